@@ -24,9 +24,19 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import GaitMode, MULTIPLIER_NAMES
-from iceskate_sim.robot import (GRAVITY, JOINT_LIMITS, N_COORDINATES, PIVOT_Y, Q1,
-                                Robot, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Y0)
+from iceskate_sim.modes import MULTIPLIER_NAMES, GaitMode
+from iceskate_sim.robot import (
+    GRAVITY,
+    JOINT_LIMITS,
+    N_COORDINATES,
+    PIVOT_Y,
+    Q1,
+    SIDES,
+    SOLE_HEEL_Y,
+    SOLE_TOE_Y,
+    Y0,
+    Robot,
+)
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)
@@ -88,6 +98,9 @@ class DynamicsResult:
     :ivar heel_friction: friction force on a sliding swing heel along y [N] (0 otherwise).
     :ivar applied: generalized force applied besides the constraints: inputs, damping and
         soft stops, per coordinate [N m, N].
+    :ivar swing_heel: world position of the swing heel point [m].
+    :ivar swing_heel_velocity: world velocity of the swing heel point [m/s].
+    :ivar swing_toe_z: height of the swing toe point [m].
     """
 
     qdd: np.ndarray
@@ -98,6 +111,9 @@ class DynamicsResult:
     cop_y: float
     heel_friction: float
     applied: np.ndarray = field(repr=False)
+    swing_heel: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
+    swing_heel_velocity: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
+    swing_toe_z: float = 0.0
 
     def multiplier(self, name: str) -> float:
         """Return the multiplier called ``name`` ('f_nz', 'f_ny' or 'tau_n')."""
@@ -279,8 +295,12 @@ class GaitDynamics:
                                       heel_friction, applied)
         normal = float(wrench[2])
         cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
+        heel = frames['swing_heel']
+        heel_position = pin.updateFramePlacement(model, data, heel).translation.copy()
+        heel_velocity = pin.getFrameVelocity(model, data, heel, _LWA).linear.copy()
+        toe_z = float(pin.updateFramePlacement(model, data, frames['swing_toe']).translation[2])
         return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
-                              float(heel_friction), applied)
+                              float(heel_friction), applied, heel_position, heel_velocity, toe_z)
 
     def _check_rank(self, jac: np.ndarray, contact: ContactState) -> None:
         gram = jac @ jac.T
@@ -376,6 +396,13 @@ class GaitDynamics:
         kinetic = pin.computeKineticEnergy(model, data, q, v)
         potential = pin.computePotentialEnergy(model, data, q)
         return float(kinetic), float(potential)
+
+    def constraint_jacobian(self, contact: ContactState, q: np.ndarray) -> np.ndarray:
+        """Rows of the active swing constraints (nc x 18; locked columns 0)."""
+        model, data, frames = self._model(contact)
+        pin.forwardKinematics(model, data, q, self._zeros, self._zeros)
+        pin.computeJointJacobians(model, data, q)
+        return self._constraint_rows(contact, data, model, frames, q)[0]
 
     def constraint_residuals(self, contact: ContactState, q: np.ndarray,
                              v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import N_COORDINATES, Q1, Robot, Y0, anatomical_map
+from iceskate_sim.robot import N_COORDINATES, Q1, Y0, Robot, anatomical_map
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LIN_X, _LIN_Y, _LIN_Z, _ANG_X, _ANG_Y, _ANG_Z = range(6)
@@ -147,7 +147,7 @@ class FloatingBaseDynamics:
         qdd[Y0] = support_acc[_LIN_Y] if mode.y0_active else 0.0
         multipliers = np.zeros(3)
         normal = tangential = 0.0
-        for (kind, what), value in zip(labels, lam):
+        for (kind, what), value in zip(labels, lam, strict=True):
             if kind == 'swing':
                 multipliers[{'hz': 0, 'hy': 1, 'fr': 2}[what]] = value
             elif what == _LIN_Z:

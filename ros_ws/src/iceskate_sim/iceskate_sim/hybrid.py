@@ -1,0 +1,362 @@
+"""The hybrid gait automaton: guards, impacts and the support exchange (model-spec 5).
+
+The discrete state is a ``HybridState``: Table 2 mode, support side, pivot edge, anchors,
+slide directions, step index and the times t_e (last exchange) and touchdown. Guards are data
+(``GUARDS``): each applies to a set of support/swing codes and is a scalar function of the state
+and its dynamics that becomes positive when its transition should happen. The integrator
+locates the first sign change in time; ``apply_transition`` performs the reset: a perfectly
+inelastic impact projected on the new constraint set where contact is made, a change of
+coordinates (add/drop q1 or y0), or the support exchange that re-roots the tree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from iceskate_sim.dynamics import ContactState, DynamicsResult, GaitDynamics
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.modes import GaitMode, mode_for
+from iceskate_sim.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
+
+_LEG = slice(1, 8)
+EPS_V = 1.0e-4  # m/s, velocity dead band of model-spec 4.6 (heel strike: slide vs. pin)
+
+
+@dataclass(frozen=True)
+class FrictionModel:
+    """Floor friction.
+
+    :param mu: Coulomb coefficient [-] (ice: 0.005 for forward sliding).
+    :param rule: 'ice' (one-way clutch: sliding only forward; a foot that would slide backward
+        is stuck by the toe pick) or 'coulomb' (symmetric |F_t| <= mu N).
+    """
+
+    mu: float = 0.005
+    rule: str = 'ice'
+
+    def __post_init__(self) -> None:
+        """Validate the rule and the coefficient."""
+        if self.rule not in ('ice', 'coulomb'):
+            raise SimulationError(f"friction rule must be 'ice' or 'coulomb', got {self.rule!r}")
+        if not (self.mu >= 0.0 and np.isfinite(self.mu)):
+            raise SimulationError(f'friction coefficient mu must be >= 0, got {self.mu!r}')
+
+
+@dataclass(frozen=True)
+class HybridState:
+    """Continuous and discrete state of the simulation.
+
+    :param t: time [s]. :param q: coordinates (18,). :param v: velocities (18,).
+    :param contact: mode, side, pivot, anchors and slide directions.
+    :param step_index: number of support exchanges so far.
+    :param t_exchange: time of the last support exchange t_e [s].
+    :param t_touchdown: time of the last swing heel strike in this step [s] (nan: none yet).
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    contact: ContactState
+    step_index: int = 0
+    t_exchange: float = 0.0
+    t_touchdown: float = float('nan')
+
+    @property
+    def mode(self) -> GaitMode:
+        """The Table 2 mode."""
+        return self.contact.mode
+
+    def summary(self) -> str:
+        """A one-line description for error messages."""
+        return (f't={self.t:.6f} s, mode {self.mode.number} ({self.mode.support}/'
+                f'{self.mode.swing}), support {self.contact.side} ({self.contact.pivot} pivot), '
+                f'step {self.step_index}, y0={self.q[Y0]:.4f} m, q1={self.q[Q1]:.4f} rad, '
+                f'|q|max={np.max(np.abs(self.q[1:])):.3g}, |v|max={np.max(np.abs(self.v)):.3g}')
+
+
+@dataclass(frozen=True)
+class Guard:
+    """A transition guard: ``value(state, result) > 0`` means the transition is due."""
+
+    name: str
+    cause: str
+    applies: Callable[[GaitMode], bool]
+    value: Callable[[HybridState, DynamicsResult, FrictionModel], float]
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One entry of the event log (the empirical Fig. 3)."""
+
+    t: float
+    from_mode: int
+    to_mode: int
+    event: str
+    cause: str
+    impulse: tuple[float, ...] = ()
+    step_index: int = 0
+    side: str = 'right'
+
+
+class RunEnded(Exception):
+    """A physical situation the paper's model cannot represent; ends a run cleanly."""
+
+    def __init__(self, reason: str, state: HybridState) -> None:
+        """Store the reason and the state at which the run ended."""
+        super().__init__(reason)
+        self.reason = reason
+        self.state = state
+
+
+def _swing_contact(m: GaitMode) -> bool:
+    return m.swing != 'A'
+
+
+def _stuck_support_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
+    """E4: the reaction needed to hold the support foot exceeds friction."""
+    if f.rule == 'ice':  # only a forward-wanting foot (reaction pointing back) can slide
+        return -r.support_tangential - f.mu * r.support_normal
+    return abs(r.support_tangential) - f.mu * r.support_normal
+
+
+def _pinned_heel_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
+    """S3: the reaction needed to pin the swing heel exceeds friction."""
+    f_nz, f_ny = r.multipliers[0], r.multipliers[1]
+    if f.rule == 'ice':
+        return -f_ny - f.mu * f_nz
+    return abs(f_ny) - f.mu * f_nz
+
+
+GUARDS: tuple[Guard, ...] = (
+    Guard('E1', 'support CoP reached the toe edge', lambda m: not m.q1_active,
+          lambda s, r, f: r.support_wrench[3] - SOLE_TOE_Y * r.support_normal),
+    Guard('E2', 'support CoP reached the heel edge', lambda m: not m.q1_active,
+          lambda s, r, f: SOLE_HEEL_Y * r.support_normal - r.support_wrench[3]),
+    Guard('E3', 'support sole came back flat', lambda m: m.q1_active,
+          lambda s, r, f: s.q[Q1] if s.contact.pivot == 'toe' else -s.q[Q1]),
+    Guard('E4', 'support friction limit exceeded: starts gliding', lambda m: not m.y0_active,
+          _stuck_support_tangential),
+    Guard('E5', 'support glide stopped', lambda m: m.y0_active,
+          lambda s, r, f: -s.contact.support_slide_dir * s.v[0]),
+    Guard('E6', 'support normal force reached zero', lambda m: True,
+          lambda s, r, f: -r.support_normal),
+    Guard('S1', 'swing heel struck the floor', lambda m: m.swing == 'A',
+          lambda s, r, f: -r.swing_heel[2]),
+    Guard('S7', 'swing toe reached the floor first', lambda m: m.swing == 'A',
+          lambda s, r, f: -r.swing_toe_z),
+    Guard('S2', 'swing heel stopped sliding', lambda m: m.swing in ('Hs', 'Fs'),
+          lambda s, r, f: -s.contact.heel_slide_dir * r.swing_heel_velocity[1]),
+    Guard('S3', 'swing heel friction limit exceeded: starts sliding',
+          lambda m: m.swing in ('Hp', 'Fp'), _pinned_heel_tangential),
+    Guard('S4', 'swing sole came flat', lambda m: m.swing in ('Hs', 'Hp'),
+          lambda s, r, f: -s.q[_LEG].sum()),
+    Guard('S5', 'swing sole un-flattens (toe lifts)', lambda m: m.swing in ('Fs', 'Fp'),
+          lambda s, r, f: -r.multipliers[2]),
+    Guard('S6', 'swing contact force reached zero', _swing_contact,
+          lambda s, r, f: -r.multipliers[0]),
+)
+_GUARDS_OF_MODE: dict[int, tuple[Guard, ...]] = {}
+
+
+def guards_of(mode: GaitMode) -> tuple[Guard, ...]:
+    """The guards that apply in ``mode`` (cached)."""
+    found = _GUARDS_OF_MODE.get(mode.number)
+    if found is None:
+        found = tuple(g for g in GUARDS if g.applies(mode))
+        _GUARDS_OF_MODE[mode.number] = found
+    return found
+
+
+def guard_values(state: HybridState, result: DynamicsResult,
+                 friction: FrictionModel) -> np.ndarray:
+    """Values of the guards of the current mode (positive: due)."""
+    return np.array([g.value(state, result, friction) for g in guards_of(state.mode)])
+
+
+# ------------------------------------------------------------------------ impacts
+def impact(dynamics: GaitDynamics, contact: ContactState, q: np.ndarray, v: np.ndarray,
+           rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Perfectly inelastic impact onto the constraint rows ``rows`` (k x 18).
+
+    Solves [M -J^T; J 0] [v+; Pi] = [M v-; 0] over the active coordinates of
+    ``contact.mode``. Returns v+ (18,) and the impulses Pi (k,) [N s, N m s].
+    """
+    act = contact.mode.active
+    M = dynamics.mass_matrix(contact, q)
+    J = rows[:, act]
+    k = J.shape[0]
+    n = act.size
+    A = np.zeros((n + k, n + k))
+    A[:n, :n] = M
+    A[:n, n:] = -J.T
+    A[n:, :n] = J
+    b = np.zeros(n + k)
+    b[:n] = M @ v[act]
+    try:
+        x = np.linalg.solve(A, b)
+    except np.linalg.LinAlgError as exc:
+        raise SimulationError(f'impact in mode {contact.mode.number}: singular ({exc})') from exc
+    v_plus = np.zeros(N_COORDINATES)
+    v_plus[act] = x[:n]
+    return v_plus, x[n:]
+
+
+# --------------------------------------------------------------- support exchange
+NEW_SUPPORT_OF_SWING = {'Fp': 'F-S', 'Fs': 'F-G', 'Hp': 'R-S', 'Hs': 'R-G'}
+
+
+def reroot(dynamics: GaitDynamics, state: HybridState) -> HybridState:
+    """Support exchange E7: re-root the tree at the old swing foot (model-spec 5.3).
+
+    q1' = phi_7 (old swing-foot pitch), q2'..q7' = -q7..-q2, q8..q17 unchanged (same map for
+    the velocities); y0' puts the new support's heel where the old swing heel is, so every
+    link keeps its world pose and velocity.
+    """
+    old = state.contact
+    new_support = NEW_SUPPORT_OF_SWING.get(old.mode.swing)
+    if new_support is None:
+        raise SimulationError(f'support exchange needs a swing contact; {state.summary()}')
+    mode = mode_for(new_support, 'A')
+    q, v = state.q, state.v
+    q_new = q.copy()
+    v_new = v.copy()
+    q_new[Q1] = q[_LEG].sum() if mode.q1_active else 0.0
+    v_new[Q1] = v[_LEG].sum() if mode.q1_active else 0.0
+    q_new[2:8] = -q[7:1:-1]
+    v_new[2:8] = -v[7:1:-1]
+    heel = dynamics.frame_placement(old, q, 'swing_heel').translation
+    heel_velocity = dynamics.frame_velocity(old, q, v, 'swing_heel').linear
+    q_new[Y0] = heel[1] - SOLE_HEEL_Y
+    v_new[Y0] = heel_velocity[1] if mode.y0_active else 0.0
+    side = 'left' if old.side == 'right' else 'right'
+    pivot = 'heel' if mode.q1_active else 'toe'
+    contact = ContactState(mode, side, pivot, 0.0, support_slide_dir=old.heel_slide_dir)
+    return HybridState(state.t, q_new, v_new, contact, state.step_index + 1, state.t,
+                       float('nan'))
+
+
+def _swapped(mode: GaitMode, support: str | None = None, swing: str | None = None) -> GaitMode:
+    return mode_for(support or mode.support, swing or mode.swing)
+
+
+_ADD_Q1 = {'F-S': 'R-S', 'F-G': 'R-G'}
+_DROP_Q1 = {'R-S': 'F-S', 'R-G': 'F-G'}
+_ADD_Y0 = {'F-S': 'F-G', 'R-S': 'R-G'}
+_DROP_Y0 = {'F-G': 'F-S', 'R-G': 'R-S'}
+_PIN = {'Hs': 'Hp', 'Fs': 'Fp'}
+_UNPIN = {'Hp': 'Hs', 'Fp': 'Fs'}
+_FLATTEN = {'Hs': 'Fs', 'Hp': 'Fp'}
+_UNFLATTEN = {'Fs': 'Hs', 'Fp': 'Hp'}
+
+
+def _impact_into(dynamics: GaitDynamics, state: HybridState, contact: ContactState,
+                 extra_rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Impact of ``state`` onto the constraints of ``contact`` (plus ``extra_rows``)."""
+    rows = dynamics.constraint_jacobian(contact, state.q)
+    if extra_rows is not None:
+        rows = np.vstack([extra_rows, rows])
+    return impact(dynamics, contact, state.q, state.v, rows)
+
+
+def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: HybridState,
+                     guard: Guard, result: DynamicsResult) -> tuple[HybridState, Transition]:
+    """Perform the reset of ``guard`` at ``state`` (located on the guard's zero).
+
+    :raises RunEnded: for flight (both feet off) and toe-first touchdown, which the paper's
+        model cannot represent.
+    """
+    mode, c = state.mode, state.contact
+    name = guard.name
+    impulse: tuple[float, ...] = ()
+    new = state
+    if name in ('E1', 'E2'):
+        pivot = 'toe' if name == 'E1' else 'heel'
+        contact = replace(c, mode=_swapped(mode, support=_ADD_Q1[mode.support]), pivot=pivot)
+        q = state.q.copy()
+        q[Q1] = 0.0
+        new = replace(state, q=q, contact=contact)
+    elif name == 'E3':
+        e_q1 = np.zeros((1, N_COORDINATES))
+        e_q1[0, Q1] = 1.0
+        v_plus, pi = _impact_into(dynamics, state, c, e_q1)
+        impulse = tuple(pi)
+        v_plus[Q1] = 0.0
+        q = state.q.copy()
+        q[Q1] = 0.0
+        contact = replace(c, mode=_swapped(mode, support=_DROP_Q1[mode.support]))
+        new = replace(state, q=q, v=v_plus, contact=contact)
+    elif name == 'E4':
+        direction = 1.0 if friction.rule == 'ice' else float(np.sign(-result.support_tangential))
+        contact = replace(c, mode=_swapped(mode, support=_ADD_Y0[mode.support]),
+                          support_slide_dir=direction or 1.0)
+        new = replace(state, contact=contact)
+    elif name == 'E5':
+        v = state.v.copy()
+        v[Y0] = 0.0
+        new = replace(state, v=v, contact=replace(
+            c, mode=_swapped(mode, support=_DROP_Y0[mode.support])))
+    elif name == 'E6':
+        if mode.swing == 'A':
+            raise RunEnded('flight: the support foot left the floor with the swing foot in '
+                           "the air (not representable in the paper's model)", state)
+        new = reroot(dynamics, state)
+    elif name == 'S7':
+        raise RunEnded('toe-first touchdown of the swing foot (not representable in the '
+                       "paper's model)", state)
+    elif name == 'S1':
+        new, impulse = _heel_strike(dynamics, friction, state)
+    elif name == 'S2':
+        contact = replace(c, mode=_swapped(mode, swing=_PIN[mode.swing]),
+                          heel_anchor_y=float(result.swing_heel[1]))
+        v_plus, pi = _impact_into(dynamics, state, contact)
+        impulse = tuple(pi)
+        new = replace(state, v=v_plus, contact=contact)
+    elif name == 'S3':
+        direction = 1.0 if friction.rule == 'ice' else float(np.sign(-result.multipliers[1]))
+        new = replace(state, contact=replace(
+            c, mode=_swapped(mode, swing=_UNPIN[mode.swing]), heel_slide_dir=direction or 1.0))
+    elif name == 'S4':
+        contact = replace(c, mode=_swapped(mode, swing=_FLATTEN[mode.swing]))
+        v_plus, pi = _impact_into(dynamics, state, contact)
+        impulse = tuple(pi)
+        new = replace(state, v=v_plus, contact=contact)
+    elif name == 'S5':
+        new = replace(state, contact=replace(c, mode=_swapped(mode,
+                                                              swing=_UNFLATTEN[mode.swing])))
+    elif name == 'S6':
+        new = replace(state, contact=replace(c, mode=_swapped(mode, swing='A')))
+    else:
+        raise SimulationError(f'unknown guard {name!r}')
+    record = Transition(state.t, mode.number, new.mode.number, name, guard.cause, impulse,
+                        new.step_index, new.contact.side)
+    return new, record
+
+
+def _heel_strike(dynamics: GaitDynamics, friction: FrictionModel,
+                 state: HybridState) -> tuple[HybridState, tuple[float, ...]]:
+    """S1: inelastic impact onto C_hz; the heel then slides (Hs) or is pinned (Hp)."""
+    c = state.contact
+    sliding = replace(c, mode=_swapped(c.mode, swing='Hs'), heel_slide_dir=1.0)
+    v_slide, pi_slide = _impact_into(dynamics, state, sliding)
+    heel_vy = dynamics.frame_velocity(sliding, state.q, v_slide, 'swing_heel').linear[1]
+    heel_y = dynamics.frame_placement(c, state.q, 'swing_heel').translation[1]
+    pinned = replace(c, mode=_swapped(c.mode, swing='Hp'), heel_anchor_y=float(heel_y))
+    v_pin, pi_pin = _impact_into(dynamics, state, pinned)
+    if friction.rule == 'ice':
+        use_pin = heel_vy <= EPS_V  # forward: slides; backward: toe pick holds it
+    else:
+        use_pin = abs(pi_pin[1]) <= friction.mu * pi_pin[0]
+        if not use_pin:
+            sliding = replace(sliding, heel_slide_dir=float(np.sign(heel_vy)) or 1.0)
+    contact, v_plus, pi = (pinned, v_pin, pi_pin) if use_pin else (sliding, v_slide, pi_slide)
+    if pi[0] < 0.0:  # the floor would have to pull: no contact is made
+        return state, ()
+    return replace(state, v=v_plus, contact=contact, t_touchdown=state.t), tuple(pi)
+
+
+def with_contact(state: HybridState, **changes: object) -> HybridState:
+    """Copy of ``state`` with fields of its ContactState replaced."""
+    return replace(state, contact=replace(state.contact, **changes))

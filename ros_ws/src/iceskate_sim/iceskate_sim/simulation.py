@@ -1,0 +1,250 @@
+"""The hybrid simulation loop: per-mode dynamics, event-locating integration, transitions.
+
+``Simulator.advance(tau)`` integrates one control period with the input held constant (zero
+order hold), stopping at every located event to apply its transition (impacts, re-rooting,
+coordinate changes) and going on in the new mode. After every period it checks the state's
+health: non-finite values or constraint residuals beyond a bound raise ``SimulationError``
+naming the time, mode and state; a fall, flight or toe-first touchdown ends the run with a
+reason (``Simulator.ended``) instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import (
+    FrictionModel,
+    HybridState,
+    RunEnded,
+    Transition,
+    apply_transition,
+    guard_values,
+    guards_of,
+)
+from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, IntegratorConfig
+from iceskate_sim.observation import Observation
+from iceskate_sim.robot import N_COORDINATES, Robot
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Settings of a simulation run.
+
+    :param control_period: period of the zero-order-hold inputs [s]; an integer multiple of
+        the fixed step for fixed-step integrators.
+    :param integrator: the integrator and its tolerances.
+    :param friction: floor friction rule and coefficient.
+    :param dynamics: joint damping, soft stops, Baumgarte constant (its mu is replaced by the
+        friction model's).
+    :param projection: project positions and velocities onto the active swing constraints
+        after every control period (drift control).
+    :param residual_bound: constraint residual [m or rad] beyond which the run fails.
+    :param fall_height: head-top height [m] below which the robot has fallen (run ends).
+    :param max_instant_transitions: transitions allowed at one instant before the run is
+        declared chattering.
+    """
+
+    control_period: float = 1.0e-3
+    integrator: IntegratorConfig = field(default_factory=IntegratorConfig)
+    friction: FrictionModel = field(default_factory=FrictionModel)
+    dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
+    projection: bool = True
+    residual_bound: float = 1.0e-3
+    fall_height: float = 1.2
+    max_instant_transitions: int = 20
+
+    def __post_init__(self) -> None:
+        """Check the control period against the integrator step."""
+        if not (np.isfinite(self.control_period) and self.control_period > 0.0):
+            raise SimulationError(f'control_period must be > 0 s, got {self.control_period!r}')
+        if self.integrator.method in FIXED_STEP:
+            ratio = self.control_period / self.integrator.step
+            if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+                raise SimulationError(
+                    f'control_period {self.control_period} s is not an integer multiple of '
+                    f'the {self.integrator.method} step {self.integrator.step} s')
+
+
+@dataclass
+class RunStatistics:
+    """Counters of a run."""
+
+    steps: int = 0
+    evaluations: int = 0
+    control_periods: int = 0
+    max_constraint_residual: float = 0.0
+
+
+class Simulator:
+    """A hybrid simulation of the humanoid from an initial state."""
+
+    def __init__(self, robot: Robot, config: SimulatorConfig, initial: HybridState) -> None:
+        self.robot = robot
+        self.config = config
+        params = replace(config.dynamics, mu=config.friction.mu)
+        self.dynamics = GaitDynamics(robot, params)
+        self._initial = initial
+        self._integrator = Integrator(config.integrator)
+        self.reset()
+
+    def reset(self) -> None:
+        """Return to the initial state; clear the event log and the statistics."""
+        q, v = self._initial.q.copy(), self._initial.v.copy()
+        self.state = replace(self._initial, q=q, v=v)
+        self.events: list[Transition] = []
+        self.stats = RunStatistics()
+        self.ended: str | None = None
+        self._tau = np.zeros(N_COORDINATES)
+        self._integrator = Integrator(self.config.integrator)
+        self.result = self._evaluate(self.state.q, self.state.v)
+        self._settle()
+
+    # -------------------------------------------------------------- accessors
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return self.state.t
+
+    def observation(self) -> Observation:
+        """The controller's view of the current state."""
+        s = self.state
+        return Observation(s.t, s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
+                           s.contact.pivot, s.step_index, s.t_exchange,
+                           s.contact.heel_anchor_y, s.t_touchdown)
+
+    def head_height(self) -> float:
+        """Height of the head top [m]."""
+        return float(self.dynamics.frame_placement(self.state.contact, self.state.q,
+                                                   'head_top').translation[2])
+
+    # ---------------------------------------------------------------- stepping
+    def _evaluate(self, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
+        return self.dynamics.evaluate(self.state.contact, q, v, self._tau)
+
+    def _rhs(self, t: float, x: np.ndarray) -> tuple[np.ndarray, DynamicsResult]:
+        n = N_COORDINATES
+        result = self.dynamics.evaluate(self._contact, x[:n], x[n:], self._tau)
+        return np.concatenate([x[n:], result.qdd]), result
+
+    def _guards(self, t: float, x: np.ndarray, result: DynamicsResult) -> np.ndarray:
+        n = N_COORDINATES
+        state = HybridState(t, x[:n], x[n:], self._contact)
+        return guard_values(state, result, self.config.friction)
+
+    def advance(self, tau: np.ndarray) -> DynamicsResult:
+        """Integrate one control period holding the input ``tau`` (18,) constant.
+
+        :returns: the dynamics at the end of the period (accelerations, multipliers, ...).
+        :raises SimulationError: on bad input or divergence. A run that ends physically
+            (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
+        """
+        if self.ended is not None:
+            raise SimulationError(f'the run has ended ({self.ended}); reset() to start again')
+        tau = np.asarray(tau, dtype=float)
+        if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
+            raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
+                                  f'[y0, q1..q17], got shape {tau.shape}')
+        self._tau = tau.copy()
+        t_end = self.state.t + self.config.control_period
+        n = N_COORDINATES
+        self.result = self._evaluate(self.state.q, self.state.v)
+        try:
+            while t_end - self.state.t > 1e-12:
+                self._contact = self.state.contact
+                x0 = np.concatenate([self.state.q, self.state.v])
+                start = (np.concatenate([self.state.v, self.result.qdd]), self.result)
+                seg = self._integrator.integrate_segment(self._rhs, self._guards,
+                                                         self.state.t, x0, t_end, start)
+                self.stats.steps += seg.steps
+                self.stats.evaluations += seg.evaluations
+                if not np.all(np.isfinite(seg.x)):
+                    self._diverged('non-finite state', replace(self.state, t=seg.t))
+                self.state = replace(self.state, t=seg.t, q=seg.x[:n].copy(),
+                                     v=seg.x[n:].copy())
+                self.result = seg.result
+                if seg.fired is not None:
+                    guard = guards_of(self.state.mode)[seg.fired]
+                    self._transition(guard)
+                    self._settle()
+            if self.config.projection and self.state.mode.constraints:
+                self._project()
+            self._check_health()
+        except RunEnded as end:
+            self.ended = end.reason
+            self.state = end.state
+        self.stats.control_periods += 1
+        return self.result
+
+    def _transition(self, guard: object) -> None:
+        new, record = apply_transition(self.dynamics, self.config.friction, self.state,
+                                       guard, self.result)
+        self.events.append(record)
+        self.state = new
+        self.result = self._evaluate(new.q, new.v)
+
+    def _settle(self) -> None:
+        """Apply transitions that are due at once (cascade), with a chattering limit."""
+        for _ in range(self.config.max_instant_transitions):
+            values = guard_values(self.state, self.result, self.config.friction)
+            due = np.flatnonzero(values > GUARD_MARGIN)
+            if not due.size:
+                return
+            self._transition(guards_of(self.state.mode)[due[0]])
+        raise SimulationError(f'chattering: more than {self.config.max_instant_transitions} '
+                              f'transitions at one instant ({self.state.summary()}); last '
+                              f'events {[e.event for e in self.events[-6:]]}')
+
+    def _project(self) -> None:
+        """Project q and v onto the active swing constraints (Newton + M-metric)."""
+        s = self.state
+        q = s.q.copy()
+        act = s.mode.active
+        for _ in range(3):
+            C, _ = self.dynamics.constraint_residuals(s.contact, q, s.v)
+            self.stats.max_constraint_residual = max(self.stats.max_constraint_residual,
+                                                     float(np.max(np.abs(C))))
+            if np.max(np.abs(C)) < 1e-13:
+                break
+            J = self.dynamics.constraint_jacobian(s.contact, q)[:, act]
+            q[act] -= J.T @ np.linalg.solve(J @ J.T, C)
+        J = self.dynamics.constraint_jacobian(s.contact, q)[:, act]
+        M = self.dynamics.mass_matrix(s.contact, q)
+        v = s.v.copy()
+        minv_jt = np.linalg.solve(M, J.T)
+        v[act] -= minv_jt @ np.linalg.solve(J @ minv_jt, J @ v[act])
+        self.state = replace(s, q=q, v=v)
+        self.result = self._evaluate(q, v)
+
+    def _check_health(self) -> None:
+        s = self.state
+        if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.v))):
+            self._diverged('non-finite state', s)
+        if s.mode.constraints:
+            C, Cdot = self.dynamics.constraint_residuals(s.contact, s.q, s.v)
+            worst = float(np.max(np.abs(C)))
+            self.stats.max_constraint_residual = max(self.stats.max_constraint_residual, worst)
+            if worst > self.config.residual_bound:
+                self._diverged(f'constraint residual {worst:.3g} beyond '
+                               f'{self.config.residual_bound:g}', s)
+        if self.head_height() < self.config.fall_height:
+            raise RunEnded(f'fall: head top below {self.config.fall_height} m', s)
+
+    def _diverged(self, what: str, state: HybridState) -> None:
+        raise SimulationError(f'simulation diverged ({what}) at {state.summary()}')
+
+
+def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 'toe',
+                  v: np.ndarray | None = None, t: float = 0.0) -> HybridState:
+    """A HybridState at rest (or with velocity ``v``) in Table 2 ``mode``."""
+    from iceskate_sim.modes import get_mode
+    gait_mode = get_mode(mode)
+    q = np.asarray(q, dtype=float).copy()
+    v = np.zeros(N_COORDINATES) if v is None else np.asarray(v, dtype=float).copy()
+    if q.shape != (N_COORDINATES,) or v.shape != (N_COORDINATES,):
+        raise SimulationError(f'initial q and v need {N_COORDINATES} entries')
+    contact = ContactState(gait_mode, side, pivot)
+    return HybridState(t, q, v, contact)

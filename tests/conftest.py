@@ -1,0 +1,100 @@
+"""Project-wide pytest fixtures: keep ROS 2 on loopback, isolate ROS logs, domains and contexts.
+
+ROS tests call ``pytest.importorskip('rclpy')`` (directly or through the fixtures below), so the
+pure (ROS-free) tests still run on a machine without ROS.
+"""
+
+from collections.abc import Iterator
+import importlib.util
+import itertools
+import os
+from pathlib import Path
+import sys
+
+import pytest
+
+#: Repository root (tests/ is directly under it).
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: colcon workspace sources.
+ROS_SRC = REPO_ROOT / 'ros_ws' / 'src'
+
+# Session-wide guard, set at import time so that it holds before any test module imports rclpy:
+# Fast DDS discovery never leaves the machine (with the default range it sends multicast out of
+# the network interface). Child processes inherit it through os.environ.
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.pop('ROS_LOCALHOST_ONLY', None)  # deprecated, and warns when set with the range
+
+
+def _add_unbuilt_packages_to_path() -> None:
+    """Make our ament_python packages importable when the workspace is not built/sourced.
+
+    Only packages that are not importable already are added, so a sourced workspace always wins.
+    """
+    for setup_py in sorted(ROS_SRC.glob('*/setup.py')):
+        package_dir = setup_py.parent
+        for module_dir in package_dir.iterdir():
+            if (module_dir / '__init__.py').is_file() and module_dir.name not in ('test', 'tests'):
+                if importlib.util.find_spec(module_dir.name) is None:
+                    sys.path.append(str(package_dir))
+                break
+
+
+_add_unbuilt_packages_to_path()
+
+# Domain ids handed out in this run: start from the pid so that parallel runs on one machine
+# (several checkouts, pytest-xdist workers) use different DDS domains; 4 runs in one domain
+# cross-talk. Fast DDS accepts ids 0..232; 0 (the default) is never used.
+_MAX_DOMAIN_ID = 232
+_domain_ids = itertools.count(os.getpid() % _MAX_DOMAIN_ID)
+
+
+@pytest.fixture(autouse=True, scope='session')
+def _ros_discovery_localhost() -> Iterator[None]:
+    """Re-assert LOCALHOST discovery for the whole session (a test may have changed it)."""
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    yield
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+
+@pytest.fixture(autouse=True)
+def _ros_log_dir(tmp_path_factory: pytest.TempPathFactory,
+                 monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Give every test its own ``ROS_LOG_DIR`` (rclpy.init fails if it cannot create it)."""
+    log_dir = tmp_path_factory.mktemp('ros_log')
+    monkeypatch.setenv('ROS_LOG_DIR', str(log_dir))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return log_dir
+
+
+@pytest.fixture
+def ros_domain_id() -> int:
+    """Return a ROS_DOMAIN_ID in 1..232 used by no other test of this run (pid-derived start).
+
+    Pass it to ``rclpy.init(domain_id=...)`` and as ``ROS_DOMAIN_ID`` to child processes.
+    """
+    return 1 + next(_domain_ids) % _MAX_DOMAIN_ID
+
+
+@pytest.fixture
+def ros_env(ros_domain_id: int) -> dict[str, str]:
+    """Return an environment for ROS child processes: this one plus the test's domain id."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(ros_domain_id)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    return env
+
+
+@pytest.fixture
+def ros_context(ros_domain_id: int) -> Iterator[object]:
+    """Yield a private, initialised ``rclpy.Context`` on the test's own domain.
+
+    Skips the test when rclpy is not installed. The context is shut down afterwards even when
+    the test fails.
+    """
+    rclpy = pytest.importorskip('rclpy')
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain_id)
+    try:
+        yield context
+    finally:
+        context.try_shutdown()
