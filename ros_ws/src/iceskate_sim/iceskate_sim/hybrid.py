@@ -22,6 +22,7 @@ from iceskate_sim.modes import GaitMode, mode_for
 from iceskate_sim.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
 
 _LEG = slice(1, 8)
+_LEG_JOINTS = np.arange(2, 8)
 EPS_V = 1.0e-4  # m/s, velocity dead band of model-spec 4.6 (heel strike: slide vs. pin)
 
 
@@ -252,13 +253,43 @@ _FLATTEN = {'Hs': 'Fs', 'Hp': 'Fp'}
 _UNFLATTEN = {'Fs': 'Hs', 'Fp': 'Hp'}
 
 
+def project_positions(dynamics: GaitDynamics, contact: ContactState, q: np.ndarray,
+                      iterations: int = 4) -> tuple[np.ndarray, float]:
+    """Gauss-Newton projection of q onto the active swing constraints (least-norm steps).
+
+    Only the leg joints q2..q7 move: the support coordinates y0 and q1 carry guards of their
+    own (E3, E5) that a round-off shift must not trigger.
+
+    :returns: projected q and the largest residual |C| seen before projecting [m, rad].
+    """
+    q = q.copy()
+    act = _LEG_JOINTS
+    worst = 0.0
+    for k in range(iterations):
+        C, _ = dynamics.constraint_residuals(contact, q, np.zeros(N_COORDINATES))
+        if k == 0:
+            worst = float(np.max(np.abs(C))) if C.size else 0.0
+        if not C.size or np.max(np.abs(C)) < 1e-14:
+            break
+        J = dynamics.constraint_jacobian(contact, q)[:, act]
+        q[act] -= J.T @ np.linalg.solve(J @ J.T, C)
+    return q, worst
+
+
 def _impact_into(dynamics: GaitDynamics, state: HybridState, contact: ContactState,
-                 extra_rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Impact of ``state`` onto the constraints of ``contact`` (plus ``extra_rows``)."""
-    rows = dynamics.constraint_jacobian(contact, state.q)
+                 extra_rows: np.ndarray | None = None,
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Impact of ``state`` onto the constraints of ``contact`` (plus ``extra_rows``).
+
+    Positions are first projected onto the new constraints (they hold only to the event
+    tolerance at the located instant). Returns (q, v+, impulses).
+    """
+    q, _ = project_positions(dynamics, contact, state.q)
+    rows = dynamics.constraint_jacobian(contact, q)
     if extra_rows is not None:
         rows = np.vstack([extra_rows, rows])
-    return impact(dynamics, contact, state.q, state.v, rows)
+    v_plus, impulse = impact(dynamics, contact, q, state.v, rows)
+    return q, v_plus, impulse
 
 
 def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: HybridState,
@@ -281,11 +312,11 @@ def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: Hyb
     elif name == 'E3':
         e_q1 = np.zeros((1, N_COORDINATES))
         e_q1[0, Q1] = 1.0
-        v_plus, pi = _impact_into(dynamics, state, c, e_q1)
-        impulse = tuple(pi)
-        v_plus[Q1] = 0.0
         q = state.q.copy()
         q[Q1] = 0.0
+        q, v_plus, pi = _impact_into(dynamics, replace(state, q=q), c, e_q1)
+        impulse = tuple(pi)
+        v_plus[Q1] = 0.0
         contact = replace(c, mode=_swapped(mode, support=_DROP_Q1[mode.support]))
         new = replace(state, q=q, v=v_plus, contact=contact)
     elif name == 'E4':
@@ -311,18 +342,18 @@ def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: Hyb
     elif name == 'S2':
         contact = replace(c, mode=_swapped(mode, swing=_PIN[mode.swing]),
                           heel_anchor_y=float(result.swing_heel[1]))
-        v_plus, pi = _impact_into(dynamics, state, contact)
+        q, v_plus, pi = _impact_into(dynamics, state, contact)
         impulse = tuple(pi)
-        new = replace(state, v=v_plus, contact=contact)
+        new = replace(state, q=q, v=v_plus, contact=contact)
     elif name == 'S3':
         direction = 1.0 if friction.rule == 'ice' else float(np.sign(-result.multipliers[1]))
         new = replace(state, contact=replace(
             c, mode=_swapped(mode, swing=_UNPIN[mode.swing]), heel_slide_dir=direction or 1.0))
     elif name == 'S4':
         contact = replace(c, mode=_swapped(mode, swing=_FLATTEN[mode.swing]))
-        v_plus, pi = _impact_into(dynamics, state, contact)
+        q, v_plus, pi = _impact_into(dynamics, state, contact)
         impulse = tuple(pi)
-        new = replace(state, v=v_plus, contact=contact)
+        new = replace(state, q=q, v=v_plus, contact=contact)
     elif name == 'S5':
         new = replace(state, contact=replace(c, mode=_swapped(mode,
                                                               swing=_UNFLATTEN[mode.swing])))
@@ -340,11 +371,11 @@ def _heel_strike(dynamics: GaitDynamics, friction: FrictionModel,
     """S1: inelastic impact onto C_hz; the heel then slides (Hs) or is pinned (Hp)."""
     c = state.contact
     sliding = replace(c, mode=_swapped(c.mode, swing='Hs'), heel_slide_dir=1.0)
-    v_slide, pi_slide = _impact_into(dynamics, state, sliding)
-    heel_vy = dynamics.frame_velocity(sliding, state.q, v_slide, 'swing_heel').linear[1]
-    heel_y = dynamics.frame_placement(c, state.q, 'swing_heel').translation[1]
+    q, v_slide, pi_slide = _impact_into(dynamics, state, sliding)
+    heel_vy = dynamics.frame_velocity(sliding, q, v_slide, 'swing_heel').linear[1]
+    heel_y = dynamics.frame_placement(c, q, 'swing_heel').translation[1]
     pinned = replace(c, mode=_swapped(c.mode, swing='Hp'), heel_anchor_y=float(heel_y))
-    v_pin, pi_pin = _impact_into(dynamics, state, pinned)
+    q, v_pin, pi_pin = _impact_into(dynamics, replace(state, q=q), pinned)
     if friction.rule == 'ice':
         use_pin = heel_vy <= EPS_V  # forward: slides; backward: toe pick holds it
     else:
@@ -354,7 +385,7 @@ def _heel_strike(dynamics: GaitDynamics, friction: FrictionModel,
     contact, v_plus, pi = (pinned, v_pin, pi_pin) if use_pin else (sliding, v_slide, pi_slide)
     if pi[0] < 0.0:  # the floor would have to pull: no contact is made
         return state, ()
-    return replace(state, v=v_plus, contact=contact, t_touchdown=state.t), tuple(pi)
+    return replace(state, q=q, v=v_plus, contact=contact, t_touchdown=state.t), tuple(pi)
 
 
 def with_contact(state: HybridState, **changes: object) -> HybridState:

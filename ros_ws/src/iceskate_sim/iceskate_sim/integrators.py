@@ -139,17 +139,24 @@ class Integrator:
 
     def _locate(self, guard_at: Callable[[float], np.ndarray], g0: np.ndarray,
                 crossed: np.ndarray, h: float) -> tuple[float, int, int]:
-        """Earliest zero in [0, h] among the crossed guards: (offset, guard index, calls)."""
+        """Earliest zero in [0, h] among the crossed guards: (offset, guard index, calls).
+
+        The offset returned is the due side of the bracket (guard > margin there, within the
+        event tolerance of the zero), so the transition is applied where it is due.
+        """
         best_s, best_i, calls = np.inf, -1, 0
-        for i in crossed:
-            if g0[i] > 0.0:  # already (barely) due at the start
-                s = 0.0
-            else:
-                def phi(s: float, i: int = i) -> float:
-                    return float(guard_at(s)[i])
-                s, info = optimize.brentq(phi, 0.0, h, xtol=self.config.event_tolerance,
-                                          rtol=4 * np.finfo(float).eps, full_output=True)
-                calls += info.function_calls
+        tol = self.config.event_tolerance
+        for i in crossed:  # g0[i] <= margin < g1[i]
+            def phi(s: float, i: int = i) -> float:
+                return float(guard_at(s)[i]) - GUARD_MARGIN
+            s, info = optimize.brentq(phi, 0.0, h, xtol=tol, rtol=4 * np.finfo(float).eps,
+                                      full_output=True)
+            calls += info.function_calls
+            step = tol
+            while phi(s) <= 0.0 and s < h:  # move onto the due side of the zero
+                s = min(h, s + step)
+                step *= 2.0
+                calls += 1
             if s < best_s:
                 best_s, best_i = s, int(i)
         return best_s, best_i, calls

@@ -1,0 +1,203 @@
+"""Feed-forward leg torques (joints 1, 2, 3, 5, 6; model-spec §7.1, §14) and weight transfer
+(§14.5), ROS-free.
+
+Feed-forward (seed §5.2: "feed-forward-like" torques on joints 1, 2, 3 for push-off and 5 for
+the swing), event-triggered, measured from the last support exchange t_e:
+
+* swing hip, while the swing foot is in the air (code 'A'): tau_5 = A5 sin(pi (t - t_e)/D5)
+  on [t_e, t_e + D5];
+* swing knee, in the air: a flexion pulse tau_6 = -A6 sin(pi (t - t_e)/D6) on [t_e, t_e + D6],
+  then an extension PD tau_6 = K6 (q6_ref - q6) - B6 dq6 until touchdown;
+* push-off while the support foot stands on its toe pivot (q1 active, pivot 'toe'):
+  tau_2 = +A2 (plantar flexion), tau_3 = -A3 (knee extension), tau_1 = -A1 (heel up; switch).
+
+Weight transfer: tau_wt = -J_c^T f_des - j_r^T tau_n,des is a joint-torque realisation of a
+desired contact force. J_c is the z row of the swing-heel Jacobian and j_r = dC_fr/dq (ones on
+q1..q7). Applied with the swing heel on the floor, the torques press the heel down by f_des; in
+a mode whose constraints contain the heel's z row (and C_fr), the constraint force grows by
+exactly f_des (and tau_n by tau_n,des) and the accelerations do not change: load moves from the
+support foot to the front foot. f_des ramps from 0 to share m g over ``ramp_time`` after the
+heel strike t_touchdown; tau_n,des = moment_arm f_des while the sole is flat (Fs, Fp), which
+puts the front foot's centre of pressure ``moment_arm`` ahead of the heel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+import math
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from gait_manager._params import boolean, build, real, zeros
+from iceskate_sim.dynamics import GaitDynamics
+from iceskate_sim.observation import Observation
+from iceskate_sim.robot import SupportModel
+
+PIVOT, ANKLE, KNEE, SWING_HIP, SWING_KNEE, SWING_ANKLE = 1, 2, 3, 5, 6, 7
+GRAVITY = 9.81  # m/s^2
+
+
+@dataclass(frozen=True)
+class FeedforwardParameters:
+    """Feed-forward leg torques (defaults: model-spec §7.1 and §14.1-2).
+
+    :param hip_amplitude: A5 [N m] of the swing-hip pulse (40).
+    :param hip_duration: D5 [s] of the swing-hip pulse (0.35).
+    :param knee_amplitude: A6 [N m] of the swing-knee flexion pulse (20; §14.2: 15-25).
+    :param knee_duration: D6 [s] of the knee pulse (0.25).
+    :param knee_stiffness: K6 [N m/rad] of the knee extension PD after the pulse (50).
+    :param knee_reference: q6_ref [rad] of that PD (-0.05, slightly flexed).
+    :param knee_damping: B6 [N m s/rad] of that PD (5).
+    :param ankle_push: A2 [N m], support ankle push-off (20).
+    :param knee_push: A3 [N m], support knee extension during push-off (10).
+    :param pivot_push: A1 [N m], heel-up torque on the floor pivot q1 (10).
+    :param joint1_torque: apply the q1 entry at all (model-spec §3.3 / §11 #18 switch).
+    """
+
+    hip_amplitude: float = 40.0
+    hip_duration: float = 0.35
+    knee_amplitude: float = 20.0
+    knee_duration: float = 0.25
+    knee_stiffness: float = 50.0
+    knee_reference: float = -0.05
+    knee_damping: float = 5.0
+    ankle_push: float = 20.0
+    knee_push: float = 10.0
+    pivot_push: float = 10.0
+    joint1_torque: bool = True
+
+    def __post_init__(self) -> None:
+        """Validate every field (GaitManagerError naming the key)."""
+        for name in ('hip_amplitude', 'knee_amplitude', 'knee_stiffness', 'knee_damping',
+                     'ankle_push', 'knee_push', 'pivot_push'):
+            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
+        for name in ('hip_duration', 'knee_duration'):
+            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0,
+                                                open_low=True))
+        object.__setattr__(self, 'knee_reference',
+                           real('knee_reference', self.knee_reference, low=-2.5, high=0.0))
+        boolean('joint1_torque', self.joint1_torque)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> FeedforwardParameters:
+        """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
+        return build(cls, d, 'feedforward.')
+
+
+@dataclass(frozen=True)
+class WeightTransferParameters:
+    """Weight transfer after heel strike (defaults: model-spec §14.5).
+
+    :param share: final f_des as a fraction of the robot's weight m g (1.0: full transfer,
+        which drives the rear normal force to 0, the E7 exchange; 0.3 settles in double
+        support).
+    :param ramp_time: time [s] of the linear ramp of f_des from 0 after t_touchdown (0.5).
+    :param moment_arm: tau_n,des / f_des [m] while the front sole is flat (0.05; 0 disables).
+    :param joint1_torque: apply the q1 entry while q1 is active (switch, model-spec §3.3).
+    """
+
+    share: float = 1.0
+    ramp_time: float = 0.5
+    moment_arm: float = 0.05
+    joint1_torque: bool = True
+
+    def __post_init__(self) -> None:
+        """Validate every field (GaitManagerError naming the key)."""
+        object.__setattr__(self, 'share', real('share', self.share, low=0.0, high=2.0))
+        object.__setattr__(self, 'ramp_time', real('ramp_time', self.ramp_time, low=0.0))
+        object.__setattr__(self, 'moment_arm',
+                           real('moment_arm', self.moment_arm, low=-0.26, high=0.26))
+        boolean('joint1_torque', self.joint1_torque)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> WeightTransferParameters:
+        """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
+        return build(cls, d, 'weight_transfer.')
+
+
+def _pulse(amplitude: float, duration: float, dt: float) -> float:
+    """Half sine amplitude sin(pi dt / duration) on [0, duration], 0 elsewhere."""
+    if 0.0 <= dt <= duration:
+        return amplitude * math.sin(math.pi * dt / duration)
+    return 0.0
+
+
+def feedforward_torque(obs: Observation, params: FeedforwardParameters) -> np.ndarray:
+    """Return the feed-forward torques [N m] on joints 1, 2, 3 (push-off), 5, 6 (swing)."""
+    tau = zeros()
+    mode = obs.gait_mode
+    dt = obs.t - obs.t_exchange
+    if mode.swing == 'A':
+        tau[SWING_HIP] = _pulse(params.hip_amplitude, params.hip_duration, dt)
+        if dt <= params.knee_duration:
+            tau[SWING_KNEE] = -_pulse(params.knee_amplitude, params.knee_duration, dt)
+        else:
+            tau[SWING_KNEE] = (params.knee_stiffness * (params.knee_reference - obs.q[SWING_KNEE])
+                               - params.knee_damping * obs.v[SWING_KNEE])
+    if mode.q1_active and obs.pivot == 'toe':
+        tau[ANKLE] = params.ankle_push
+        tau[KNEE] = -params.knee_push
+        if params.joint1_torque:
+            tau[PIVOT] = -params.pivot_push
+    return tau
+
+
+def desired_heel_force(obs: Observation, params: WeightTransferParameters,
+                       total_mass: float) -> float:
+    """f_des [N]: vertical floor force wanted on the swing heel (0 in the air or before
+    touchdown), ramping linearly to share m g over ``ramp_time`` after t_touchdown."""
+    if obs.gait_mode.swing == 'A' or not math.isfinite(obs.t_touchdown):
+        return 0.0
+    final = params.share * total_mass * GRAVITY
+    if params.ramp_time == 0.0:
+        return final
+    return final * min(max((obs.t - obs.t_touchdown) / params.ramp_time, 0.0), 1.0)
+
+
+_SCRATCH: dict[int, tuple[SupportModel, pin.Data]] = {}
+
+
+def _data_for(support_model: SupportModel) -> pin.Data:
+    """Pinocchio scratch data of one support model, made once (not thread-safe, like
+    GaitDynamics; the model is kept referenced so that its id stays unique)."""
+    entry = _SCRATCH.get(id(support_model))
+    if entry is None or entry[0] is not support_model:
+        entry = (support_model, support_model.new_data())
+        _SCRATCH[id(support_model)] = entry
+    return entry[1]
+
+
+def swing_heel_z_row(obs: Observation, dynamics: GaitDynamics) -> np.ndarray:
+    """J_c: d z_heel / d q, the z row of the swing-heel Jacobian (18 entries [m/rad, m/m];
+    columns of locked coordinates 0)."""
+    sm = dynamics.robot.support_model(obs.side, obs.pivot)
+    data = _data_for(sm)
+    pin.computeJointJacobians(sm.model, data, obs.q)
+    row = pin.getFrameJacobian(sm.model, data, sm.frame_ids['swing_heel'],
+                               pin.LOCAL_WORLD_ALIGNED)[2].copy()
+    mode = obs.gait_mode
+    if not mode.y0_active:
+        row[0] = 0.0
+    if not mode.q1_active:
+        row[PIVOT] = 0.0
+    return row
+
+
+def weight_transfer_torque(obs: Observation, dynamics: GaitDynamics,
+                           params: WeightTransferParameters) -> np.ndarray:
+    """Return tau_wt = -J_c^T f_des - j_r^T tau_n,des [N m] (zero before touchdown)."""
+    tau = zeros()
+    force = desired_heel_force(obs, params, dynamics.robot.total_mass)
+    if force == 0.0:
+        return tau
+    tau -= force * swing_heel_z_row(obs, dynamics)
+    mode = obs.gait_mode
+    if mode.swing in ('Fs', 'Fp') and params.moment_arm != 0.0:
+        tau[PIVOT:SWING_ANKLE + 1] -= params.moment_arm * force
+    tau[0] = 0.0
+    if not (mode.q1_active and params.joint1_torque):
+        tau[PIVOT] = 0.0
+    return tau
