@@ -96,10 +96,15 @@ class Simulator:
         """Return to the initial state; clear the event log and the statistics."""
         q, v = self._initial.q.copy(), self._initial.v.copy()
         self.state = replace(self._initial, q=q, v=v)
+        if 'hy' in self.state.mode.constraints:  # a pinned heel is held where it stands
+            heel = self.dynamics.frame_placement(self.state.contact, q, 'swing_heel')
+            self.state = replace(self.state, contact=replace(
+                self.state.contact, heel_anchor_y=float(heel.translation[1])))
         self.events: list[Transition] = []
         self.stats = RunStatistics()
         self.ended: str | None = None
         self._tau = np.zeros(N_COORDINATES)
+        self._push: tuple[str, np.ndarray] | None = None
         self._integrator = Integrator(self.config.integrator)
         self.result = self._evaluate(self.state.q, self.state.v)
         self._settle()
@@ -124,11 +129,11 @@ class Simulator:
 
     # ---------------------------------------------------------------- stepping
     def _evaluate(self, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
-        return self.dynamics.evaluate(self.state.contact, q, v, self._tau)
+        return self.dynamics.evaluate(self.state.contact, q, v, self._tau, self._push)
 
     def _rhs(self, t: float, x: np.ndarray) -> tuple[np.ndarray, DynamicsResult]:
         n = N_COORDINATES
-        result = self.dynamics.evaluate(self._contact, x[:n], x[n:], self._tau)
+        result = self.dynamics.evaluate(self._contact, x[:n], x[n:], self._tau, self._push)
         return np.concatenate([x[n:], result.qdd]), result
 
     def _guards(self, t: float, x: np.ndarray, result: DynamicsResult) -> np.ndarray:
@@ -136,8 +141,12 @@ class Simulator:
         state = HybridState(t, x[:n], x[n:], self._contact)
         return guard_values(state, result, self.config.friction)
 
-    def advance(self, tau: np.ndarray) -> DynamicsResult:
+    def advance(self, tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
+                ) -> DynamicsResult:
         """Integrate one control period holding the input ``tau`` (18,) constant.
+
+        :param push: optional external force (link frame, world force [N]) held over the
+            period.
 
         :returns: the dynamics at the end of the period (accelerations, multipliers, ...).
         :raises SimulationError: on bad input or divergence. A run that ends physically
@@ -150,9 +159,11 @@ class Simulator:
             raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
                                   f'[y0, q1..q17], got shape {tau.shape}')
         self._tau = tau.copy()
+        self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
+        self.start_result = self._evaluate(self.state.q, self.state.v)
         t_end = self.state.t + self.config.control_period
         n = N_COORDINATES
-        self.result = self._evaluate(self.state.q, self.state.v)
+        self.result = self.start_result
         instant, at_instant = self.state.t, 0
         try:
             while t_end - self.state.t > 1e-12:
@@ -250,4 +261,5 @@ def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 't
     if q.shape != (N_COORDINATES,) or v.shape != (N_COORDINATES,):
         raise SimulationError(f'initial q and v need {N_COORDINATES} entries')
     contact = ContactState(gait_mode, side, pivot)
-    return HybridState(t, q, v, contact)
+    touchdown = t if gait_mode.swing != 'A' else float('nan')  # a foot already down counts
+    return HybridState(t, q, v, contact, t_touchdown=touchdown)

@@ -1,0 +1,124 @@
+"""The sampled trajectory of a run and the figures computed from it (``metrics.json``)."""
+
+from __future__ import annotations
+
+import pathlib
+from typing import Any
+
+import numpy as np
+
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.recording import Sample
+from iceskate_sim.robot import SOLE_HEEL_Y, SOLE_TOE_Y
+
+ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs removed
+SIDE_CODE = {'right': 0, 'left': 1}
+PIVOT_CODE = {'toe': 1, 'heel': 2}
+
+
+class Trajectory:
+    """Columns of per-control-instant samples, grown by ``append``."""
+
+    def __init__(self) -> None:
+        self._rows: dict[str, list[Any]] = {}
+        self.sources: list[str] = []
+
+    def append(self, sample: Sample, psi_d: np.ndarray) -> None:
+        """Add one sample and the visual-lifting target psi_d at it."""
+        s, r = sample.state, sample.result
+        rot = sample.head_rotation
+        row = {
+            't': s.t, 'q': s.q, 'v': s.v, 'qdd': r.qdd, 'mode': s.mode.number,
+            'side': SIDE_CODE[s.contact.side],
+            'pivot': PIVOT_CODE[s.contact.pivot] if s.mode.q1_active else 0,
+            'step_index': s.step_index, 'multipliers': r.multipliers,
+            'support_normal': r.support_normal, 'support_tangential': r.support_tangential,
+            'cop_y': r.cop_y,
+            'psi': np.array([sample.head_position[1], sample.head_position[2],
+                             np.arctan2(-rot[1, 2], rot[2, 2])]),
+            'psi_d': np.asarray(psi_d, dtype=float), 'applied': r.applied,
+        }
+        for source, tau in sample.efforts.items():
+            if source not in self.sources:
+                self.sources.append(source)
+                self._rows[f'tau_{source}'] = [np.zeros(18)] * len(self._rows.get('t', []))
+            row[f'tau_{source}'] = tau
+        for source in self.sources:
+            row.setdefault(f'tau_{source}', np.zeros(18))
+        for key, value in row.items():
+            self._rows.setdefault(key, []).append(value)
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return len(self._rows.get('t', []))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every column as a numpy array (first axis: sample)."""
+        return {key: np.array(values) for key, values in self._rows.items()}
+
+    def save(self, path: pathlib.Path) -> None:
+        """Write the columns to an ``.npz`` file."""
+        np.savez_compressed(path, **self.arrays())
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float('nan')
+
+
+def _runs(values: np.ndarray) -> list[int]:
+    """Collapse consecutive repeats: [1, 1, 2, 2, 10] -> [1, 2, 10]."""
+    out: list[int] = []
+    for value in values.tolist():
+        if not out or out[-1] != value:
+            out.append(int(value))
+    return out
+
+
+def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: float,
+                    error: SimulationError | None) -> dict[str, Any]:
+    """The figures of a run (see the README's metrics table)."""
+    a = trajectory.arrays()
+    sim_time = float(sim.time)
+    failure = str(error) if error is not None else sim.ended
+    metrics: dict[str, Any] = {
+        'scene': scene.name, 'sim_time_s': sim_time, 'wall_time_s': wall_time,
+        'real_time_factor': sim_time / wall_time if wall_time > 0 else float('nan'),
+        'steps': int(sim.state.step_index), 'fell': failure is not None,
+        'failure': failure, 'transitions': len(sim.events),
+        'max_constraint_residual': float(sim.stats.max_constraint_residual),
+        'physics_steps': sim.stats.steps, 'dynamics_evaluations': sim.stats.evaluations,
+        'sources': list(trajectory.sources),
+    }
+    if not len(trajectory):
+        return metrics
+    psi, psi_d = a['psi'], a['psi_d']
+    err = psi_d - psi
+    metrics['head_error_rms'] = {'y': _rms(err[:, 0]), 'z': _rms(err[:, 1]),
+                                 'pitch': _rms(err[:, 2])}
+    metrics['forward_distance_m'] = float(psi[-1, 0] - psi[0, 0])
+    modes = a['mode']
+    metrics['mode_time_fraction'] = {
+        str(m): float(np.mean(modes == m)) for m in sorted(set(modes.tolist()))}
+    flat = a['pivot'] == 0
+    cop = a['cop_y']
+    y0 = a['q'][:, 0]
+    outside = flat & ~((cop >= y0 + SOLE_HEEL_Y) & (cop <= y0 + SOLE_TOE_Y))
+    metrics['zmp_outside_support_fraction'] = float(np.mean(outside))
+    metrics['edge_mode_fraction'] = float(np.mean(~flat))
+    steps = a['step_index']
+    metrics['support_positions_m'] = [float(y0[np.argmax(steps == k)])
+                                      for k in range(int(steps.max()) + 1)]
+    metrics['mode_sequence_per_step'] = {str(k): _runs(modes[steps == k])
+                                         for k in range(int(steps.max()) + 1)}
+    late = steps >= ARM_SWING_FROM_STEP
+    if np.count_nonzero(late) > 2:
+        q11, q14 = a['q'][late, 11], a['q'][late, 14]
+        corr = (float(np.corrcoef(q11, q14)[0, 1])
+                if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
+        metrics['arm_swing'] = {'q11_peak_to_peak': float(np.ptp(q11)),
+                                'q14_peak_to_peak': float(np.ptp(q14)),
+                                'corr_q11_q14': corr, 'samples': int(np.count_nonzero(late))}
+    else:
+        metrics['arm_swing'] = None
+    metrics['yaw_range_rad'] = [float(a['q'][:, 8].min()), float(a['q'][:, 8].max())]
+    return metrics

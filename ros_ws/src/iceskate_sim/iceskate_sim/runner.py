@@ -1,0 +1,148 @@
+"""Headless scene runner: ``run_scene <scene> --out DIR``.
+
+Runs a scene in one process without ROS transport: at every control instant t_k it builds the
+observation, asks the scene's controllers for their torques (the same law functions the ROS
+nodes call), holds their sum over [t_k, t_k+1] (zero-order hold) and advances the hybrid
+simulation. It writes into DIR:
+
+* ``metrics.json``: the figures of the run (see ``iceskate_sim.metrics``);
+* ``events.json``: every transition (time, from/to mode, event, cause, impulse);
+* ``trajectory.npz``: the sampled state (t, q, v, qdd, mode, side, pivot, step, multipliers,
+  support forces, CoP, head pose and target, torques by source);
+* ``bag/``: the same run as a rosbag2 MCAP bag (unless the scene turns it off).
+
+A run that diverges raises SimulationError after closing the bag; a fall ends the run with
+``fell: true`` and the reason in ``failure``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+import json
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+from iceskate_sim.control_stack import ControlStack
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.metrics import Trajectory, compute_metrics
+from iceskate_sim.recording import BagRecorder, Sample
+from iceskate_sim.robot import load_robot
+from iceskate_sim.scene import Scene, load_scene
+from iceskate_sim.simulation import Simulator
+
+
+def scene_metadata(scene: Scene) -> dict[str, str]:
+    """Bag custom_data: scene name, its full parameters, the integrator."""
+    return {'scene': scene.name, 'scene_parameters': json.dumps(scene.raw, sort_keys=True),
+            'integrator': json.dumps(asdict(scene.simulator.integrator), sort_keys=True)}
+
+
+def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
+    """Run ``scene``; write the outputs into ``out`` (if given) and return the metrics."""
+    robot = load_robot()
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    stack = ControlStack(scene, robot, sim.observation())
+    trajectory = Trajectory()
+    recorder = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        if scene.record_bag:
+            recorder = BagRecorder(out / 'bag', scene_metadata(scene),
+                                   robot.urdf_path.read_text(encoding='utf-8'))
+    n_periods = int(round(scene.duration / scene.simulator.control_period))
+    bar = _progress(n_periods, scene.name, progress)
+    error: SimulationError | None = None
+    wall_start = time.perf_counter()
+    try:
+        for _ in range(n_periods):
+            state = sim.state
+            obs = sim.observation()
+            efforts = stack.efforts(obs)
+            tau = np.sum(list(efforts.values()), axis=0) if efforts else np.zeros(18)
+            push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
+                        None)
+            if push is not None:
+                efforts = {**efforts, 'push': sim.dynamics.push_force(state.contact, state.q,
+                                                                      push)}
+            sim.advance(tau, push)
+            placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
+            sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
+                            placement.rotation.copy(), _last_event_before(sim, state.t))
+            trajectory.append(sample, stack.last_psi_d)
+            if recorder is not None:
+                recorder.write(sample)
+            bar.update(1)
+            if sim.ended is not None:
+                break
+    except SimulationError as exc:
+        error = exc
+    finally:
+        bar.close()
+        if recorder is not None:
+            recorder.close()
+    wall = time.perf_counter() - wall_start
+    metrics = compute_metrics(scene, sim, trajectory, wall, error)
+    if out is not None:
+        (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n')
+        (out / 'events.json').write_text(json.dumps(
+            [asdict(e) for e in sim.events], indent=1, default=float) + '\n')
+        trajectory.save(out / 'trajectory.npz')
+    if error is not None:
+        raise error
+    return metrics
+
+
+def _last_event_before(sim: Simulator, t: float):
+    for event in reversed(sim.events):
+        if event.t <= t:
+            return event
+    return None
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress(total: int, name: str, enabled: bool):
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, desc=f'scene {name}', unit='period', mininterval=1.0,
+                file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point."""
+    parser = argparse.ArgumentParser(prog='run_scene', description=__doc__.split('\n\n')[0])
+    parser.add_argument('scene', help='shipped scene name (e.g. skate) or path to a YAML file')
+    parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
+    parser.add_argument('--duration', type=float, help='override the scene duration [s]')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    args = parser.parse_args(argv)
+    try:
+        scene = load_scene(args.scene)
+        if args.duration is not None:
+            if not args.duration > 0:
+                raise SimulationError('--duration must be > 0 s')
+            from dataclasses import replace
+            scene = replace(scene, duration=args.duration)
+        metrics = run(scene, args.out, progress=not args.quiet)
+    except SimulationError as exc:
+        print(f'run_scene: error: {exc}', file=sys.stderr)
+        return 1
+    summary = {k: metrics[k] for k in ('scene', 'sim_time_s', 'steps', 'fell', 'failure',
+                                       'forward_distance_m', 'real_time_factor')}
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
