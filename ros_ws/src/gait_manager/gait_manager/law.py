@@ -29,8 +29,9 @@ from gait_manager.feedforward import (
     weight_transfer_torque,
 )
 from gait_manager.heel import HeelParameters, heel_torque
-from gait_manager.posture import PostureParameters, head_offset_of, posture_torque
+from gait_manager.posture import PostureParameters, head_offset_of, posture_command
 from gait_manager.yaw import YawParameters, yaw_torque
+from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 
@@ -92,27 +93,37 @@ class GaitManagerParameters:
         return cls(**kwargs)
 
 
-def gait_manager_torques(obs: Observation, dynamics: GaitDynamics,
-                         params: GaitManagerParameters) -> dict[str, np.ndarray]:
-    """Return {source: 18-vector torque [N m]} for the enabled sources only, in SOURCES order.
+def gait_manager_commands(obs: Observation, dynamics: GaitDynamics,
+                          params: GaitManagerParameters) -> dict[str, JointCommand]:
+    """Return {source: JointCommand} for the enabled sources only, in SOURCES order.
 
-    ``dynamics`` is used only by 'posture' and 'weight_transfer'.
+    The posture stabiliser carries a joint impedance (its PD runs at the physics rate); the
+    other sources are torques held over the control period. ``dynamics`` is used only by
+    'posture' and 'weight_transfer'.
     """
-    out: dict[str, np.ndarray] = {}
+    out: dict[str, JointCommand] = {}
     enabled = params.enabled
     if 'posture' in enabled:
-        out['posture'] = posture_torque(obs, dynamics, params.posture)
+        out['posture'] = posture_command(obs, dynamics, params.posture)
     if 'feedforward' in enabled:
-        out['feedforward'] = feedforward_torque(obs, params.feedforward)
+        out['feedforward'] = JointCommand(feedforward_torque(obs, params.feedforward))
     if 'weight_transfer' in enabled:
-        out['weight_transfer'] = weight_transfer_torque(obs, dynamics, params.weight_transfer)
+        out['weight_transfer'] = JointCommand(
+            weight_transfer_torque(obs, dynamics, params.weight_transfer))
     if 'heel' in enabled:
-        out['heel'] = heel_torque(obs, params.heel)
+        out['heel'] = JointCommand(heel_torque(obs, params.heel))
     if 'arm_assist' in enabled:
-        out['arm_assist'] = arm_assist_torque(obs, params.arm_assist)
+        out['arm_assist'] = JointCommand(arm_assist_torque(obs, params.arm_assist))
     if 'yaw' in enabled:
-        out['yaw'] = yaw_torque(obs, params.yaw)
+        out['yaw'] = JointCommand(yaw_torque(obs, params.yaw))
     return out
+
+
+def gait_manager_torques(obs: Observation, dynamics: GaitDynamics,
+                         params: GaitManagerParameters) -> dict[str, np.ndarray]:
+    """Return {source: 18-vector torque [N m]} at ``obs`` for the enabled sources only."""
+    return {source: command.torque(obs.q, obs.v)
+            for source, command in gait_manager_commands(obs, dynamics, params).items()}
 
 
 def total_torque(torques: Mapping[str, np.ndarray]) -> np.ndarray:

@@ -36,6 +36,7 @@ import numpy as np
 
 from gait_manager._params import boolean, build, choice, joints, real, smoothstep, zeros
 from gait_manager.errors import GaitManagerError
+from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import SupportModel
@@ -242,6 +243,33 @@ def head_offset_of(obs: Observation, params: PostureParameters) -> np.ndarray:
     if params.reference == 'standing':
         return np.zeros(2)
     return stance_shift(obs, params)
+
+
+def posture_command(obs: Observation, dynamics: GaitDynamics,
+                    params: PostureParameters) -> JointCommand:
+    """The posture stabiliser as a joint command: gravity compensation as feed-forward and the
+    PD (stance reference, yaw centring spring) as a joint impedance that the simulator runs at
+    its physics rate. With ``null_space`` the PD depends on J_H(q), so it is sent as a torque
+    held over the control period instead."""
+    if params.null_space:
+        return JointCommand(posture_torque(obs, dynamics, params))
+    effort = zeros()
+    stiffness, damping, reference = zeros(), zeros(), zeros()
+    if params.joints:
+        idx = list(params.joints)
+        reference[idx] = stance_reference(obs, dynamics, params).q_ref[idx]
+        stiffness[idx] = params.stiffness
+        damping[idx] = params.damping
+    if params.gravity_compensation and params.gravity_joints:
+        g = zeros()
+        g[obs.gait_mode.active] = dynamics.gravity_terms(obs.contact(), obs.q)
+        idx = list(params.gravity_joints)
+        effort[idx] += g[idx]
+    stiffness[YAW_JOINT] += params.yaw_stiffness
+    damping[YAW_JOINT] += params.yaw_damping
+    if not np.all(np.isfinite(effort)) or not np.all(np.isfinite(reference)):
+        raise GaitManagerError(f'posture command is not finite at t = {obs.t}')
+    return JointCommand(effort, stiffness, damping, reference)
 
 
 def posture_torque(obs: Observation, dynamics: GaitDynamics,

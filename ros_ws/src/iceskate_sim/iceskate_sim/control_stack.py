@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import Robot
@@ -34,18 +35,18 @@ class ControlStack:
         self.psi_initial = self.dynamics.head_pose(initial.contact(), initial.q)[0]
         self.last_psi_d = self.psi_initial.copy()
 
-    def efforts(self, obs: Observation) -> dict[str, np.ndarray]:
-        """Torque of every enabled source at ``obs`` [N m], keyed by source name."""
-        from gait_manager.law import gait_manager_torques, head_offset
+    def commands(self, obs: Observation) -> dict[str, JointCommand]:
+        """Command of every enabled source at ``obs``, keyed by source name."""
+        from gait_manager.law import gait_manager_commands, head_offset
         from visual_lifting.law import visual_lifting
-        torques: dict[str, np.ndarray] = {}
+        commands: dict[str, JointCommand] = {}
         if self.visual_lifting is not None:
             offset = (head_offset(obs, self.dynamics, self.gait_manager)
                       if self.gait_manager is not None else np.zeros(2))
             task = visual_lifting(obs, self.dynamics, self.visual_lifting, self.psi_initial,
                                   offset)
-            torques['visual_lifting'] = task.tau
+            commands['visual_lifting'] = JointCommand(task.tau)
             self.last_psi_d = task.psi_d
         if self.gait_manager is not None:
-            torques.update(gait_manager_torques(obs, self.dynamics, self.gait_manager))
-        return torques
+            commands.update(gait_manager_commands(obs, self.dynamics, self.gait_manager))
+        return commands

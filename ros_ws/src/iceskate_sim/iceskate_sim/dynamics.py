@@ -101,6 +101,7 @@ class DynamicsResult:
     :ivar swing_heel: world position of the swing heel point [m].
     :ivar swing_heel_velocity: world velocity of the swing heel point [m/s].
     :ivar swing_toe_z: height of the swing toe point [m].
+    :ivar passive: joint damping and soft-stop torques (part of ``applied``) [N m].
     """
 
     qdd: np.ndarray
@@ -114,6 +115,7 @@ class DynamicsResult:
     swing_heel: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
     swing_heel_velocity: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))
     swing_toe_z: float = 0.0
+    passive: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(18))
 
     def multiplier(self, name: str) -> float:
         """Return the multiplier called ``name`` ('f_nz', 'f_ny' or 'tau_n')."""
@@ -177,6 +179,15 @@ class GaitDynamics:
                            + self.params.limit_damping * v[idx] * engaged)
         return force
 
+    def _limit_damping_engaged(self, q: np.ndarray) -> np.ndarray:
+        """Soft-stop damping of the stops engaged at q (18,) [N m s/rad]."""
+        out = np.zeros(N_COORDINATES)
+        if self.params.joint_limits:
+            idx = self._limit_index
+            engaged = (q[idx] < self._limit_lower) | (q[idx] > self._limit_upper)
+            out[idx] = self.params.limit_damping * engaged
+        return out
+
     def _constraint_rows(self, contact: ContactState, data: pin.Data, model: pin.Model,
                          frames: dict[str, int], q: np.ndarray,
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -218,7 +229,8 @@ class GaitDynamics:
     # ------------------------------------------------------------- main routine
     def evaluate(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
                  tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
-                 ) -> DynamicsResult:
+                 stiffness: np.ndarray | None = None, damping: np.ndarray | None = None,
+                 implicit_step: float = 0.0) -> DynamicsResult:
         """Solve eq. (7) of ``contact.mode`` at (q, v) under input torques ``tau``.
 
         :param contact: mode, support side, pivot and contact anchors.
@@ -228,6 +240,12 @@ class GaitDynamics:
             entry applied only while q1 is active).
         :param push: optional external force (link frame name, world force [N] (3,)) acting
             at that frame's origin, e.g. a push on the chest.
+        :param stiffness: joint-impedance stiffness K (18,) [N m/rad]: adds -K q (the K q_ref
+            part belongs in ``tau``).
+        :param damping: joint-impedance damping B (18,) [N m s/rad]: adds -B v.
+        :param implicit_step: h > 0 returns the acceleration of a step of size h with joint,
+            impedance and soft-stop damping taken implicitly, (M + h D) a = f - D v (MuJoCo's
+            implicitfast idea); 0 gives the exact acceleration.
         :raises SimulationError: on malformed input or a rank-deficient constraint set.
         """
         mode = contact.mode
@@ -250,8 +268,11 @@ class GaitDynamics:
         pin.forwardKinematics(model, data, q, v, self._zeros)  # data.a = velocity products
         M = data.M
         M[self._lower] = M.T[self._lower]
-        applied = self.passive_forces(q, v)
+        passive = self.passive_forces(q, v)
+        applied = passive.copy()
         applied[1:] += tau[1:]
+        if stiffness is not None:
+            applied[1:] -= stiffness[1:] * q[1:] + damping[1:] * v[1:]
         if not mode.q1_active:
             applied[Q1] = 0.0
         applied[Y0] = 0.0
@@ -265,6 +286,12 @@ class GaitDynamics:
         b = np.zeros(size)
         A[:n, :n] = M[np.ix_(act, act)]
         b[:n] = applied[act] - data.nle[act]
+        if implicit_step > 0.0:
+            implicit = self._damping + self._limit_damping_engaged(q)
+            if damping is not None:
+                implicit = implicit + damping
+            implicit[Y0] = 0.0
+            A[np.arange(n), np.arange(n)] += implicit_step * implicit[act]
         force_cols = rows.copy()  # generalized-force direction of each multiplier
         if mode.swing_sliding:  # friction mu f_nz on the heel, against its velocity
             force_cols[0] -= mu * contact.heel_slide_dir * heel_y_row
@@ -305,7 +332,8 @@ class GaitDynamics:
         heel_velocity = pin.getFrameVelocity(model, data, heel, _LWA).linear.copy()
         toe_z = float(pin.updateFramePlacement(model, data, frames['swing_toe']).translation[2])
         return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
-                              float(heel_friction), applied, heel_position, heel_velocity, toe_z)
+                              float(heel_friction), applied, heel_position, heel_velocity, toe_z,
+                              passive)
 
     def _check_rank(self, jac: np.ndarray, contact: ContactState) -> None:
         gram = jac @ jac.T

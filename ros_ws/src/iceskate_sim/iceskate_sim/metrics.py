@@ -96,6 +96,13 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     metrics['head_error_rms'] = {'y': _rms(err[:, 0]), 'z': _rms(err[:, 1]),
                                  'pitch': _rms(err[:, 2])}
     metrics['forward_distance_m'] = float(psi[-1, 0] - psi[0, 0])
+    pushes = getattr(scene, 'pushes', ())
+    if pushes:  # recovery: worst head error in the last second of the run, after every push
+        t = a['t']
+        after = t >= max(max(p.start + p.duration for p in pushes), t[-1] - 1.0)
+        metrics['head_error_final_max'] = {
+            'y': float(np.max(np.abs(err[after, 0]))), 'z': float(np.max(np.abs(err[after, 1]))),
+            'pitch': float(np.max(np.abs(err[after, 2])))}
     modes = a['mode']
     metrics['mode_time_fraction'] = {
         str(m): float(np.mean(modes == m)) for m in sorted(set(modes.tolist()))}

@@ -141,13 +141,8 @@ class MessageFactory:
             touched_down=touched,
             touchdown_stamp=stamp(self.typestore, s.t_touchdown if touched else 0.0),
             heel_anchor_y=float(s.contact.heel_anchor_y))
-        efforts = [self._effort(header=self.header(t), source=source, joint_names=self.names,
-                                effort=np.asarray(tau, dtype=np.float64))
-                   for source, tau in sample.efforts.items()]
-        efforts.append(self._effort(header=self.header(t), source='passive',
-                                    joint_names=self.names,
-                                    effort=np.asarray(r.applied - _input_part(total, s),
-                                                      dtype=np.float64)))
+        efforts = [self.effort(t, source, tau) for source, tau in sample.efforts.items()]
+        efforts.append(self.effort(t, 'passive', r.passive))
         dynamics = self._dynamics(header=self.header(t), name=self.names,
                                   active=np.isin(np.arange(18), mode.active),
                                   acceleration=r.qdd.astype(np.float64), efforts=efforts)
@@ -155,18 +150,16 @@ class MessageFactory:
                 '/joint_states': joint_state, '/head_pose': pose, '/gait_state': gait,
                 '/joint_dynamics': dynamics}
 
+    def effort(self, t: float, source: str, tau: np.ndarray) -> Any:
+        """EffortCommand holding the generalized force of one source at the sample [N m]."""
+        empty = np.zeros(0)
+        return self._effort(header=self.header(t), source=source, joint_names=self.names,
+                            effort=np.asarray(tau, dtype=np.float64), stiffness=empty,
+                            damping=empty, position_reference=empty)
+
     def description(self, urdf: str) -> Any:
         """std_msgs/String holding the URDF."""
         return self._string(data=urdf)
-
-
-def _input_part(total: np.ndarray, state: HybridState) -> np.ndarray:
-    """The part of the input torque the dynamics applies (y0 never, q1 only when active)."""
-    applied = np.asarray(total, dtype=float).copy()
-    applied[0] = 0.0
-    if not state.mode.q1_active:
-        applied[1] = 0.0
-    return applied
 
 
 class BagRecorder:

@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.control_stack import ControlStack
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import Trajectory, compute_metrics
@@ -61,14 +62,13 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
         for _ in range(n_periods):
             state = sim.state
             obs = sim.observation()
-            efforts = stack.efforts(obs)
-            tau = np.sum(list(efforts.values()), axis=0) if efforts else np.zeros(18)
+            commands = stack.commands(obs)
             push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
                         None)
+            sim.advance(HeldCommand.combine(commands.values()), push)
+            efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
             if push is not None:
-                efforts = {**efforts, 'push': sim.dynamics.push_force(state.contact, state.q,
-                                                                      push)}
-            sim.advance(tau, push)
+                efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
             placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
             sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
                             placement.rotation.copy(), _last_event_before(sim, state.t))

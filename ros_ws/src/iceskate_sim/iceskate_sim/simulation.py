@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
@@ -103,7 +104,7 @@ class Simulator:
         self.events: list[Transition] = []
         self.stats = RunStatistics()
         self.ended: str | None = None
-        self._tau = np.zeros(N_COORDINATES)
+        self._command = HeldCommand.torque_only(np.zeros(N_COORDINATES))
         self._push: tuple[str, np.ndarray] | None = None
         self._integrator = Integrator(self.config.integrator)
         self.result = self._evaluate(self.state.q, self.state.v)
@@ -129,11 +130,16 @@ class Simulator:
 
     # ---------------------------------------------------------------- stepping
     def _evaluate(self, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
-        return self.dynamics.evaluate(self.state.contact, q, v, self._tau, self._push)
+        c = self._command
+        return self.dynamics.evaluate(self.state.contact, q, v, c.bias, self._push, c.stiffness,
+                                      c.damping)
 
-    def _rhs(self, t: float, x: np.ndarray) -> tuple[np.ndarray, DynamicsResult]:
+    def _rhs(self, t: float, x: np.ndarray, implicit_step: float = 0.0,
+             ) -> tuple[np.ndarray, DynamicsResult]:
         n = N_COORDINATES
-        result = self.dynamics.evaluate(self._contact, x[:n], x[n:], self._tau, self._push)
+        c = self._command
+        result = self.dynamics.evaluate(self._contact, x[:n], x[n:], c.bias, self._push,
+                                        c.stiffness, c.damping, implicit_step)
         return np.concatenate([x[n:], result.qdd]), result
 
     def _guards(self, t: float, x: np.ndarray, result: DynamicsResult) -> np.ndarray:
@@ -141,10 +147,12 @@ class Simulator:
         state = HybridState(t, x[:n], x[n:], self._contact)
         return guard_values(state, result, self.config.friction)
 
-    def advance(self, tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
-                ) -> DynamicsResult:
-        """Integrate one control period holding the input ``tau`` (18,) constant.
+    def advance(self, command: HeldCommand | np.ndarray,
+                push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
+        """Integrate one control period holding the input command (zero-order hold).
 
+        :param command: a HeldCommand (feed-forward plus joint impedance, evaluated at every
+            physics step) or a plain torque vector (18,) held constant.
         :param push: optional external force (link frame, world force [N]) held over the
             period.
 
@@ -154,11 +162,13 @@ class Simulator:
         """
         if self.ended is not None:
             raise SimulationError(f'the run has ended ({self.ended}); reset() to start again')
-        tau = np.asarray(tau, dtype=float)
-        if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
-            raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
-                                  f'[y0, q1..q17], got shape {tau.shape}')
-        self._tau = tau.copy()
+        if not isinstance(command, HeldCommand):
+            tau = np.asarray(command, dtype=float)
+            if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
+                raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
+                                      f'[y0, q1..q17], got shape {tau.shape}')
+            command = HeldCommand.torque_only(tau)
+        self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         self.start_result = self._evaluate(self.state.q, self.state.v)
         t_end = self.state.t + self.config.control_period

@@ -1,0 +1,97 @@
+"""Joint commands: a feed-forward effort plus an optional joint impedance.
+
+A controller answers each control instant with a ``JointCommand`` per source. The simulator
+holds it over the control period (zero-order hold of the *command*) and evaluates
+``effort + stiffness * (reference - q) - damping * v`` at every physics step, as a real joint
+drive runs its PD loop faster than the controller that sets it. Stiff PD terms on the light
+links of this model (pelvis, torso segments, hands) are unstable when the torque itself is held
+for a millisecond; run this way they are stable, and the damping can be integrated implicitly.
+All arrays have 18 entries [y0, q1..q17]; units N m (N), N m/rad, N m s/rad, rad (m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.robot import N_COORDINATES
+
+
+def _vector(name: str, value: np.ndarray | None) -> np.ndarray:
+    x = np.zeros(N_COORDINATES) if value is None else np.asarray(value, dtype=float)
+    if x.shape != (N_COORDINATES,):
+        raise SimulationError(f'joint command {name} must have {N_COORDINATES} entries, '
+                              f'got shape {x.shape}')
+    if not np.all(np.isfinite(x)):
+        raise SimulationError(f'joint command {name} has non-finite entries')
+    return x
+
+
+@dataclass(frozen=True)
+class JointCommand:
+    """effort + stiffness * (reference - q) - damping * v, per coordinate."""
+
+    effort: np.ndarray
+    stiffness: np.ndarray | None = None
+    damping: np.ndarray | None = None
+    reference: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """Validate lengths, finiteness and non-negative gains."""
+        object.__setattr__(self, 'effort', _vector('effort', self.effort))
+        given = [x is not None for x in (self.stiffness, self.damping, self.reference)]
+        if any(given) and not all(given):
+            raise SimulationError('joint command impedance needs stiffness, damping and '
+                                  'reference together')
+        if all(given):
+            for name in ('stiffness', 'damping', 'reference'):
+                object.__setattr__(self, name, _vector(name, getattr(self, name)))
+            if np.any(self.stiffness < 0) or np.any(self.damping < 0):
+                raise SimulationError('joint command stiffness and damping must be >= 0')
+
+    @property
+    def has_impedance(self) -> bool:
+        """Whether the command carries a joint impedance."""
+        return self.stiffness is not None
+
+    def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The generalized force this command applies at (q, v) [N m]."""
+        if not self.has_impedance:
+            return self.effort.copy()
+        return self.effort + self.stiffness * (self.reference - q) - self.damping * v
+
+
+@dataclass(frozen=True)
+class HeldCommand:
+    """The sum of several commands in the form bias - stiffness * q - damping * v."""
+
+    bias: np.ndarray  # effort + stiffness * reference
+    stiffness: np.ndarray
+    damping: np.ndarray
+
+    @classmethod
+    def combine(cls, commands: Iterable[JointCommand]) -> HeldCommand:
+        """Sum the commands of all sources."""
+        bias = np.zeros(N_COORDINATES)
+        stiffness = np.zeros(N_COORDINATES)
+        damping = np.zeros(N_COORDINATES)
+        for c in commands:
+            bias += c.effort
+            if c.has_impedance:
+                bias += c.stiffness * c.reference
+                stiffness += c.stiffness
+                damping += c.damping
+        return cls(bias, stiffness, damping)
+
+    @classmethod
+    def torque_only(cls, tau: np.ndarray) -> HeldCommand:
+        """A plain held torque."""
+        zeros = np.zeros(N_COORDINATES)
+        return cls(_vector('effort', tau), zeros, zeros.copy())
+
+    def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The generalized force at (q, v) [N m]."""
+        return self.bias - self.stiffness * q - self.damping * v
