@@ -97,12 +97,18 @@ class WeightTransferParameters:
     :param ramp_time: time [s] of the linear ramp of f_des from 0 after t_touchdown (0.5).
     :param moment_arm: tau_n,des / f_des [m] while the front sole is flat (0.05; 0 disables).
     :param joint1_torque: apply the q1 entry while q1 is active (switch, model-spec §3.3).
+    :param start_share: f_des / (m g) on the second foot in the starting double support
+        (swing foot down since the start, before any heel strike): weight shift (§14.7).
+    :param start_ramp: time [s] over which the starting share falls linearly to 0, unloading
+        the swing foot so it can lift off; 0 holds it (standing).
     """
 
     share: float = 1.0
     ramp_time: float = 0.5
     moment_arm: float = 0.05
     joint1_torque: bool = True
+    start_share: float = 0.5
+    start_ramp: float = 0.5
 
     def __post_init__(self) -> None:
         """Validate every field (GaitManagerError naming the key)."""
@@ -111,6 +117,9 @@ class WeightTransferParameters:
         object.__setattr__(self, 'moment_arm',
                            real('moment_arm', self.moment_arm, low=-0.26, high=0.26))
         boolean('joint1_torque', self.joint1_torque)
+        object.__setattr__(self, 'start_share',
+                           real('start_share', self.start_share, low=0.0, high=1.0))
+        object.__setattr__(self, 'start_ramp', real('start_ramp', self.start_ramp, low=0.0))
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> WeightTransferParameters:
@@ -148,10 +157,17 @@ def feedforward_torque(obs: Observation, params: FeedforwardParameters) -> np.nd
 def desired_heel_force(obs: Observation, params: WeightTransferParameters,
                        total_mass: float) -> float:
     """f_des [N]: vertical floor force wanted on the swing heel (0 in the air or before
-    touchdown), ramping linearly to share m g over ``ramp_time`` after t_touchdown."""
+    touchdown), ramping linearly to share m g over ``ramp_time`` after t_touchdown; in the
+    starting double support, start_share m g falling to 0 over ``start_ramp``."""
     if obs.gait_mode.swing == 'A' or not math.isfinite(obs.t_touchdown):
         return 0.0
-    final = params.share * total_mass * GRAVITY
+    weight = total_mass * GRAVITY
+    if obs.step_index == 0 and obs.t_touchdown <= obs.t_exchange:  # down since the start
+        if params.start_ramp == 0.0:
+            return params.start_share * weight
+        return params.start_share * weight * max(0.0, 1.0 - (obs.t - obs.t_exchange)
+                                                 / params.start_ramp)
+    final = params.share * weight
     if params.ramp_time == 0.0:
         return final
     return final * min(max((obs.t - obs.t_touchdown) / params.ramp_time, 0.0), 1.0)

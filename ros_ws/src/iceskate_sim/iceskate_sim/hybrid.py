@@ -21,6 +21,15 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import GaitMode, mode_for
 from iceskate_sim.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
 
+# Dead bands (hysteresis) of the force-based guards. A guard that is the complement of the
+# transition just made (flat <-> edge, stick <-> slip, flat sole <-> heel only) would otherwise
+# re-fire on round-off and chatter; these bands make each switch need a finite excess.
+COP_BAND = 1.0e-3  # m: the support CoP must pass a sole edge by 1 mm (E1, E2)
+FORCE_BAND = 0.5  # N: friction excess (E4, S3) and contact force below zero (E6, S6)
+MOMENT_BAND = 0.05  # N m: swing-sole moment below zero before the sole un-flattens (S5)
+# The model has no swing-toe contact: a toe dipping at most this far below the floor while the
+# foot lifts or swings is a scuff, not a toe-first touchdown (S7).
+TOE_SCUFF = 2.0e-3  # m
 _LEG = slice(1, 8)
 _LEG_JOINTS = np.arange(2, 8)
 EPS_V = 1.0e-4  # m/s, velocity dead band of model-spec 4.6 (heel strike: slide vs. pin)
@@ -119,23 +128,23 @@ def _swing_contact(m: GaitMode) -> bool:
 def _stuck_support_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
     """E4: the reaction needed to hold the support foot exceeds friction."""
     if f.rule == 'ice':  # only a forward-wanting foot (reaction pointing back) can slide
-        return -r.support_tangential - f.mu * r.support_normal
-    return abs(r.support_tangential) - f.mu * r.support_normal
+        return -r.support_tangential - f.mu * r.support_normal - FORCE_BAND
+    return abs(r.support_tangential) - f.mu * r.support_normal - FORCE_BAND
 
 
 def _pinned_heel_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
     """S3: the reaction needed to pin the swing heel exceeds friction."""
     f_nz, f_ny = r.multipliers[0], r.multipliers[1]
     if f.rule == 'ice':
-        return -f_ny - f.mu * f_nz
-    return abs(f_ny) - f.mu * f_nz
+        return -f_ny - f.mu * f_nz - FORCE_BAND
+    return abs(f_ny) - f.mu * f_nz - FORCE_BAND
 
 
 GUARDS: tuple[Guard, ...] = (
     Guard('E1', 'support CoP reached the toe edge', lambda m: not m.q1_active,
-          lambda s, r, f: r.support_wrench[3] - SOLE_TOE_Y * r.support_normal),
+          lambda s, r, f: r.support_wrench[3] - (SOLE_TOE_Y + COP_BAND) * r.support_normal),
     Guard('E2', 'support CoP reached the heel edge', lambda m: not m.q1_active,
-          lambda s, r, f: SOLE_HEEL_Y * r.support_normal - r.support_wrench[3]),
+          lambda s, r, f: (SOLE_HEEL_Y - COP_BAND) * r.support_normal - r.support_wrench[3]),
     Guard('E3', 'support sole came back flat', lambda m: m.q1_active,
           lambda s, r, f: s.q[Q1] if s.contact.pivot == 'toe' else -s.q[Q1]),
     Guard('E4', 'support friction limit exceeded: starts gliding', lambda m: not m.y0_active,
@@ -143,11 +152,11 @@ GUARDS: tuple[Guard, ...] = (
     Guard('E5', 'support glide stopped', lambda m: m.y0_active,
           lambda s, r, f: -s.contact.support_slide_dir * s.v[0]),
     Guard('E6', 'support normal force reached zero', lambda m: True,
-          lambda s, r, f: -r.support_normal),
+          lambda s, r, f: -r.support_normal - FORCE_BAND),
     Guard('S1', 'swing heel struck the floor', lambda m: m.swing == 'A',
           lambda s, r, f: -r.swing_heel[2]),
     Guard('S7', 'swing toe reached the floor first', lambda m: m.swing == 'A',
-          lambda s, r, f: -r.swing_toe_z),
+          lambda s, r, f: -r.swing_toe_z - TOE_SCUFF),
     Guard('S2', 'swing heel stopped sliding', lambda m: m.swing in ('Hs', 'Fs'),
           lambda s, r, f: -s.contact.heel_slide_dir * r.swing_heel_velocity[1]),
     Guard('S3', 'swing heel friction limit exceeded: starts sliding',
@@ -155,9 +164,9 @@ GUARDS: tuple[Guard, ...] = (
     Guard('S4', 'swing sole came flat', lambda m: m.swing in ('Hs', 'Hp'),
           lambda s, r, f: -s.q[_LEG].sum()),
     Guard('S5', 'swing sole un-flattens (toe lifts)', lambda m: m.swing in ('Fs', 'Fp'),
-          lambda s, r, f: -r.multipliers[2]),
+          lambda s, r, f: -r.multipliers[2] - MOMENT_BAND),
     Guard('S6', 'swing contact force reached zero', _swing_contact,
-          lambda s, r, f: -r.multipliers[0]),
+          lambda s, r, f: -r.multipliers[0] - FORCE_BAND),
 )
 _GUARDS_OF_MODE: dict[int, tuple[Guard, ...]] = {}
 
@@ -358,7 +367,12 @@ def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: Hyb
         new = replace(state, contact=replace(c, mode=_swapped(mode,
                                                               swing=_UNFLATTEN[mode.swing])))
     elif name == 'S6':
-        new = replace(state, contact=replace(c, mode=_swapped(mode, swing='A')))
+        new = replace(state, contact=replace(c, mode=_swapped(mode, swing='A')),
+                      t_touchdown=float('nan'))
+        if state.step_index == 0 and state.t_touchdown <= state.t_exchange:
+            # the end of the starting double support is the first swing's t_e: the paper's
+            # t_e is when a foot becomes the swing foot, and the first one does so here
+            new = replace(new, t_exchange=state.t)
     else:
         raise SimulationError(f'unknown guard {name!r}')
     record = Transition(state.t, mode.number, new.mode.number, name, guard.cause, impulse,

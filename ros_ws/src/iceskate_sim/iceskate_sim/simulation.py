@@ -48,6 +48,10 @@ class SimulatorConfig:
     :param fall_height: head-top height [m] below which the robot has fallen (run ends).
     :param max_instant_transitions: transitions allowed at one instant before the run is
         declared chattering.
+    :param chatter_dwell: when a transition would bring back a (mode, side) already visited at
+        the same instant (a Zeno cycle of complementary guards, e.g. flat <-> edge in a closed
+        double-support chain), it is not applied and its guard is suppressed for this long
+        [s]; every such case is counted in ``stats.suppressed_cycles``.
     """
 
     control_period: float = 1.0e-3
@@ -58,6 +62,7 @@ class SimulatorConfig:
     residual_bound: float = 1.0e-3
     fall_height: float = 1.2
     max_instant_transitions: int = 20
+    chatter_dwell: float = 0.005
 
     def __post_init__(self) -> None:
         """Check the control period against the integrator step."""
@@ -79,6 +84,7 @@ class RunStatistics:
     evaluations: int = 0
     control_periods: int = 0
     max_constraint_residual: float = 0.0
+    suppressed_cycles: int = 0
 
 
 class Simulator:
@@ -107,6 +113,8 @@ class Simulator:
         self._command = HeldCommand.torque_only(np.zeros(N_COORDINATES))
         self._push: tuple[str, np.ndarray] | None = None
         self._integrator = Integrator(self.config.integrator)
+        self._suppressed: dict[str, float] = {}
+        self._instant: tuple[float, set[tuple[int, str]]] = (float('nan'), set())
         self.result = self._evaluate(self.state.q, self.state.v)
         self._settle()
 
@@ -144,8 +152,16 @@ class Simulator:
 
     def _guards(self, t: float, x: np.ndarray, result: DynamicsResult) -> np.ndarray:
         n = N_COORDINATES
-        state = HybridState(t, x[:n], x[n:], self._contact)
-        return guard_values(state, result, self.config.friction)
+        return self._masked(HybridState(t, x[:n], x[n:], self._contact), result)
+
+    def _masked(self, state: HybridState, result: DynamicsResult) -> np.ndarray:
+        """Guard values with the suppressed guards held at -1 (not due)."""
+        values = guard_values(state, result, self.config.friction)
+        if self._suppressed:
+            for i, guard in enumerate(guards_of(state.mode)):
+                if self._suppressed.get(guard.name, -np.inf) > state.t:
+                    values[i] = -1.0
+        return values
 
     def advance(self, command: HeldCommand | np.ndarray,
                 push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
@@ -208,8 +224,17 @@ class Simulator:
         return self.result
 
     def _transition(self, guard: object) -> None:
+        t = self.state.t
+        if not abs(t - self._instant[0]) <= self.config.integrator.event_tolerance * 10:
+            self._instant = (t, {(self.state.mode.number, self.state.contact.side)})
         new, record = apply_transition(self.dynamics, self.config.friction, self.state,
                                        guard, self.result)
+        key = (new.mode.number, new.contact.side)
+        if key in self._instant[1]:  # a Zeno cycle: keep the mode, rest the guard a while
+            self._suppressed[guard.name] = t + self.config.chatter_dwell
+            self.stats.suppressed_cycles += 1
+            return
+        self._instant[1].add(key)
         self.events.append(record)
         self.state = new
         self.result = self._evaluate(new.q, new.v)
@@ -217,7 +242,7 @@ class Simulator:
     def _settle(self) -> None:
         """Apply transitions that are due at once (cascade), with a chattering limit."""
         for _ in range(self.config.max_instant_transitions):
-            values = guard_values(self.state, self.result, self.config.friction)
+            values = self._masked(self.state, self.result)
             due = np.flatnonzero(values > GUARD_MARGIN)
             if not due.size:
                 return

@@ -1,0 +1,176 @@
+"""A picture of a run: stick-figure animation (GIF) and a key-frame strip (PNG), side view.
+
+Link positions come from forward kinematics of the recorded q with the support model of each
+sample (support side and pivot edge), so the figure is what the dynamics integrated. The view
+is the sagittal plane: world y (travel direction) to the right, z up; the right side is drawn
+red, the left side blue. Each frame shows the time, the Table 2 gait mode, the support foot and
+the step (paper numbering: step = step_index + 1).
+"""
+
+from __future__ import annotations
+
+import pathlib
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from iceskate_sim.analysis._progress import progress_bar
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.modes import get_mode
+from iceskate_sim.robot import LINK_NAMES, Robot
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.lines import Line2D
+    from matplotlib.text import Text
+
+    from iceskate_sim.analysis.bag_io import BagData
+
+__all__ = ['SEGMENTS', 'frame_indices', 'link_positions', 'render_gif', 'render_keyframes']
+
+#: Points of the stick figure: the anatomical link frames, the head top and the sole corners.
+POINTS = (*LINK_NAMES, 'head_top', 'right_heel', 'right_toe', 'left_heel', 'left_toe')
+_TORSO = (('pelvis', 'torso_middle'), ('torso_middle', 'chest'), ('chest', 'head'),
+          ('head', 'head_top'))
+
+
+def _limb(side: str) -> tuple[tuple[str, str], ...]:
+    return ((('pelvis', f'{side}_thigh'), (f'{side}_thigh', f'{side}_shank'),
+             (f'{side}_shank', f'{side}_foot'), (f'{side}_foot', f'{side}_heel'),
+             (f'{side}_heel', f'{side}_toe'), (f'{side}_toe', f'{side}_foot'),
+             ('chest', f'{side}_upper_arm'), (f'{side}_upper_arm', f'{side}_forearm'),
+             (f'{side}_forearm', f'{side}_hand')))
+
+
+#: (colour, segments) of the stick figure.
+SEGMENTS = (('k', _TORSO), ('tab:red', _limb('right')), ('tab:blue', _limb('left')))
+_GROUND_SPACING = 0.25  # m between ground ticks (they show the travel)
+
+
+def frame_indices(n: int, max_frames: int) -> np.ndarray:
+    """At most ``max_frames`` sample indices spread evenly over ``n`` samples."""
+    if n <= 0:
+        raise SimulationError('the bag has no samples to draw')
+    count = max(1, min(n, int(max_frames)))
+    return np.unique(np.linspace(0, n - 1, count).round().astype(int))
+
+
+def link_positions(bag: BagData, robot: Robot, indices: np.ndarray | None = None,
+                   progress: bool = False) -> dict[str, np.ndarray]:
+    """World positions [m] of every point of POINTS at the samples ``indices``.
+
+    :return: point name -> (len(indices), 3) array.
+    """
+    indices = np.arange(bag.n_samples) if indices is None else np.asarray(indices)
+    out = {name: np.zeros((indices.size, 3)) for name in POINTS}
+    data: dict[tuple[str, str], pin.Data] = {}
+    bar = progress_bar(indices.size, 'forward kinematics', progress)
+    try:
+        for row, k in enumerate(indices):
+            side, pivot = bag.side_name(k), bag.pivot_name(k)
+            sm = robot.support_model(side, pivot)
+            d = data.setdefault((side, pivot), sm.model.createData())
+            pin.framesForwardKinematics(sm.model, d, bag.q[k])
+            for name in POINTS:
+                frame = name
+                if name.endswith(('_heel', '_toe')):  # sole corners: support or swing foot
+                    foot_side, corner = name.split('_')
+                    frame = f'{"support" if foot_side == side else "swing"}_{corner}'
+                out[name][row] = d.oMf[sm.frame_ids[frame]].translation
+            bar.update(1)
+    finally:
+        bar.close()
+    return out
+
+
+def _caption(bag: BagData, k: int) -> str:
+    mode = get_mode(int(bag.mode[k]))
+    pivot = '' if int(bag.pivot[k]) == 0 else f', {bag.pivot_name(k)} pivot'
+    return (f't = {bag.t[k]:.3f} s   step {int(bag.step_index[k]) + 1}\n'
+            f'mode {mode.number} ({mode.support} / {mode.swing})   '
+            f'support {bag.side_name(k)}{pivot}')
+
+
+class _Stick:
+    """The artists of one stick figure on one axes, updated in place."""
+
+    def __init__(self, ax: Axes, fontsize: float = 8.0) -> None:
+        self.ax = ax
+        self.lines: list[tuple[tuple[str, str], Line2D]] = []
+        for colour, segments in SEGMENTS:
+            for segment in segments:
+                (line,) = ax.plot([], [], color=colour, lw=2.0, solid_capstyle='round')
+                self.lines.append((segment, line))
+        (self.head,) = ax.plot([], [], 'o', color='k', ms=7, mfc='w')
+        (self.ticks,) = ax.plot([], [], '|', color='0.5', ms=6)
+        ax.axhline(0.0, color='0.4', lw=1.0)
+        ax.set_aspect('equal')
+        ax.set_ylim(-0.1, 1.9)
+        ax.set_xlabel('y [m]', fontsize=fontsize)
+        ax.tick_params(labelsize=fontsize - 1)
+        self.text: Text = ax.text(0.02, 0.98, '', transform=ax.transAxes, va='top',
+                                  fontsize=fontsize, family='monospace')
+
+    def update(self, points: dict[str, np.ndarray], row: int, caption: str,
+               half_width: float) -> None:
+        for (a, b), line in self.lines:
+            line.set_data([points[a][row, 1], points[b][row, 1]],
+                          [points[a][row, 2], points[b][row, 2]])
+        self.head.set_data([points['head'][row, 1] * 0.4 + points['head_top'][row, 1] * 0.6],
+                           [points['head'][row, 2] * 0.4 + points['head_top'][row, 2] * 0.6])
+        centre = float(points['pelvis'][row, 1])
+        lo, hi = centre - half_width, centre + half_width
+        ticks = np.arange(np.floor(lo / _GROUND_SPACING), np.ceil(hi / _GROUND_SPACING) + 1)
+        self.ticks.set_data(ticks * _GROUND_SPACING, np.zeros_like(ticks))
+        self.ax.set_xlim(lo, hi)
+        self.text.set_text(caption)
+
+
+def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames: int = 120,
+               fps: float = 20.0, progress: bool = False) -> pathlib.Path:
+    """Write a stick-figure GIF of the run (``max_frames`` frames spread over the run)."""
+    import imageio.v2 as imageio
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    indices = frame_indices(bag.n_samples, max_frames)
+    points = link_positions(bag, robot, indices)
+    fig = Figure(figsize=(5.0, 4.6), layout='constrained')
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.set_title(f'{bag.scene_name or bag.path.name}: side view', fontsize=9)
+    stick = _Stick(ax)
+    bar = progress_bar(indices.size, 'animation', progress, unit='frame')
+    try:
+        with imageio.get_writer(path, mode='I', duration=1000.0 / fps, loop=0) as writer:
+            for row, k in enumerate(indices):
+                stick.update(points, row, _caption(bag, int(k)), half_width=0.9)
+                canvas.draw()
+                writer.append_data(np.asarray(canvas.buffer_rgba())[..., :3].copy())
+                bar.update(1)
+    finally:
+        bar.close()
+    return path
+
+
+def render_keyframes(bag: BagData, robot: Robot, path: str | pathlib.Path, count: int = 8,
+                     ) -> pathlib.Path:
+    """Write a strip of ``count`` key frames spread evenly over the run as one PNG."""
+    from matplotlib.figure import Figure
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    indices = frame_indices(bag.n_samples, count)
+    points = link_positions(bag, robot, indices)
+    fig = Figure(figsize=(2.2 * indices.size, 3.6), layout='constrained')
+    axes = fig.subplots(1, indices.size, squeeze=False)[0]
+    for row, (ax, k) in enumerate(zip(axes, indices, strict=True)):
+        stick = _Stick(ax, fontsize=6.5)
+        stick.update(points, row, _caption(bag, int(k)), half_width=0.55)
+        if row:
+            ax.set_yticklabels([])
+    fig.suptitle(f'{bag.scene_name or bag.path.name}: key frames (side view, right red, '
+                 'left blue)', fontsize=9)
+    fig.savefig(path, dpi=100)
+    return path

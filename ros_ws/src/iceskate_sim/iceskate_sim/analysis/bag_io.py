@@ -1,0 +1,443 @@
+"""Read a recorded run (rosbag2 bag) into time-aligned numpy arrays, without ROS.
+
+The bag is opened with ``rosbags``' ``AnyReader``. Message definitions come from the bag itself
+(MCAP stores them); for a bag without definitions our typestore
+(``iceskate_sim.bag_types.make_typestore``) is the fallback. The analysis needs three topics,
+all stamped with the simulation time of the sample (``header.stamp``):
+
+* ``/joint_states`` (sensor_msgs/JointState): q, q̇ and the total input effort,
+* ``/gait_state`` (iceskate_interfaces/GaitState): mode, support side, pivot, step index,
+  multipliers, support forces,
+* ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations and the effort of every
+  input source (plus ``passive``: joint damping and soft stops).
+
+``/robot_description`` (the URDF) and the bag's ``custom_data`` (scene parameters) are read when
+present. Samples are joined on ``header.stamp``; a sample that misses one of the three topics
+(the tail of a run that was cut) is dropped and noted. Everything that cannot be read raises
+``SimulationError`` naming the bag and the missing or broken part.
+
+Times are kept in nanoseconds (``t_ns``, int64) and offered in seconds (``t``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import json
+import pathlib
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from iceskate_sim.analysis._progress import progress_bar
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.modes import MULTIPLIER_NAMES
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
+
+__all__ = ['BagData', 'OPTIONAL_TOPICS', 'REQUIRED_TOPICS', 'SIDE_NAMES', 'PIVOT_NAMES',
+           'read_bag', 'resolve_bag_path']
+
+#: Topics the analysis cannot do without, and the message type each must have.
+REQUIRED_TOPICS = {
+    '/joint_states': 'sensor_msgs/msg/JointState',
+    '/gait_state': 'iceskate_interfaces/msg/GaitState',
+    '/joint_dynamics': 'iceskate_interfaces/msg/JointDynamics',
+}
+#: Topics read when present.
+OPTIONAL_TOPICS = {
+    '/head_pose': 'geometry_msgs/msg/PoseStamped',
+    '/robot_description': 'std_msgs/msg/String',
+}
+_WHAT = {
+    '/joint_states': 'joint positions and velocities',
+    '/gait_state': 'gait mode, support side and step index',
+    '/joint_dynamics': 'joint accelerations and the input effort of every source',
+}
+#: GaitState.support_side code -> support side name.
+SIDE_NAMES = ('right', 'left')
+#: GaitState.pivot code -> pivot name ('none': sole flat; the flat models use the toe pivot).
+PIVOT_NAMES = ('none', 'toe', 'heel')
+PASSIVE = 'passive'
+
+
+@dataclass(frozen=True)
+class BagData:
+    """One recorded run as arrays over its N samples (index k = one control instant).
+
+    Coordinates are ordered ``[y0, q1, ..., q17]`` (18 columns) whatever order the messages
+    used. Units: SI (m, rad, s, N, N m).
+
+    :ivar path: the bag directory (or file).
+    :ivar t_ns: simulation time of each sample [ns] (N,), strictly increasing.
+    :ivar q: positions (N, 18). :ivar v: velocities (N, 18).
+    :ivar qdd: accelerations (N, 18), 0 where inactive. :ivar active: (N, 18) bool.
+    :ivar effort_total: total input effort of /joint_states (N, 18).
+    :ivar efforts: effort of each source (N, 18), keyed by source; ``'passive'`` is the
+        joint damping and soft stops. A source missing at a sample counts 0 there.
+    :ivar mode: Table 2 mode (N,). :ivar side: support side code, 0 right / 1 left (N,).
+    :ivar pivot: 0 none / 1 toe / 2 heel (N,). :ivar step_index: support exchanges (N,).
+    :ivar multipliers: (f_nz, f_ny, tau_n) per sample (N, 3), 0 where inactive.
+    :ivar support_normal: N_s [N] (N,). :ivar support_friction: F_y [N] (N,).
+    :ivar zmp_y: world y of the CoP [m] (N,). :ivar heel_anchor_y: y_h* [m] (N,).
+    :ivar head_position: head-top world position [m] (N, 3), nan without /head_pose.
+    :ivar urdf: the URDF of /robot_description ('' when absent).
+    :ivar custom_data: the bag's custom_data (strings; JSON for the scene parameters).
+    :ivar notes: what was dropped or assumed while reading.
+    """
+
+    path: pathlib.Path
+    t_ns: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    qdd: np.ndarray
+    active: np.ndarray
+    effort_total: np.ndarray
+    efforts: dict[str, np.ndarray]
+    mode: np.ndarray
+    side: np.ndarray
+    pivot: np.ndarray
+    step_index: np.ndarray
+    multipliers: np.ndarray
+    support_normal: np.ndarray
+    support_friction: np.ndarray
+    zmp_y: np.ndarray
+    heel_anchor_y: np.ndarray
+    head_position: np.ndarray
+    urdf: str = ''
+    custom_data: dict[str, str] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def t(self) -> np.ndarray:
+        """Simulation time of each sample [s] (N,)."""
+        return self.t_ns * 1e-9
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples N."""
+        return int(self.t_ns.size)
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        """Input sources recorded (without ``'passive'``)."""
+        return tuple(s for s in self.efforts if s != PASSIVE)
+
+    @property
+    def scene_name(self) -> str:
+        """Scene name from the bag metadata ('' when unknown)."""
+        return self.custom_data.get('scene', '')
+
+    @property
+    def scene_parameters(self) -> dict[str, Any]:
+        """The scene mapping the run was made with ({} when the bag does not carry it)."""
+        text = self.custom_data.get('scene_parameters', '')
+        if not text:
+            return {}
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            return {}
+        return value if isinstance(value, dict) else {}
+
+    def side_name(self, k: int) -> str:
+        """Support side of sample k ('right' or 'left')."""
+        return SIDE_NAMES[int(self.side[k])]
+
+    def pivot_name(self, k: int) -> str:
+        """Pivot edge of the support model of sample k ('toe' while the sole is flat)."""
+        return 'heel' if int(self.pivot[k]) == 2 else 'toe'
+
+    def step_start_time(self, step: int) -> float | None:
+        """Time [s] of the first sample with ``step_index >= step`` (None: never reached)."""
+        hits = np.flatnonzero(self.step_index >= step)
+        return float(self.t[hits[0]]) if hits.size else None
+
+
+def resolve_bag_path(path: str | pathlib.Path) -> pathlib.Path:
+    """Return the bag directory of ``path``: the path itself, or ``path/bag`` for a run dir.
+
+    :raises SimulationError: when the path does not exist or holds no rosbag2 bag.
+    """
+    p = pathlib.Path(path)
+    if not p.exists():
+        raise SimulationError(f'bag {p} does not exist')
+    if p.is_dir() and not (p / 'metadata.yaml').is_file():
+        if (p / 'bag' / 'metadata.yaml').is_file():
+            return p / 'bag'
+        raise SimulationError(
+            f'{p} is not a rosbag2 bag: it has no metadata.yaml (a recording that was not '
+            'closed, e.g. a killed run, has none; `ros2 bag reindex` can rebuild it)')
+    return p
+
+
+def _default_typestore() -> Typestore | None:
+    from iceskate_sim.bag_types import make_typestore
+    try:
+        return make_typestore()
+    except FileNotFoundError:
+        return None
+
+
+def _stamp_ns(msg: Any) -> int:
+    stamp = msg.header.stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _order(names: Iterable[str], topic: str, where: str) -> np.ndarray:
+    """Indices that reorder a message's arrays into COORDINATE_NAMES order."""
+    names = list(names)
+    if names == list(COORDINATE_NAMES):
+        return np.arange(N_COORDINATES)
+    missing = [n for n in COORDINATE_NAMES if n not in names]
+    if missing:
+        raise SimulationError(f'{topic} at {where}: coordinates {missing} missing from the '
+                              f'names {names}')
+    return np.array([names.index(n) for n in COORDINATE_NAMES], dtype=np.intp)
+
+
+def _vector(values: Any, order: np.ndarray, topic: str, what: str, where: str) -> np.ndarray:
+    x = np.asarray(values, dtype=float)
+    if x.shape[0] <= int(order.max()):
+        raise SimulationError(f'{topic} at {where}: {what} has {x.shape[0]} entries, need '
+                              f'{N_COORDINATES}')
+    return x[order]
+
+
+def _check_connections(reader: AnyReader, path: pathlib.Path) -> dict[str, Connection]:
+    """Return the connection of each required/optional topic; refuse missing or odd ones."""
+    by_topic: dict[str, list[Connection]] = {}
+    for conn in reader.connections:
+        by_topic.setdefault(conn.topic, []).append(conn)
+    chosen: dict[str, Connection] = {}
+    for topic, expected in {**REQUIRED_TOPICS, **OPTIONAL_TOPICS}.items():
+        conns = by_topic.get(topic, [])
+        if not conns:
+            if topic in REQUIRED_TOPICS:
+                raise SimulationError(
+                    f'bag {path} has no topic {topic} ({expected}): the {_WHAT[topic]} are '
+                    f'needed for the coupling analysis; topics present: {sorted(by_topic)}')
+            continue
+        conn = conns[0]
+        if conn.msgtype != expected:
+            raise SimulationError(f'bag {path}: topic {topic} has message type '
+                                  f'{conn.msgtype}, expected {expected}')
+        if expected not in reader.typestore.fielddefs:
+            raise SimulationError(
+                f'bag {path}: message type {expected} of topic {topic} is unknown: the bag '
+                'carries no definition of it and the iceskate_interfaces .msg files were not '
+                'found (build ros_ws or run from the source tree)')
+        if topic in REQUIRED_TOPICS and sum(c.msgcount for c in conns) == 0:
+            raise SimulationError(f'bag {path}: topic {topic} has no messages: no '
+                                  f'{_WHAT[topic]} were recorded')
+        chosen[topic] = conn
+    return chosen
+
+
+def _custom_data(reader: AnyReader) -> dict[str, str]:
+    for sub in getattr(reader, 'readers', []):
+        metadata = getattr(getattr(sub, 'storage', None), 'metadata', None)
+        custom = getattr(metadata, 'custom', None)
+        if isinstance(custom, dict):
+            return {str(k): str(v) for k, v in custom.items()}
+    return {}
+
+
+class _Rows:
+    """Per-topic records keyed by stamp."""
+
+    def __init__(self) -> None:
+        self.joint: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.gait: dict[int, tuple[Any, ...]] = {}
+        self.dyn: dict[int, tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]] = {}
+        self.head: dict[int, np.ndarray] = {}
+        self.urdf = ''
+        self.duplicates = 0
+
+    def put(self, table: dict[int, Any], stamp: int, row: Any) -> None:
+        """Store a row; a repeated stamp keeps the later message and is counted."""
+        if stamp in table:
+            self.duplicates += 1
+        table[stamp] = row
+
+
+def _read_joint_states(rows: _Rows, msg: Any, where: str) -> None:
+    order = _order(msg.name, '/joint_states', where)
+    q = _vector(msg.position, order, '/joint_states', 'position', where)
+    v = _vector(msg.velocity, order, '/joint_states', 'velocity', where)
+    effort = (_vector(msg.effort, order, '/joint_states', 'effort', where)
+              if len(msg.effort) else np.zeros(N_COORDINATES))
+    rows.put(rows.joint, _stamp_ns(msg), (q, v, effort))
+
+
+def _read_gait_state(rows: _Rows, msg: Any, where: str) -> None:
+    multipliers = np.zeros(len(MULTIPLIER_NAMES))
+    if len(msg.multiplier_names) != len(msg.multipliers):
+        raise SimulationError(f'/gait_state at {where}: {len(msg.multiplier_names)} multiplier '
+                              f'names but {len(msg.multipliers)} values')
+    for name, value in zip(msg.multiplier_names, msg.multipliers, strict=True):
+        if name in MULTIPLIER_NAMES:
+            multipliers[MULTIPLIER_NAMES.index(name)] = float(value)
+    rows.put(rows.gait, _stamp_ns(msg), (
+        int(msg.mode), int(msg.support_side), int(msg.pivot), int(msg.step_index), multipliers,
+        float(msg.support_normal_force), float(msg.support_friction_force), float(msg.zmp.y),
+        float(msg.heel_anchor_y)))
+
+
+def _read_joint_dynamics(rows: _Rows, msg: Any, where: str) -> None:
+    if len(msg.acceleration) == 0:
+        raise SimulationError(f'/joint_dynamics at {where}: the message carries no joint '
+                              'accelerations (empty acceleration array)')
+    order = _order(msg.name, '/joint_dynamics', where)
+    qdd = _vector(msg.acceleration, order, '/joint_dynamics', 'acceleration', where)
+    active = np.asarray(msg.active, dtype=bool)[order]
+    efforts: dict[str, np.ndarray] = {}
+    for command in msg.efforts:
+        c_order = _order(command.joint_names, f'/joint_dynamics effort {command.source!r}',
+                         where)
+        tau = _vector(command.effort, c_order, '/joint_dynamics', f'effort {command.source!r}',
+                      where)
+        efforts[command.source] = efforts.get(command.source, 0.0) + tau
+    rows.put(rows.dyn, _stamp_ns(msg), (qdd, active, efforts))
+
+
+def _collect(reader: AnyReader, chosen: dict[str, Connection], path: pathlib.Path,
+             progress: bool) -> _Rows:
+    from rosbags.highlevel import AnyReaderError
+    rows = _Rows()
+    total = sum(c.msgcount for c in chosen.values())
+    bar = progress_bar(total, f'reading {path.name}', progress, unit='msg')
+    topic = ''
+    try:
+        for conn, log_ns, raw in reader.messages(connections=list(chosen.values())):
+            topic = conn.topic
+            where = f'log time {log_ns * 1e-9:.6f} s'
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except AnyReaderError as exc:
+                raise SimulationError(f'bag {path}: cannot decode a {conn.msgtype} message of '
+                                      f'{topic} at {where} ({exc})') from exc
+            try:
+                if topic == '/joint_states':
+                    _read_joint_states(rows, msg, where)
+                elif topic == '/gait_state':
+                    _read_gait_state(rows, msg, where)
+                elif topic == '/joint_dynamics':
+                    _read_joint_dynamics(rows, msg, where)
+                elif topic == '/head_pose':
+                    p = msg.pose.position
+                    rows.head[_stamp_ns(msg)] = np.array([p.x, p.y, p.z], dtype=float)
+                elif topic == '/robot_description':
+                    rows.urdf = str(msg.data)
+            except AttributeError as exc:
+                raise SimulationError(f'bag {path}: {topic} message at {where} lacks a field '
+                                      f'the analysis needs ({exc}); the bag was recorded with '
+                                      'an incompatible message definition') from exc
+            bar.update(1)
+    except AnyReaderError as exc:
+        raise SimulationError(f'cannot read bag {path} (topic {topic or "?"}): the file is '
+                              f'truncated or corrupt ({exc})') from exc
+    finally:
+        bar.close()
+    return rows
+
+
+def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagData:
+    stamps = sorted(set(rows.joint) & set(rows.gait) & set(rows.dyn))
+    notes = []
+    union = set(rows.joint) | set(rows.gait) | set(rows.dyn)
+    if len(union) > len(stamps):
+        notes.append(f'{len(union) - len(stamps)} sample(s) miss one of '
+                     f'{sorted(REQUIRED_TOPICS)} and were dropped')
+    if not stamps:
+        counts = {'/joint_states': len(rows.joint), '/gait_state': len(rows.gait),
+                  '/joint_dynamics': len(rows.dyn)}
+        raise SimulationError(f'bag {path}: no sample has all of {sorted(REQUIRED_TOPICS)} '
+                              f'at the same header stamp (messages per topic: {counts})')
+    n = len(stamps)
+    sources: list[str] = []
+    for k in stamps:
+        for source in rows.dyn[k][2]:
+            if source not in sources:
+                sources.append(source)
+    efforts = {s: np.zeros((n, N_COORDINATES)) for s in sources}
+    for i, k in enumerate(stamps):
+        for source, tau in rows.dyn[k][2].items():
+            efforts[source][i] = tau
+    gait = [rows.gait[k] for k in stamps]
+    head = np.array([rows.head.get(k, np.full(3, np.nan)) for k in stamps])
+    if rows.duplicates:
+        notes.append(f'{rows.duplicates} message(s) repeated a header stamp; the later one '
+                     'was kept')
+    if not rows.head:
+        notes.append('no /head_pose: head positions are nan')
+    if not rows.urdf:
+        notes.append('no /robot_description: the installed URDF is assumed')
+    return BagData(
+        path=path, t_ns=np.array(stamps, dtype=np.int64),
+        q=np.array([rows.joint[k][0] for k in stamps]),
+        v=np.array([rows.joint[k][1] for k in stamps]),
+        qdd=np.array([rows.dyn[k][0] for k in stamps]),
+        active=np.array([rows.dyn[k][1] for k in stamps]),
+        effort_total=np.array([rows.joint[k][2] for k in stamps]),
+        efforts=efforts,
+        mode=np.array([g[0] for g in gait], dtype=int),
+        side=np.array([g[1] for g in gait], dtype=int),
+        pivot=np.array([g[2] for g in gait], dtype=int),
+        step_index=np.array([g[3] for g in gait], dtype=int),
+        multipliers=np.array([g[4] for g in gait]),
+        support_normal=np.array([g[5] for g in gait]),
+        support_friction=np.array([g[6] for g in gait]),
+        zmp_y=np.array([g[7] for g in gait]),
+        heel_anchor_y=np.array([g[8] for g in gait]),
+        head_position=head, urdf=rows.urdf, custom_data=custom, notes=tuple(notes))
+
+
+def _validate(data: BagData) -> None:
+    bad_modes = sorted(set(data.mode[(data.mode < 1) | (data.mode > 20)].tolist()))
+    if bad_modes:
+        raise SimulationError(f'bag {data.path}: /gait_state has modes {bad_modes} outside '
+                              'Table 2 (1-20)')
+    if np.any((data.side < 0) | (data.side > 1)) or np.any((data.pivot < 0) | (data.pivot > 2)):
+        raise SimulationError(f'bag {data.path}: /gait_state has an unknown support_side or '
+                              'pivot code')
+    for name, x in (('positions', data.q), ('velocities', data.v),
+                    ('accelerations', data.qdd)):
+        if not np.all(np.isfinite(x)):
+            k = int(np.flatnonzero(~np.all(np.isfinite(x), axis=1))[0])
+            raise SimulationError(f'bag {data.path}: non-finite joint {name} at t = '
+                                  f'{data.t[k]:.6f} s')
+
+
+def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
+    """Read a recorded run into time-aligned arrays.
+
+    :param path: rosbag2 directory (or a run directory holding ``bag/``, or an .mcap file).
+    :param progress: show a tqdm progress bar on stderr.
+    :return: the samples joined on their header stamps.
+    :raises SimulationError: on a missing path or metadata, a missing or empty required topic,
+        a topic of the wrong or an unknown message type, a truncated or corrupt file, or
+        messages that lack the fields the analysis needs; the message names what is wrong.
+    """
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    bag = resolve_bag_path(path)
+    reader = AnyReader([bag], default_typestore=_default_typestore())
+    try:
+        reader.open()
+    except (AnyReaderError, FileNotFoundError) as exc:
+        raise SimulationError(f'cannot open bag {bag}: the file is truncated or corrupt, or '
+                              f'not a rosbag2 recording ({exc})') from exc
+    try:
+        chosen = _check_connections(reader, bag)
+        rows = _collect(reader, chosen, bag, progress)
+        custom = _custom_data(reader)
+    finally:
+        reader.close()
+    data = _assemble(rows, bag, custom)
+    _validate(data)
+    return data

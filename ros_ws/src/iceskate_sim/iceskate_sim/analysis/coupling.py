@@ -1,0 +1,546 @@
+"""The paper's eq. (11) at one joint, evaluated on a recorded run (no re-simulation).
+
+Row i of the equations of motion (model-spec 8; i = 11 is the right shoulder)::
+
+    M_ii q̈_i = τ_i + M_total − h_i − g_i − d_i q̇_i + limit_i + constraint_i + friction_i
+    M_total := −Σ_{j≠i} M_ij q̈_j
+
+over the active coordinates of the sample's mode (y0 and q1 included when present). M, h (RNEA
+with q̈ = 0 and gravity off) and g (RNEA with q̇ = q̈ = 0) are evaluated at the recorded (q, q̇)
+with the support model of the sample (mode, support side, pivot); q̈ and the input effort of
+every source are the recorded ones. ``limit_i`` is the soft-stop torque (the recorded passive
+effort minus the damping), ``constraint_i`` the generalized force of the swing-foot constraints
+(recorded multipliers, with the Coulomb friction of a sliding heel), ``friction_i`` the floor
+friction on a gliding support foot (y0 only). For the upper-body joints 8..17 the last two are
+zero: they are not on the path from the support foot to the swing heel. The closure residual
+(left side minus right side) shows that the bag, the model and this decomposition agree; it must
+be at solver precision (relative to the sum of the magnitudes of all terms).
+
+The arm-swing figures (peak-to-peak, phase) are taken from the paper's 4th step on
+(``step_index >= 3``), or over the whole run when the run never gets there.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+import hashlib
+import pathlib
+import tempfile
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from iceskate_sim.analysis._progress import progress_bar
+from iceskate_sim.analysis.bag_io import PASSIVE, BagData
+from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.modes import MULTIPLIER_NAMES, get_mode
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
+
+__all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LEFT_SHOULDER',
+           'TERMS', 'analyse_case', 'arm_swing', 'decompose', 'dynamics_for_bag',
+           'mirror_joint', 'parse_joint', 'robot_for_bag', 'rms', 'write_csv']
+
+RIGHT_SHOULDER = 11
+LEFT_SHOULDER = 14
+TORSO_YAW = 8
+#: First step index of the analysis window: the paper's 4th step (arms unactuated from then).
+WINDOW_STEP = 3
+#: Fewest samples for an arm-swing window; shorter windows fall back to the whole run.
+MIN_WINDOW = 8
+#: Terms of eq. (11), in the order of the equation (keys of JointDecomposition.terms()).
+TERMS = ('own_inertia', 'tau', 'm_total', 'coriolis', 'gravity', 'damping', 'limit',
+         'constraint', 'support_friction', 'residual')
+TERM_LABELS = {
+    'own_inertia': 'M_ii q̈_i', 'tau': 'τ_i', 'm_total': 'M_total = −Σ M_ij q̈_j',
+    'coriolis': 'h_i', 'gravity': 'g_i', 'damping': 'd_i q̇_i', 'limit': 'soft stop',
+    'constraint': 'swing constraint', 'support_friction': 'support friction',
+    'residual': 'closure residual',
+}
+_HEEL_SPEED_EPS = 1e-9  # m/s: below it a sliding heel's friction direction defaults to +1
+
+
+def parse_joint(value: str | int) -> int:
+    """Joint index of '11', 11 or 'q11' (0 or 'y0' for y0).
+
+    :raises SimulationError: for anything that is not one of the 18 coordinates.
+    """
+    text = str(value).strip()
+    if text in COORDINATE_NAMES:
+        return COORDINATE_NAMES.index(text)
+    try:
+        index = int(text)
+    except ValueError:
+        index = -1
+    if not 0 <= index < N_COORDINATES:
+        raise SimulationError(f'unknown joint {value!r}: give 0..17 or one of '
+                              f'{list(COORDINATE_NAMES)} (11 = right shoulder, 14 = left)')
+    return index
+
+
+def mirror_joint(joint: int) -> int | None:
+    """The other arm's shoulder for a shoulder (11 <-> 14), else None."""
+    return {RIGHT_SHOULDER: LEFT_SHOULDER, LEFT_SHOULDER: RIGHT_SHOULDER}.get(joint)
+
+
+def rms(x: np.ndarray) -> float:
+    """Root mean square over the finite entries (nan when there is none)."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x * x))) if x.size else float('nan')
+
+
+# ------------------------------------------------------------------------- the model of a bag
+def robot_for_bag(bag: BagData) -> Robot:
+    """The robot the run used: the bag's URDF when it carries one, else the installed one."""
+    robot = load_robot()
+    if not bag.urdf:
+        return robot
+    try:
+        installed = robot.urdf_path.read_text(encoding='utf-8')
+    except OSError:
+        installed = ''
+    if bag.urdf == installed:
+        return robot
+    digest = hashlib.sha256(bag.urdf.encode('utf-8')).hexdigest()[:16]
+    path = pathlib.Path(tempfile.gettempdir()) / f'iceskate_bag_urdf_{digest}.urdf'
+    if not path.is_file():
+        path.write_text(bag.urdf, encoding='utf-8')
+    return load_robot(str(path))
+
+
+def dynamics_for_bag(bag: BagData, robot: Robot | None = None) -> GaitDynamics:
+    """GaitDynamics with the run's friction coefficient and joint-damping switch.
+
+    Both come from the bag's scene parameters (floor.mu, dynamics.damping); a bag without them
+    gets the scene defaults (mu 0.005, damping on).
+    """
+    scene = bag.scene_parameters
+    floor = scene.get('floor') or {}
+    dyn = scene.get('dynamics') or {}
+    params = DynamicsParameters(mu=float(floor.get('mu', DynamicsParameters.mu)),
+                                damping=bool(dyn.get('damping', True)))
+    return GaitDynamics(robot or robot_for_bag(bag), params)
+
+
+# ------------------------------------------------------------------------ the decomposition
+@dataclass(frozen=True)
+class JointDecomposition:
+    """Eq. (11) at joint ``joint`` for every sample (arrays (N,), nan where inactive).
+
+    Units: N m (N for y0). ``coupling[:, j]`` is M_ij q̈_j (0 for j = i and inactive j).
+    """
+
+    joint: int
+    t: np.ndarray
+    valid: np.ndarray
+    own_inertia: np.ndarray
+    coupling: np.ndarray
+    coriolis: np.ndarray
+    gravity: np.ndarray
+    damping: np.ndarray
+    tau: np.ndarray
+    tau_by_source: dict[str, np.ndarray]
+    passive: np.ndarray
+    constraint: np.ndarray
+    support_friction: np.ndarray
+    mass_row: np.ndarray = field(repr=False)
+
+    @property
+    def name(self) -> str:
+        """Coordinate name, e.g. 'q11'."""
+        return COORDINATE_NAMES[self.joint]
+
+    @property
+    def m_total(self) -> np.ndarray:
+        """M_total = −Σ_{j≠i} M_ij q̈_j [N m]."""
+        return -self.coupling.sum(axis=1)
+
+    @property
+    def limit(self) -> np.ndarray:
+        """Soft-stop torque: the recorded passive effort minus the joint damping [N m]."""
+        return self.passive + self.damping
+
+    @property
+    def rhs(self) -> np.ndarray:
+        """Right side of eq. (11)."""
+        return (self.tau + self.m_total - self.coriolis - self.gravity + self.passive
+                + self.constraint + self.support_friction)
+
+    @property
+    def residual(self) -> np.ndarray:
+        """Closure residual M_ii q̈_i − right side [N m]."""
+        return self.own_inertia - self.rhs
+
+    @property
+    def scale(self) -> np.ndarray:
+        """Sum of the magnitudes of every term of the row (the relative-residual base)."""
+        return (np.abs(self.own_inertia) + np.abs(self.coupling).sum(axis=1)
+                + np.abs(self.coriolis) + np.abs(self.gravity) + np.abs(self.damping)
+                + np.abs(self.limit) + np.abs(self.tau) + np.abs(self.constraint)
+                + np.abs(self.support_friction))
+
+    @property
+    def residual_rel(self) -> np.ndarray:
+        """|residual| / scale per sample (0 where every term is 0, nan where inactive)."""
+        scale = self.scale
+        with np.errstate(invalid='ignore', divide='ignore'):
+            rel = np.where(scale > 0.0, np.abs(self.residual) / scale, 0.0)
+        return np.where(self.valid, rel, np.nan)
+
+    def terms(self) -> dict[str, np.ndarray]:
+        """The terms of eq. (11), keyed as in TERMS."""
+        return {'own_inertia': self.own_inertia, 'tau': self.tau, 'm_total': self.m_total,
+                'coriolis': self.coriolis, 'gravity': self.gravity, 'damping': self.damping,
+                'limit': self.limit, 'constraint': self.constraint,
+                'support_friction': self.support_friction, 'residual': self.residual}
+
+    def coupling_series(self) -> dict[str, np.ndarray]:
+        """M_ij q̈_j per other coordinate j that is active somewhere, keyed by j's name."""
+        out = {}
+        for j in range(N_COORDINATES):
+            if j != self.joint and np.any(self.coupling[self.valid, j] != 0.0):
+                out[COORDINATE_NAMES[j]] = self.coupling[:, j]
+        return out
+
+    def ranking(self, mask: np.ndarray | None = None) -> list[tuple[str, float]]:
+        """Coupling terms M_ij q̈_j by decreasing RMS over ``mask`` (default: valid samples)."""
+        mask = self.valid if mask is None else mask & self.valid
+        ranked = [(name, rms(x[mask])) for name, x in self.coupling_series().items()]
+        return sorted(ranked, key=lambda item: -item[1] if np.isfinite(item[1]) else 0.0)
+
+
+def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q: np.ndarray,
+                      v: np.ndarray, multipliers: np.ndarray) -> np.ndarray:
+    """Generalized force of the active swing constraints (18,), heel friction included."""
+    mode = contact.mode
+    rows = dyn.constraint_jacobian(contact, q)
+    lam = np.array([multipliers[MULTIPLIER_NAMES.index(m)] for m in mode.multipliers])
+    cols = rows.copy()
+    if mode.swing_sliding:  # Coulomb friction mu f_nz on the heel, against its y velocity
+        sm = robot.support_model(contact.side, contact.pivot)
+        data = _pin_data(sm)
+        jac = pin.computeFrameJacobian(sm.model, data, q, sm.frame_ids['swing_heel'],
+                                       pin.LOCAL_WORLD_ALIGNED)
+        heel_y = jac[1].copy()
+        heel_y[~np.isin(np.arange(N_COORDINATES), mode.active)] = 0.0
+        speed = float(heel_y @ v)
+        direction = np.sign(speed) if abs(speed) > _HEEL_SPEED_EPS else 1.0
+        cols[0] = cols[0] - dyn.params.mu * direction * heel_y
+    return cols.T @ lam
+
+
+_DATA: dict[int, pin.Data] = {}
+
+
+def _pin_data(sm: Any) -> pin.Data:
+    key = id(sm.model)
+    if key not in _DATA:
+        _DATA[key] = sm.model.createData()
+    return _DATA[key]
+
+
+def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
+              dynamics: GaitDynamics | None = None, progress: bool = False,
+              ) -> dict[int, JointDecomposition]:
+    """Evaluate eq. (11) at each of ``joints`` for every sample of ``bag``.
+
+    :param joints: coordinate indices (0 = y0, 1..17 = q1..q17).
+    :param dynamics: the model to use (default: :func:`dynamics_for_bag`).
+    :param progress: show a tqdm progress bar.
+    :return: joint -> its decomposition.
+    :raises SimulationError: for an unknown joint or a sample the model cannot evaluate.
+    """
+    joints = tuple(parse_joint(j) for j in joints)
+    dyn = dynamics or dynamics_for_bag(bag)
+    robot = dyn.robot
+    n = bag.n_samples
+    nj = len(joints)
+    own = np.full((nj, n), np.nan)
+    coupling = np.zeros((nj, n, N_COORDINATES))
+    mass_row = np.zeros((nj, n, N_COORDINATES))
+    coriolis = np.full((nj, n), np.nan)
+    gravity = np.full((nj, n), np.nan)
+    constraint = np.zeros((nj, n))
+    valid = np.zeros((nj, n), dtype=bool)
+    bar = progress_bar(n, f'eq. (11) {bag.path.name}', progress)
+    try:
+        for k in range(n):
+            mode = get_mode(int(bag.mode[k]))
+            contact = ContactState(mode, bag.side_name(k), bag.pivot_name(k),
+                                   float(bag.heel_anchor_y[k]))
+            q, v, qdd = bag.q[k], bag.v[k], bag.qdd[k]
+            act = mode.active
+            try:
+                M = dyn.mass_matrix(contact, q)
+                h = dyn.bias_terms(contact, q, v)
+                g = dyn.gravity_terms(contact, q)
+                force = (_constraint_force(dyn, robot, contact, q, v, bag.multipliers[k])
+                         if mode.constraints else np.zeros(N_COORDINATES))
+            except SimulationError as exc:
+                raise SimulationError(f'{bag.path}: cannot evaluate the model at sample {k} '
+                                      f'(t = {bag.t[k]:.6f} s, mode {mode.number}): {exc}'
+                                      ) from exc
+            for a, i in enumerate(joints):
+                where = np.flatnonzero(act == i)
+                if not where.size:
+                    continue
+                p = int(where[0])
+                row = np.zeros(N_COORDINATES)
+                row[act] = M[p]
+                mass_row[a, k] = row
+                terms = row * qdd
+                own[a, k] = terms[i]
+                terms[i] = 0.0
+                coupling[a, k] = terms
+                coriolis[a, k] = h[p]
+                gravity[a, k] = g[p]
+                constraint[a, k] = force[i]
+                valid[a, k] = True
+            bar.update(1)
+    finally:
+        bar.close()
+    damping_coefficients = dyn.robot.damping if dyn.params.damping else np.zeros(N_COORDINATES)
+    passive = bag.efforts.get(PASSIVE, np.zeros((n, N_COORDINATES)))
+    out = {}
+    for a, i in enumerate(joints):
+        actuated = _actuated(bag, i)
+        by_source = {s: np.where(actuated, bag.efforts[s][:, i], 0.0) for s in bag.sources}
+        tau = np.sum(list(by_source.values()), axis=0) if by_source else np.zeros(n)
+        friction = (np.where(bag.active[:, Y0], bag.support_friction, 0.0) if i == Y0
+                    else np.zeros(n))
+        nan = ~valid[a]
+        out[i] = JointDecomposition(
+            joint=i, t=bag.t, valid=valid[a], own_inertia=own[a],
+            coupling=np.where(nan[:, None], np.nan, coupling[a]),
+            coriolis=coriolis[a], gravity=gravity[a],
+            damping=_masked(damping_coefficients[i] * bag.v[:, i], nan),
+            tau=_masked(tau, nan), tau_by_source={s: _masked(x, nan) for s, x in
+                                                  by_source.items()},
+            passive=_masked(passive[:, i], nan), constraint=_masked(constraint[a], nan),
+            support_friction=_masked(friction, nan), mass_row=mass_row[a])
+    return out
+
+
+def _actuated(bag: BagData, i: int) -> np.ndarray:
+    """Whether the inputs act on coordinate i at each sample (y0 never, q1 when active)."""
+    if i == Y0:
+        return np.zeros(bag.n_samples, dtype=bool)
+    if i == Q1:
+        return bag.active[:, Q1].copy()
+    return np.ones(bag.n_samples, dtype=bool)
+
+
+def _masked(x: np.ndarray, nan: np.ndarray) -> np.ndarray:
+    return np.where(nan, np.nan, np.asarray(x, dtype=float))
+
+
+# ----------------------------------------------------------------------------- arm swing
+@dataclass(frozen=True)
+class ArmSwing:
+    """Swing of both shoulders over the analysis window.
+
+    :ivar window_from_step: step index the window starts at (None: whole run).
+    :ivar window_start_s: time of the window's first sample [s].
+    :ivar samples: samples in the window.
+    :ivar peak_to_peak: q11 and q14 peak-to-peak [rad].
+    :ivar dominant_frequency: q11 and q14 strongest non-zero FFT frequency [Hz].
+    :ivar correlation: Pearson correlation of q11 and q14 (−1: mirror images).
+    :ivar phase_difference_deg: phase of q11 relative to q14 from the Hilbert transform
+        (amplitude-weighted mean over the window), in (−180, 180]; ±180 is anti-phase.
+    """
+
+    window_from_step: int | None
+    window_start_s: float
+    samples: int
+    peak_to_peak: dict[str, float]
+    dominant_frequency: dict[str, float]
+    correlation: float
+    phase_difference_deg: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        arms = {name: {'peak_to_peak_rad': self.peak_to_peak[name],
+                       'peak_to_peak_deg': float(np.degrees(self.peak_to_peak[name])),
+                       'dominant_frequency_hz': self.dominant_frequency[name]}
+                for name in self.peak_to_peak}
+        return {'window': {'from_step_index': self.window_from_step,
+                           'start_s': self.window_start_s, 'samples': self.samples},
+                **arms, 'correlation': self.correlation,
+                'phase_difference_deg': self.phase_difference_deg}
+
+
+def analysis_window(bag: BagData, from_step: int = WINDOW_STEP) -> tuple[np.ndarray, int | None]:
+    """Mask of the samples from ``step_index >= from_step`` on, or all when too few."""
+    mask = bag.step_index >= from_step
+    if int(mask.sum()) >= MIN_WINDOW:
+        return mask, from_step
+    return np.ones(bag.n_samples, dtype=bool), None
+
+
+def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
+    if x.size < 4 or not np.any(x != x[0]):
+        return float('nan')
+    dt = float(np.mean(np.diff(t)))
+    spectrum = np.abs(np.fft.rfft(x - x.mean()))
+    freqs = np.fft.rfftfreq(x.size, dt)
+    return float(freqs[1:][np.argmax(spectrum[1:])]) if freqs.size > 1 else float('nan')
+
+
+def arm_swing(bag: BagData, from_step: int = WINDOW_STEP) -> ArmSwing:
+    """Peak-to-peak, frequency, correlation and phase of q11 versus q14."""
+    from scipy.signal import detrend, hilbert
+    mask, step = analysis_window(bag, from_step)
+    t = bag.t[mask]
+    right, left = bag.q[mask, RIGHT_SHOULDER], bag.q[mask, LEFT_SHOULDER]
+    p2p = {'q11': float(np.ptp(right)) if right.size else float('nan'),
+           'q14': float(np.ptp(left)) if left.size else float('nan')}
+    freq = {'q11': _dominant_frequency(t, right), 'q14': _dominant_frequency(t, left)}
+    correlation = phase = float('nan')
+    if right.size >= 4:
+        a, b = detrend(right), detrend(left)
+        if np.std(a) > 0.0 and np.std(b) > 0.0:
+            correlation = float(np.corrcoef(a, b)[0, 1])
+            za, zb = hilbert(a), hilbert(b)
+            phase = float(np.degrees(np.angle(np.sum(za * np.conj(zb)))))
+            if phase <= -180.0:
+                phase += 360.0
+    return ArmSwing(step, float(t[0]) if t.size else float('nan'), int(mask.sum()), p2p, freq,
+                    correlation, phase)
+
+
+# ------------------------------------------------------------------------------ one case
+@dataclass
+class CaseResult:
+    """Everything computed for one bag."""
+
+    label: str
+    bag: BagData
+    joint: int
+    decompositions: dict[int, JointDecomposition]
+    arms: ArmSwing
+    window: np.ndarray = field(repr=False)
+
+    @property
+    def main(self) -> JointDecomposition:
+        """The decomposition of the chosen joint."""
+        return self.decompositions[self.joint]
+
+    @property
+    def torso_yaw_input(self) -> bool:
+        """Whether a 'yaw' source (the τ8 of eq. 10) commanded the torso yaw q8."""
+        yaw = self.bag.efforts.get('yaw')
+        return bool(yaw is not None and np.any(yaw[:, TORSO_YAW] != 0.0))
+
+    @property
+    def fourth_step_s(self) -> float | None:
+        """Start of the paper's 4th step [s] (first sample with step_index >= 3)."""
+        return self.bag.step_start_time(WINDOW_STEP)
+
+    def joint_summary(self, d: JointDecomposition) -> dict[str, Any]:
+        """Closure, RMS of every term and the coupling ranking of one joint."""
+        mask = self.window & d.valid
+        rel = d.residual_rel[d.valid]
+        terms = d.terms()
+        out: dict[str, Any] = {
+            'samples_valid': int(d.valid.sum()),
+            'closure_residual_max_rel': float(rel.max()) if rel.size else float('nan'),
+            'closure_residual_max_abs': float(np.max(np.abs(d.residual[d.valid])))
+            if rel.size else float('nan'),
+            'rms': {name: rms(x[mask]) for name, x in terms.items()},
+            'rms_tau_by_source': {s: rms(x[mask]) for s, x in d.tau_by_source.items()},
+            'rms_m_total_minus_g': rms((d.m_total - d.gravity)[mask]),
+            'rms_sum_minus_g': rms((-d.m_total - d.gravity)[mask]),
+            'coupling_ranking': [{'coordinate': name, 'rms': value}
+                                 for name, value in d.ranking(mask)],
+        }
+        if np.any(d.valid):
+            out['mean_M_i8'] = float(np.mean(d.mass_row[d.valid, TORSO_YAW]))
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The summary.json entry of this case."""
+        bag = self.bag
+        main = self.joint_summary(self.main)
+        return {
+            'bag': str(bag.path), 'scene': bag.scene_name, 'samples': bag.n_samples,
+            'duration_s': float(bag.t[-1] - bag.t[0]), 'steps': int(bag.step_index.max()),
+            'sources': list(bag.sources), 'torso_yaw_input': self.torso_yaw_input,
+            'fourth_step_s': self.fourth_step_s,
+            'rms_window': {'from_step_index': self.arms.window_from_step,
+                           'start_s': self.arms.window_start_s,
+                           'samples': int(self.window.sum())},
+            'joint': self.main.name,
+            'closure_residual_max_rel': main['closure_residual_max_rel'],
+            'closure_residual_max_abs': main['closure_residual_max_abs'],
+            'arms': self.arms.as_dict(),
+            'rms': main['rms'],
+            'rms_tau_by_source': main['rms_tau_by_source'],
+            'rms_m_total_minus_g': main['rms_m_total_minus_g'],
+            'rms_sum_minus_g': main['rms_sum_minus_g'],
+            'coupling_ranking': main['coupling_ranking'],
+            'joints': {d.name: self.joint_summary(d) for d in self.decompositions.values()},
+            'notes': list(bag.notes),
+        }
+
+
+def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
+                 progress: bool = False) -> CaseResult:
+    """Decompose eq. (11) at ``joint`` (and at the other shoulder for a shoulder) and measure
+    the arm swing."""
+    joint = parse_joint(joint)
+    joints = (joint,) + ((mirror_joint(joint),) if mirror_joint(joint) is not None else ())
+    decompositions = decompose(bag, joints, progress=progress)
+    window, _ = analysis_window(bag)
+    return CaseResult(label, bag, joint, decompositions, arm_swing(bag), window)
+
+
+# ---------------------------------------------------------------------------------- export
+def write_csv(path: str | pathlib.Path, columns: dict[str, np.ndarray]) -> pathlib.Path:
+    """Write equal-length columns to a CSV file with a header row (nan written as 'nan')."""
+    path = pathlib.Path(path)
+    names = list(columns)
+    arrays = [np.asarray(columns[c]) for c in names]
+    lengths = {a.shape[0] for a in arrays}
+    if len(lengths) > 1:
+        raise SimulationError(f'CSV {path}: columns of different lengths {sorted(lengths)}')
+    text = [_csv_strings(a) for a in arrays]
+    with path.open('w', newline='', encoding='utf-8') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(names)
+        writer.writerows(zip(*text, strict=True))
+    return path
+
+
+def _csv_strings(a: np.ndarray) -> list[str]:
+    if a.dtype.kind in 'biu':
+        return [str(int(x)) for x in a]
+    return [repr(float(x)) for x in a]
+
+
+def case_columns(case: CaseResult) -> dict[str, np.ndarray]:
+    """Every time series of a case: the state of both arms and the terms of every joint."""
+    bag = case.bag
+    cols: dict[str, np.ndarray] = {
+        't_s': bag.t, 'mode': bag.mode, 'support_side': bag.side, 'pivot': bag.pivot,
+        'step_index': bag.step_index,
+        'q11': bag.q[:, RIGHT_SHOULDER], 'q14': bag.q[:, LEFT_SHOULDER],
+        'qd11': bag.v[:, RIGHT_SHOULDER], 'qd14': bag.v[:, LEFT_SHOULDER],
+        'qd8': bag.v[:, TORSO_YAW], 'qdd8': bag.qdd[:, TORSO_YAW],
+    }
+    for d in case.decompositions.values():
+        p = d.name
+        cols[f'{p}.valid'] = d.valid
+        for name, x in d.terms().items():
+            cols[f'{p}.{name}'] = x
+        cols[f'{p}.sum_M_ij_qdd_j'] = -d.m_total
+        cols[f'{p}.m_total_minus_g'] = d.m_total - d.gravity
+        cols[f'{p}.residual_rel'] = d.residual_rel
+        for source, x in d.tau_by_source.items():
+            cols[f'{p}.tau[{source}]'] = x
+        cols[f'{p}.passive'] = d.passive
+        for j, x in d.coupling_series().items():
+            cols[f'{p}.M[{p},{j}]*qdd[{j}]'] = x
+    return cols

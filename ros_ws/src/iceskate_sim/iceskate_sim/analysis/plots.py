@@ -1,0 +1,164 @@
+"""The paper's Figs. 5-8 from analysed runs, as PNG (matplotlib, Agg; no pyplot state).
+
+* Figs. 5 and 6: both shoulder angles q11 and q14 against time, the 4th step marked (Fig. 5:
+  the run without the torso-yaw input τ8, Fig. 6: with it).
+* Figs. 7 and 8: the terms of eq. (11) at the chosen joint against time: M_total and its
+  negative Σ M_ij q̈_j (the sign caveat of model-spec 8), g_i, h_i, d_i q̇_i, τ_i and M_ii q̈_i;
+  below, M_total − g_i against h_i (the cancellation claim), and the closure residual.
+* The coupling terms M_ij q̈_j with the largest RMS, to show which joint drives the arm.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from iceskate_sim.analysis.coupling import CaseResult, JointDecomposition
+
+__all__ = ['plot_compare_shoulders', 'plot_coupling', 'plot_shoulders', 'plot_terms']
+
+_DPI = 110
+
+
+def _figure(rows: int, height: float = 2.6, width: float = 9.0) -> tuple[Figure, list[Axes]]:
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(width, 0.6 + height * rows), layout='constrained')
+    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    return fig, list(axes)
+
+
+def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=_DPI)
+    return path
+
+
+def _index(name: str) -> str:
+    """Subscript of a coordinate name: 'q11' -> '11', 'y0' -> 'y0'."""
+    return name if name == 'y0' else name[1:]
+
+
+def _mark_steps(ax: Axes, case: CaseResult, legend: bool = True) -> None:
+    """Dotted lines at every support exchange, a bold one at the 4th step."""
+    bag = case.bag
+    changes = np.flatnonzero(np.diff(bag.step_index) != 0) + 1
+    for k in changes:
+        ax.axvline(bag.t[k], color='0.75', lw=0.6, ls=':', zorder=0)
+    fourth = case.fourth_step_s
+    if fourth is not None:
+        ax.axvline(fourth, color='k', lw=1.2, ls='--', label='4th step' if legend else None)
+
+
+def plot_shoulders(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
+                   ) -> pathlib.Path:
+    """Figs. 5/6: q11 (right) and q14 (left shoulder) against time [deg]."""
+    bag = case.bag
+    fig, (ax,) = _figure(1, height=3.4)
+    ax.plot(bag.t, np.degrees(bag.q[:, 11]), color='tab:red', lw=1.3, label='q11 right shoulder')
+    ax.plot(bag.t, np.degrees(bag.q[:, 14]), color='tab:blue', lw=1.3, label='q14 left shoulder')
+    _mark_steps(ax, case)
+    arms = case.arms
+    ax.set_title(title or f'{case.label}: shoulder angles')
+    ax.set_xlabel('time [s]')
+    ax.set_ylabel('joint angle [deg]')
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='upper right', fontsize=8)
+    ax.text(0.01, 0.02, f'from {"step 4" if arms.window_from_step is not None else "start"}: '
+            f'p-p q11 {np.degrees(arms.peak_to_peak["q11"]):.2f}°, '
+            f'q14 {np.degrees(arms.peak_to_peak["q14"]):.2f}°, '
+            f'corr {arms.correlation:.2f}, phase {arms.phase_difference_deg:.0f}°',
+            transform=ax.transAxes, fontsize=8, va='bottom')
+    return _save(fig, path)
+
+
+def plot_compare_shoulders(cases: list[CaseResult], path: str | pathlib.Path,
+                           ) -> pathlib.Path:
+    """Both cases' shoulder angles one above the other, on the same scales."""
+    fig, axes = _figure(len(cases), height=2.8)
+    for ax, case in zip(axes, cases, strict=True):
+        t = case.bag.t
+        ax.plot(t, np.degrees(case.bag.q[:, 11]), color='tab:red', lw=1.2, label='q11 right')
+        ax.plot(t, np.degrees(case.bag.q[:, 14]), color='tab:blue', lw=1.2, label='q14 left')
+        _mark_steps(ax, case)
+        yaw = 'with' if case.torso_yaw_input else 'without'
+        ax.set_title(f'{case.label} ({yaw} torso-yaw input τ8)', fontsize=10)
+        ax.set_ylabel('angle [deg]')
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc='upper right', fontsize=8)
+    axes[-1].set_xlabel('time [s]')
+    return _save(fig, path)
+
+
+def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
+               joint: int | None = None) -> pathlib.Path:
+    """Figs. 7/8: the terms of eq. (11) at the joint against time, and the closure."""
+    d: JointDecomposition = case.decompositions[case.joint if joint is None else joint]
+    i = _index(d.name)
+    t = d.t
+    fig, axes = _figure(3, height=2.7)
+    ax = axes[0]
+    ax.plot(t, d.m_total, color='tab:purple', lw=1.4, label=f'M_total = −Σ M_{i},j q̈_j')
+    ax.plot(t, -d.m_total, color='tab:purple', lw=0.8, ls='--', alpha=0.7,
+            label=f'Σ M_{i},j q̈_j')
+    ax.plot(t, d.gravity, color='tab:green', lw=1.4, label=f'g_{i}')
+    ax.plot(t, d.coriolis, color='tab:orange', lw=1.4, label=f'h_{i}')
+    ax.plot(t, d.damping, color='tab:brown', lw=1.0, label=f'd_{i} q̇_{i}')
+    ax.plot(t, d.tau, color='k', lw=1.0, label=f'τ_{i}')
+    ax.plot(t, d.own_inertia, color='tab:cyan', lw=1.0, label=f'M_{i},{i} q̈_{i}')
+    if np.any(np.nan_to_num(d.limit) != 0.0):
+        ax.plot(t, d.limit, color='tab:pink', lw=1.0, label='soft stop')
+    if np.any(np.nan_to_num(d.constraint) != 0.0):
+        ax.plot(t, d.constraint, color='tab:olive', lw=1.0, label='swing constraint')
+    ax.set_ylabel('torque [N m]')
+    ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}')
+    _mark_steps(ax, case)
+    ax.legend(loc='upper right', fontsize=7, ncol=3)
+
+    ax = axes[1]
+    ax.plot(t, d.m_total - d.gravity, color='tab:purple', lw=1.3, label=f'M_total − g_{i}')
+    ax.plot(t, -d.m_total - d.gravity, color='tab:purple', lw=0.8, ls='--', alpha=0.7,
+            label=f'Σ M_{i},j q̈_j − g_{i}')
+    ax.plot(t, d.coriolis, color='tab:orange', lw=1.3, label=f'h_{i}')
+    ax.set_ylabel('torque [N m]')
+    _mark_steps(ax, case, legend=False)
+    ax.legend(loc='upper right', fontsize=7, ncol=3)
+
+    ax = axes[2]
+    rel = np.where(d.valid, np.maximum(d.residual_rel, 1e-18), np.nan)
+    ax.semilogy(t, rel, color='0.3', lw=1.0, label='|closure residual| / Σ|terms|')
+    ax.axhline(1e-9, color='tab:red', lw=0.8, ls='--', label='1e-9')
+    ax.set_ylabel('relative residual')
+    ax.set_xlabel('time [s]')
+    _mark_steps(ax, case, legend=False)
+    ax.legend(loc='upper right', fontsize=7)
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
+                  joint: int | None = None) -> pathlib.Path:
+    """The ``top`` coupling terms M_ij q̈_j by RMS (over the analysis window) and M_total."""
+    d = case.decompositions[case.joint if joint is None else joint]
+    series = d.coupling_series()
+    ranking = d.ranking(case.window)[:top]
+    fig, (ax,) = _figure(1, height=3.6)
+    i = _index(d.name)
+    for name, value in ranking:
+        ax.plot(d.t, series[name], lw=1.0, label=f'M_{i},{_index(name)} q̈_{_index(name)} '
+                f'(RMS {value:.3g})')
+    ax.plot(d.t, d.m_total, color='k', lw=1.4, label='M_total')
+    _mark_steps(ax, case)
+    ax.set_title(f'{case.label}: largest coupling terms at {d.name} (ranked by RMS)')
+    ax.set_xlabel('time [s]')
+    ax.set_ylabel('torque [N m]')
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='upper right', fontsize=7, ncol=2)
+    return _save(fig, path)

@@ -1,0 +1,94 @@
+"""The part the controller nodes (visual_lifting, gait_manager) share: state in, commands out.
+
+A ``ControllerNode`` subscribes ``joint_states`` and ``gait_state``, pairs the two messages of one
+instant by stamp (``StatePairer``), rebuilds the ``Observation``, asks the subclass's law
+(``compute``) for its commands and publishes one ``EffortCommand`` per source on
+``effort_commands``, stamped with the state's stamp (the lockstep key). Parameters: ``scene``
+(name or path; the laws' parameters come from it) and ``use_sim_time`` (true unless overridden).
+A law failing at one instant logs an error and sends nothing: the simulator's timeout then names
+the source.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from iceskate_interfaces.msg import EffortCommand, GaitState
+from iceskate_sim.command import JointCommand
+from iceskate_sim.dynamics import GaitDynamics
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.node_support import STATE_QOS, ConfigError, check_unknown, declare
+from iceskate_sim.observation import Observation
+from iceskate_sim.robot import load_robot
+from iceskate_sim.ros_conversions import (
+    StatePairer,
+    command_fields,
+    observation_from_messages,
+    set_stamp,
+)
+from iceskate_sim.scene import Scene, load_scene
+
+
+class ControllerNode(Node):
+    """Base of the controller nodes; subclasses implement ``configure`` and ``compute``."""
+
+    #: Errors of the subclass's law package (logged per instant, never fatal).
+    law_errors: tuple[type[Exception], ...] = ()
+
+    def __init__(self, node_name: str, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        if 'use_sim_time' not in getattr(self, '_parameter_overrides', {}):
+            self.set_parameters([Parameter('use_sim_time', Parameter.Type.BOOL, True)])
+        scene_name = declare(self, 'scene', 'stand', 'shipped scene name, or scene YAML path')
+        self.declare_extra()
+        check_unknown(self)
+        try:
+            scene = load_scene(scene_name)
+        except SimulationError as exc:
+            raise ConfigError(f'parameter scene={scene_name!r}: {exc}') from None
+        self.dynamics = GaitDynamics(load_robot())  # own model data, default physics
+        self.active = self.configure(scene)
+        if not self.active:
+            self.get_logger().warning(f'scene {scene.name!r} does not run {node_name}: idle')
+        self._pairer = StatePairer()
+        self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_QOS)
+        self.create_subscription(GaitState, 'gait_state', self.on_gait_state, STATE_QOS)
+
+    def declare_extra(self) -> None:
+        """Declare the subclass's own parameters (none by default)."""
+
+    def configure(self, scene: Scene) -> bool:
+        """Set the law up from the scene; return False if the scene does not run it."""
+        raise NotImplementedError
+
+    def compute(self, obs: Observation) -> dict[str, JointCommand]:
+        """The commands of every source of this node at ``obs``."""
+        raise NotImplementedError
+
+    def on_joint_states(self, msg: JointState) -> None:
+        """Half of an instant's state."""
+        self._on_state('joint_states', msg)
+
+    def on_gait_state(self, msg: GaitState) -> None:
+        """The other half."""
+        self._on_state('gait_state', msg)
+
+    def _on_state(self, kind: str, msg: Any) -> None:
+        pair = self._pairer.add(kind, msg) if self.active else None
+        if pair is None:
+            return
+        ns, joint_state, gait_state = pair
+        try:
+            commands = self.compute(observation_from_messages(joint_state, gait_state))
+        except (SimulationError, *self.law_errors) as exc:
+            self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
+            return
+        for source, command in commands.items():
+            msg = EffortCommand(source=source, **command_fields(command))
+            set_stamp(msg.header.stamp, ns)
+            self._publisher.publish(msg)

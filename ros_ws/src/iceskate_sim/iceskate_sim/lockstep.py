@@ -1,0 +1,246 @@
+"""The simulator side of the ROS graph, ROS-free: commands in, one control period, sample out.
+
+``LockstepSession`` is what the simulator node drives. At every control instant t_k it gives the
+state messages to publish (``state_messages``), takes the controllers' commands
+(``offer``: checked source, stamp and content), and once every required source has answered
+(``missing()`` is empty) integrates one period (``step``) exactly as the headless runner does:
+the same zero-order hold of the summed commands, the same push, the same ``Sample`` appended to
+the same ``Trajectory`` and written to the same bag. So a lockstep ROS run gives the headless
+trajectory and ``metrics.json``.
+
+Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
+*starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
+them. The live topics at t_k are published *before* those commands exist: their efforts and
+multipliers are those of the command still held from the previous period, evaluated at t_k (what
+a real robot's sensors would report). Positions, velocities and the gait state agree.
+
+In the free-running mode (``lockstep=False``) each source's latest command is held until it
+sends a newer one; stamps may lag the state but never lead it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+import json
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+from iceskate_sim.command import HeldCommand, JointCommand
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.metrics import Trajectory, compute_metrics
+from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
+from iceskate_sim.robot import load_robot
+from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
+from iceskate_sim.runner import _last_event_before, scene_metadata
+from iceskate_sim.scene import Scene
+from iceskate_sim.simulation import Simulator
+
+#: Live state topics (relative names in the graph; the bag uses the absolute ones).
+STATE_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state')
+
+
+def ordered_sources(scene: Scene) -> tuple[str, ...]:
+    """The scene's command sources in the order the headless control stack produces them."""
+    from gait_manager.law import SOURCES, GaitManagerParameters
+    names = ['visual_lifting'] if scene.visual_lifting is not None else []
+    if scene.gait_manager is not None:
+        enabled = GaitManagerParameters.from_dict(scene.gait_manager or {}).enabled
+        names += [s for s in SOURCES if s in enabled]
+    return tuple(names)
+
+
+def node_of_source(source: str) -> str:
+    """Name of the node that publishes a source's commands."""
+    return 'visual_lifting' if source == 'visual_lifting' else 'gait_manager'
+
+
+class LockstepSession:
+    """One run of a scene driven by commands that arrive from outside (the ROS nodes).
+
+    :param scene: the validated scene (its ``duration`` is the run length).
+    :param out: directory for metrics.json, events.json and trajectory.npz (None: none).
+    :param bag: path of the MCAP bag to record (None: no bag).
+    :param lockstep: wait for a command stamped t_k from every source (True), or hold each
+        source's latest command (False).
+    """
+
+    def __init__(self, scene: Scene, out: pathlib.Path | None = None,
+                 bag: pathlib.Path | None = None, lockstep: bool = True) -> None:
+        from gait_manager.law import GaitManagerParameters
+        from visual_lifting.law import VisualLiftingParameters
+        self.scene = scene
+        self.out = out
+        self.lockstep = lockstep
+        self.robot = load_robot()
+        self.sim = Simulator(self.robot, scene.simulator, scene.initial)
+        self.sources = ordered_sources(scene)
+        self.n_periods = int(round(scene.duration / scene.simulator.control_period))
+        self._vl = (VisualLiftingParameters.from_dict(scene.visual_lifting or {})
+                    if scene.visual_lifting is not None else None)
+        self._gm = (GaitManagerParameters.from_dict(scene.gait_manager or {})
+                    if scene.gait_manager is not None else None)
+        self.recorder = None
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+        if bag is not None:
+            self.recorder = BagRecorder(bag, scene_metadata(scene),
+                                        self.robot.urdf_path.read_text(encoding='utf-8'))
+        self.factory = self.recorder.factory if self.recorder else MessageFactory()
+        self.metrics: dict[str, Any] | None = None
+        self._restart()
+
+    def _restart(self) -> None:
+        obs = self.sim.observation()
+        self._psi_initial = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
+        self.trajectory = Trajectory()
+        self.periods = 0
+        self.error: SimulationError | None = None
+        self._commands: dict[str, JointCommand] = {}
+        self._stamps: dict[str, int] = {}
+        self._held = HeldCommand.torque_only(np.zeros(18))
+        self._unrecorded: list[Sample] = []
+        self._wall_start: float | None = None
+
+    # ----------------------------------------------------------------------------- state
+    @property
+    def t_ns(self) -> int:
+        """Stamp of the current instant t_k [ns]."""
+        return seconds_to_ns(self.sim.time)
+
+    @property
+    def done(self) -> bool:
+        """The run is over: duration reached, physically ended, or failed."""
+        return (self.periods >= self.n_periods or self.sim.ended is not None
+                or self.error is not None)
+
+    def state_messages(self) -> dict[str, Any]:
+        """rosbags messages of the live topics at t_k (see the module docstring)."""
+        if self._wall_start is None:
+            self._wall_start = time.perf_counter()
+        s = self.sim.state
+        placement = self.sim.dynamics.frame_placement(s.contact, s.q, 'head_top')
+        sample = Sample(s, self.sim.result, {'held': self._held.torque(s.q, s.v)},
+                        placement.translation, placement.rotation,
+                        _last_event_before(self.sim, s.t))
+        messages = self.factory.messages(sample)
+        return {topic: messages[topic] for topic in STATE_TOPICS}
+
+    def serialize(self, topic: str, message: Any) -> bytes:
+        """CDR bytes of a bag topic's message (what the bag holds; publishable raw)."""
+        return bytes(self.factory.typestore.serialize_cdr(message, TOPICS[topic]))
+
+    # -------------------------------------------------------------------------- commands
+    def offer(self, source: str, stamp_ns: int, command: JointCommand) -> bool:
+        """Take a source's command; False for a repeated one (ignored).
+
+        :raises SimulationError: for an unknown source, or a stamp that is stale (before
+            t_k, or in free-running mode before the source's last command) or in the future.
+        """
+        if source not in self.sources:
+            raise SimulationError(f'command from unknown source {source!r}; scene '
+                                  f'{self.scene.name!r} runs {list(self.sources)}')
+        now = self.t_ns
+        if stamp_ns > now:
+            raise SimulationError(f'command of {source!r} stamped {ns_to_seconds(stamp_ns)} s '
+                                  f'is in the future (simulation at {ns_to_seconds(now)} s)')
+        previous = self._stamps.get(source, -1)
+        if stamp_ns < now if self.lockstep else stamp_ns < previous:
+            raise SimulationError(f'stale command of {source!r} stamped '
+                                  f'{ns_to_seconds(stamp_ns)} s (simulation at '
+                                  f'{ns_to_seconds(now)} s)')
+        if self.lockstep and previous == stamp_ns:
+            return False
+        self._commands[source] = command
+        self._stamps[source] = stamp_ns
+        return True
+
+    def missing(self) -> list[str]:
+        """Sources whose command for t_k has not arrived (free-running: none ever did)."""
+        if self.lockstep:
+            return [s for s in self.sources if self._stamps.get(s) != self.t_ns]
+        return [s for s in self.sources if s not in self._commands]
+
+    # -------------------------------------------------------------------------- stepping
+    def step(self) -> Sample | None:
+        """Integrate one control period under the commands in; None if the run is done.
+
+        A SimulationError of the physics ends the run (``error``) instead of propagating.
+        """
+        if self.done:
+            return None
+        if self.lockstep and self.missing():
+            raise SimulationError(f'step at t={self.sim.time} s without commands of '
+                                  f'{self.missing()}')
+        sim, state = self.sim, self.sim.state
+        obs = sim.observation()
+        commands = {s: self._commands[s] for s in self.sources if s in self._commands}
+        push = next(((p.frame, np.array(p.force)) for p in self.scene.pushes
+                     if p.active(state.t)), None)
+        self._held = HeldCommand.combine(commands.values())
+        try:
+            sim.advance(self._held, push)
+        except SimulationError as exc:
+            self.error = exc
+            return None
+        efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
+        if push is not None:
+            efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
+        placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
+        sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
+                        placement.rotation.copy(), _last_event_before(sim, state.t))
+        self.trajectory.append(sample, self._psi_d(obs))
+        self._unrecorded.append(sample)
+        self.periods += 1
+        if self.lockstep:
+            self._commands.clear()
+        return sample
+
+    def _psi_d(self, obs: Any) -> np.ndarray:
+        """The visual-lifting target at obs, as the headless control stack records it."""
+        if self._vl is None:
+            return self._psi_initial.copy()
+        from gait_manager.law import head_offset
+        from visual_lifting.law import desired_head_pose
+        psi = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
+        offset = (head_offset(obs, self.sim.dynamics, self._gm) if self._gm is not None
+                  else np.zeros(2))
+        return desired_head_pose(self._vl, obs.t, psi, self._psi_initial, offset)
+
+    def flush(self) -> None:
+        """Write the samples not yet in the bag (call it while the controllers compute)."""
+        if self.recorder is not None:
+            for sample in self._unrecorded:
+                self.recorder.write(sample)
+        self._unrecorded.clear()
+
+    def reset(self) -> None:
+        """Back to the scene's initial state (refused while recording a bag)."""
+        if self.recorder is not None:
+            raise SimulationError('reset is refused while the run is recorded to a bag')
+        self.sim.reset()
+        self.metrics = None
+        self._restart()
+
+    def finish(self, error: SimulationError | None = None) -> dict[str, Any]:
+        """End the run: close the bag, compute the metrics, write the output files (once)."""
+        if self.metrics is not None:
+            return self.metrics
+        if error is not None and self.error is None:
+            self.error = error
+        try:
+            self.flush()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()
+        start = self._wall_start if self._wall_start is not None else time.perf_counter()
+        self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
+                                       time.perf_counter() - start, self.error)
+        if self.out is not None:
+            (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
+            (self.out / 'events.json').write_text(json.dumps(
+                [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
+            self.trajectory.save(self.out / 'trajectory.npz')
+        return self.metrics

@@ -1,0 +1,213 @@
+"""Conversions between our ROS messages and the ROS-free core types (no rclpy import).
+
+Every function is duck-typed on message *fields*, so it accepts rclpy messages (live topics) and
+rosbags message objects (bags) alike:
+
+* stamps: ``builtin_interfaces/Time`` <-> integer nanoseconds <-> seconds; the lockstep compares
+  stamps as integer nanoseconds, never as floats;
+* ``observation_from_messages``: the ``Observation`` a control law sees, rebuilt from the
+  ``joint_states`` (sensor_msgs/JointState) and ``gait_state`` (GaitState) of one instant;
+* ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a ``JointCommand``,
+  refusing NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that
+  names the problem and the source;
+* ``StatePairer``: pairs the two state messages of one instant by stamp (no message_filters).
+
+Known loss: GaitState carries ``pivot = PIVOT_NONE`` while the support sole is flat, so the
+observation then says 'toe'. The support models of either pivot give the same kinematics while
+q1 = 0, which is all a flat-sole law evaluates.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from iceskate_sim.command import JointCommand
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.observation import Observation
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+
+NS_PER_S = 1_000_000_000
+PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
+_INDEX = {name: i for i, name in enumerate(COORDINATE_NAMES)}
+_IMPEDANCE = ('stiffness', 'damping', 'position_reference')
+
+
+# ------------------------------------------------------------------------------------ stamps
+def seconds_to_ns(t: float) -> int:
+    """Simulation time t [s] as integer nanoseconds (rounded; the stamp of that instant)."""
+    if not math.isfinite(t) or t < 0.0:
+        raise SimulationError(f'a stamp needs a finite time >= 0 s, got {t!r}')
+    return int(round(t * 1e9))
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """Integer nanoseconds of a builtin_interfaces/Time (fields sec, nanosec)."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def ns_to_seconds(ns: int) -> float:
+    """Seconds [s] of integer nanoseconds."""
+    return ns / 1e9
+
+
+def stamp_to_seconds(stamp: Any) -> float:
+    """Seconds [s] of a builtin_interfaces/Time."""
+    return ns_to_seconds(stamp_to_ns(stamp))
+
+
+def ns_to_sec_nanosec(ns: int) -> tuple[int, int]:
+    """(sec, nanosec) fields of integer nanoseconds >= 0."""
+    if ns < 0:
+        raise SimulationError(f'a stamp needs a time >= 0, got {ns} ns')
+    return ns // NS_PER_S, ns % NS_PER_S
+
+
+def set_stamp(stamp: Any, ns: int) -> Any:
+    """Write integer nanoseconds into a Time message in place; return it."""
+    stamp.sec, stamp.nanosec = ns_to_sec_nanosec(ns)
+    return stamp
+
+
+# ------------------------------------------------------------------------------ observation
+def _coordinates(names: Any, values: Any, what: str) -> np.ndarray:
+    names = list(names)
+    x = np.asarray(values, dtype=float)
+    if x.shape != (len(names),):
+        raise SimulationError(f'joint_states {what} has {x.size} entries for {len(names)} names')
+    if names == list(COORDINATE_NAMES):
+        return x
+    out = np.zeros(N_COORDINATES)
+    order = _indices(names, 'joint_states')
+    if len(order) != N_COORDINATES:
+        raise SimulationError(f'joint_states must name all {N_COORDINATES} coordinates '
+                              f'{list(COORDINATE_NAMES)}, got {names}')
+    out[order] = x
+    return out
+
+
+def observation_from_messages(joint_state: Any, gait_state: Any) -> Observation:
+    """The Observation of one instant from its JointState and GaitState messages.
+
+    :raises SimulationError: when the stamps differ or a field is malformed.
+    """
+    ns = stamp_to_ns(joint_state.header.stamp)
+    if stamp_to_ns(gait_state.header.stamp) != ns:
+        raise SimulationError(
+            f'joint_states stamp {ns} ns and gait_state stamp '
+            f'{stamp_to_ns(gait_state.header.stamp)} ns differ')
+    q = _coordinates(joint_state.name, joint_state.position, 'position')
+    v = _coordinates(joint_state.name, joint_state.velocity, 'velocity')
+    side = int(gait_state.support_side)
+    if side not in (0, 1):
+        raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
+    pivot = PIVOT_OF_CODE.get(int(gait_state.pivot))
+    if pivot is None:
+        raise SimulationError(f'gait_state pivot must be 0, 1 or 2, got {gait_state.pivot}')
+    touchdown = (stamp_to_seconds(gait_state.touchdown_stamp) if gait_state.touched_down
+                 else float('nan'))
+    return Observation(ns_to_seconds(ns), q, v, int(gait_state.mode), SIDES[side], pivot,
+                       int(gait_state.step_index),
+                       stamp_to_seconds(gait_state.support_exchange_stamp),
+                       float(gait_state.heel_anchor_y), touchdown)
+
+
+# ---------------------------------------------------------------------------------- commands
+def _indices(names: list[str], where: str) -> np.ndarray:
+    unknown = [n for n in names if n not in _INDEX]
+    if unknown:
+        raise SimulationError(f'{where}: unknown joint names {unknown}; expected names among '
+                              f'{list(COORDINATE_NAMES)}')
+    if len(set(names)) != len(names):
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        raise SimulationError(f'{where}: repeated joint names {repeated}')
+    return np.array([_INDEX[n] for n in names], dtype=np.intp)
+
+
+def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
+    x = np.asarray(getattr(msg, field), dtype=float)
+    if x.shape != (n,):
+        raise SimulationError(f'{where}: {field} has {x.size} entries for {n} joint names')
+    if not np.all(np.isfinite(x)):
+        bad = [str(name) for name, ok in zip(msg.joint_names, np.isfinite(x)) if not ok]
+        raise SimulationError(f'{where}: {field} is not finite at {bad}')
+    return x
+
+
+def command_from_message(msg: Any) -> JointCommand:
+    """The JointCommand of an EffortCommand message (18-vectors; unnamed coordinates 0).
+
+    :raises SimulationError: on unknown or repeated joint names, wrong lengths, non-finite or
+        negative gains, or a partial impedance; the message names the source and the field.
+    """
+    where = f'effort command of source {msg.source!r}'
+    names = list(msg.joint_names)
+    index = _indices(names, where)
+    n = len(names)
+    effort = np.zeros(N_COORDINATES)
+    effort[index] = _array(msg, 'effort', n, where)
+    given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]
+    if not any(given):
+        return JointCommand(effort)
+    if not all(given):
+        raise SimulationError(f'{where}: stiffness, damping and position_reference must be '
+                              'all empty or all given')
+    parts = []
+    for field in _IMPEDANCE:
+        x = np.zeros(N_COORDINATES)
+        x[index] = _array(msg, field, n, where)
+        parts.append(x)
+    try:
+        return JointCommand(effort, *parts)
+    except SimulationError as exc:
+        raise SimulationError(f'{where}: {exc}') from None
+
+
+def command_fields(command: JointCommand) -> dict[str, Any]:
+    """EffortCommand fields (joint_names, effort, impedance arrays) of a JointCommand."""
+    empty: list[float] = []
+    fields = {'joint_names': list(COORDINATE_NAMES), 'effort': command.effort.tolist(),
+              'stiffness': empty, 'damping': empty, 'position_reference': empty}
+    if command.has_impedance:
+        fields.update(stiffness=command.stiffness.tolist(), damping=command.damping.tolist(),
+                      position_reference=command.reference.tolist())
+    return fields
+
+
+# ------------------------------------------------------------------------------------ pairing
+class StatePairer:
+    """Pairs the joint_states and gait_state messages of one instant by their stamp.
+
+    ``add`` returns the pair once both messages of a stamp are in; older unmatched messages are
+    dropped. A stamp earlier than the last paired one (a reset of the simulation) starts over.
+    """
+
+    KINDS = ('joint_states', 'gait_state')
+
+    def __init__(self) -> None:
+        self._pending: dict[str, dict[int, Any]] = {k: {} for k in self.KINDS}
+        self.last_ns: int | None = None
+
+    def add(self, kind: str, msg: Any) -> tuple[int, Any, Any] | None:
+        """Store one message; return (stamp ns, joint_state, gait_state) when complete."""
+        ns = stamp_to_ns(msg.header.stamp)
+        if self.last_ns is not None and ns < self.last_ns:
+            self.reset()
+        self._pending[kind][ns] = msg
+        other = self._pending[self.KINDS[1 - self.KINDS.index(kind)]]
+        if ns not in other:
+            return None
+        pair = self._pending['joint_states'].pop(ns), self._pending['gait_state'].pop(ns)
+        for table in self._pending.values():
+            for old in [k for k in table if k < ns]:
+                del table[old]
+        self.last_ns = ns
+        return ns, pair[0], pair[1]
+
+    def reset(self) -> None:
+        """Forget everything (the simulation was reset)."""
+        for table in self._pending.values():
+            table.clear()
+        self.last_ns = None
