@@ -405,3 +405,122 @@ def _heel_strike(dynamics: GaitDynamics, friction: FrictionModel,
 def with_contact(state: HybridState, **changes: object) -> HybridState:
     """Copy of ``state`` with fields of its ContactState replaced."""
     return replace(state, contact=replace(state.contact, **changes))
+
+
+# ------------------------------------------------------- contact-consistent mode
+_SUPPORT_ORDER = ('F-S', 'R-S', 'F-G', 'R-G')  # most constrained first
+_SWING_ORDER = ('Fp', 'Fs', 'Hp', 'Hs', 'A')
+_AT_REST = 1.0e-7  # m/s, rad/s: a coordinate this slow may switch without an impulse
+_ACCEL_TOL = 1.0e-6  # m/s^2, rad/s^2
+
+
+def _candidates(state: HybridState) -> list[ContactState]:
+    """Contact states reachable from ``state`` without an impact, most constrained first."""
+    c, q, v = state.contact, state.q, state.v
+    mode = c.mode
+    flat_ok = abs(q[Q1]) < 1e-12 and abs(v[Q1]) < _AT_REST
+    if mode.q1_active and not flat_ok:
+        pivots = [c.pivot]
+    else:
+        pivots = [c.pivot] if mode.q1_active else ['toe', 'heel']
+    stuck_ok = abs(v[Y0]) < _AT_REST
+    glide_dirs = [c.support_slide_dir] if mode.y0_active and not stuck_ok else [1.0, -1.0]
+    if mode.swing == 'A':
+        swings = ['A']
+    else:
+        swings = ['A', 'Hs', 'Hp']
+        if mode.swing in ('Fs', 'Fp'):
+            swings += ['Fs', 'Fp']
+    out = []
+    for support in _SUPPORT_ORDER:
+        edge = support.startswith('R')
+        glide = support.endswith('G')
+        if not edge and not flat_ok:
+            continue
+        if not glide and mode.y0_active and not stuck_ok:
+            continue
+        for swing in _SWING_ORDER:
+            if swing not in swings:
+                continue
+            for pivot in (pivots if edge else [c.pivot]):
+                for direction in (glide_dirs if glide else [c.support_slide_dir]):
+                    out.append(replace(c, mode=mode_for(support, swing), pivot=pivot,
+                                       support_slide_dir=direction))
+    return out
+
+
+def _consistent(state: HybridState, r: DynamicsResult, friction: FrictionModel,
+                old: GaitMode) -> bool:
+    """All unilateral, friction and direction conditions of the candidate hold."""
+    c, mode = state.contact, state.mode
+    mu = friction.mu
+    if r.support_normal < -FORCE_BAND:
+        return False
+    if not mode.y0_active:  # stuck support: the needed reaction inside the friction cone
+        if _stuck_support_tangential(state, r, friction) > 0.0:
+            return False
+    elif abs(state.v[Y0]) < _AT_REST and c.support_slide_dir * r.qdd[Y0] < -_ACCEL_TOL:
+        return False
+    if friction.rule == 'ice' and mode.y0_active and c.support_slide_dir < 0:
+        return False
+    if not mode.q1_active:
+        moment = r.support_wrench[3]
+        if (moment - (SOLE_TOE_Y + COP_BAND) * r.support_normal > 0.0
+                or (SOLE_HEEL_Y - COP_BAND) * r.support_normal - moment > 0.0):
+            return False
+    elif not old.q1_active:  # a new edge: the sole must start to turn off the floor
+        sign = -1.0 if c.pivot == 'toe' else 1.0
+        if sign * r.qdd[Q1] < -_ACCEL_TOL:
+            return False
+    if mode.swing != 'A':
+        if r.multipliers[0] < -FORCE_BAND:
+            return False
+        if mode.swing in ('Hp', 'Fp') and _pinned_heel_tangential(state, r, friction) > 0.0:
+            return False
+        if mode.swing in ('Fs', 'Fp') and r.multipliers[2] < -MOMENT_BAND:
+            return False
+        if mode.swing in ('Hs', 'Hp') and old.swing in ('Fs', 'Fp'):
+            if r.qdd[_LEG].sum() < -_ACCEL_TOL:  # the toe must lift
+                return False
+        if mode.swing in ('Hs', 'Fs'):
+            heel_vy = r.swing_heel_velocity[1]
+            if friction.rule == 'ice' and c.heel_slide_dir < 0:
+                return False
+            if abs(heel_vy) > _AT_REST and np.sign(heel_vy) != c.heel_slide_dir:
+                return False
+    return True
+
+
+def resolve_contact_mode(dynamics: GaitDynamics, friction: FrictionModel,
+                         state: HybridState,
+                         evaluate: Callable[[ContactState, np.ndarray, np.ndarray],
+                                            DynamicsResult],
+                         ) -> tuple[HybridState, DynamicsResult] | None:
+    """A contact-consistent mode at an instant where single-guard switching cycles.
+
+    Enumerates the modes reachable without an impact (subsets of the active contacts, and
+    stick/flat constraints whose velocity is already zero), most constrained first, and
+    returns the first whose solution satisfies every unilateral, friction-cone, CoP and
+    direction condition; None if there is none.
+    """
+    old = state.mode
+    for contact in _candidates(state):
+        if contact.mode.swing in ('Hp', 'Fp') and old.swing not in ('Hp', 'Fp'):
+            heel = dynamics.frame_placement(contact, state.q, 'swing_heel').translation
+            contact = replace(contact, heel_anchor_y=float(heel[1]))
+        q, v = state.q.copy(), state.v.copy()
+        if not contact.mode.y0_active:
+            v[Y0] = 0.0
+        if not contact.mode.q1_active:
+            v[Q1] = 0.0
+        candidate = replace(state, q=q, v=v, contact=contact)
+        rows = dynamics.constraint_jacobian(contact, q)
+        if rows.size and np.max(np.abs(rows @ v)) > 1e-6:
+            continue
+        try:
+            result = evaluate(contact, q, v)
+        except SimulationError:
+            continue
+        if _consistent(candidate, result, friction, old):
+            return candidate, result
+    return None

@@ -88,6 +88,7 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
         'max_constraint_residual': float(sim.stats.max_constraint_residual),
         'physics_steps': sim.stats.steps, 'dynamics_evaluations': sim.stats.evaluations,
         'suppressed_cycles': sim.stats.suppressed_cycles,
+        'resolved_cycles': sim.stats.resolved_cycles,
         'sources': list(trajectory.sources),
     }
     if not len(trajectory):

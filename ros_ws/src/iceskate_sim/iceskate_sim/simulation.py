@@ -19,6 +19,7 @@ from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResu
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
     FrictionModel,
+    Guard,
     HybridState,
     RunEnded,
     Transition,
@@ -26,6 +27,7 @@ from iceskate_sim.hybrid import (
     guard_values,
     guards_of,
     project_positions,
+    resolve_contact_mode,
 )
 from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, IntegratorConfig
 from iceskate_sim.observation import Observation
@@ -85,6 +87,7 @@ class RunStatistics:
     control_periods: int = 0
     max_constraint_residual: float = 0.0
     suppressed_cycles: int = 0
+    resolved_cycles: int = 0
 
 
 class Simulator:
@@ -230,14 +233,35 @@ class Simulator:
         new, record = apply_transition(self.dynamics, self.config.friction, self.state,
                                        guard, self.result)
         key = (new.mode.number, new.contact.side)
-        if key in self._instant[1]:  # a Zeno cycle: keep the mode, rest the guard a while
-            self._suppressed[guard.name] = t + self.config.chatter_dwell
-            self.stats.suppressed_cycles += 1
+        if key in self._instant[1]:  # a cycle of single switches: solve for a consistent mode
+            self._resolve(guard)
             return
         self._instant[1].add(key)
         self.events.append(record)
         self.state = new
         self.result = self._evaluate(new.q, new.v)
+
+    def _resolve(self, guard: Guard) -> None:
+        """Replace a same-instant cycle by the contact-consistent mode, if there is one;
+        otherwise rest the cycling guard for ``chatter_dwell``."""
+        def evaluate(contact: ContactState, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
+            c = self._command
+            return self.dynamics.evaluate(contact, q, v, c.bias, self._push, c.stiffness,
+                                          c.damping)
+        found = resolve_contact_mode(self.dynamics, self.config.friction, self.state, evaluate)
+        if found is None or found[0].contact == self.state.contact:
+            self._suppressed[guard.name] = self.state.t + self.config.chatter_dwell
+            self.stats.suppressed_cycles += 1
+            return
+        new, result = found
+        self.stats.resolved_cycles += 1
+        self.events.append(Transition(self.state.t, self.state.mode.number, new.mode.number,
+                                      'R', 'contact-consistent mode after a cycle of '
+                                      f'single switches ({guard.name})', (),
+                                      new.step_index, new.contact.side))
+        self._instant[1].add((new.mode.number, new.contact.side))
+        self.state = new
+        self.result = result
 
     def _settle(self) -> None:
         """Apply transitions that are due at once (cascade), with a chattering limit."""
