@@ -10,11 +10,12 @@ IN_ENV := cd $(ROOT) && . ./env.sh &&
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.
 PYTEST_ARGS ?=
 
-.PHONY: help setup test lint fix lock clean distclean
+.PHONY: help setup test run lint fix lock clean distclean
 
 help:
 	@echo 'make setup      create .venv from requirements.lock and colcon-build ros_ws (idempotent)'
 	@echo 'make test       setup, then the whole pytest suite (what CI runs)'
+	@echo 'make run        setup, then run a scene headless (SCENE=skate, OUT=runs/<scene>-<time>)'
 	@echo 'make lint       setup, then ruff check of ros_ws/src and tests'
 	@echo 'make fix        setup, then ruff check --fix (safe fixes only, e.g. import order)'
 	@echo 'make lock       re-resolve requirements.in into requirements.lock (uv, Python 3.11)'
@@ -26,6 +27,12 @@ setup:
 
 test: setup
 	$(IN_ENV) python -m pytest tests -ra --durations=10 $(PYTEST_ARGS)
+
+# The main job: one scene, headless (same control code and rate as the ROS nodes).
+SCENE ?= skate
+OUT ?= runs/$(SCENE)-$(shell date +%Y%m%d-%H%M%S)
+run: setup
+	$(IN_ENV) run_scene $(SCENE) --out $(OUT) $(RUN_ARGS)
 
 lint: setup
 	$(IN_ENV) ruff check ros_ws/src tests

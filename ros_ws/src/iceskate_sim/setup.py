@@ -42,6 +42,10 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={
-        'console_scripts': [],
+        'console_scripts': [
+            'run_scene = iceskate_sim.runner:main',
+            'simulator = iceskate_sim.simulator_node:main',
+            'replay = iceskate_sim.replay:main',
+        ],
     },
 )

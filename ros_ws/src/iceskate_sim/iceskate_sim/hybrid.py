@@ -453,7 +453,6 @@ def _consistent(state: HybridState, r: DynamicsResult, friction: FrictionModel,
                 old: GaitMode) -> bool:
     """All unilateral, friction and direction conditions of the candidate hold."""
     c, mode = state.contact, state.mode
-    mu = friction.mu
     if r.support_normal < -FORCE_BAND:
         return False
     if not mode.y0_active:  # stuck support: the needed reaction inside the friction cone
