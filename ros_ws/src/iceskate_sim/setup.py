@@ -46,6 +46,7 @@ setup(
             'run_scene = iceskate_sim.runner:main',
             'simulator = iceskate_sim.simulator_node:main',
             'replay = iceskate_sim.replay:main',
+            'coupling_analysis = iceskate_sim.coupling_cli:main',
         ],
     },
 )

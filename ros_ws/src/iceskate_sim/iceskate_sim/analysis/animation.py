@@ -21,6 +21,7 @@ from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import LINK_NAMES, Robot
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.lines import Line2D
     from matplotlib.text import Text
@@ -88,43 +89,67 @@ def _caption(bag: BagData, k: int) -> str:
     mode = get_mode(int(bag.mode[k]))
     pivot = '' if int(bag.pivot[k]) == 0 else f', {bag.pivot_name(k)} pivot'
     return (f't = {bag.t[k]:.3f} s   step {int(bag.step_index[k]) + 1}\n'
-            f'mode {mode.number} ({mode.support} / {mode.swing})   '
+            f'mode {mode.number} ({mode.support}/{mode.swing})\n'
             f'support {bag.side_name(k)}{pivot}')
 
 
 class _Stick:
-    """The artists of one stick figure on one axes, updated in place."""
+    """The artists of one stick figure on one axes, updated in place.
 
-    def __init__(self, ax: Axes, fontsize: float = 8.0) -> None:
+    The view follows the robot: the horizontal axis is y relative to the pelvis, so the axes
+    stay fixed and the ground ticks (every 0.25 m of world y) show the travel.
+    """
+
+    def __init__(self, ax: Axes, half_width: float, fontsize: float = 8.0,
+                 caption_in_title: bool = False, animated: bool = False) -> None:
         self.ax = ax
+        self.caption_in_title = caption_in_title
         self.lines: list[tuple[tuple[str, str], Line2D]] = []
         for colour, segments in SEGMENTS:
             for segment in segments:
-                (line,) = ax.plot([], [], color=colour, lw=2.0, solid_capstyle='round')
+                (line,) = ax.plot([], [], color=colour, lw=2.0, solid_capstyle='round',
+                                  animated=animated)
                 self.lines.append((segment, line))
-        (self.head,) = ax.plot([], [], 'o', color='k', ms=7, mfc='w')
-        (self.ticks,) = ax.plot([], [], '|', color='0.5', ms=6)
+        (self.head,) = ax.plot([], [], 'o', color='k', ms=7, mfc='w', animated=animated)
+        (self.ticks,) = ax.plot([], [], '|', color='0.5', ms=6, animated=animated)
         ax.axhline(0.0, color='0.4', lw=1.0)
         ax.set_aspect('equal')
+        ax.set_xlim(-half_width, half_width)
         ax.set_ylim(-0.1, 1.9)
-        ax.set_xlabel('y [m]', fontsize=fontsize)
+        ax.set_xlabel('y − y_pelvis [m]', fontsize=fontsize)
         ax.tick_params(labelsize=fontsize - 1)
-        self.text: Text = ax.text(0.02, 0.98, '', transform=ax.transAxes, va='top',
-                                  fontsize=fontsize, family='monospace')
+        self.half_width = half_width
+        self.text: Text | None = None
+        if not caption_in_title:
+            self.text = ax.text(0.02, 0.98, '', transform=ax.transAxes, va='top',
+                                fontsize=fontsize, family='monospace', animated=animated)
+        self.fontsize = fontsize
 
-    def update(self, points: dict[str, np.ndarray], row: int, caption: str,
-               half_width: float) -> None:
-        for (a, b), line in self.lines:
-            line.set_data([points[a][row, 1], points[b][row, 1]],
-                          [points[a][row, 2], points[b][row, 2]])
-        self.head.set_data([points['head'][row, 1] * 0.4 + points['head_top'][row, 1] * 0.6],
-                           [points['head'][row, 2] * 0.4 + points['head_top'][row, 2] * 0.6])
+    @property
+    def artists(self) -> list[Artist]:
+        """The artists that change from frame to frame."""
+        moving: list[Artist] = [line for _, line in self.lines]
+        moving += [self.head, self.ticks]
+        if self.text is not None:
+            moving.append(self.text)
+        return moving
+
+    def update(self, points: dict[str, np.ndarray], row: int, caption: str) -> None:
+        """Draw sample ``row`` of ``points``."""
         centre = float(points['pelvis'][row, 1])
-        lo, hi = centre - half_width, centre + half_width
+        for (a, b), line in self.lines:
+            line.set_data([points[a][row, 1] - centre, points[b][row, 1] - centre],
+                          [points[a][row, 2], points[b][row, 2]])
+        head = 0.4 * points['head'][row] + 0.6 * points['head_top'][row]
+        self.head.set_data([head[1] - centre], [head[2]])
+        lo, hi = centre - self.half_width, centre + self.half_width
         ticks = np.arange(np.floor(lo / _GROUND_SPACING), np.ceil(hi / _GROUND_SPACING) + 1)
-        self.ticks.set_data(ticks * _GROUND_SPACING, np.zeros_like(ticks))
-        self.ax.set_xlim(lo, hi)
-        self.text.set_text(caption)
+        self.ticks.set_data(ticks * _GROUND_SPACING - centre, np.zeros_like(ticks))
+        caption = f'{caption}\ny_pelvis = {centre:.2f} m'
+        if self.text is not None:
+            self.text.set_text(caption)
+        else:
+            self.ax.set_title(caption, fontsize=self.fontsize, family='monospace', loc='left')
 
 
 def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames: int = 120,
@@ -137,17 +162,23 @@ def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames:
     path.parent.mkdir(parents=True, exist_ok=True)
     indices = frame_indices(bag.n_samples, max_frames)
     points = link_positions(bag, robot, indices)
-    fig = Figure(figsize=(5.0, 4.6), layout='constrained')
+    fig = Figure(figsize=(5.0, 4.6), dpi=90)
+    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.1, top=0.94)
     canvas = FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    ax.set_title(f'{bag.scene_name or bag.path.name}: side view', fontsize=9)
-    stick = _Stick(ax)
+    ax.set_title(f'{bag.scene_name or bag.path.name}: side view (right red, left blue)',
+                 fontsize=9)
+    stick = _Stick(ax, half_width=0.9, animated=True)
+    canvas.draw()  # the static part once (axes, labels, floor); frames are blitted on it
+    background = canvas.copy_from_bbox(fig.bbox)
     bar = progress_bar(indices.size, 'animation', progress, unit='frame')
     try:
         with imageio.get_writer(path, mode='I', duration=1000.0 / fps, loop=0) as writer:
             for row, k in enumerate(indices):
-                stick.update(points, row, _caption(bag, int(k)), half_width=0.9)
-                canvas.draw()
+                stick.update(points, row, _caption(bag, int(k)))
+                canvas.restore_region(background)
+                for artist in stick.artists:
+                    ax.draw_artist(artist)
                 writer.append_data(np.asarray(canvas.buffer_rgba())[..., :3].copy())
                 bar.update(1)
     finally:
@@ -163,11 +194,11 @@ def render_keyframes(bag: BagData, robot: Robot, path: str | pathlib.Path, count
     path.parent.mkdir(parents=True, exist_ok=True)
     indices = frame_indices(bag.n_samples, count)
     points = link_positions(bag, robot, indices)
-    fig = Figure(figsize=(2.2 * indices.size, 3.6), layout='constrained')
+    fig = Figure(figsize=(2.4 * indices.size, 4.0), layout='constrained')
     axes = fig.subplots(1, indices.size, squeeze=False)[0]
     for row, (ax, k) in enumerate(zip(axes, indices, strict=True)):
-        stick = _Stick(ax, fontsize=6.5)
-        stick.update(points, row, _caption(bag, int(k)), half_width=0.55)
+        stick = _Stick(ax, half_width=0.6, fontsize=6.0, caption_in_title=True)
+        stick.update(points, row, _caption(bag, int(k)))
         if row:
             ax.set_yticklabels([])
     fig.suptitle(f'{bag.scene_name or bag.path.name}: key frames (side view, right red, '

@@ -40,8 +40,8 @@ if TYPE_CHECKING:
     from rosbags.interfaces import Connection
     from rosbags.typesys.store import Typestore
 
-__all__ = ['BagData', 'OPTIONAL_TOPICS', 'REQUIRED_TOPICS', 'SIDE_NAMES', 'PIVOT_NAMES',
-           'read_bag', 'resolve_bag_path']
+__all__ = ['BagData', 'OPTIONAL_TOPICS', 'PASSIVE', 'PIVOT_NAMES', 'REQUIRED_TOPICS',
+           'SIDE_NAMES', 'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -63,6 +63,7 @@ _WHAT = {
 SIDE_NAMES = ('right', 'left')
 #: GaitState.pivot code -> pivot name ('none': sole flat; the flat models use the toe pivot).
 PIVOT_NAMES = ('none', 'toe', 'heel')
+#: Source name of the joint damping and soft-stop torques in JointDynamics.efforts.
 PASSIVE = 'passive'
 
 
@@ -430,6 +431,10 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
     try:
         reader.open()
     except (AnyReaderError, FileNotFoundError) as exc:
+        if 'message type' in str(exc).lower():
+            raise SimulationError(f'cannot open bag {bag}: unknown or inconsistent message '
+                                  f'type: the definition stored in the bag does not match its '
+                                  f'type hash ({exc})') from exc
         raise SimulationError(f'cannot open bag {bag}: the file is truncated or corrupt, or '
                               f'not a rosbag2 recording ({exc})') from exc
     try:

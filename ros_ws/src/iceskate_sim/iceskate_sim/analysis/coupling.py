@@ -11,10 +11,13 @@ with the support model of the sample (mode, support side, pivot); q̈ and the in
 every source are the recorded ones. ``limit_i`` is the soft-stop torque (the recorded passive
 effort minus the damping), ``constraint_i`` the generalized force of the swing-foot constraints
 (recorded multipliers, with the Coulomb friction of a sliding heel), ``friction_i`` the floor
-friction on a gliding support foot (y0 only). For the upper-body joints 8..17 the last two are
-zero: they are not on the path from the support foot to the swing heel. The closure residual
-(left side minus right side) shows that the bag, the model and this decomposition agree; it must
-be at solver precision (relative to the sum of the magnitudes of all terms).
+friction on a gliding support foot (y0 only). τ_i is the sum of the recorded sources that act on
+the coordinate: joint inputs never on y0 and on q1 only while it is a coordinate; an external
+push (source ``push``, recorded as J^T f) on every active coordinate. For the upper-body joints
+8..17 the constraint and friction terms are zero: these joints are not on the path from the
+support foot to the swing heel. The closure residual (left side minus right side) shows that the
+bag, the model and this decomposition agree; it must be at solver precision (relative to the sum
+of the magnitudes of all terms).
 
 The arm-swing figures (peak-to-peak, phase) are taken from the paper's 4th step on
 (``step_index >= 3``), or over the whole run when the run never gets there.
@@ -59,6 +62,8 @@ TERM_LABELS = {
     'constraint': 'swing constraint', 'support_friction': 'support friction',
     'residual': 'closure residual',
 }
+#: Sources that are external forces on a link (recorded as J^T f), not joint inputs.
+EXTERNAL_SOURCES = ('push',)
 _HEEL_SPEED_EPS = 1e-9  # m/s: below it a sliding heel's friction direction defaults to +1
 
 
@@ -213,7 +218,8 @@ class JointDecomposition:
 
 
 def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q: np.ndarray,
-                      v: np.ndarray, multipliers: np.ndarray) -> np.ndarray:
+                      v: np.ndarray, multipliers: np.ndarray,
+                      data: dict[tuple[str, str], pin.Data]) -> np.ndarray:
     """Generalized force of the active swing constraints (18,), heel friction included."""
     mode = contact.mode
     rows = dyn.constraint_jacobian(contact, q)
@@ -221,8 +227,8 @@ def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q:
     cols = rows.copy()
     if mode.swing_sliding:  # Coulomb friction mu f_nz on the heel, against its y velocity
         sm = robot.support_model(contact.side, contact.pivot)
-        data = _pin_data(sm)
-        jac = pin.computeFrameJacobian(sm.model, data, q, sm.frame_ids['swing_heel'],
+        d = data.setdefault((sm.side, sm.pivot), sm.new_data())
+        jac = pin.computeFrameJacobian(sm.model, d, q, sm.frame_ids['swing_heel'],
                                        pin.LOCAL_WORLD_ALIGNED)
         heel_y = jac[1].copy()
         heel_y[~np.isin(np.arange(N_COORDINATES), mode.active)] = 0.0
@@ -230,16 +236,6 @@ def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q:
         direction = np.sign(speed) if abs(speed) > _HEEL_SPEED_EPS else 1.0
         cols[0] = cols[0] - dyn.params.mu * direction * heel_y
     return cols.T @ lam
-
-
-_DATA: dict[int, pin.Data] = {}
-
-
-def _pin_data(sm: Any) -> pin.Data:
-    key = id(sm.model)
-    if key not in _DATA:
-        _DATA[key] = sm.model.createData()
-    return _DATA[key]
 
 
 def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
@@ -265,6 +261,7 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     gravity = np.full((nj, n), np.nan)
     constraint = np.zeros((nj, n))
     valid = np.zeros((nj, n), dtype=bool)
+    pin_data: dict[tuple[str, str], pin.Data] = {}
     bar = progress_bar(n, f'eq. (11) {bag.path.name}', progress)
     try:
         for k in range(n):
@@ -277,7 +274,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
                 M = dyn.mass_matrix(contact, q)
                 h = dyn.bias_terms(contact, q, v)
                 g = dyn.gravity_terms(contact, q)
-                force = (_constraint_force(dyn, robot, contact, q, v, bag.multipliers[k])
+                force = (_constraint_force(dyn, robot, contact, q, v, bag.multipliers[k],
+                                           pin_data)
                          if mode.constraints else np.zeros(N_COORDINATES))
             except SimulationError as exc:
                 raise SimulationError(f'{bag.path}: cannot evaluate the model at sample {k} '
@@ -306,8 +304,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     passive = bag.efforts.get(PASSIVE, np.zeros((n, N_COORDINATES)))
     out = {}
     for a, i in enumerate(joints):
-        actuated = _actuated(bag, i)
-        by_source = {s: np.where(actuated, bag.efforts[s][:, i], 0.0) for s in bag.sources}
+        by_source = {s: np.where(_actuated(bag, i, s), bag.efforts[s][:, i], 0.0)
+                     for s in bag.sources}
         tau = np.sum(list(by_source.values()), axis=0) if by_source else np.zeros(n)
         friction = (np.where(bag.active[:, Y0], bag.support_friction, 0.0) if i == Y0
                     else np.zeros(n))
@@ -324,8 +322,14 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     return out
 
 
-def _actuated(bag: BagData, i: int) -> np.ndarray:
-    """Whether the inputs act on coordinate i at each sample (y0 never, q1 when active)."""
+def _actuated(bag: BagData, i: int, source: str) -> np.ndarray:
+    """Whether ``source`` acts on coordinate i at each sample.
+
+    Joint inputs never act on y0 (unactuated) and on q1 only while it is a coordinate; an
+    external force (``push``) acts on every active coordinate.
+    """
+    if source in EXTERNAL_SOURCES:
+        return bag.active[:, i].copy()
     if i == Y0:
         return np.zeros(bag.n_samples, dtype=bool)
     if i == Q1:
@@ -458,6 +462,8 @@ class CaseResult:
         }
         if np.any(d.valid):
             out['mean_M_i8'] = float(np.mean(d.mass_row[d.valid, TORSO_YAW]))
+        else:
+            out['note'] = f'{d.name} is a coordinate of none of the recorded modes'
         return out
 
     def summary(self) -> dict[str, Any]:

@@ -40,6 +40,21 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
+def _robust_limits(ax: Axes, series: list[np.ndarray]) -> None:
+    """Clip the y range to the bulk of the data when a few samples (e.g. a fall) dwarf it."""
+    values = np.concatenate([np.asarray(x, dtype=float).ravel() for x in series])
+    values = values[np.isfinite(values)]
+    if values.size < 20:
+        return
+    lo, hi = np.percentile(values, [2.0, 98.0])
+    pad = 0.5 * (hi - lo) if hi > lo else max(1e-9, 0.1 * abs(hi))
+    if values.min() < lo - pad or values.max() > hi + pad:
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.text(0.01, 0.02, f'y range clipped (data span {values.min():.3g} to '
+                f'{values.max():.3g}; full values in the CSV)', transform=ax.transAxes,
+                fontsize=7, color='0.35', va='bottom')
+
+
 def _index(name: str) -> str:
     """Subscript of a coordinate name: 'q11' -> '11', 'y0' -> 'y0'."""
     return name if name == 'y0' else name[1:]
@@ -118,6 +133,7 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
         ax.plot(t, d.constraint, color='tab:olive', lw=1.0, label='swing constraint')
     ax.set_ylabel('torque [N m]')
     ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}')
+    _robust_limits(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia])
     _mark_steps(ax, case)
     ax.legend(loc='upper right', fontsize=7, ncol=3)
 
@@ -126,6 +142,7 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     ax.plot(t, -d.m_total - d.gravity, color='tab:purple', lw=0.8, ls='--', alpha=0.7,
             label=f'Σ M_{i},j q̈_j − g_{i}')
     ax.plot(t, d.coriolis, color='tab:orange', lw=1.3, label=f'h_{i}')
+    _robust_limits(ax, [d.m_total - d.gravity, -d.m_total - d.gravity, d.coriolis])
     ax.set_ylabel('torque [N m]')
     _mark_steps(ax, case, legend=False)
     ax.legend(loc='upper right', fontsize=7, ncol=3)
@@ -155,6 +172,7 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
         ax.plot(d.t, series[name], lw=1.0, label=f'M_{i},{_index(name)} q̈_{_index(name)} '
                 f'(RMS {value:.3g})')
     ax.plot(d.t, d.m_total, color='k', lw=1.4, label='M_total')
+    _robust_limits(ax, [d.m_total] + [series[name] for name, _ in ranking])
     _mark_steps(ax, case)
     ax.set_title(f'{case.label}: largest coupling terms at {d.name} (ranked by RMS)')
     ax.set_xlabel('time [s]')

@@ -1,0 +1,142 @@
+"""The whole offline analysis of one bag, or of a pair (``--compare``), into a directory.
+
+For each case (label: the scene name, else the bag's directory name) it writes
+``<label>_shoulders.png``, ``<label>_terms_<joint>.png``, ``<label>_coupling_<joint>.png`` and
+``<label>_series.csv`` (every series: arm state and every term of eq. (11) at the joint and,
+for a shoulder, at the other shoulder), and with ``animate`` ``<label>_animation.gif`` and
+``<label>_keyframes.png``. A pair also gives the paper's figures: ``fig5_shoulders.png`` (the
+run without the torso-yaw input τ8), ``fig6_shoulders.png`` (with it), ``fig7_terms_<joint>.png``
+and ``fig8_terms_<joint>.png``, plus ``compare_shoulders.png``. ``summary.json`` holds one entry
+per case (closure residual, arm swing, RMS of every term, RMS of M_total − g_i, coupling
+ranking) and, for a pair, the comparison.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+from typing import Any
+
+from iceskate_sim.analysis.bag_io import read_bag
+from iceskate_sim.analysis.coupling import (
+    RIGHT_SHOULDER,
+    CaseResult,
+    analyse_case,
+    case_columns,
+    parse_joint,
+    robot_for_bag,
+    write_csv,
+)
+from iceskate_sim.errors import SimulationError
+
+__all__ = ['case_label', 'jsonable', 'run_analysis']
+
+
+def case_label(path: pathlib.Path, scene: str, taken: set[str]) -> str:
+    """A file-name-safe label: the scene name, else the bag directory's name; made unique."""
+    base = scene or (path.parent.name if path.name == 'bag' else path.stem) or 'run'
+    base = ''.join(c if c.isalnum() or c in '-_' else '_' for c in base)
+    label, n = base, 2
+    while label in taken:
+        label, n = f'{base}_{n}', n + 1
+    taken.add(label)
+    return label
+
+
+def jsonable(value: Any) -> Any:
+    """Nested data with non-finite floats replaced by None (strict JSON)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    return value
+
+
+def _order_pair(cases: list[CaseResult]) -> tuple[CaseResult, CaseResult, str]:
+    """(without τ8, with τ8, how it was decided)."""
+    first, second = cases
+    if first.torso_yaw_input != second.torso_yaw_input:
+        return (second, first, 'yaw source') if first.torso_yaw_input else (first, second,
+                                                                            'yaw source')
+    return first, second, 'argument order (both or neither have a torso-yaw source)'
+
+
+def _ratio(a: float, b: float) -> float | None:
+    return a / b if b and math.isfinite(a) and math.isfinite(b) else None
+
+
+def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
+                 joint: int | str = RIGHT_SHOULDER, compare: str | pathlib.Path | None = None,
+                 animate: bool = False, frames: int = 120, progress: bool = False,
+                 ) -> dict[str, Any]:
+    """Analyse ``bag`` (and ``compare``) and write figures, CSV and summary.json into ``out``.
+
+    :param joint: the joint of eq. (11) (default 11, the right shoulder).
+    :param animate: also write the stick-figure GIF and the key-frame strip of each case.
+    :param frames: most frames of a GIF.
+    :return: the summary (as written to summary.json).
+    :raises SimulationError: on an unreadable bag or a bad joint (the message names it).
+    """
+    from iceskate_sim.analysis import plots
+    joint = parse_joint(joint)
+    out = pathlib.Path(out)
+    if out.exists() and not out.is_dir():
+        raise SimulationError(f'--out {out} exists and is not a directory')
+    out.mkdir(parents=True, exist_ok=True)
+    taken: set[str] = set()
+    cases = []
+    for path in [bag] + ([compare] if compare is not None else []):
+        data = read_bag(path, progress=progress)
+        label = case_label(data.path, data.scene_name, taken)
+        cases.append(analyse_case(data, label, joint, progress=progress))
+    name = cases[0].main.name
+    files: dict[str, list[str]] = {}
+    for case in cases:
+        written = [
+            plots.plot_shoulders(case, out / f'{case.label}_shoulders.png'),
+            plots.plot_terms(case, out / f'{case.label}_terms_{name}.png'),
+            plots.plot_coupling(case, out / f'{case.label}_coupling_{name}.png'),
+            write_csv(out / f'{case.label}_series.csv', case_columns(case)),
+        ]
+        if animate:
+            from iceskate_sim.analysis.animation import render_gif, render_keyframes
+            robot = robot_for_bag(case.bag)
+            written.append(render_gif(case.bag, robot, out / f'{case.label}_animation.gif',
+                                      max_frames=frames, progress=progress))
+            written.append(render_keyframes(case.bag, robot, out / f'{case.label}_keyframes.png'))
+        files[case.label] = [p.name for p in written]
+    summaries = {c.label: c.summary() for c in cases}
+    summary: dict[str, Any] = {'joint': name, 'cases': summaries}
+    if len(cases) == 2:
+        without, with_yaw, decided = _order_pair(cases)
+        paper = [
+            plots.plot_shoulders(without, out / 'fig5_shoulders.png',
+                                 f'Fig. 5: shoulder angles without torso-yaw input τ8 '
+                                 f'({without.label})'),
+            plots.plot_shoulders(with_yaw, out / 'fig6_shoulders.png',
+                                 f'Fig. 6: shoulder angles with torso-yaw input τ8 '
+                                 f'({with_yaw.label})'),
+            plots.plot_terms(without, out / f'fig7_terms_{name}.png',
+                             f'Fig. 7: terms of eq. (11) at {name} without τ8 '
+                             f'({without.label})'),
+            plots.plot_terms(with_yaw, out / f'fig8_terms_{name}.png',
+                             f'Fig. 8: terms of eq. (11) at {name} with τ8 ({with_yaw.label})'),
+            plots.plot_compare_shoulders([without, with_yaw], out / 'compare_shoulders.png'),
+        ]
+        files['comparison'] = [p.name for p in paper]
+        a, b = without.arms, with_yaw.arms
+        summary['comparison'] = {
+            'without_yaw': without.label, 'with_yaw': with_yaw.label, 'assigned_by': decided,
+            'arm_peak_to_peak_ratio_with_over_without': {
+                arm: _ratio(b.peak_to_peak[arm], a.peak_to_peak[arm]) for arm in ('q11', 'q14')},
+            'rms_coriolis_ratio_with_over_without': _ratio(
+                summaries[with_yaw.label]['rms']['coriolis'],
+                summaries[without.label]['rms']['coriolis']),
+        }
+    summary['files'] = files
+    summary = jsonable(summary)
+    (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n', encoding='utf-8')
+    return summary

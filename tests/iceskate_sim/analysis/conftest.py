@@ -1,0 +1,172 @@
+"""Bags for the offline-analysis tests, generated in temporary directories (never committed).
+
+* ``sim_bag``: a short run of a tiny ice-skating scene (torso-yaw input on) through the headless
+  runner, i.e. the bag our runs really write.
+* ``synthetic_bag`` / ``synthetic_no_yaw_bag``: bags written with ``BagRecorder`` from
+  prescribed states that visit modes 1, 2 (q1 active, heel pivot), 3 (y0 active) and 5 (sliding
+  swing heel) on both support sides, four steps long, with the arms swinging as prescribed
+  sinusoids (anti-phase with the yaw source, nearly in phase without). Their accelerations are
+  ``GaitDynamics.evaluate`` at each state, so eq. (11) must close on them exactly as on a run.
+* ``bag_without``: a copy of a bag with one topic left out; ``truncated_bag``: a copy cut short.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import pathlib
+import shutil
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from iceskate_sim.dynamics import ContactState, GaitDynamics
+from iceskate_sim.hybrid import HybridState
+from iceskate_sim.modes import get_mode
+from iceskate_sim.recording import BagRecorder, Sample
+from iceskate_sim.robot import N_COORDINATES, Q1, Y0, load_robot
+
+#: A tiny version of the skate scene: ice, visual lifting, posture and the torso-yaw input.
+TINY_SKATE = {
+    'scene': 'tiny_skate',
+    'duration': 0.04,
+    'control_period': 0.001,
+    'floor': {'rule': 'ice', 'mu': 0.005},
+    'initial': {'mode': 17, 'support': 'right', 'posture': 'bent_knees', 'knee_bend': 0.05,
+                'v': {'q8': 0.4, 'q11': 0.5, 'q14': -0.5}},
+    'integrator': {'method': 'rk4', 'step': 0.0005},
+    'inputs': {'visual_lifting': {'desired_y': 'moving', 'v_d': 0.3},
+               'gait_manager': {'enabled': ['posture', 'yaw']}},
+}
+#: (mode, support side, pivot) of each synthetic step.
+SYNTHETIC_STEPS = ((1, 'right', 'toe'), (2, 'left', 'heel'), (3, 'right', 'toe'),
+                   (5, 'left', 'toe'))
+SAMPLES_PER_STEP = 40
+DT = 0.001  # s
+ARM_FREQUENCY = 100.0  # Hz: 4 periods per synthetic step
+ARM_AMPLITUDE = 0.3  # rad (with yaw: q11 = A sin, q14 = -A sin)
+NO_YAW_AMPLITUDE = 0.05  # rad (without yaw: q14 leads q11 by NO_YAW_LEAD)
+NO_YAW_LEAD = 0.5  # rad
+
+
+@pytest.fixture(scope='session')
+def spec() -> SimpleNamespace:
+    """The constants the bags above were made with (tests cannot import conftest)."""
+    return SimpleNamespace(tiny_skate=TINY_SKATE, steps=SYNTHETIC_STEPS,
+                           samples_per_step=SAMPLES_PER_STEP, dt=DT,
+                           arm_frequency=ARM_FREQUENCY, arm_amplitude=ARM_AMPLITUDE,
+                           no_yaw_amplitude=NO_YAW_AMPLITUDE, no_yaw_lead=NO_YAW_LEAD)
+
+
+@pytest.fixture(scope='session')
+def sim_bag(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """A 40 ms run of TINY_SKATE recorded by the headless runner; returns the bag directory."""
+    from iceskate_sim.runner import run
+    from iceskate_sim.scene import parse_scene
+    out = tmp_path_factory.mktemp('sim_run')
+    run(parse_scene(dict(TINY_SKATE)), out, progress=False)
+    return out / 'bag'
+
+
+def _synthetic_state(k: int, yaw: bool) -> tuple[float, int, ContactState, np.ndarray,
+                                                np.ndarray]:
+    step = k // SAMPLES_PER_STEP
+    number, side, pivot = SYNTHETIC_STEPS[step]
+    mode = get_mode(number)
+    t = k * DT
+    w = 2.0 * np.pi * ARM_FREQUENCY
+    q = np.zeros(N_COORDINATES)
+    v = np.zeros(N_COORDINATES)
+    a = 0.05
+    q[2:8] = (-a, 2 * a, -a, a + 0.2, -2 * a - 0.3, a + 0.1)
+    q[Y0], v[Y0] = 0.3 * t, 0.3
+    if mode.q1_active:
+        q[Q1], v[Q1] = 0.05 + 0.2 * t, 0.2
+    q[8], v[8] = 0.2 * np.sin(w * t / 4), 0.2 * w / 4 * np.cos(w * t / 4)
+    if yaw:
+        q[11], v[11] = ARM_AMPLITUDE * np.sin(w * t), ARM_AMPLITUDE * w * np.cos(w * t)
+        q[14], v[14] = -q[11], -v[11]
+    else:
+        q[11] = NO_YAW_AMPLITUDE * np.sin(w * t)
+        v[11] = NO_YAW_AMPLITUDE * w * np.cos(w * t)
+        q[14] = NO_YAW_AMPLITUDE * np.sin(w * t + NO_YAW_LEAD)
+        v[14] = NO_YAW_AMPLITUDE * w * np.cos(w * t + NO_YAW_LEAD)
+    q[12], v[12] = 0.4, 0.1  # elbows bent (inside their soft stops)
+    q[15], v[15] = 0.4, -0.1
+    if not mode.y0_active:
+        v[Y0] = 0.0
+    contact = ContactState(mode, side, pivot)
+    return t, step, contact, q, v
+
+
+def write_synthetic_bag(path: pathlib.Path, yaw: bool) -> pathlib.Path:
+    """Write the synthetic bag described in the module docstring; return its directory."""
+    robot = load_robot()
+    dyn = GaitDynamics(robot)
+    scene = 'synthetic_yaw' if yaw else 'synthetic_no_yaw'
+    metadata = {'scene': scene, 'scene_parameters': {'scene': scene,
+                                                     'floor': {'rule': 'ice', 'mu': 0.005}}}
+    with BagRecorder(path, metadata, robot.urdf_path.read_text(encoding='utf-8')) as recorder:
+        for k in range(len(SYNTHETIC_STEPS) * SAMPLES_PER_STEP):
+            t, step, contact, q, v = _synthetic_state(k, yaw)
+            if contact.mode.swing_sliding:  # the simulator slides the heel along its velocity
+                heel_vy = dyn.frame_velocity(contact, q, v, 'swing_heel').linear[1]
+                contact.heel_slide_dir = float(np.sign(heel_vy)) or 1.0
+            joints = np.arange(N_COORDINATES)
+            efforts = {'visual_lifting': np.where(joints >= 2, 3.0 * np.sin(40.0 * t + joints),
+                                                  0.0)}
+            if yaw:
+                efforts['yaw'] = np.where(joints == 8, 30.0 * np.sin(20.0 * t), 0.0)
+            result = dyn.evaluate(contact, q, v, np.sum(list(efforts.values()), axis=0))
+            head = dyn.frame_placement(contact, q, 'head_top')
+            state = HybridState(t, q, v, contact, step_index=step)
+            recorder.write(Sample(state, result, efforts, head.translation.copy(),
+                                  head.rotation.copy(), None))
+    return path
+
+
+@pytest.fixture(scope='session')
+def synthetic_bag(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """Synthetic bag with the torso-yaw source and anti-phase arms."""
+    return write_synthetic_bag(tmp_path_factory.mktemp('synthetic') / 'bag', yaw=True)
+
+
+@pytest.fixture(scope='session')
+def synthetic_no_yaw_bag(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """Synthetic bag without the yaw source, arms small and nearly in phase."""
+    return write_synthetic_bag(tmp_path_factory.mktemp('synthetic_no_yaw') / 'bag', yaw=False)
+
+
+@pytest.fixture
+def bag_without(tmp_path: pathlib.Path) -> Callable[[pathlib.Path, str], pathlib.Path]:
+    """``bag_without(bag, topic)``: a copy of ``bag`` with every message of ``topic`` left out."""
+    def copy(source: pathlib.Path, topic: str) -> pathlib.Path:
+        from rosbags.highlevel import AnyReader
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        target = tmp_path / f'without_{topic.strip("/")}'
+        with AnyReader([source]) as reader:
+            writer = Writer(target, version=9, storage_plugin=StoragePlugin.MCAP)
+            writer.open()
+            try:
+                out = {c.id: writer.add_connection(c.topic, c.msgtype,
+                                                   typestore=reader.typestore)
+                       for c in reader.connections if c.topic != topic}
+                for conn, stamp, raw in reader.messages():
+                    if conn.id in out:
+                        writer.write(out[conn.id], stamp, raw)
+            finally:
+                writer.close()
+        return target
+    return copy
+
+
+@pytest.fixture
+def truncated_bag(tmp_path: pathlib.Path, sim_bag: pathlib.Path) -> pathlib.Path:
+    """A copy of ``sim_bag`` whose MCAP file lost its second half (an interrupted copy)."""
+    target = tmp_path / 'truncated'
+    shutil.copytree(sim_bag, target)
+    (mcap,) = target.glob('*.mcap')
+    size = mcap.stat().st_size
+    with mcap.open('r+b') as stream:
+        stream.truncate(size // 2)
+    return target

@@ -1,0 +1,146 @@
+"""Reading bags into arrays, and refusing the ones the analysis cannot use."""
+
+from __future__ import annotations
+
+import pathlib
+import shutil
+
+import numpy as np
+import pytest
+
+from iceskate_sim.analysis.bag_io import read_bag, resolve_bag_path
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
+
+
+def test_read_bag_aligns_every_sample_of_a_run(sim_bag, spec):
+    bag = read_bag(sim_bag)
+    n = round(spec.tiny_skate['duration'] / spec.tiny_skate['control_period'])
+    assert bag.n_samples == n
+    assert np.all(np.diff(bag.t_ns) > 0)
+    assert bag.t[0] == 0.0
+    for name in ('q', 'v', 'qdd', 'effort_total'):
+        assert getattr(bag, name).shape == (n, N_COORDINATES)
+    assert bag.multipliers.shape == (n, 3)
+    assert {'visual_lifting', 'posture', 'yaw', 'passive'} <= set(bag.efforts)
+    assert set(bag.sources) == set(bag.efforts) - {'passive'}
+    assert bag.scene_name == 'tiny_skate'
+    assert bag.scene_parameters['floor']['mu'] == 0.005
+    assert '<robot' in bag.urdf
+    assert np.all(np.isfinite(bag.head_position))
+    assert bag.notes == ()
+    # the total effort of /joint_states is the sum of the recorded sources
+    total = sum(bag.efforts[s] for s in bag.sources)
+    np.testing.assert_allclose(bag.effort_total, total, rtol=0, atol=1e-9)
+
+
+def test_read_bag_maps_gait_codes(synthetic_bag, spec):
+    bag = read_bag(synthetic_bag)
+    modes = [m for m, _, _ in spec.steps]
+    assert bag.n_samples == len(spec.steps) * spec.samples_per_step
+    for step, (mode, side, pivot) in enumerate(spec.steps):
+        k = step * spec.samples_per_step
+        assert int(bag.mode[k]) == mode
+        assert bag.side_name(k) == side
+        assert int(bag.step_index[k]) == step
+        if mode == 2:  # q1 active: the pivot is recorded
+            assert bag.pivot_name(k) == pivot
+            assert bag.active[k, 1]
+    assert sorted(set(bag.mode.tolist())) == sorted(modes)
+    assert bag.step_start_time(3) == pytest.approx(3 * spec.samples_per_step * spec.dt)
+    assert bag.step_start_time(4) is None
+
+
+def test_a_run_directory_resolves_to_its_bag(sim_bag):
+    assert resolve_bag_path(sim_bag.parent) == sim_bag
+
+
+@pytest.mark.parametrize('topic, what', [
+    ('/joint_dynamics', 'joint accelerations'),
+    ('/gait_state', 'gait mode'),
+    ('/joint_states', 'joint positions'),
+])
+def test_read_bag_refuses_a_bag_without_a_required_topic(sim_bag, bag_without, topic, what):
+    broken = bag_without(sim_bag, topic)
+    with pytest.raises(SimulationError, match=f'has no topic {topic} .*{what}'):
+        read_bag(broken)
+
+
+def test_a_bag_without_head_pose_is_read_with_a_note(sim_bag, bag_without):
+    bag = read_bag(bag_without(sim_bag, '/head_pose'))
+    assert np.all(np.isnan(bag.head_position))
+    assert any('/head_pose' in note for note in bag.notes)
+
+
+def test_read_bag_refuses_a_truncated_bag(truncated_bag):
+    with pytest.raises(SimulationError, match='truncated or corrupt'):
+        read_bag(truncated_bag)
+
+
+def test_read_bag_refuses_a_bag_without_metadata(tmp_path, sim_bag):
+    target = tmp_path / 'no_metadata'
+    shutil.copytree(sim_bag, target)
+    (target / 'metadata.yaml').unlink()
+    with pytest.raises(SimulationError, match='no metadata.yaml'):
+        read_bag(target)
+
+
+def test_read_bag_refuses_a_missing_path(tmp_path):
+    with pytest.raises(SimulationError, match='does not exist'):
+        read_bag(tmp_path / 'nothing')
+
+
+def _write(path: pathlib.Path, topics: dict[str, tuple[str, object]], typestore) -> None:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    try:
+        for topic, (msgtype, message) in topics.items():
+            conn = writer.add_connection(topic, msgtype, typestore=typestore)
+            writer.write(conn, 0, typestore.serialize_cdr(message, msgtype))
+    finally:
+        writer.close()
+
+
+def test_read_bag_refuses_a_topic_of_the_wrong_type(tmp_path):
+    from iceskate_sim.bag_types import make_typestore
+    ts = make_typestore()
+    string = ts.types['std_msgs/msg/String']
+    path = tmp_path / 'wrong_type'
+    _write(path, {'/joint_states': ('std_msgs/msg/String', string(data='x')),
+                  '/gait_state': ('std_msgs/msg/String', string(data='x')),
+                  '/joint_dynamics': ('std_msgs/msg/String', string(data='x'))}, ts)
+    with pytest.raises(SimulationError, match='has message type std_msgs/msg/String, expected'):
+        read_bag(path)
+
+
+def test_read_bag_refuses_an_unknown_definition_of_our_message(tmp_path, sim_bag, bag_without):
+    """A bag whose JointDynamics is another message under the same name (an old interface)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    old = get_typestore(Stores.ROS2_JAZZY)
+    old.register(get_types_from_msg('std_msgs/Header header\nstring[] name\n'
+                                    'float64[] acceleration\n',
+                                    'iceskate_interfaces/msg/JointDynamics'))
+    source = bag_without(sim_bag, '/joint_dynamics')
+    path = tmp_path / 'old_interface'
+    with AnyReader([source]) as reader:
+        writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=reader.typestore)
+               for c in reader.connections}
+        dyn = writer.add_connection('/joint_dynamics', 'iceskate_interfaces/msg/JointDynamics',
+                                    typestore=old)
+        msg_type = old.types['iceskate_interfaces/msg/JointDynamics']
+        for conn, stamp, raw in reader.messages():
+            writer.write(out[conn.id], stamp, raw)
+            if conn.topic == '/joint_states':
+                header = reader.deserialize(raw, conn.msgtype).header
+                message = msg_type(header=header, name=list(COORDINATE_NAMES),
+                                   acceleration=np.zeros(N_COORDINATES))
+                writer.write(dyn, stamp, old.serialize_cdr(
+                    message, 'iceskate_interfaces/msg/JointDynamics'))
+        writer.close()
+    with pytest.raises(SimulationError, match='/joint_dynamics.*incompatible message'):
+        read_bag(path)

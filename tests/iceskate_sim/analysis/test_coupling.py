@@ -1,0 +1,184 @@
+"""Eq. (11) on recorded bags: closure, agreement with a direct evaluation, the arm swing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from iceskate_sim.analysis.bag_io import read_bag
+from iceskate_sim.analysis.coupling import (
+    analyse_case,
+    arm_swing,
+    decompose,
+    dynamics_for_bag,
+    parse_joint,
+)
+from iceskate_sim.dynamics import ContactState
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.modes import get_mode
+from iceskate_sim.robot import N_COORDINATES
+
+CLOSURE = 1e-9  # relative closure residual the decomposition must reach
+DIRECT = 1e-9  # relative agreement with a direct evaluation (scaled by max(1, |reference|))
+
+
+@pytest.fixture(scope='module')
+def sim(sim_bag):
+    return read_bag(sim_bag)
+
+
+@pytest.fixture(scope='module')
+def synthetic(synthetic_bag):
+    return read_bag(synthetic_bag)
+
+
+@pytest.mark.parametrize('joint', [11, 14])
+def test_eq11_closes_at_solver_precision_on_a_simulated_run(sim, joint):
+    d = decompose(sim, (joint,))[joint]
+    assert d.valid.all()
+    rel = d.residual_rel
+    assert np.all(np.isfinite(rel))
+    assert rel.max() <= CLOSURE, f'closure residual {rel.max():.2e} at {d.name}'
+    assert np.abs(d.own_inertia).max() > 0.0  # the arm does accelerate: not a trivial 0 = 0
+    assert np.abs(d.m_total).max() > 0.0
+
+
+def test_eq11_closes_at_every_coordinate_in_every_visited_mode(synthetic):
+    """y0 (gliding friction), q1 (tipping), legs (sliding-heel constraint), arms, neck."""
+    decompositions = decompose(synthetic, tuple(range(N_COORDINATES)))
+    for joint, d in decompositions.items():
+        assert d.valid.any(), f'joint {joint} never active'
+        worst = np.nanmax(d.residual_rel)
+        assert worst <= CLOSURE, f'closure residual {worst:.2e} at {d.name}'
+    # the swing constraints act on the legs, never on the upper body (model-spec 8)
+    assert np.nanmax(np.abs(decompositions[5].constraint)) > 0.0
+    for joint in range(8, 18):
+        assert np.all(np.nan_to_num(decompositions[joint].constraint) == 0.0)
+    # q1 is a coordinate only in mode 2; y0 only in mode 3
+    assert np.array_equal(decompositions[1].valid, synthetic.mode == 2)
+    assert np.array_equal(decompositions[0].valid, synthetic.mode == 3)
+
+
+def _direct(robot, side, pivot, q, v):
+    """M, h (RNEA, gravity off, q̈ = 0), g (RNEA, q̇ = q̈ = 0) straight from pinocchio."""
+    model = robot.support_model(side, pivot).model
+    data = model.createData()
+    M = pin.crba(model, data, q).copy()
+    M = np.triu(M) + np.triu(M, 1).T
+    zero = np.zeros(N_COORDINATES)
+    g = pin.rnea(model, data, q, zero, zero).copy()
+    no_gravity = model.copy()
+    no_gravity.gravity = pin.Motion.Zero()
+    h = pin.rnea(no_gravity, no_gravity.createData(), q, v, zero).copy()
+    return M, h, g
+
+
+def _close(actual, expected, what):
+    scale = max(1.0, float(np.max(np.abs(expected))))
+    error = float(np.max(np.abs(np.asarray(actual) - np.asarray(expected))))
+    assert error <= DIRECT * scale, f'{what}: error {error:.2e} (scale {scale:.2e})'
+
+
+@pytest.mark.parametrize('which', ['sim', 'synthetic'])
+def test_decomposition_agrees_with_a_direct_evaluation(which, sim, synthetic):
+    bag = sim if which == 'sim' else synthetic
+    dyn = dynamics_for_bag(bag)
+    joints = (11, 14, 8)
+    decompositions = decompose(bag, joints, dynamics=dyn)
+    sources = bag.sources
+    picks = np.unique(np.linspace(0, bag.n_samples - 1, 5).round().astype(int))
+    checked = 0
+    for k in picks:
+        mode = get_mode(int(bag.mode[k]))
+        side, pivot = bag.side_name(k), bag.pivot_name(k)
+        q, v = bag.q[k], bag.v[k]
+        act = mode.active
+        if not (mode.swing_sliding or mode.y0_active):  # slide directions are not recorded
+            tau = np.sum([bag.efforts[s][k] for s in sources], axis=0)
+            contact = ContactState(mode, side, pivot, float(bag.heel_anchor_y[k]))
+            qdd = dyn.evaluate(contact, q, v, tau).qdd
+            _close(qdd, bag.qdd[k], f'sample {k}: evaluate() reproduces the recorded q̈')
+            checked += 1
+        M, h, g = _direct(dyn.robot, side, pivot, q, v)
+        qdd = np.where(np.isin(np.arange(N_COORDINATES), act), bag.qdd[k], 0.0)
+        for i, d in decompositions.items():
+            _close(d.own_inertia[k], M[i, i] * qdd[i], f'sample {k}: M_ii q̈_i at q{i}')
+            others = [j for j in act if j != i]
+            _close(d.coupling[k, others], M[i, others] * qdd[others],
+                   f'sample {k}: M_ij q̈_j at q{i}')
+            _close(d.m_total[k], -np.sum(M[i, others] * qdd[others]), f'sample {k}: M_total')
+            _close(d.coriolis[k], h[i], f'sample {k}: h_{i}')
+            _close(d.gravity[k], g[i], f'sample {k}: g_{i}')
+            _close(d.damping[k], dyn.robot.damping[i] * v[i], f'sample {k}: d_i q̇_i')
+    assert checked >= 2
+
+
+def test_shoulders_couple_to_torso_yaw_with_opposite_signs(synthetic):
+    """Model-spec 8 mechanism check: M_11,8 and M_14,8 have opposite signs."""
+    case = analyse_case(synthetic, 'synthetic', 11)
+    summary = case.summary()
+    right = summary['joints']['q11']['mean_M_i8']
+    left = summary['joints']['q14']['mean_M_i8']
+    assert right * left < 0.0
+    assert abs(right + left) < 0.2 * abs(right)
+
+
+def test_arm_swing_measures_anti_phase_from_the_fourth_step(synthetic, spec):
+    swing = arm_swing(synthetic)
+    assert swing.window_from_step == 3
+    assert swing.samples == spec.samples_per_step
+    assert swing.window_start_s == pytest.approx(3 * spec.samples_per_step * spec.dt)
+    for arm in ('q11', 'q14'):
+        assert swing.peak_to_peak[arm] == pytest.approx(2 * spec.arm_amplitude, rel=0.05)
+        assert swing.dominant_frequency[arm] == pytest.approx(spec.arm_frequency, rel=0.05)
+    assert swing.correlation == pytest.approx(-1.0, abs=1e-6)
+    assert abs(swing.phase_difference_deg) == pytest.approx(180.0, abs=5.0)
+
+
+def test_arm_swing_measures_the_phase_lag_without_yaw(synthetic_no_yaw_bag, spec):
+    swing = arm_swing(read_bag(synthetic_no_yaw_bag))
+    assert swing.peak_to_peak['q11'] == pytest.approx(2 * spec.no_yaw_amplitude, rel=0.05)
+    assert swing.correlation > 0.8
+    # q14 leads q11 by NO_YAW_LEAD: the phase of q11 relative to q14 is negative
+    assert swing.phase_difference_deg == pytest.approx(-np.degrees(spec.no_yaw_lead), abs=5.0)
+
+
+def test_a_run_short_of_four_steps_is_measured_over_the_whole_run(sim):
+    swing = arm_swing(sim)
+    assert swing.window_from_step is None
+    assert swing.samples == sim.n_samples
+
+
+def test_coupling_terms_are_ranked_by_rms(synthetic):
+    d = decompose(synthetic, (11,))[11]
+    ranking = d.ranking()
+    values = [value for _, value in ranking]
+    assert values == sorted(values, reverse=True)
+    assert 'q11' not in dict(ranking)
+    assert {'q8', 'q12'} <= set(dict(ranking))
+    assert 'q14' not in dict(ranking)  # the two arms are separate branches: M_11,14 = 0
+
+
+def test_summary_reports_what_the_issue_asks_for(synthetic):
+    summary = analyse_case(synthetic, 'synthetic', 11).summary()
+    assert summary['closure_residual_max_rel'] <= CLOSURE
+    assert summary['torso_yaw_input'] is True
+    for arm in ('q11', 'q14'):
+        assert summary['arms'][arm]['peak_to_peak_rad'] > 0.0
+    assert {'correlation', 'phase_difference_deg'} <= set(summary['arms'])
+    assert {'own_inertia', 'tau', 'm_total', 'coriolis', 'gravity', 'damping',
+            'residual'} <= set(summary['rms'])
+    assert summary['rms_m_total_minus_g'] > 0.0
+    assert set(summary['joints']) == {'q11', 'q14'}
+
+
+@pytest.mark.parametrize('value, expected', [('11', 11), (14, 14), ('q14', 14), ('y0', 0)])
+def test_parse_joint_accepts_indices_and_names(value, expected):
+    assert parse_joint(value) == expected
+
+
+@pytest.mark.parametrize('value', ['18', '-1', 'shoulder', 'q18'])
+def test_parse_joint_refuses_unknown_joints(value):
+    with pytest.raises(SimulationError, match='unknown joint'):
+        parse_joint(value)

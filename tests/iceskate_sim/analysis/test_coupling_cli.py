@@ -1,0 +1,96 @@
+"""``coupling_analysis``: the whole analysis of a pair of bags, and its refusals."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from iceskate_sim.coupling_cli import main
+
+
+@pytest.fixture(scope='module')
+def compared(tmp_path_factory, synthetic_bag, synthetic_no_yaw_bag):
+    """Run the CLI once: the yaw bag compared with the no-yaw bag, with the animation."""
+    out = tmp_path_factory.mktemp('analysis')
+    code = main([str(synthetic_bag), '--compare', str(synthetic_no_yaw_bag), '--out', str(out),
+                 '--animate', '--frames', '5', '--quiet'])
+    assert code == 0
+    return out
+
+
+def test_paper_figures_are_written_for_the_right_cases(compared):
+    summary = json.loads((compared / 'summary.json').read_text())
+    comparison = summary['comparison']
+    # the yaw bag was given first; Fig. 5 is still the run without the torso-yaw input
+    assert comparison['without_yaw'] == 'synthetic_no_yaw'
+    assert comparison['with_yaw'] == 'synthetic_yaw'
+    assert comparison['assigned_by'] == 'yaw source'
+    for name in ('fig5_shoulders.png', 'fig6_shoulders.png', 'fig7_terms_q11.png',
+                 'fig8_terms_q11.png', 'compare_shoulders.png'):
+        assert (compared / name).stat().st_size > 10_000, name
+    assert comparison['arm_peak_to_peak_ratio_with_over_without']['q11'] > 1.0
+
+
+def test_every_case_gets_figures_csv_and_animation(compared):
+    summary = json.loads((compared / 'summary.json').read_text())
+    for label in ('synthetic_yaw', 'synthetic_no_yaw'):
+        files = summary['files'][label]
+        assert set(files) == {f'{label}_shoulders.png', f'{label}_terms_q11.png',
+                              f'{label}_coupling_q11.png', f'{label}_series.csv',
+                              f'{label}_animation.gif', f'{label}_keyframes.png'}
+        for name in files:
+            assert (compared / name).stat().st_size > 1_000, name
+
+
+def test_csv_holds_every_series(compared):
+    with (compared / 'synthetic_yaw_series.csv').open() as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == 160
+    columns = set(rows[0])
+    for joint in ('q11', 'q14'):
+        for term in ('own_inertia', 'tau', 'm_total', 'coriolis', 'gravity', 'damping',
+                     'residual', 'residual_rel', 'm_total_minus_g', 'tau[yaw]'):
+            assert f'{joint}.{term}' in columns
+    assert 'q11.M[q11,q8]*qdd[q8]' in columns
+    assert {'t_s', 'mode', 'step_index', 'q11', 'q14'} <= columns
+    assert float(rows[-1]['t_s']) == pytest.approx(0.159)
+
+
+def test_summary_has_one_entry_per_case(compared):
+    summary = json.loads((compared / 'summary.json').read_text())
+    assert summary['joint'] == 'q11'
+    for case in summary['cases'].values():
+        assert case['closure_residual_max_rel'] <= 1e-9
+        for arm in ('q11', 'q14'):
+            assert case['arms'][arm]['peak_to_peak_rad'] > 0.0
+        assert case['arms']['phase_difference_deg'] is not None
+        assert case['rms']['coriolis'] > 0.0
+        assert case['rms_m_total_minus_g'] > 0.0
+        assert case['coupling_ranking'][0]['rms'] >= case['coupling_ranking'][-1]['rms']
+
+
+def test_the_left_shoulder_can_be_chosen(tmp_path, synthetic_bag):
+    assert main([str(synthetic_bag), '--joint', '14', '--out', str(tmp_path), '--quiet']) == 0
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    assert summary['joint'] == 'q14'
+    assert (tmp_path / 'synthetic_yaw_terms_q14.png').is_file()
+    assert 'comparison' not in summary
+
+
+def test_a_truncated_bag_is_refused_with_a_message(tmp_path, truncated_bag, capsys):
+    assert main([str(truncated_bag), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert 'truncated or corrupt' in capsys.readouterr().err
+
+
+def test_a_bag_without_accelerations_is_refused(tmp_path, sim_bag, bag_without, capsys):
+    broken = bag_without(sim_bag, '/joint_dynamics')
+    assert main([str(broken), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    err = capsys.readouterr().err
+    assert 'no topic /joint_dynamics' in err and 'accelerations' in err
+
+
+def test_an_unknown_joint_is_refused(tmp_path, synthetic_bag, capsys):
+    assert main([str(synthetic_bag), '--joint', '21', '--out', str(tmp_path), '--quiet']) == 1
+    assert 'unknown joint' in capsys.readouterr().err
