@@ -316,6 +316,10 @@ class GaitDynamics:
         except np.linalg.LinAlgError as exc:
             raise SimulationError(f'mode {mode.number}: singular dynamics matrix ({exc})') from exc
 
+        if not np.all(np.isfinite(x)):
+            raise SimulationError(f'mode {mode.number} dynamics: the solution is not finite '
+                                  f'(|v|max {np.max(np.abs(v)):.3g}, |q|max '
+                                  f'{np.max(np.abs(q)):.3g})')
         qdd = np.zeros(N_COORDINATES)
         qdd[act] = x[:n]
         multipliers = np.zeros(3)

@@ -119,7 +119,11 @@ class Simulator:
         self._suppressed: dict[str, float] = {}
         self._instant: tuple[float, set[tuple[int, str]]] = (float('nan'), set())
         self.result = self._evaluate(self.state.q, self.state.v)
-        self._settle()
+        try:
+            self._settle()
+        except RunEnded as end:
+            self.ended = end.reason
+            self.state = end.state
 
     # -------------------------------------------------------------- accessors
     @property
@@ -195,12 +199,18 @@ class Simulator:
         self.result = self.start_result
         instant, at_instant = self.state.t, 0
         try:
+            self._settle()  # a guard the new command makes due fires at the period start
+            self.start_result = self.result
             while t_end - self.state.t > 1e-12:
                 self._contact = self.state.contact
                 x0 = np.concatenate([self.state.q, self.state.v])
                 start = (np.concatenate([self.state.v, self.result.qdd]), self.result)
-                seg = self._integrator.integrate_segment(self._rhs, self._guards,
-                                                         self.state.t, x0, t_end, start)
+                try:
+                    seg = self._integrator.integrate_segment(self._rhs, self._guards,
+                                                             self.state.t, x0, t_end, start)
+                except SimulationError as exc:
+                    raise SimulationError(f'{exc} (during the period from '
+                                          f'{self.state.summary()})') from exc
                 self.stats.steps += seg.steps
                 self.stats.evaluations += seg.evaluations
                 if not np.all(np.isfinite(seg.x)):
