@@ -59,23 +59,28 @@ def make_messages(typestore, step: int):
     Point = t['geometry_msgs/msg/Point']
     stamp = Time(sec=step // 1000, nanosec=(step % 1000) * 1_000_000)
     header = Header(stamp=stamp, frame_id='world')
+    n = len(COORDINATES)
     effort = t[EFFORT_COMMAND](
         header=header, source='visual_lifting', joint_names=COORDINATES,
-        effort=np.linspace(-3.0, 3.0, len(COORDINATES)) + step)
+        effort=np.linspace(-3.0, 3.0, n) + step, stiffness=np.full(n, 800.0),
+        damping=np.full(n, 16.0), position_reference=np.linspace(-0.1, 0.1, n))
     gait_state = t[GAIT_STATE](
         header=header, mode=1 + step % 20, support_side=step % 2, pivot=step % 3,
         step_index=step, y0_active=step % 2 == 0, q1_active=step % 3 != 0,
         multiplier_names=['f_nz', 'tau_n'], multipliers=np.array([400.0 + step, -2.5]),
         support_normal_force=300.0 - step, support_friction_force=-0.05 * step,
         zmp=Point(x=0.0, y=0.1 * step, z=0.0), zmp_inside_support=step % 4 != 0,
-        last_transition_cause=f'step_{step}', last_transition_stamp=stamp)
+        last_transition_cause=f'step_{step}', last_transition_stamp=stamp,
+        support_exchange_stamp=stamp, touched_down=step % 2 == 1, touchdown_stamp=stamp,
+        heel_anchor_y=0.01 * step)
     dynamics = t[JOINT_DYNAMICS](
         header=header, name=COORDINATES,
         active=np.array([step % 2 == 0] + [True] * 17, dtype=bool),
         acceleration=np.arange(len(COORDINATES), dtype=np.float64) * 0.25 - step,
         efforts=[effort, t[EFFORT_COMMAND](
             header=header, source='gait_manager', joint_names=['q8', 'q9'],
-            effort=np.array([1.5, -1.5]))])
+            effort=np.array([1.5, -1.5]), stiffness=np.zeros(0), damping=np.zeros(0),
+            position_reference=np.zeros(0))])
     return gait_state, effort, dynamics
 
 

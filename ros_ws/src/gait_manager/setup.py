@@ -42,6 +42,8 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={
-        'console_scripts': [],
+        'console_scripts': [
+            'gait_manager = gait_manager.gait_manager_node:main',
+        ],
     },
 )

@@ -39,6 +39,8 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={
-        'console_scripts': [],
+        'console_scripts': [
+            'visual_lifting = visual_lifting.visual_lifting_node:main',
+        ],
     },
 )

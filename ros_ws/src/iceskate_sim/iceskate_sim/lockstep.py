@@ -16,6 +16,10 @@ a real robot's sensors would report). Positions, velocities and the gait state a
 
 In the free-running mode (``lockstep=False``) each source's latest command is held until it
 sends a newer one; stamps may lag the state but never lead it.
+
+``LoopMonitor`` is the wall-clock side of the node's loop: the command timeout, the resend of a
+state nobody answered (a message can be lost while discovery completes), the free-running pace
+and the loop timings.
 """
 
 from __future__ import annotations
@@ -38,8 +42,8 @@ from iceskate_sim.runner import _last_event_before, scene_metadata
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
 
-#: Live state topics (relative names in the graph; the bag uses the absolute ones).
-STATE_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state')
+#: Live state topics in publishing order: what the controllers wait for first.
+STATE_TOPICS = ('/joint_states', '/gait_state', '/head_pose', '/clock')
 
 
 def ordered_sources(scene: Scene) -> tuple[str, ...]:
@@ -134,7 +138,7 @@ class LockstepSession:
 
     # -------------------------------------------------------------------------- commands
     def offer(self, source: str, stamp_ns: int, command: JointCommand) -> bool:
-        """Take a source's command; False for a repeated one (ignored).
+        """Take a source's command; False for a repeat of the source's last stamp (ignored).
 
         :raises SimulationError: for an unknown source, or a stamp that is stale (before
             t_k, or in free-running mode before the source's last command) or in the future.
@@ -147,12 +151,12 @@ class LockstepSession:
             raise SimulationError(f'command of {source!r} stamped {ns_to_seconds(stamp_ns)} s '
                                   f'is in the future (simulation at {ns_to_seconds(now)} s)')
         previous = self._stamps.get(source, -1)
+        if self.lockstep and stamp_ns == previous:  # again (an answer to a resent state)
+            return False
         if stamp_ns < now if self.lockstep else stamp_ns < previous:
             raise SimulationError(f'stale command of {source!r} stamped '
                                   f'{ns_to_seconds(stamp_ns)} s (simulation at '
                                   f'{ns_to_seconds(now)} s)')
-        if self.lockstep and previous == stamp_ns:
-            return False
         self._commands[source] = command
         self._stamps[source] = stamp_ns
         return True
@@ -244,3 +248,65 @@ class LockstepSession:
                 [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
             self.trajectory.save(self.out / 'trajectory.npz')
         return self.metrics
+
+
+class LoopMonitor:
+    """The wall-clock side of the simulator's loop (ROS-free): timeouts, resends, pace, stats.
+
+    :param sources: the command sources of the scene.
+    :param control_timeout: a source silent this long [s] ends the run.
+    :param period: control period [s]; ``realtime_factor``: free-running pace [-].
+    :param resend_after: publish the state t_k again after this long without every command [s].
+    """
+
+    def __init__(self, sources: tuple[str, ...], control_timeout: float, period: float,
+                 realtime_factor: float = 1.0, resend_after: float = 0.25) -> None:
+        self.sources, self.timeout, self.resend_after = sources, control_timeout, resend_after
+        self.period, self.realtime_factor = period, realtime_factor
+        self.started_at = self.published_at = self.waiting_since = time.monotonic()
+        self.heard = dict.fromkeys(sources, self.started_at)
+        self.samples: dict[str, list[float]] = {'round_trip': [], 'physics': []}
+        self.rejected = 0
+
+    def start(self) -> None:
+        """The run starts now (origin of the free-running pace)."""
+        self.started_at = self.waiting_since = time.monotonic()
+        self.heard = dict.fromkeys(self.sources, self.started_at)
+
+    def published(self, again: bool = False) -> None:
+        """A state went out (``again``: the same t_k once more)."""
+        self.published_at = time.monotonic()
+        if not again:
+            self.waiting_since = self.published_at
+
+    def wait_anew(self) -> None:
+        """Restart the command timeout (after a pause)."""
+        self.waiting_since = time.monotonic()
+
+    def command(self, source: str, complete: bool) -> None:
+        """A valid command came in; ``complete``: now every source has answered t_k."""
+        self.heard[source] = time.monotonic()
+        if complete:
+            self.samples['round_trip'].append(self.heard[source] - self.published_at)
+
+    def overdue(self, missing: list[str], lockstep: bool) -> list[str]:
+        """Sources whose silence ends the run (lockstep: while waiting for t_k)."""
+        now = time.monotonic()
+        if lockstep:
+            return missing if missing and now - self.waiting_since > self.timeout else []
+        return [s for s, t in self.heard.items() if now - t > self.timeout]
+
+    def resend_due(self) -> bool:
+        """Time to publish the state t_k again (a state may be lost before discovery ends)."""
+        return time.monotonic() - self.published_at > self.resend_after
+
+    def due(self, periods: int, limit: int = 10) -> int:
+        """Free-running: how many periods to simulate now to keep the pace (at most limit)."""
+        elapsed = (time.monotonic() - self.started_at) * self.realtime_factor
+        return max(0, min(limit, int(elapsed / self.period) - periods))
+
+    def stats(self, periods: int, wall_time: float) -> dict[str, Any]:
+        """Median and p99 [s] of the round trip and the physics step per period; counts."""
+        out: dict[str, Any] = {k: np.percentile(v, [50, 99]).tolist() if v else []
+                               for k, v in self.samples.items()}
+        return out | {'rejected': self.rejected, 'periods': periods, 'wall_time_s': wall_time}

@@ -99,9 +99,10 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
                                  'pitch': _rms(err[:, 2])}
     metrics['forward_distance_m'] = float(psi[-1, 0] - psi[0, 0])
     pushes = getattr(scene, 'pushes', ())
-    if pushes:  # recovery: worst head error in the last second of the run, after every push
-        t = a['t']
-        after = t >= max(max(p.start + p.duration for p in pushes), t[-1] - 1.0)
+    t = a['t']
+    push_end = max((p.start + p.duration for p in pushes), default=float('inf'))
+    after = t >= max(push_end, t[-1] - 1.0)
+    if pushes and np.any(after):  # recovery: worst head error in the last second, after pushes
         metrics['head_error_final_max'] = {
             'y': float(np.max(np.abs(err[after, 0]))), 'z': float(np.max(np.abs(err[after, 1]))),
             'pitch': float(np.max(np.abs(err[after, 2])))}

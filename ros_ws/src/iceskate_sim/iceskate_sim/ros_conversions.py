@@ -131,7 +131,7 @@ def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
     if x.shape != (n,):
         raise SimulationError(f'{where}: {field} has {x.size} entries for {n} joint names')
     if not np.all(np.isfinite(x)):
-        bad = [str(name) for name, ok in zip(msg.joint_names, np.isfinite(x)) if not ok]
+        bad = [str(msg.joint_names[i]) for i in np.flatnonzero(~np.isfinite(x))]
         raise SimulationError(f'{where}: {field} is not finite at {bad}')
     return x
 

@@ -126,6 +126,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
     parser.add_argument('--duration', type=float, help='override the scene duration [s]')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    parser.add_argument('--ros', action='store_true',
+                        help='run through the ROS 2 node graph (iceskate_sim.graph)')
+    parser.add_argument('--single-process', action='store_true',
+                        help='with --ros: all nodes in one process and one executor')
     args = parser.parse_args(argv)
     try:
         scene = load_scene(args.scene)
@@ -134,7 +138,12 @@ def main(argv: list[str] | None = None) -> int:
                 raise SimulationError('--duration must be > 0 s')
             from dataclasses import replace
             scene = replace(scene, duration=args.duration)
-        metrics = run(scene, args.out, progress=not args.quiet)
+        if args.ros:
+            from iceskate_sim.graph import run_graph
+            metrics = run_graph(args.scene, args.out, duration=args.duration,
+                                single_process=args.single_process)
+        else:
+            metrics = run(scene, args.out, progress=not args.quiet)
     except SimulationError as exc:
         print(f'run_scene: error: {exc}', file=sys.stderr)
         return 1

@@ -1,0 +1,154 @@
+"""ros_conversions: stamps, Observation from messages, EffortCommand <-> JointCommand (ROS-free).
+
+The messages are rosbags objects (the conversions are duck-typed on fields, so rclpy messages
+behave the same; the integration tests feed those).
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from iceskate_sim.bag_types import make_typestore
+from iceskate_sim.command import JointCommand
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.recording import MessageFactory, Sample
+from iceskate_sim.robot import COORDINATE_NAMES, load_robot
+from iceskate_sim.ros_conversions import (
+    StatePairer,
+    command_fields,
+    command_from_message,
+    ns_to_sec_nanosec,
+    observation_from_messages,
+    seconds_to_ns,
+    set_stamp,
+    stamp_to_ns,
+    stamp_to_seconds,
+)
+from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+
+
+@pytest.fixture(scope='module')
+def factory() -> MessageFactory:
+    return MessageFactory(make_typestore())
+
+
+@pytest.fixture(scope='module')
+def simulator() -> Simulator:
+    q = np.zeros(18)
+    q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
+    return Simulator(load_robot(), SimulatorConfig(), initial_state(q, 17))
+
+
+def effort_message(factory, source='posture', names=None, effort=None, **impedance):
+    names = list(COORDINATE_NAMES) if names is None else names
+    effort = np.arange(len(names), dtype=float) if effort is None else np.asarray(effort)
+    msg = factory.effort(0.002, source, np.zeros(18))
+    msg.joint_names, msg.effort = names, effort
+    for key, value in impedance.items():
+        setattr(msg, key, np.asarray(value, dtype=float))
+    return msg
+
+
+def test_stamps_round_trip_in_integer_nanoseconds():
+    assert seconds_to_ns(0.003000000000000001) == 3_000_000
+    assert ns_to_sec_nanosec(2_500_000_001) == (2, 500_000_001)
+    stamp = set_stamp(SimpleNamespace(sec=0, nanosec=0), 7_000_000_123)
+    assert (stamp.sec, stamp.nanosec) == (7, 123)
+    assert stamp_to_ns(stamp) == 7_000_000_123
+    assert stamp_to_seconds(stamp) == pytest.approx(7.000000123, abs=1e-15)
+
+
+def test_seconds_to_ns_raises_on_negative_or_nan_time():
+    with pytest.raises(SimulationError, match='finite time >= 0'):
+        seconds_to_ns(-1e-3)
+    with pytest.raises(SimulationError, match='finite time >= 0'):
+        seconds_to_ns(float('nan'))
+
+
+def test_observation_from_messages_equals_the_simulators(factory, simulator):
+    s = simulator.state
+    placement = simulator.dynamics.frame_placement(s.contact, s.q, 'head_top')
+    sample = Sample(s, simulator.result, {}, placement.translation, placement.rotation, None)
+    msgs = factory.messages(sample)
+    ts = factory.typestore
+    # through CDR, as a subscriber gets them
+    js = ts.deserialize_cdr(ts.serialize_cdr(msgs['/joint_states'], 'sensor_msgs/msg/JointState'),
+                            'sensor_msgs/msg/JointState')
+    gs = msgs['/gait_state']
+    obs = observation_from_messages(js, gs)
+    expected = simulator.observation()
+    assert obs.t == expected.t and obs.mode == expected.mode and obs.side == expected.side
+    np.testing.assert_array_equal(obs.q, expected.q)
+    np.testing.assert_array_equal(obs.v, expected.v)
+    assert (obs.step_index, obs.t_exchange, obs.heel_anchor_y) == (
+        expected.step_index, expected.t_exchange, expected.heel_anchor_y)
+    assert obs.t_touchdown == expected.t_touchdown or (
+        math.isnan(obs.t_touchdown) and math.isnan(expected.t_touchdown))
+
+
+def test_observation_from_messages_raises_on_mismatched_stamps(factory, simulator):
+    s = simulator.state
+    placement = simulator.dynamics.frame_placement(s.contact, s.q, 'head_top')
+    msgs = factory.messages(Sample(s, simulator.result, {}, placement.translation,
+                                   placement.rotation, None))
+    msgs['/gait_state'].header = factory.header(0.001)
+    with pytest.raises(SimulationError, match='stamp .* differ'):
+        observation_from_messages(msgs['/joint_states'], msgs['/gait_state'])
+
+
+def test_command_round_trips_with_and_without_impedance(factory):
+    plain = JointCommand(np.linspace(-1, 1, 18))
+    pd = JointCommand(np.ones(18), np.full(18, 800.0), np.full(18, 80.0), np.linspace(0, 1, 18))
+    for command in (plain, pd):
+        msg = factory.effort(0.0, 'posture', np.zeros(18))
+        for key, value in command_fields(command).items():
+            setattr(msg, key, value)
+        back = command_from_message(msg)
+        np.testing.assert_array_equal(back.effort, command.effort)
+        assert back.has_impedance == command.has_impedance
+        if command.has_impedance:
+            np.testing.assert_array_equal(back.reference, command.reference)
+
+
+def test_command_with_a_subset_of_names_in_any_order(factory):
+    msg = effort_message(factory, names=['q3', 'y0'], effort=[2.0, 5.0])
+    command = command_from_message(msg)
+    assert command.effort[3] == 2.0 and command.effort[0] == 5.0
+    assert np.count_nonzero(command.effort) == 2
+
+
+@pytest.mark.parametrize('change, match', [
+    ({'effort': [float('nan')] + [0.0] * 17}, r"effort is not finite at \['y0'\]"),
+    ({'effort': [0.0] * 17}, 'effort has 17 entries for 18 joint names'),
+    ({'names': ['y0', 'q1', 'knee']}, r"unknown joint names \['knee'\]"),
+    ({'names': ['q1', 'q1'], 'effort': [0.0, 0.0]}, r"repeated joint names \['q1'\]"),
+    ({'stiffness': [1.0] * 18}, 'all empty or all given'),
+    ({'stiffness': [-1.0] * 18, 'damping': [0.0] * 18, 'position_reference': [0.0] * 18},
+     'must be >= 0'),
+    ({'stiffness': [1.0] * 18, 'damping': [0.0] * 3, 'position_reference': [0.0] * 18},
+     'damping has 3 entries'),
+])
+def test_command_from_message_raises_naming_the_problem(factory, change, match):
+    names = change.pop('names', None)
+    effort = change.pop('effort', None if names is None else [0.0] * len(names))
+    msg = effort_message(factory, names=names, effort=effort, **change)
+    with pytest.raises(SimulationError, match="source 'posture'.*" + match):
+        command_from_message(msg)
+
+
+def header(ns):
+    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(
+        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
+
+
+def test_state_pairer_pairs_by_stamp_and_drops_older_halves():
+    pairer = StatePairer()
+    assert pairer.add('joint_states', header(1)) is None
+    assert pairer.add('joint_states', header(2)) is None
+    ns, js, gs = pairer.add('gait_state', header(2))
+    assert ns == 2 and js.header.stamp.nanosec == 2
+    assert pairer.add('gait_state', header(1)) is None  # before the last pair: a reset
+    assert pairer.last_ns is None
+    assert pairer.add('joint_states', header(1))[0] == 1

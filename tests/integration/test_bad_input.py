@@ -1,0 +1,127 @@
+"""Failures at the graph's boundaries: a dead controller, bad commands, bad parameter files."""
+
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+from rclpy.duration import Duration  # noqa: E402
+from rosbags.highlevel import AnyReader  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from iceskate_interfaces.msg import EffortCommand  # noqa: E402
+from iceskate_interfaces.srv import StepSimulation  # noqa: E402
+from iceskate_sim.graph import command_of, graph_nodes  # noqa: E402
+from iceskate_sim.node_support import STATE_QOS  # noqa: E402
+from iceskate_sim.robot import COORDINATE_NAMES  # noqa: E402
+from iceskate_sim.ros_conversions import set_stamp, stamp_to_ns  # noqa: E402
+
+TINY = Path(__file__).resolve().parent / 'data' / 'tiny_stand.yaml'
+MS = 1_000_000
+
+
+def test_killed_controller_ends_the_run_naming_it_and_the_bag_reads(
+        listener, ros_domain_id, tmp_path, graph_factory):
+    graph = graph_factory(tmp_path / 'out', duration=2.0, control_timeout=1.0).start()
+    listener.subscribe('/clock', Clock)
+    clocks = listener.messages['/clock']
+    try:
+        listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) >= 5 * MS, 60.0,
+                            'the run to reach 5 ms')
+        os.killpg(graph.processes['gait_manager'].pid, signal.SIGKILL)
+        listener.spin_until(lambda: graph.simulator.poll() is not None, 30.0,
+                            'the simulator to end the run')
+    finally:
+        codes = graph.stop()
+    log = graph.log('simulator')
+    assert codes['simulator'] == 1, log
+    assert "no command from source 'posture' (node gait_manager)" in log
+    failure = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['failure']
+    assert 'controller timeout' in failure and 'gait_manager' in failure
+    with AnyReader([tmp_path / 'out' / 'bag']) as reader:
+        states = [c for c in reader.connections if c.topic == '/joint_states']
+        n = sum(1 for _ in reader.messages(connections=states))
+    assert n == len(np.load(tmp_path / 'out' / 'trajectory.npz')['t']) >= 5
+
+
+def _command(source: str, ns: int, **fields) -> EffortCommand:
+    msg = EffortCommand(source=source, joint_names=list(COORDINATE_NAMES), effort=[0.0] * 18)
+    for key, value in fields.items():
+        setattr(msg, key, value)
+    set_stamp(msg.header.stamp, ns)
+    return msg
+
+
+def test_bad_commands_are_rejected_and_never_reach_the_state(
+        graph_run, listener, tmp_path, graph_factory, assert_same_trajectory):
+    stats = tmp_path / 'stats.json'
+    graph = graph_factory(tmp_path / 'out', start_paused=True, stats_file=str(stats)).start()
+    listener.subscribe('/clock', Clock)
+    clocks = listener.messages['/clock']
+    publisher = listener.node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
+    step = StepSimulation.Request(control_periods=3)
+    bad = [_command('posture', 3 * MS, effort=[float('nan')] + [0.0] * 17),
+           _command('posture', 3 * MS, effort=[1.0] * 17),
+           _command('posture', 3 * MS, joint_names=['y0', 'knee'], effort=[1.0, 1.0]),
+           _command('posture', 1 * MS),
+           _command('posture', 1000 * MS),
+           _command('bogus', 3 * MS)]
+    try:
+        listener.spin_until(lambda: listener.call(StepSimulation, '/simulator/step', step,
+                                                  timeout=60.0).success, 60.0, 'a step')
+        listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) == 3 * MS, 30.0,
+                            '/clock at 3 ms')
+        listener.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0, 'matching')
+        for msg in bad:
+            publisher.publish(msg)
+        assert publisher.wait_for_all_acked(Duration(seconds=10))
+        assert listener.call(Trigger, '/simulator/resume', Trigger.Request()).success
+        listener.spin_until(lambda: graph.simulator.poll() is not None, 60.0, 'the end')
+    finally:
+        codes = graph.stop()
+    log = graph.log('simulator')
+    assert codes['simulator'] == 0, log
+    for reason in ("effort is not finite at ['y0']", 'effort has 17 entries for 18',
+                   "unknown joint names ['knee']", "stale command of 'posture' stamped 0.001",
+                   "'posture' stamped 1.0 s is in the future", "unknown source 'bogus'"):
+        assert 'rejected command: ' in log and reason in log, reason
+    assert json.loads(stats.read_text())['rejected'] == len(bad)
+    assert_same_trajectory(tmp_path / 'out' / 'trajectory.npz',
+                           graph_run.headless / 'trajectory.npz')
+
+
+@pytest.mark.parametrize('node, parameters, expected', [
+    ('simulator', 'control_timeout: -1.0', "parameter 'control_timeout'"),
+    ('simulator', 'lockstep: maybe', "parameter 'lockstep'"),
+    ('visual_lifting', 'scene_name: stand', "unknown parameter 'scene_name'"),
+    ('gait_manager', 'scene: no_such_scene', "parameter scene='no_such_scene'"),
+])
+def test_bad_parameter_file_exits_non_zero_naming_the_parameter(
+        tmp_path, ros_env, node, parameters, expected):
+    params = tmp_path / 'bad.yaml'
+    params.write_text(f'{node}:\n  ros__parameters:\n    {parameters}\n')
+    (spec,) = [s for s in graph_nodes(str(TINY), tmp_path / 'out') if s.executable == node] or \
+        [s for s in graph_nodes('stand', tmp_path / 'out') if s.executable == node]
+    result = subprocess.run(command_of(spec) + ['--ros-args', '--params-file', str(params)],
+                            env=ros_env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1, result.stderr
+    assert expected in result.stderr and result.stderr.startswith(f'{node}: error:'), \
+        result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_node_modules_run_without_an_install(tmp_path, ros_env):
+    """python -m works too (what the graph falls back to without ros_ws/install)."""
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+                             '-p', 'duration:=-1.0'], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 1 and "parameter 'duration'" in result.stderr

@@ -1,0 +1,170 @@
+"""The three nodes as separate processes run a short scene in lockstep.
+
+One module-scoped run (started paused, stepped 2 periods through ~/step, resumed) is watched by
+a test node; the tests then check the live topics and stamps, the services, the bag (rosbags and
+the independent mcap reader), the equality with the headless runner, and that a second run (in
+one process) records the same message payloads.
+"""
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip('rclpy')
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+from rosbags.highlevel import AnyReader  # noqa: E402
+
+from iceskate_sim.graph import run_graph  # noqa: E402
+from iceskate_sim.lockstep import ordered_sources  # noqa: E402
+from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
+from iceskate_sim.scene import load_scene  # noqa: E402
+
+TESTS = Path(__file__).resolve().parent
+TINY = TESTS / 'data' / 'tiny_stand.yaml'
+PERIOD_NS = 1_000_000
+N_PERIODS = 30
+BAG_TOPICS = {'/clock', '/joint_states', '/head_pose', '/gait_state', '/joint_dynamics',
+              '/robot_description'}
+
+
+def test_run_leaves_the_headless_files_and_exits_cleanly(graph_run):
+    assert sorted(p.name for p in graph_run.out.iterdir()) == sorted(
+        p.name for p in graph_run.headless.iterdir())
+    assert set(graph_run.exit_codes.values()) == {0}, graph_run.exit_codes
+    assert graph_run.stats['periods'] == N_PERIODS and graph_run.stats['rejected'] == 0
+
+
+def test_trajectory_equals_the_headless_runners(graph_run, assert_same_trajectory):
+    assert_same_trajectory(graph_run.out / 'trajectory.npz',
+                               graph_run.headless / 'trajectory.npz')
+    ros = json.loads((graph_run.out / 'metrics.json').read_text())
+    headless = json.loads((graph_run.headless / 'metrics.json').read_text())
+    assert ros.keys() == headless.keys()
+    for key in ('scene', 'sim_time_s', 'steps', 'fell', 'failure', 'transitions', 'sources',
+                'mode_time_fraction', 'physics_steps'):
+        assert ros[key] == headless[key], key
+
+
+def test_step_and_pause_services(graph_run):
+    assert graph_run.step_response.success
+    assert stamp_to_ns(graph_run.step_response.sim_time) == 2 * PERIOD_NS
+    assert max(graph_run.clock_while_paused) == 2 * PERIOD_NS
+    assert not graph_run.reset_response.success
+    assert 'refused while the run is recorded' in graph_run.reset_response.message
+
+
+def test_free_running_mode_is_paced_to_wall_time(tmp_path, ros_domain_id):
+    metrics = run_graph(str(TINY), tmp_path / 'free', single_process=True,
+                        domain_id=ros_domain_id, timeout=120.0, lockstep=False,
+                        realtime_factor=0.1)
+    assert metrics['failure'] is None
+    assert metrics['sim_time_s'] == pytest.approx(N_PERIODS * 1e-3, abs=1e-9)
+    assert metrics['wall_time_s'] >= 0.9 * metrics['sim_time_s'] / 0.1
+
+
+def test_live_topics_carry_every_instant_with_matching_stamps(graph_run):
+    m = graph_run.messages
+    stamps = [stamp_to_ns(msg.header.stamp) for msg in m['/joint_states']]
+    # t = 0 may go out before the test node is matched; a state the controllers have not
+    # answered within 0.25 s is published again (same stamp); otherwise every instant once
+    assert stamps[0] <= PERIOD_NS and stamps == sorted(stamps)
+    assert sorted(set(stamps)) == list(range(stamps[0], N_PERIODS * PERIOD_NS, PERIOD_NS))
+    assert [stamp_to_ns(c.clock) for c in m['/clock']][-len(stamps):] == stamps
+    for topic in ('/gait_state', '/head_pose'):
+        assert [stamp_to_ns(msg.header.stamp) for msg in m[topic]][-len(stamps):] == stamps
+    assert {msg.header.frame_id for msg in m['/head_pose']} == {'world'}
+    sources = set(ordered_sources(load_scene(TINY)))
+    answers: dict[int, set[str]] = {}
+    for cmd in m['/effort_commands']:
+        answers.setdefault(stamp_to_ns(cmd.header.stamp), set()).add(cmd.source)
+    assert set(answers) <= set(range(0, N_PERIODS * PERIOD_NS, PERIOD_NS))
+    # from the stepped instants on the test node hears every controller (earlier it may not
+    # be matched with them yet)
+    incomplete = {ns: answers.get(ns) for ns in stamps if ns >= 2 * PERIOD_NS
+                  and answers.get(ns) != sources}
+    assert not incomplete, f'instants without every source {sorted(sources)}: {incomplete}'
+    assert '<robot' in m['/robot_description'][0].data
+    trajectory = np.load(graph_run.out / 'trajectory.npz')
+    for msg in m['/joint_states']:
+        k = int(round(stamp_to_ns(msg.header.stamp) / PERIOD_NS))
+        np.testing.assert_array_equal(msg.position, trajectory['q'][k])
+
+
+def _bag_payloads(bag: Path) -> tuple[dict[str, int], str]:
+    digest = hashlib.sha256()
+    counts: dict[str, int] = {}
+    with AnyReader([bag]) as reader:
+        for conn, timestamp, raw in reader.messages():
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+            digest.update(conn.topic.encode() + timestamp.to_bytes(8, 'little') + bytes(raw))
+    return counts, digest.hexdigest()
+
+
+def test_bag_reads_back_with_rosbags_and_mcap(graph_run):
+    bag = graph_run.out / 'bag'
+    counts, _ = _bag_payloads(bag)
+    assert set(counts) == BAG_TOPICS
+    assert counts['/robot_description'] == 1
+    assert {counts[t] for t in BAG_TOPICS - {'/robot_description'}} == {N_PERIODS}
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == '/gait_state']
+        stamps = [stamp_to_ns(reader.deserialize(raw, c.msgtype).header.stamp)
+                  for c, _, raw in reader.messages(connections=conns)]
+        assert stamps == list(range(0, N_PERIODS * PERIOD_NS, PERIOD_NS))
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['storage_identifier'] == 'mcap'
+    assert json.loads(info['custom_data']['scene_parameters'])['scene'] == 'tiny_stand'
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    (path,) = bag.glob('*.mcap')
+    decoded: dict[str, int] = {}
+    with path.open('rb') as f:
+        for _, channel, _, msg in make_reader(f, decoder_factories=[DecoderFactory()]) \
+                .iter_decoded_messages():
+            decoded[channel.topic] = decoded.get(channel.topic, 0) + 1
+            if channel.topic == '/joint_dynamics':
+                assert len(msg.acceleration) == 18 and msg.efforts[0].source == 'visual_lifting'
+    assert decoded == counts
+
+
+def test_two_runs_record_identical_payloads(graph_run, tmp_path, ros_domain_id,
+                                            assert_same_trajectory):
+    out = tmp_path / 'again'
+    run_graph(str(TINY), out, single_process=True, domain_id=ros_domain_id, timeout=120.0)
+    assert _bag_payloads(out / 'bag') == _bag_payloads(graph_run.out / 'bag')
+    assert_same_trajectory(out / 'trajectory.npz', graph_run.out / 'trajectory.npz')
+
+
+def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
+                                                 assert_same_trajectory):
+    import subprocess
+    import sys
+    out = tmp_path / 'cli'
+    result = subprocess.run(
+        [sys.executable, '-m', 'iceskate_sim.runner', str(TINY), '--ros', '--out', str(out)],
+        env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
+        timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)['failure'] is None
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        p.name for p in graph_run.headless.iterdir())
+    assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
+
+
+def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
+    import subprocess
+    import sys
+    out = tmp_path / 'cli'
+    (out / 'bag').mkdir(parents=True)  # the bag may not be overwritten: the simulator refuses
+    result = subprocess.run(
+        [sys.executable, '-m', 'iceskate_sim.runner', str(TINY), '--ros', '--out', str(out)],
+        env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
+        timeout=120)
+    assert result.returncode == 1
+    assert 'run_scene: error: the simulator exited with 1' in result.stderr
+    assert 'already exists' in result.stderr
