@@ -4,13 +4,15 @@ ROS tests call ``pytest.importorskip('rclpy')`` (directly or through the fixture
 pure (ROS-free) tests still run on a machine without ROS.
 """
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 import importlib.util
 import itertools
+import math
 import os
 from pathlib import Path
 import sys
 
+import numpy as np
 import pytest
 
 #: Repository root (tests/ is directly under it).
@@ -98,3 +100,35 @@ def ros_context(ros_domain_id: int) -> Iterator[object]:
         yield context
     finally:
         context.try_shutdown()
+
+
+# ---------------------------------------------------------------- control-law tests
+# Shared by tests/visual_lifting and tests/gait_manager (tests/iceskate_sim overrides
+# ``dynamics`` with its own fixture).
+#: Bent-knee standing posture of model-spec 13.1 (a = 0.05 rad), [y0, q1..q17].
+BENT = np.zeros(18)
+BENT[2:8] = (-0.05, 0.10, -0.05, 0.05, -0.10, 0.05)
+
+
+@pytest.fixture(scope='session')
+def dynamics() -> object:
+    """GaitDynamics of the shipped URDF (one per test session)."""
+    from iceskate_sim.dynamics import GaitDynamics
+    from iceskate_sim.robot import load_robot
+    return GaitDynamics(load_robot())
+
+
+@pytest.fixture
+def make_obs() -> Callable[..., object]:
+    """Return a factory of Observations; defaults: bent-knee stance, mode 1, right support."""
+    from iceskate_sim.observation import Observation
+
+    def make(t: float = 0.0, q: np.ndarray | None = None, v: np.ndarray | None = None,
+             mode: int = 1, side: str = 'right', pivot: str = 'toe', step_index: int = 0,
+             t_exchange: float = 0.0, heel_anchor_y: float = 0.0,
+             t_touchdown: float = math.nan) -> Observation:
+        return Observation(t, BENT.copy() if q is None else np.asarray(q, dtype=float),
+                           np.zeros(18) if v is None else np.asarray(v, dtype=float), mode,
+                           side, pivot, step_index, t_exchange, heel_anchor_y, t_touchdown)
+
+    return make
