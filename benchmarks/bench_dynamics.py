@@ -122,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     pin.forwardKinematics(model, data, q, v, zeros)
     calls = {
         'computeAllTerms': lambda: pin.computeAllTerms(model, data, q, v),
-        'forwardKinematics(q, v, 0)': lambda: pin.forwardKinematics(model, data, q, v, zeros),
+        'forwardKinematics(q, v, 0) (ref.)': lambda: pin.forwardKinematics(model, data, q, v,
+                                                                          zeros),
         'getFrameJacobian (LWA)': lambda: pin.getFrameJacobian(model, data, heel, lwa),
         'getFrameClassicalAcceleration': lambda: pin.getFrameClassicalAcceleration(
             model, data, heel, lwa),

@@ -11,7 +11,8 @@ active constraint rows ``J`` it solves
 with Coulomb friction on a sliding swing heel (f_t = mu f_nz against the heel velocity) and on a
 gliding support foot (F_y = -mu sgn(yd0) N_s, N_s from the vertical momentum balance, model-spec
 4.4), which makes the matrix non-symmetric. Everything runs on Pinocchio's C++ algorithms
-(computeAllTerms, forwardKinematics for the velocity-product terms, RNEA for the support wrench).
+(computeAllTerms, which also leaves the velocity-product accelerations, and RNEA for the support
+wrench); per-mode index maps and KKT buffers keep the Python overhead of ``evaluate`` small.
 
 Units: SI (m, rad, s, kg, N, N m).
 """
@@ -19,6 +20,8 @@ Units: SI (m, rad, s, kg, N, N m).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
+from operator import itemgetter
 
 import numpy as np
 import pinocchio as pin
@@ -42,6 +45,9 @@ _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)
 _F_NZ, _F_NY, _TAU_N = 0, 1, 2
 _RANK_TOLERANCE = 1e-10  # Hadamard ratio of the constraint Gram matrix below which it is singular
+_RANK_SAFE = 1e3 * _RANK_TOLERANCE  # above this the closed-form ratio needs no exact recheck
+_SHAPE = (N_COORDINATES,)
+_ROW_OF = {'hz': 2, 'hy': 1}  # row of the LOCAL_WORLD_ALIGNED heel Jacobian / acceleration
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,62 @@ def check_state(q: np.ndarray, v: np.ndarray, where: str = 'state') -> tuple[np.
     return q, v
 
 
+class _Plan:
+    """Index maps and preallocated KKT buffers of ``evaluate`` for one (mode, side, pivot)."""
+
+    __slots__ = ('mode', 'model', 'data', 'frames', 'heel', 'toe', 'where', 'locked', 'act',
+                 'sel', 'n', 'nc', 'n_jac', 'fr_row', 'm_index', 'j_index', 'heel_y_index',
+                 'pick', 'origin_x', 'A', 'b', 'A_mm', 'A_cm', 'A_jac', 'A_mc_jac', 'A_c0',
+                 'A_mc0', 'A_row0', 'A_diag', 'b_top')
+
+    def __init__(self, mode: GaitMode, model: pin.Model, data: pin.Data,
+                 frames: dict[str, int]) -> None:
+        act = np.asarray(mode.active, dtype=np.intp)
+        n, nc = act.size, len(mode.constraints)
+        size = n + nc
+        self.mode, self.model, self.data, self.frames = mode, model, data, frames
+        self.heel, self.toe = frames['swing_heel'], frames['swing_toe']
+        self.where = f'mode {mode.number} dynamics'
+        self.locked = _locked(mode)
+        self.act, self.n, self.nc = act, n, nc
+        first = int(act[0])
+        contiguous = np.array_equal(act, np.arange(first, first + n))
+        self.sel = slice(first, first + n) if contiguous else act  # picks the active entries
+        # M_aa from the upper triangle of M, flattened in Fortran order (Pinocchio's layout)
+        self.m_index = (np.maximum.outer(act, act) * N_COORDINATES
+                        + np.minimum.outer(act, act))
+        jac_rows = [_ROW_OF[c] for c in mode.constraints if c != 'fr']
+        self.n_jac = len(jac_rows)
+        self.fr_row = n + self.n_jac if 'fr' in mode.constraints else None
+        # rows of the (6, 18) heel Jacobian at the active columns, flattened in C order
+        self.j_index = np.array(jac_rows, dtype=np.intp)[:, None] * N_COORDINATES + act
+        self.heel_y_index = N_COORDINATES + act
+        # (f_nz, f_ny, tau_n) from x[n:] + [0.0]: each name's solution entry, or the 0.0
+        names = mode.multipliers
+        self.pick = itemgetter(*(names.index(m) if m in names else nc
+                                 for m in MULTIPLIER_NAMES))
+        # the root joint is y0 along world y, so its origin is (x_s, y0, 0) without reading data
+        base = model.jointPlacements[1]
+        plain = (model.joints[1].shortname() == 'JointModelPY' and model.parents[1] == 0
+                 and np.array_equal(base.rotation, np.eye(3))
+                 and base.translation[1] == 0.0 and base.translation[2] == 0.0)
+        self.origin_x = float(base.translation[0]) if plain else None
+        self.A = A = np.zeros((size, size))
+        self.b = b = np.zeros(size)
+        self.A_mm, self.A_cm = A[:n, :n], A[n:, :n]
+        self.A_jac, self.A_mc_jac = A[n:n + self.n_jac, :n], A[:n, n:n + self.n_jac]
+        if nc:
+            self.A_c0, self.A_mc0 = A[n, :n], A[:n, n]
+        self.A_row0 = A[0, :n]
+        self.A_diag = A.reshape(-1)[:n * (size + 1):size + 1]
+        self.b_top = b[:n]
+        if self.fr_row is not None:  # C_fr = q0 + q1 + ... + q7: a constant row
+            fr = np.zeros(N_COORDINATES)
+            fr[_LEG_CHAIN] = 1.0
+            A[self.fr_row, :n] = fr[act]
+            A[:n, self.fr_row] = -fr[act]
+
+
 class GaitDynamics:
     """Per-mode dynamics and derived quantities of the humanoid.
 
@@ -157,6 +219,9 @@ class GaitDynamics:
         self._limit_upper = np.array([hi for _, (_lo, hi) in limits])
         self._mass = robot.total_mass
         self._lower = np.tril_indices(N_COORDINATES, -1)
+        self._neg_damping = -self._damping
+        self._limit_list = [(int(i), float(lo), float(hi)) for i, (lo, hi) in limits]
+        self._plans: dict[tuple[int, str, str], _Plan] = {}
 
     # ----------------------------------------------------------------- helpers
     def _model(self, contact: ContactState) -> tuple[pin.Model, pin.Data, dict[str, int]]:
@@ -165,6 +230,19 @@ class GaitDynamics:
         if sm is None:
             raise SimulationError(f'unknown support side/pivot {key}; sides {SIDES}')
         return sm.model, self._data[key], sm.frame_ids
+
+    def _plan(self, contact: ContactState) -> _Plan:
+        model, data, frames = self._model(contact)
+        plan = _Plan(contact.mode, model, data, frames)
+        self._plans[(contact.mode.number, contact.side, contact.pivot)] = plan
+        return plan
+
+    def _limits_engaged(self, ql: list[float]) -> bool:
+        """Whether q (as a list) penetrates any soft stop."""
+        for i, lower, upper in self._limit_list:
+            if ql[i] < lower or ql[i] > upper:
+                return True
+        return False
 
     def passive_forces(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Joint damping and soft-stop torques for all 18 coordinates [N m]."""
@@ -249,95 +327,126 @@ class GaitDynamics:
         :raises SimulationError: on malformed input or a rank-deficient constraint set.
         """
         mode = contact.mode
-        model, data, frames = self._model(contact)
-        q, v = check_state(q, v, f'mode {mode.number} dynamics')
+        plan = self._plans.get((mode.number, contact.side, contact.pivot))
+        if plan is None or plan.mode is not mode:
+            plan = self._plan(contact)
+        q = np.asarray(q, dtype=float)
+        v = np.asarray(v, dtype=float)
+        if q.shape != _SHAPE or v.shape != _SHAPE:
+            check_state(q, v, plan.where)
         tau = np.asarray(tau, dtype=float)
-        if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
-            raise SimulationError(f'mode {mode.number} dynamics: tau must be {N_COORDINATES} '
-                                  f'finite values, got shape {tau.shape}')
-        locked = _locked(mode)
-        if np.any(v[locked] != 0.0):
-            raise SimulationError(f'mode {mode.number} dynamics: locked coordinates '
-                                  f'{locked} must have zero velocity, got {v[locked]}')
-        act = mode.active
-        n = act.size
-        nc = len(mode.constraints)
-        mu = self.params.mu
+        ql = q.tolist()
+        # float sums never warn; a non-finite (or overflowing) sum gets the exact checks
+        if tau.shape != _SHAPE or not math.isfinite(sum(ql) + sum(v.tolist())
+                                                    + sum(tau.tolist())):
+            check_state(q, v, plan.where)
+            if tau.shape != _SHAPE or not np.all(np.isfinite(tau)):
+                raise SimulationError(f'{plan.where}: tau must be {N_COORDINATES} '
+                                      f'finite values, got shape {tau.shape}')
+        for i in plan.locked:
+            if v[i] != 0.0:
+                locked = plan.locked
+                raise SimulationError(f'{plan.where}: locked coordinates '
+                                      f'{locked} must have zero velocity, got {v[locked]}')
+        model, data, heel = plan.model, plan.data, plan.heel
+        n, nc, sel, A, b = plan.n, plan.nc, plan.sel, plan.A, plan.b
+        params = self.params
+        mu = params.mu
 
-        pin.computeAllTerms(model, data, q, v)
-        pin.forwardKinematics(model, data, q, v, self._zeros)  # data.a = velocity products
-        M = data.M
-        M[self._lower] = M.T[self._lower]
-        passive = self.passive_forces(q, v)
-        applied = passive.copy()
-        applied[1:] += tau[1:]
+        pin.computeAllTerms(model, data, q, v)  # leaves data.a = velocity products (a = 0)
+        heel_position = pin.updateFramePlacement(model, data, heel).translation.copy()
+        engaged = params.joint_limits and self._limits_engaged(ql)
+        passive = self.passive_forces(q, v) if engaged else self._neg_damping * v
+        applied = passive + tau
         if stiffness is not None:
-            applied[1:] -= stiffness[1:] * q[1:] + damping[1:] * v[1:]
+            applied -= stiffness * q + damping * v
         if not mode.q1_active:
             applied[Q1] = 0.0
         applied[Y0] = 0.0
         if push is not None:
-            applied += pin.getFrameJacobian(model, data, frames[push[0]], _LWA)[:3].T @ push[1]
+            jac = pin.getFrameJacobian(model, data, plan.frames[push[0]], _LWA)
+            applied += jac[:3].T @ push[1]
 
-        rows, drift, position, heel_y_row = self._constraint_rows(contact, data, model,
-                                                                  frames, q)
-        size = n + nc
-        A = np.zeros((size, size))
-        b = np.zeros(size)
-        A[:n, :n] = M[np.ix_(act, act)]
-        b[:n] = applied[act] - data.nle[act]
+        plan.A_mm[...] = data.M.reshape(-1, order='F').take(plan.m_index)  # symmetric M_aa
+        np.subtract(applied[sel], data.nle[sel], out=plan.b_top)
         if implicit_step > 0.0:
-            implicit = self._damping + self._limit_damping_engaged(q)
+            implicit = (self._damping + self._limit_damping_engaged(q) if engaged
+                        else self._damping.copy())
             if damping is not None:
                 implicit = implicit + damping
             implicit[Y0] = 0.0
-            A[np.arange(n), np.arange(n)] += implicit_step * implicit[act]
-        force_cols = rows.copy()  # generalized-force direction of each multiplier
-        if mode.swing_sliding:  # friction mu f_nz on the heel, against its velocity
-            force_cols[0] -= mu * contact.heel_slide_dir * heel_y_row
+            plan.A_diag += implicit_step * implicit[sel]
         if nc:
-            A[:n, n:] = -force_cols[:, act].T
-            A[n:, :n] = rows[:, act]
-            b[n:] = -drift
-            alpha = self.params.baumgarte
+            jac = pin.getFrameJacobian(model, data, heel, _LWA)
+            rows = jac.take(plan.j_index)
+            plan.A_jac[...] = rows
+            plan.A_mc_jac[...] = -rows.T  # generalized-force directions -J^T
+            if mode.swing_sliding:  # friction mu f_nz on the heel, against its velocity
+                np.subtract(mu * contact.heel_slide_dir * jac.take(plan.heel_y_index),
+                            plan.A_c0, out=plan.A_mc0)
+            acc = pin.getFrameClassicalAcceleration(model, data, heel, _LWA).linear
+            b[n] = -acc[2]
+            if plan.n_jac == 2:
+                b[n + 1] = -acc[1]
+            if plan.fr_row is not None:
+                b[plan.fr_row] = -0.0
+            alpha = params.baumgarte
             if alpha:
-                b[n:] -= 2.0 * alpha * rows @ v + alpha * alpha * position
+                rows = np.zeros((nc, N_COORDINATES))
+                rows[:, plan.act] = plan.A_cm
+                position = [heel_position[2] if name == 'hz'
+                            else heel_position[1] - contact.heel_anchor_y if name == 'hy'
+                            else q[_LEG_CHAIN].sum() for name in mode.constraints]
+                b[n:] -= 2.0 * alpha * rows @ v + alpha * alpha * np.array(position)
         if mode.y0_active:  # Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
             pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
             k = mu * contact.support_slide_dir
-            A[0, :n] += k * self._mass * data.Jcom[2, act]
-            b[0] -= k * self._mass * (GRAVITY + data.acom[0][2])
+            km = k * self._mass
+            plan.A_row0 += km * data.Jcom[2, sel]
+            b[0] -= km * (GRAVITY + float(data.acom[0][2]))
             if nc:
                 A[0, n] -= k
         if nc:
-            self._check_rank(rows[:, act], contact)
+            self._check_rank_fast(plan.A_cm, contact)
         try:
-            x = np.linalg.solve(A, b)
+            x, finite = _solve(A, b)
         except np.linalg.LinAlgError as exc:
             raise SimulationError(f'mode {mode.number}: singular dynamics matrix ({exc})') from exc
-
-        if not np.all(np.isfinite(x)):
+        if not finite:
             raise SimulationError(f'mode {mode.number} dynamics: the solution is not finite '
                                   f'(|v|max {np.max(np.abs(v)):.3g}, |q|max '
                                   f'{np.max(np.abs(q)):.3g})')
+
         qdd = np.zeros(N_COORDINATES)
-        qdd[act] = x[:n]
-        multipliers = np.zeros(3)
-        for k, name in enumerate(mode.multipliers):
-            multipliers[MULTIPLIER_NAMES.index(name)] = x[n + k]
-        heel_friction = (-mu * contact.heel_slide_dir * multipliers[_F_NZ]
+        qdd[sel] = x[:n]
+        values = plan.pick(x[n:].tolist() + [0.0])  # (f_nz, f_ny, tau_n)
+        multipliers = np.array(values)
+        heel_friction = (-mu * contact.heel_slide_dir * values[_F_NZ]
                          if mode.swing_sliding else 0.0)
-        wrench = self._support_wrench(contact, model, data, frames, q, v, qdd, multipliers,
-                                      heel_friction, applied, push)
+        wrench = self._support_wrench(plan, heel_position, q, v, qdd, values, heel_friction,
+                                      applied, push)
         normal = float(wrench[2])
         cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
-        heel = frames['swing_heel']
-        heel_position = pin.updateFramePlacement(model, data, heel).translation.copy()
         heel_velocity = pin.getFrameVelocity(model, data, heel, _LWA).linear.copy()
-        toe_z = float(pin.updateFramePlacement(model, data, frames['swing_toe']).translation[2])
+        toe_z = float(pin.updateFramePlacement(model, data, plan.toe).translation[2])
         return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
                               float(heel_friction), applied, heel_position, heel_velocity, toe_z,
                               passive)
+
+    def _check_rank_fast(self, jac: np.ndarray, contact: ContactState) -> None:
+        """``_check_rank`` with the Hadamard ratio in closed form (1 to 3 rows); the exact check
+        runs only when that ratio is not clearly above the tolerance."""
+        if len(jac) == 1:
+            ratio = 1.0 if jac[0].dot(jac[0]) > 0.0 else 0.0
+        elif len(jac) == 2:
+            (a, b), (_, d) = jac.dot(jac.T).tolist()
+            ratio = (a * d - b * b) / (a * d) if a > 0.0 and d > 0.0 else 0.0
+        else:
+            (a, b, c), (_, d, e), (_, _, f) = jac.dot(jac.T).tolist()
+            det = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c)
+            ratio = det / (a * d * f) if a > 0.0 and d > 0.0 and f > 0.0 else 0.0
+        if not ratio >= _RANK_SAFE:
+            self._check_rank(np.array(jac), contact)
 
     def _check_rank(self, jac: np.ndarray, contact: ContactState) -> None:
         gram = jac @ jac.T
@@ -349,32 +458,40 @@ class GaitDynamics:
                 f'are rank-deficient at this posture (Hadamard ratio {ratio:.2e}); the '
                 'all-straight double-support posture is singular (model-spec 13.1)')
 
-    def _support_wrench(self, contact: ContactState, model: pin.Model, data: pin.Data,
-                        frames: dict[str, int], q: np.ndarray, v: np.ndarray, qdd: np.ndarray,
-                        multipliers: np.ndarray, heel_friction: float,
-                        applied: np.ndarray, push: tuple[str, np.ndarray] | None,
-                        ) -> np.ndarray:
+    def _support_wrench(self, plan: _Plan, heel: np.ndarray, q: np.ndarray, v: np.ndarray,
+                        qdd: np.ndarray, multipliers: tuple[float, float, float],
+                        heel_friction: float, applied: np.ndarray,
+                        push: tuple[str, np.ndarray] | None) -> np.ndarray:
         """Floor wrench on the support foot at (x_s, y0, 0), world-aligned.
 
         RNEA gives the wrench the base must supply for the motion; the swing contact and any
-        push supply part of it, the rest comes from the support foot.
+        push supply part of it, the rest comes from the support foot. In Python floats: numpy
+        costs more than it saves on 3-vectors.
         """
+        model, data = plan.model, plan.data
         pin.rnea(model, data, q, v, qdd)
-        wrench = data.f[1].vector.copy()  # (force, moment) through the y0 joint, world-aligned
-        origin = data.oMi[1].translation
-        if contact.mode.constraints:
-            heel = data.oMf[frames['swing_heel']].translation
-            force = np.array([0.0, multipliers[_F_NY] + heel_friction, multipliers[_F_NZ]])
-            wrench[:3] -= force
-            wrench[3:] -= _cross(heel - origin, force)
-            wrench[3] -= multipliers[_TAU_N]
+        # (force, moment) through the y0 joint, world-aligned
+        fx, fy, fz, mx, my, mz = data.f[1].vector.tolist()
+        if plan.origin_x is None:
+            ox, oy, oz = data.oMi[1].translation.tolist()
+        else:
+            ox, oy, oz = plan.origin_x, 0.0 + float(q[Y0]), 0.0
+        if plan.nc:
+            f_nz, f_ny, tau_n = multipliers
+            py, pz = f_ny + heel_friction, f_nz  # the swing contact force (0, py, pz)
+            hx, hy, hz = heel.tolist()
+            fx, fy, fz, mx, my, mz = _minus_force_at(fx, fy, fz, mx, my, mz, hx - ox, hy - oy,
+                                                     hz - oz, 0.0, py, pz)
+            mx -= tau_n
         if push is not None:
-            at = pin.updateFramePlacement(model, data, frames[push[0]]).translation
-            wrench[:3] -= push[1]
-            wrench[3:] -= _cross(at - origin, push[1])
-        if contact.mode.q1_active:  # input and damping at the floor hinge act beside contact
-            wrench[3] -= applied[Q1]
-        return wrench
+            at = pin.updateFramePlacement(model, data, plan.frames[push[0]]).translation
+            ax, ay, az = at.tolist()
+            px, py, pz = np.asarray(push[1], dtype=float).tolist()
+            fx, fy, fz, mx, my, mz = _minus_force_at(fx, fy, fz, mx, my, mz, ax - ox, ay - oy,
+                                                     az - oz, px, py, pz)
+        if plan.mode.q1_active:  # input and damping at the floor hinge act beside contact
+            mx -= applied[Q1]
+        return np.array([fx, fy, fz, mx, my, mz])
 
     # ------------------------------------------------------ derived quantities
     def push_force(self, contact: ContactState, q: np.ndarray,
@@ -478,10 +595,19 @@ class GaitDynamics:
         return float(q[Y0] + PIVOT_Y[contact.pivot])
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (np.cross costs ~15 us per call)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
+    """np.linalg.solve(A, b) and whether the solution is finite (LinAlgError if singular)."""
+    with np.errstate(all='ignore'):
+        x = np.linalg.solve(A, b)
+    return x, bool(np.all(np.isfinite(x)))
+
+
+def _minus_force_at(fx: float, fy: float, fz: float, mx: float, my: float, mz: float,
+                    rx: float, ry: float, rz: float, px: float, py: float, pz: float,
+                    ) -> tuple[float, float, float, float, float, float]:
+    """Wrench (f, m) minus the force p acting at r: (f - p, m - r x p), in scalars."""
+    return (fx - px, fy - py, fz - pz, mx - (ry * pz - rz * py), my - (rz * px - rx * pz),
+            mz - (rx * py - ry * px))
 
 
 def _locked(mode: GaitMode) -> list[int]:
