@@ -1,0 +1,99 @@
+"""The headless runner: outputs, a short skate run, determinism and same-code-as-nodes."""
+
+from dataclasses import replace
+import json
+
+import numpy as np
+import pytest
+
+from iceskate_sim.control_stack import ControlStack
+from iceskate_sim.dynamics import ContactState, GaitDynamics
+from iceskate_sim.modes import get_mode
+from iceskate_sim.robot import SIDES, load_robot
+from iceskate_sim.runner import main, run
+from iceskate_sim.scene import load_scene
+from iceskate_sim.simulation import Simulator
+
+SHORT_SKATE = 0.8  # s: the start of the skate scene (weight shift and first lift-off)
+
+
+@pytest.fixture(scope='module')
+def skate_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp('skate')
+    scene = replace(load_scene('skate'), duration=SHORT_SKATE)
+    metrics = run(scene, out, progress=False)
+    return out, metrics
+
+
+def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
+    out, metrics = skate_run
+    assert not metrics['fell'], metrics['failure']
+    assert metrics['sim_time_s'] == pytest.approx(SHORT_SKATE, abs=1e-9)
+    for name in ('metrics.json', 'events.json', 'trajectory.npz', 'bag/metadata.yaml'):
+        assert (out / name).is_file(), name
+    assert json.loads((out / 'metrics.json').read_text()) == json.loads(json.dumps(metrics))
+    for key in ('scene', 'wall_time_s', 'real_time_factor', 'steps', 'failure',
+                'forward_distance_m', 'head_error_rms', 'mode_time_fraction', 'transitions',
+                'zmp_outside_support_fraction', 'max_constraint_residual', 'arm_swing'):
+        assert key in metrics, key
+    assert sum(metrics['mode_time_fraction'].values()) == pytest.approx(1.0)
+
+
+def test_short_skate_run_visits_the_expected_start(skate_run):
+    """Double support (17) with the weight shifting away from the rear foot until it lifts
+    off into single support (mode 1 or, gliding, 3)."""
+    out, _metrics = skate_run
+    events = json.loads((out / 'events.json').read_text())
+    modes = np.load(out / 'trajectory.npz')['mode']
+    assert modes[0] == 17
+    assert {'S6'} <= {e['event'] for e in events}
+    assert set(modes.tolist()) & {1, 3}
+
+
+def test_y0_never_decreases_on_ice(skate_run):
+    out, _metrics = skate_run
+    y0 = np.load(out / 'trajectory.npz')['q'][:, 0]
+    assert np.all(np.diff(y0) >= -1e-12)
+
+
+def test_recorded_accelerations_are_the_dynamics_at_the_sample(skate_run):
+    """The npz holds qdd at t_k under the held command: row 11 (right shoulder, no constraint
+    force reaches it) of M qdd + h + g equals the applied generalized force."""
+    out, _metrics = skate_run
+    a = np.load(out / 'trajectory.npz')
+    dynamics = GaitDynamics(load_robot())
+    for k in np.linspace(0, len(a['t']) - 1, 12).astype(int):
+        contact = ContactState(get_mode(int(a['mode'][k])), SIDES[int(a['side'][k])],
+                               {0: 'toe', 1: 'toe', 2: 'heel'}[int(a['pivot'][k])])
+        q, v, qdd = a['q'][k], a['v'][k], a['qdd'][k]
+        act = list(contact.mode.active)
+        row = act.index(11)
+        lhs = (dynamics.mass_matrix(contact, q)[row] @ qdd[act]
+               + dynamics.bias_terms(contact, q, v)[row]
+               + dynamics.gravity_terms(contact, q)[row])
+        assert lhs == pytest.approx(a['applied'][k][11], abs=1e-9), k
+
+
+def test_runner_is_deterministic(tmp_path):
+    scene = replace(load_scene('stand'), duration=0.05)
+    first = run(scene, tmp_path / 'a', progress=False)
+    second = run(scene, tmp_path / 'b', progress=False)
+    a, b = (np.load(tmp_path / d / 'trajectory.npz') for d in 'ab')
+    assert np.array_equal(a['q'], b['q']) and np.array_equal(a['v'], b['v'])
+    assert first['transitions'] == second['transitions']
+
+
+def test_control_stack_computes_only_the_scene_sources():
+    scene = load_scene('stand')
+    robot = load_robot()
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    commands = ControlStack(scene, robot, sim.observation()).commands(sim.observation())
+    assert set(commands) == set(scene.sources)
+    assert commands['posture'].has_impedance
+
+
+def test_main_reports_a_bad_scene_and_exits_non_zero(tmp_path, capsys):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('scene: bad\nduration: 1.0\ncontrol_period: 0.001\ninputs: {}\nfoo: 1\n')
+    assert main([str(bad), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert "scene key 'foo'" in capsys.readouterr().err

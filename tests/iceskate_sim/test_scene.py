@@ -1,0 +1,92 @@
+"""Scenes: every shipped scene validates; malformed scenes are refused naming the key."""
+
+import copy
+
+import pytest
+import yaml
+
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.scene import load_scene, parse_scene, scene_dirs, shipped_scenes
+
+REQUIRED = {'stand', 'skate', 'skate_no_yaw', 'walk'}
+
+
+def _raw(name: str) -> dict:
+    for d in scene_dirs():
+        path = d / f'{name}.yaml'
+        if path.is_file():
+            return yaml.safe_load(path.read_text())
+    raise AssertionError(f'scene {name} not found')
+
+
+def test_required_scenes_are_shipped():
+    assert REQUIRED <= set(shipped_scenes())
+
+
+@pytest.mark.parametrize('name', sorted(REQUIRED))
+def test_every_shipped_scene_validates(name):
+    scene = load_scene(name)
+    assert scene.name == name
+    assert scene.duration > 0 and scene.simulator.control_period > 0
+
+
+def test_skate_and_skate_no_yaw_differ_only_by_the_yaw_input():
+    skate, no_yaw = _raw('skate'), _raw('skate_no_yaw')
+    assert 'yaw' in load_scene('skate').sources
+    assert 'yaw' not in load_scene('skate_no_yaw').sources
+    for raw in (skate, no_yaw):
+        raw.pop('scene'), raw.pop('description')
+        raw['inputs']['gait_manager']['enabled'] = sorted(
+            set(raw['inputs']['gait_manager']['enabled']) - {'yaw'})
+    assert skate == no_yaw
+
+
+def test_skate_is_on_ice_and_walk_on_a_normal_floor():
+    assert load_scene('skate').simulator.friction.rule == 'ice'
+    assert load_scene('skate').simulator.friction.mu == 0.005
+    assert load_scene('walk').simulator.friction.rule == 'coulomb'
+    assert load_scene('walk').simulator.friction.mu == 0.8
+
+
+def test_stand_runs_only_what_it_declares():
+    assert set(load_scene('stand').sources) == {'visual_lifting', 'posture', 'weight_transfer'}
+
+
+@pytest.mark.parametrize(('path', 'value', 'match'), [
+    (('integrator', 'stepp'), 1e-3, r'integrator\.stepp.*unknown key'),
+    (('integrator', 'step'), 'fast', r'integrator\.step.*number'),
+    (('integrator', 'step'), -1e-3, r'integrator\.step.*> 0'),
+    (('integrator', 'method'), 'euler', r'integrator\.method.*one of'),
+    (('floor', 'mu'), -0.1, r'floor\.mu.*>= 0'),
+    (('floor', 'rule'), 'sand', r'floor\.rule'),
+    (('initial', 'mode'), 21, r'initial\.mode.*1-20'),
+    (('initial', 'q'), {'q42': 0.1}, r'initial\.q\.q42.*unknown key'),
+    (('duration',), float('nan'), r'duration.*finite'),
+    (('inputs', 'gait_manager', 'posture', 'stiffness'), -5.0, r'posture\.stiffness'),
+    (('inputs', 'visual_lifting', 'kp'), [1.0, 2.0], r'inputs\.visual_lifting'),
+    (('colour',), 'blue', r'colour.*unknown key'),
+])
+def test_a_malformed_scene_is_refused_naming_the_key(path, value, match):
+    raw = copy.deepcopy(_raw('skate'))
+    node = raw
+    for key in path[:-1]:
+        node = node.setdefault(key, {})
+    node[path[-1]] = value
+    with pytest.raises(SimulationError, match=match):
+        parse_scene(raw)
+
+
+def test_control_period_must_be_a_multiple_of_the_step():
+    raw = copy.deepcopy(_raw('stand'))
+    raw['integrator']['step'] = 0.0007
+    with pytest.raises(SimulationError, match='control_period.*integer multiple'):
+        parse_scene(raw)
+
+
+def test_malformed_yaml_and_unknown_scene_are_refused(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('scene: [unclosed\n')
+    with pytest.raises(SimulationError, match='malformed YAML'):
+        load_scene(bad)
+    with pytest.raises(SimulationError, match="unknown scene 'nope'"):
+        load_scene('nope')
