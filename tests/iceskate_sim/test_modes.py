@@ -78,11 +78,10 @@ def test_get_mode_rejects_unknown_numbers_naming_them(bad):
         get_mode(bad)
 
 
-@pytest.mark.xfail(strict=True, reason='get_mode truncates a non-integer number with int(): '
-                   'get_mode(2.5) returns mode 2 instead of raising')
-def test_get_mode_rejects_non_integer_numbers():
-    with pytest.raises(SimulationError, match='2.5'):
-        get_mode(2.5)
+@pytest.mark.parametrize('number', [2.5, True, '3'])
+def test_get_mode_rejects_non_integer_numbers(number):
+    with pytest.raises(SimulationError, match='unknown gait mode'):
+        get_mode(number)
 
 
 @pytest.mark.parametrize(('support', 'swing', 'named'), [

@@ -94,10 +94,11 @@ _BY_CODES = {(m.support, m.swing): m for m in MODES.values()}
 
 def get_mode(number: int) -> GaitMode:
     """Return the Table 2 mode ``number`` (1-20); raise SimulationError for anything else."""
-    try:
-        return MODES[int(number)]
-    except (KeyError, TypeError, ValueError):
-        raise SimulationError(f'unknown gait mode {number!r}; Table 2 has modes 1-20') from None
+    mode = MODES.get(number) if isinstance(number, (int, np.integer)) and not isinstance(
+        number, bool) else None
+    if mode is None:
+        raise SimulationError(f'unknown gait mode {number!r}; Table 2 has modes 1-20')
+    return mode
 
 
 def mode_for(support: str, swing: str) -> GaitMode:
