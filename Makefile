@@ -10,12 +10,14 @@ IN_ENV := cd $(ROOT) && . ./env.sh &&
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.
 PYTEST_ARGS ?=
 
-.PHONY: help setup test run lint fix lock clean distclean
+.PHONY: help setup test run lint fix lock clean distclean bench stress
 
 help:
 	@echo 'make setup      create .venv from requirements.lock and colcon-build ros_ws (idempotent)'
 	@echo 'make test       setup, then the whole pytest suite (what CI runs)'
 	@echo 'make run        setup, then run a scene headless (SCENE=skate, OUT=runs/<scene>-<time>)'
+	@echo 'make bench      setup, then work-precision and laziness benchmarks into runs/bench (~4-8 min)'
+	@echo 'make stress     setup, then the stress cases and stand for STRESS_DURATION=600 s (long)'
 	@echo 'make lint       setup, then ruff check of ros_ws/src and tests'
 	@echo 'make fix        setup, then ruff check --fix (safe fixes only, e.g. import order)'
 	@echo 'make lock       re-resolve requirements.in into requirements.lock (uv, Python 3.11)'
@@ -51,3 +53,13 @@ clean:
 
 distclean: clean
 	rm -rf $(ROOT)/.venv
+
+# Benchmarks (issue 8): outputs in runs/bench; BENCH_ARGS=--quick for a ~1-2 min version.
+BENCH_ARGS ?=
+bench: setup
+	$(IN_ENV) python benchmarks/bench_work_precision.py --out runs/bench $(BENCH_ARGS) && python benchmarks/bench_laziness.py $(BENCH_ARGS)
+
+# Numerical-stability stress cases plus a long stand run (simulated seconds below).
+STRESS_DURATION ?= 600
+stress: setup
+	$(IN_ENV) python benchmarks/stress.py --long --long-duration $(STRESS_DURATION) --json runs/bench/stress.json

@@ -48,6 +48,8 @@ class SimulatorConfig:
         after every control period (drift control).
     :param residual_bound: constraint residual [m or rad] beyond which the run fails.
     :param fall_height: head-top height [m] below which the robot has fallen (run ends).
+    :param max_speed: largest coordinate speed [rad/s, m/s] a physical run can reach; beyond
+        it the integration has diverged (SimulationError), even if no value is non-finite.
     :param max_instant_transitions: transitions allowed at one instant before the run is
         declared chattering.
     :param chatter_dwell: when a transition would bring back a (mode, side) already visited at
@@ -63,6 +65,7 @@ class SimulatorConfig:
     projection: bool = True
     residual_bound: float = 1.0e-3
     fall_height: float = 1.2
+    max_speed: float = 200.0
     max_instant_transitions: int = 20
     chatter_dwell: float = 0.005
 
@@ -231,6 +234,7 @@ class Simulator:
                 self._project()
             self._check_health()
         except RunEnded as end:
+            self._check_speed(end.state)  # a blow-up is not a physical end
             self.ended = end.reason
             self.state = end.state
         self.stats.control_periods += 1
@@ -291,8 +295,12 @@ class Simulator:
     def _project(self) -> None:
         """Project q onto the active swing constraints and v onto their tangent space."""
         s = self.state
-        q, residual = project_positions(self.dynamics, s.contact, s.q)
+        C, Cdot = self.dynamics.constraint_residuals(s.contact, s.q, s.v)
+        residual = float(np.max(np.abs(C)))
         self.stats.max_constraint_residual = max(self.stats.max_constraint_residual, residual)
+        if residual < 1e-12 and float(np.max(np.abs(Cdot))) < 1e-12:
+            return  # nothing to correct (the profile showed 27 % of a run spent here)
+        q, _ = project_positions(self.dynamics, s.contact, s.q)
         act = s.mode.active
         J = self.dynamics.constraint_jacobian(s.contact, q)[:, act]
         M = self.dynamics.mass_matrix(s.contact, q)
@@ -302,10 +310,17 @@ class Simulator:
         self.state = replace(s, q=q, v=v)
         self.result = self._evaluate(q, v)
 
+    def _check_speed(self, state: HybridState) -> None:
+        speed = float(np.max(np.abs(state.v)))
+        if not speed <= self.config.max_speed:
+            self._diverged(f'speed {speed:.3g} beyond {self.config.max_speed:g} rad/s or m/s',
+                           state)
+
     def _check_health(self) -> None:
         s = self.state
         if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.v))):
             self._diverged('non-finite state', s)
+        self._check_speed(s)
         if s.mode.constraints:
             C, Cdot = self.dynamics.constraint_residuals(s.contact, s.q, s.v)
             worst = float(np.max(np.abs(C)))
