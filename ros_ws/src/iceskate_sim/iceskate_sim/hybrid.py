@@ -402,11 +402,6 @@ def _heel_strike(dynamics: GaitDynamics, friction: FrictionModel,
     return replace(state, q=q, v=v_plus, contact=contact, t_touchdown=state.t), tuple(pi)
 
 
-def with_contact(state: HybridState, **changes: object) -> HybridState:
-    """Copy of ``state`` with fields of its ContactState replaced."""
-    return replace(state, contact=replace(state.contact, **changes))
-
-
 # ------------------------------------------------------- contact-consistent mode
 _SUPPORT_ORDER = ('F-S', 'R-S', 'F-G', 'R-G')  # most constrained first
 _SWING_ORDER = ('Fp', 'Fs', 'Hp', 'Hs', 'A')

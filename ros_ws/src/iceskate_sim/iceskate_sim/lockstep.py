@@ -38,7 +38,7 @@ from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
 from iceskate_sim.robot import load_robot
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
-from iceskate_sim.runner import _last_event_before, scene_metadata
+from iceskate_sim.runner import advance_and_sample, last_event_before, scene_metadata
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
 
@@ -128,7 +128,7 @@ class LockstepSession:
         placement = self.sim.dynamics.frame_placement(s.contact, s.q, 'head_top')
         sample = Sample(s, self.sim.result, {'held': self._held.torque(s.q, s.v)},
                         placement.translation, placement.rotation,
-                        _last_event_before(self.sim, s.t))
+                        last_event_before(self.sim, s.t))
         messages = self.factory.messages(sample)
         return {topic: messages[topic] for topic in STATE_TOPICS}
 
@@ -178,23 +178,15 @@ class LockstepSession:
         if self.lockstep and self.missing():
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
                                   f'{self.missing()}')
-        sim, state = self.sim, self.sim.state
+        sim = self.sim
         obs = sim.observation()
         commands = {s: self._commands[s] for s in self.sources if s in self._commands}
-        push = next(((p.frame, np.array(p.force)) for p in self.scene.pushes
-                     if p.active(state.t)), None)
         self._held = HeldCommand.combine(commands.values())
         try:
-            sim.advance(self._held, push)
+            sample = advance_and_sample(sim, self.scene, commands)
         except SimulationError as exc:
             self.error = exc
             return None
-        efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
-        if push is not None:
-            efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
-        placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
-        sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
-                        placement.rotation.copy(), _last_event_before(sim, state.t))
         self.trajectory.append(sample, self._psi_d(obs))
         self._unrecorded.append(sample)
         self.periods += 1

@@ -26,9 +26,10 @@ import time
 
 import numpy as np
 
-from iceskate_sim.command import HeldCommand
+from iceskate_sim.command import HeldCommand, JointCommand
 from iceskate_sim.control_stack import ControlStack
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import Transition
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import BagRecorder, Sample
 from iceskate_sim.robot import load_robot
@@ -60,18 +61,7 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
     wall_start = time.perf_counter()
     try:
         for _ in range(n_periods):
-            state = sim.state
-            obs = sim.observation()
-            commands = stack.commands(obs)
-            push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
-                        None)
-            sim.advance(HeldCommand.combine(commands.values()), push)
-            efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
-            if push is not None:
-                efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
-            placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
-            sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
-                            placement.rotation.copy(), _last_event_before(sim, state.t))
+            sample = advance_and_sample(sim, scene, stack.commands(sim.observation()))
             trajectory.append(sample, stack.last_psi_d)
             if recorder is not None:
                 recorder.write(sample)
@@ -96,7 +86,25 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
     return metrics
 
 
-def _last_event_before(sim: Simulator, t: float):
+def advance_and_sample(sim: Simulator, scene: Scene,
+                       commands: dict[str, JointCommand]) -> Sample:
+    """Hold ``commands`` (and the scene's push, if one acts) over one control period, advance,
+    and return the sample of the period's start: the state, the dynamics under the held
+    commands, the effort of every source at that state (headless runner and ROS lockstep)."""
+    state = sim.state
+    push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
+                None)
+    sim.advance(HeldCommand.combine(commands.values()), push)
+    efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
+    if push is not None:
+        efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
+    placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
+    return Sample(state, sim.start_result, efforts, placement.translation.copy(),
+                  placement.rotation.copy(), last_event_before(sim, state.t))
+
+
+def last_event_before(sim: Simulator, t: float) -> Transition | None:
+    """The latest transition at or before time t (None before the first)."""
     for event in reversed(sim.events):
         if event.t <= t:
             return event
