@@ -105,9 +105,6 @@ def ros_context(ros_domain_id: int) -> Iterator[object]:
 # ---------------------------------------------------------------- control-law tests
 # Shared by tests/visual_lifting and tests/gait_manager (tests/iceskate_sim overrides
 # ``dynamics`` with its own fixture).
-#: Bent-knee standing posture of model-spec 13.1 (a = 0.05 rad), [y0, q1..q17].
-BENT = np.zeros(18)
-BENT[2:8] = (-0.05, 0.10, -0.05, 0.05, -0.10, 0.05)
 
 
 @pytest.fixture(scope='session')
@@ -122,12 +119,14 @@ def dynamics() -> object:
 def make_obs() -> Callable[..., object]:
     """Return a factory of Observations; defaults: bent-knee stance, mode 1, right support."""
     from iceskate_sim.observation import Observation
+    from iceskate_sim.scene import standing_posture
 
     def make(t: float = 0.0, q: np.ndarray | None = None, v: np.ndarray | None = None,
              mode: int = 1, side: str = 'right', pivot: str = 'toe', step_index: int = 0,
              t_exchange: float = 0.0, heel_anchor_y: float = 0.0,
              t_touchdown: float = math.nan) -> Observation:
-        return Observation(t, BENT.copy() if q is None else np.asarray(q, dtype=float),
+        bent = standing_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1
+        return Observation(t, bent if q is None else np.asarray(q, dtype=float),
                            np.zeros(18) if v is None else np.asarray(v, dtype=float), mode,
                            side, pivot, step_index, t_exchange, heel_anchor_y, t_touchdown)
 

@@ -14,9 +14,9 @@ from gait_manager.feedforward import (
     weight_transfer_torque,
 )
 from iceskate_sim.robot import GRAVITY
+from iceskate_sim.scene import standing_posture
 
-BENT = np.zeros(18)
-BENT[2:8] = (-0.05, 0.10, -0.05, 0.05, -0.10, 0.05)
+BENT = standing_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1, a = 0.05 rad
 
 
 def test_swing_hip_pulse_only_in_its_window_and_in_the_air(make_obs):

@@ -12,9 +12,9 @@ from gait_manager.posture import (
     stance_reference,
     standing_posture,
 )
+from iceskate_sim.scene import standing_posture as scene_posture
 
-BENT = np.zeros(18)
-BENT[2:8] = (-0.05, 0.10, -0.05, 0.05, -0.10, 0.05)
+BENT = scene_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1, a = 0.05 rad
 STANCE_AND_TORSO = [2, 3, 4, 9, 10]
 
 
