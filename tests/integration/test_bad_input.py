@@ -3,6 +3,7 @@
 import json
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -44,7 +45,8 @@ def test_killed_controller_ends_the_run_naming_it_and_the_bag_reads(
         codes = graph.stop()
     log = graph.log('simulator')
     assert codes['simulator'] == 1, log
-    assert "no command from source 'posture' (node gait_manager)" in log
+    # the kill may land between two of gait_manager's publishes: any of its sources may be named
+    assert re.search(r"no command from source '\w+' \(node gait_manager\)", log), log
     failure = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['failure']
     assert 'controller timeout' in failure and 'gait_manager' in failure
     with AnyReader([tmp_path / 'out' / 'bag']) as reader:

@@ -3,7 +3,8 @@
 A ``ControllerNode`` subscribes ``joint_states`` and ``gait_state``, pairs the two messages of one
 instant by stamp (``StatePairer``), rebuilds the ``Observation``, asks the subclass's law
 (``compute``) for its commands and publishes one ``EffortCommand`` per source on
-``effort_commands``, stamped with the state's stamp (the lockstep key). Parameters: ``scene``
+``effort_commands``, stamped with the state's stamp (the lockstep key); each source's message
+object is made once and refilled at every instant. Parameters: ``scene``
 (name or path; the laws' parameters come from it) and ``use_sim_time`` (true unless overridden).
 A law failing at one instant logs an error and sends nothing: the simulator's timeout then names
 the source.
@@ -55,6 +56,7 @@ class ControllerNode(Node):
         if not self.active:
             self.get_logger().warning(f'scene {scene.name!r} does not run {node_name}: idle')
         self._pairer = StatePairer()
+        self._messages: dict[str, EffortCommand] = {}
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_QOS)
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state, STATE_QOS)
@@ -89,6 +91,9 @@ class ControllerNode(Node):
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
             return
         for source, command in commands.items():
-            msg = EffortCommand(source=source, **command_fields(command))
+            msg = self._messages.get(source) or self._messages.setdefault(
+                source, EffortCommand(source=source))
+            for field, value in command_fields(command).items():
+                setattr(msg, field, value)
             set_stamp(msg.header.stamp, ns)
             self._publisher.publish(msg)

@@ -599,7 +599,7 @@ def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """np.linalg.solve(A, b) and whether the solution is finite (LinAlgError if singular)."""
     with np.errstate(all='ignore'):
         x = np.linalg.solve(A, b)
-    return x, bool(np.all(np.isfinite(x)))
+    return x, bool(np.isfinite(x).all())
 
 
 def _minus_force_at(fx: float, fy: float, fz: float, mx: float, my: float, mz: float,

@@ -19,11 +19,14 @@ sends a newer one; stamps may lag the state but never lead it.
 
 ``LoopMonitor`` is the wall-clock side of the node's loop: the command timeout, the resend of a
 state nobody answered (a message can be lost while discovery completes), the free-running pace
-and the loop timings.
+and the loop timings. ``LockstepLoop`` is the rest of the node's logic, also ROS-free: phases
+(starting, running, finished), pause and the ~/step budget, commands in, state out, the end of
+the run; the node gives it a publish function and a report function and wires the callbacks.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict
 import json
 import pathlib
@@ -37,7 +40,12 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
 from iceskate_sim.robot import load_robot
-from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
+from iceskate_sim.ros_conversions import (
+    command_from_message,
+    ns_to_seconds,
+    seconds_to_ns,
+    stamp_to_ns,
+)
 from iceskate_sim.runner import advance_and_sample, last_event_before, scene_metadata
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
@@ -65,18 +73,18 @@ class LockstepSession:
     """One run of a scene driven by commands that arrive from outside (the ROS nodes).
 
     :param scene: the validated scene (its ``duration`` is the run length).
-    :param out: directory for metrics.json, events.json and trajectory.npz (None: none).
-    :param bag: path of the MCAP bag to record (None: no bag).
+    :param out: directory for metrics.json, events.json and trajectory.npz (None or '': none).
+    :param bag: path of the MCAP bag to record (None or '': no bag).
     :param lockstep: wait for a command stamped t_k from every source (True), or hold each
         source's latest command (False).
     """
 
-    def __init__(self, scene: Scene, out: pathlib.Path | None = None,
-                 bag: pathlib.Path | None = None, lockstep: bool = True) -> None:
+    def __init__(self, scene: Scene, out: str | pathlib.Path | None = None,
+                 bag: str | pathlib.Path | None = None, lockstep: bool = True) -> None:
         from gait_manager.law import GaitManagerParameters
         from visual_lifting.law import VisualLiftingParameters
         self.scene = scene
-        self.out = out
+        self.out = out = pathlib.Path(out) if out else None
         self.lockstep = lockstep
         self.robot = load_robot()
         self.sim = Simulator(self.robot, scene.simulator, scene.initial)
@@ -89,8 +97,8 @@ class LockstepSession:
         self.recorder = None
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
-        if bag is not None:
-            self.recorder = BagRecorder(bag, scene_metadata(scene),
+        if bag:
+            self.recorder = BagRecorder(pathlib.Path(bag), scene_metadata(scene),
                                         self.robot.urdf_path.read_text(encoding='utf-8'))
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
         self.metrics: dict[str, Any] | None = None
@@ -113,6 +121,11 @@ class LockstepSession:
     def t_ns(self) -> int:
         """Stamp of the current instant t_k [ns]."""
         return seconds_to_ns(self.sim.time)
+
+    @property
+    def nodes(self) -> set[str]:
+        """Names of the controller nodes the scene's sources need."""
+        return {node_of_source(s) for s in self.sources}
 
     @property
     def done(self) -> bool:
@@ -298,7 +311,172 @@ class LoopMonitor:
         return max(0, min(limit, int(elapsed / self.period) - periods))
 
     def stats(self, periods: int, wall_time: float) -> dict[str, Any]:
-        """Median and p99 [s] of the round trip and the physics step per period; counts."""
-        out: dict[str, Any] = {k: np.percentile(v, [50, 99]).tolist() if v else []
+        """Median, p95 and p99 [s] of the round trip and the physics step per period; counts."""
+        out: dict[str, Any] = {k: np.percentile(v, [50, 95, 99]).tolist() if v else []
                                for k, v in self.samples.items()}
         return out | {'rejected': self.rejected, 'periods': periods, 'wall_time_s': wall_time}
+
+
+class LockstepLoop:
+    """The simulator node's loop without ROS: phases, pause and step budget, commands, outputs.
+
+    :param session: the run.
+    :param publish: ``publish(topic, message)`` sends one live state message (rosbags object).
+    :param report: ``report(text, failed)`` tells how the run ended (once).
+    :param control_timeout: a source silent this long [s] ends the run.
+    :param realtime_factor: free-running pace [simulated s per wall s].
+    :param paused: start paused (``~/step``, ``resume``).
+    :param stats_file: JSON file for the loop timings (None or '': none).
+    """
+
+    def __init__(self, session: LockstepSession, publish: Callable[[str, Any], None],
+                 report: Callable[[str, bool], None], control_timeout: float = 5.0,
+                 realtime_factor: float = 1.0, paused: bool = False,
+                 stats_file: str | pathlib.Path | None = None) -> None:
+        self.session = session
+        self.monitor = LoopMonitor(session.sources, control_timeout,
+                                   session.scene.simulator.control_period, realtime_factor)
+        self._publish, self._report = publish, report
+        self._stats_file = pathlib.Path(stats_file) if stats_file else None
+        self.phase, self.paused, self.budget, self.exit_code = 'starting', paused, 0, 0
+
+    @property
+    def timer_period(self) -> float:
+        """Period of the node's wall-clock timer (``tick``) [s]: 20 ms, or the free pace."""
+        m = self.monitor
+        return 0.02 if self.session.lockstep else min(0.02, m.period / m.realtime_factor)
+
+    def may_step(self) -> bool:
+        """Running, and not paused or with ~/step periods left."""
+        return self.phase == 'running' and (not self.paused or self.budget > 0)
+
+    def try_begin(self, up: set[str], matched: int, startup_timeout: float) -> bool:
+        """Run (and publish the state at t_0) once every controller node is up.
+
+        :param up: nodes publishing commands and subscribed to both state topics.
+        :param matched: fewest matched readers of a state topic.
+        :param startup_timeout: end the run with an error naming the missing nodes after
+            this long [s].
+        :returns: whether the run started now.
+        """
+        nodes = self.session.nodes
+        if nodes <= up and matched >= len(nodes):
+            self.phase = 'running'
+            self.monitor.start()
+            self.publish_state()
+            return True
+        if time.monotonic() - self.monitor.started_at > startup_timeout:
+            self.finish(SimulationError(
+                f'controller node(s) {sorted(nodes - up)} not up within {startup_timeout} s '
+                '(publishing effort_commands, subscribed to joint_states and gait_state)'))
+        return False
+
+    def publish_state(self, again: bool = False) -> None:
+        """Publish the live state at t_k (``again``: the same t_k once more)."""
+        for topic, message in self.session.state_messages().items():
+            self._publish(topic, message)
+        self.monitor.published(again)
+
+    def step(self) -> None:
+        """One period; then the next state out and the bag written (while controllers compute)."""
+        start = time.perf_counter()
+        self.session.step()
+        self.monitor.samples['physics'].append(time.perf_counter() - start)
+        self.budget = max(0, self.budget - 1)
+        if self.session.done:
+            return self.finish()
+        self.publish_state()
+        self.session.flush()
+
+    def take(self, msg: Any) -> str | None:
+        """Take an EffortCommand message; step once every source has answered t_k (lockstep).
+
+        :returns: why the command was rejected (None: taken, or ignored while not running).
+        """
+        if self.phase != 'running':
+            return None
+        try:
+            self.session.offer(msg.source, stamp_to_ns(msg.header.stamp),
+                               command_from_message(msg))
+        except SimulationError as exc:
+            self.monitor.rejected += 1
+            return f'rejected command: {exc}'
+        complete = self.session.lockstep and not self.session.missing()
+        self.monitor.command(msg.source, complete)
+        if complete and self.may_step():
+            self.step()
+        return None
+
+    def tick(self) -> None:
+        """Wall-clock timer: command timeout, resend of an unanswered state, free-running pace."""
+        if not self.may_step():
+            return
+        s, m = self.session, self.monitor
+        overdue = m.overdue(s.missing(), s.lockstep)
+        if overdue:
+            who = ', '.join(f'{x!r} (node {node_of_source(x)})' for x in overdue)
+            return self.finish(SimulationError(
+                f'controller timeout at t={s.sim.time:.6f} s: no command from source {who} '
+                f'within {m.timeout} s'))
+        if s.lockstep and s.missing() and m.resend_due():
+            self.publish_state(again=True)
+        for _ in range(0 if s.lockstep else m.due(s.periods)):
+            if self.may_step():
+                self.step()
+
+    def finish(self, error: SimulationError | None = None) -> None:
+        """End the run (outputs, bag, report, loop timings)."""
+        metrics = self.session.finish(error)
+        self.phase, self.exit_code = 'finished', int(self.session.error is not None)
+        self._report(f'run over at t={metrics["sim_time_s"]:.6f} s: '
+                     f'{metrics["failure"] or "complete"}', bool(self.exit_code))
+        if self._stats_file is not None:
+            self._stats_file.write_text(json.dumps(self.monitor.stats(
+                self.session.periods, metrics['wall_time_s']), indent=1))
+
+    def stop(self) -> None:
+        """End a run that is not over yet (the node was stopped, e.g. by SIGTERM)."""
+        if self.phase != 'finished':
+            self.finish(SimulationError(f'stopped at t={self.session.sim.time:.6f} s'))
+
+    # ------------------------------------------------------------------------------ services
+    def request_steps(self, periods: int) -> tuple[bool, int, str]:
+        """Queue periods of a paused, running simulation: (accepted, stamp they reach [ns], text).
+
+        The answer comes before the steps are taken (watch /clock for them).
+        """
+        ok = self.paused and self.phase == 'running' and periods >= 1
+        total = self.budget + periods if ok else 0
+        target = self.session.sim.time + total * self.session.scene.simulator.control_period
+        text = (f'stepping to t={target:.6f} s' if ok else
+                'step needs a paused, running simulation and control_periods >= 1')
+        if ok:
+            self.budget = total
+            self._go_on()
+        return ok, int(round(target * 1e9)), text
+
+    def _go_on(self) -> None:
+        self.monitor.wait_anew()
+        if self.session.lockstep and not self.session.missing() and self.may_step():
+            self.step()
+
+    def pause(self) -> tuple[bool, str]:
+        """Stop after the current period."""
+        self.paused = True
+        return True, 'paused'
+
+    def resume(self) -> tuple[bool, str]:
+        """Run on."""
+        self.paused, self.budget = False, 0
+        self._go_on()
+        return True, 'running'
+
+    def reset(self) -> tuple[bool, str]:
+        """Back to the scene's initial state (refused while recording a bag)."""
+        try:
+            self.session.reset()
+        except SimulationError as exc:
+            return False, str(exc)
+        self.phase, self.budget = 'running', 0
+        self.publish_state()
+        return True, 'reset to t=0'

@@ -4,7 +4,8 @@
   ``LATCHED_QOS``: transient-local depth 1 (robot_description).
 * ``declare``: one parameter with a default and a ``ParameterDescriptor`` (description, range);
   a value out of range or of the wrong type raises ``ConfigError`` naming the parameter, and so
-  does a parameter the node does not have (``check_unknown``: a typo in a params file).
+  does a parameter the node does not have (``check_unknown``: a typo in a params file);
+  ``declare_all``: a table of them at once, then ``check_unknown``.
 * ``run_node``: rclpy.init, construct, spin an ``EventsExecutor`` with a ``spin_once`` loop
   (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop on SIGTERM/SIGINT
   (``ExternalShutdownException``), destroy and shut down; a ``ConfigError`` or
@@ -13,8 +14,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 import sys
+from types import SimpleNamespace
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
@@ -58,6 +60,18 @@ def declare(node: Node, name: str, default: Any, description: str,
     if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     return value
+
+
+def declare_all(node: Node, table: Iterable[tuple[str, Any, str, tuple[float, float] | None]]
+                ) -> SimpleNamespace:
+    """Declare (name, default, description, float bounds or None) rows; refuse unknown ones.
+
+    :returns: the values as attributes named like the parameters.
+    """
+    values = {name: declare(node, name, default, text, *(bounds or ()))
+              for name, default, text, bounds in table}
+    check_unknown(node)
+    return SimpleNamespace(**values)
 
 
 def check_unknown(node: Node) -> None:

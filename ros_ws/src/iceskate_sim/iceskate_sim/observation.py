@@ -50,7 +50,7 @@ class Observation:
         """Validate shapes, finiteness and the discrete fields."""
         for name in ('q', 'v'):
             x = np.asarray(getattr(self, name), dtype=float)
-            if x.shape != (N_COORDINATES,) or not np.all(np.isfinite(x)):
+            if x.shape != (N_COORDINATES,) or not np.isfinite(x).all():
                 raise SimulationError(f'observation {name} must be {N_COORDINATES} finite values')
             object.__setattr__(self, name, x)
         get_mode(self.mode)

@@ -15,14 +15,23 @@ the offline analysis reads either:
 
 Bag metadata (``custom_data``) holds the scene, its parameters, the integrator and the project
 version.
+
+Building and serialising the messages costs about as much as simulating the period, so
+``BagRecorder(..., background=True)`` hands each sample, packed into one float array
+(``BagRecord``), to a writer process that builds, serialises and writes the same messages while
+the simulation goes on (the bag's messages are byte-identical to an in-process recording).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 import json
+import multiprocessing
+from multiprocessing.connection import Connection
 import pathlib
-from typing import Any
+import queue
+import signal
+from typing import Any, NamedTuple
 
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -32,7 +41,8 @@ from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState, Transition
-from iceskate_sim.robot import COORDINATE_NAMES
+from iceskate_sim.modes import get_mode
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
 
 PROJECT_VERSION = '0.1.0'
 TOPICS = {
@@ -44,6 +54,8 @@ TOPICS = {
     '/robot_description': 'std_msgs/msg/String',
 }
 PIVOT_CODE = {'toe': 1, 'heel': 2}
+BATCH = 100  # samples per hand-over to the writer process
+QUEUE_BATCHES = 40  # batches in flight before ``write`` waits for the writer process
 
 
 @dataclass
@@ -64,6 +76,45 @@ class Sample:
     head_position: np.ndarray
     head_rotation: np.ndarray
     last_transition: Transition | None
+
+
+_N = N_COORDINATES
+_SCALARS = 8  # t, t_exchange, t_touchdown, heel_anchor_y, N_s, F_y, CoP y, last transition t
+_Q, _V, _QDD, _PASSIVE = (slice(_SCALARS + k * _N, _SCALARS + (k + 1) * _N) for k in range(4))
+_MULT = slice(_PASSIVE.stop, _PASSIVE.stop + 3)
+_HEAD_P = slice(_MULT.stop, _MULT.stop + 3)
+_HEAD_R = slice(_HEAD_P.stop, _HEAD_P.stop + 9)
+_EFFORTS = _HEAD_R.stop
+
+
+class BagRecord(NamedTuple):
+    """What the bag holds of a Sample, cheap to pickle: the floats packed into ``values``.
+
+    ``values``: t, t_exchange, t_touchdown, heel_anchor_y [s, m], N_s, F_y [N], CoP y [m], time
+    of the last transition [s] (0 if none), then q, v, qdd, passive (18 each), multipliers (3),
+    head position (3) and rotation (9, row-major), then the effort of each of ``sources`` (18
+    each). Discrete fields as in ``HybridState``; ``last_cause`` None before any transition.
+    """
+
+    values: np.ndarray
+    mode: int
+    side: str
+    pivot: str
+    step_index: int
+    sources: tuple[str, ...]
+    last_cause: str | None
+
+
+def bag_record(sample: Sample) -> BagRecord:
+    """Pack ``sample`` into a BagRecord (exact copies of its values)."""
+    s, r, last = sample.state, sample.result, sample.last_transition
+    head = (s.t, s.t_exchange, s.t_touchdown, s.contact.heel_anchor_y, r.support_normal,
+            r.support_tangential, r.cop_y, last.t if last else 0.0)
+    values = np.concatenate([head, s.q, s.v, r.qdd, r.passive, r.multipliers,
+                             sample.head_position, np.ravel(sample.head_rotation),
+                             *sample.efforts.values()], dtype=np.float64)
+    return BagRecord(values, s.mode.number, s.contact.side, s.contact.pivot, s.step_index,
+                     tuple(sample.efforts), last.cause if last else None)
 
 
 def stamp(typestore: Typestore, t: float) -> Any:
@@ -104,48 +155,57 @@ class MessageFactory:
 
     def messages(self, sample: Sample) -> dict[str, Any]:
         """Topic -> message of one sample."""
-        s, r = sample.state, sample.result
-        t = s.t
-        total = np.sum(list(sample.efforts.values()), axis=0) if sample.efforts else np.zeros(18)
+        return self.record_messages(bag_record(sample))
+
+    def record_messages(self, record: BagRecord) -> dict[str, Any]:
+        """Topic -> message of one packed sample (see ``BagRecord``)."""
+        x = record.values
+        t, t_exchange, t_touchdown, heel_anchor_y, normal, tangential, cop, last_t = (
+            x[:_SCALARS].tolist())
+        q, v = x[_Q], x[_V]
+        sources = record.sources
+        efforts = {source: x[_EFFORTS + k * _N:_EFFORTS + (k + 1) * _N]
+                   for k, source in enumerate(sources)}
+        total = np.sum(list(efforts.values()), axis=0) if efforts else np.zeros(18)
         joint_state = self._joint_state(
-            header=self.header(t), name=self.names, position=s.q.astype(np.float64),
-            velocity=s.v.astype(np.float64), effort=np.asarray(total, dtype=np.float64))
-        quat = rotation_to_quaternion(sample.head_rotation)
-        pos = sample.head_position
+            header=self.header(t), name=self.names, position=q.copy(), velocity=v.copy(),
+            effort=np.asarray(total, dtype=np.float64))
+        quat = rotation_to_quaternion(x[_HEAD_R].reshape(3, 3))
+        pos = x[_HEAD_P]
         pose = self._pose_stamped(header=self.header(t, 'world'), pose=self._pose(
             position=self._point(x=float(pos[0]), y=float(pos[1]), z=float(pos[2])),
             orientation=self._quaternion(x=float(quat[0]), y=float(quat[1]), z=float(quat[2]),
                                          w=float(quat[3]))))
-        mode = s.mode
+        mode = get_mode(record.mode)
         names = list(mode.multipliers)
         index = {'f_nz': 0, 'f_ny': 1, 'tau_n': 2}
-        last = sample.last_transition
-        touched = bool(np.isfinite(s.t_touchdown))
-        cop = r.cop_y
-        heel_y, toe_y = s.q[0] - 0.06, s.q[0] + 0.20
+        multipliers = x[_MULT]
+        last = record.last_cause is not None
+        touched = bool(np.isfinite(t_touchdown))
+        heel_y, toe_y = q[0] - 0.06, q[0] + 0.20
         inside = bool(np.isfinite(cop) and heel_y <= cop <= toe_y) if not mode.q1_active else False
         gait = self._gait_state(
             header=self.header(t), mode=mode.number,
-            support_side=0 if s.contact.side == 'right' else 1,
-            pivot=PIVOT_CODE[s.contact.pivot] if mode.q1_active else 0,
-            step_index=s.step_index, y0_active=mode.y0_active, q1_active=mode.q1_active,
+            support_side=0 if record.side == 'right' else 1,
+            pivot=PIVOT_CODE[record.pivot] if mode.q1_active else 0,
+            step_index=record.step_index, y0_active=mode.y0_active, q1_active=mode.q1_active,
             multiplier_names=names,
-            multipliers=np.array([r.multipliers[index[n]] for n in names], dtype=np.float64),
-            support_normal_force=float(r.support_normal),
-            support_friction_force=float(r.support_tangential),
+            multipliers=np.array([multipliers[index[n]] for n in names], dtype=np.float64),
+            support_normal_force=float(normal),
+            support_friction_force=float(tangential),
             zmp=self._point(x=0.0, y=float(cop) if np.isfinite(cop) else float('nan'), z=0.0),
             zmp_inside_support=inside,
-            last_transition_cause=last.cause if last else '',
-            last_transition_stamp=stamp(self.typestore, last.t if last else 0.0),
-            support_exchange_stamp=stamp(self.typestore, s.t_exchange),
+            last_transition_cause=record.last_cause if last else '',
+            last_transition_stamp=stamp(self.typestore, last_t if last else 0.0),
+            support_exchange_stamp=stamp(self.typestore, t_exchange),
             touched_down=touched,
-            touchdown_stamp=stamp(self.typestore, s.t_touchdown if touched else 0.0),
-            heel_anchor_y=float(s.contact.heel_anchor_y))
-        efforts = [self.effort(t, source, tau) for source, tau in sample.efforts.items()]
-        efforts.append(self.effort(t, 'passive', r.passive))
+            touchdown_stamp=stamp(self.typestore, t_touchdown if touched else 0.0),
+            heel_anchor_y=float(heel_anchor_y))
+        effort_messages = [self.effort(t, source, tau) for source, tau in efforts.items()]
+        effort_messages.append(self.effort(t, 'passive', x[_PASSIVE]))
         dynamics = self._dynamics(header=self.header(t), name=self.names,
                                   active=np.isin(np.arange(18), mode.active),
-                                  acceleration=r.qdd.astype(np.float64), efforts=efforts)
+                                  acceleration=x[_QDD].copy(), efforts=effort_messages)
         return {'/clock': self._clock(clock=stamp(self.typestore, t)),
                 '/joint_states': joint_state, '/head_pose': pose, '/gait_state': gait,
                 '/joint_dynamics': dynamics}
@@ -162,43 +222,171 @@ class MessageFactory:
         return self._string(data=urdf)
 
 
-class BagRecorder:
-    """Writes samples to an MCAP rosbag2 bag; closes cleanly even when a run fails."""
+class _BagFile:
+    """The open MCAP bag: metadata, connections and the URDF written; serialises messages."""
 
-    def __init__(self, path: str | pathlib.Path, metadata: dict[str, Any], urdf: str,
-                 typestore: Typestore | None = None) -> None:
-        self.path = pathlib.Path(path)
-        if self.path.exists():
-            raise SimulationError(f'bag {self.path} already exists; choose a new --out')
-        self.factory = MessageFactory(typestore)
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+    def __init__(self, path: pathlib.Path, metadata: dict[str, Any], urdf: str,
+                 factory: MessageFactory) -> None:
+        self.factory = factory
+        self._writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         for key, value in metadata.items():
             self._writer.set_custom_data(key, value if isinstance(value, str)
                                          else json.dumps(value, sort_keys=True))
         self._writer.set_custom_data('project_version', PROJECT_VERSION)
-        ts = self.factory.typestore
+        ts = factory.typestore
         self._connections = {topic: self._writer.add_connection(topic, msgtype, typestore=ts)
                              for topic, msgtype in TOPICS.items()}
-        self._write('/robot_description', 0.0, self.factory.description(urdf))
-        self.count = 0
+        self.write('/robot_description', 0.0, factory.description(urdf))
 
-    def _write(self, topic: str, t: float, message: Any) -> None:
-        ts = self.factory.typestore
-        data = ts.serialize_cdr(message, TOPICS[topic])
+    def write(self, topic: str, t: float, message: Any) -> None:
+        """Serialise ``message`` and write it at simulation time t [s]."""
+        data = self.factory.typestore.serialize_cdr(message, TOPICS[topic])
         self._writer.write(self._connections[topic], int(round(t * 1e9)), data)
 
-    def write(self, sample: Sample) -> None:
-        """Record one control instant."""
-        for topic, message in self.factory.messages(sample).items():
-            self._write(topic, sample.state.t, message)
-        self.count += 1
+    def write_record(self, record: BagRecord) -> None:
+        """Write the messages of one packed sample."""
+        t = float(record.values[0])
+        for topic, message in self.factory.record_messages(record).items():
+            self.write(topic, t, message)
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+
+
+def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
+                    factory: MessageFactory, records: multiprocessing.Queue,
+                    status: Connection) -> None:
+    """Body of the writer process: write the batches of ``records`` until None, then close the
+    bag and send ('ok', samples) or ('error', message) on ``status``. Closes the bag and stops
+    when the parent process is gone."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent closes the bag
+    count = 0
+    try:
+        bag = _BagFile(path, metadata, urdf, factory)
+        try:
+            parent = multiprocessing.parent_process()
+            while True:
+                try:
+                    batch = records.get(timeout=1.0)
+                except queue.Empty:
+                    if parent is not None and not parent.is_alive():
+                        break
+                    continue
+                if batch is None:
+                    break
+                for record in batch:
+                    bag.write_record(record)
+                    count += 1
+        finally:
+            bag.close()
+    except BaseException as exc:  # reported to the parent, which raises it
+        status.send(('error', f'{type(exc).__name__}: {exc}'))
+    else:
+        status.send(('ok', count))
+    finally:
+        status.close()
+
+
+class BagRecorder:
+    """Writes samples to an MCAP rosbag2 bag; closes cleanly even when a run fails.
+
+    :param background: build, serialise and write the messages in a writer process, forked
+        here (a few ms, no re-import of ``__main__``; the writer touches neither ROS nor the
+        simulation, so threads of the parent do not matter).
+        ``write`` packs the sample and hands it over in batches of ``BATCH``; it waits while
+        ``QUEUE_BATCHES`` batches are in flight and raises SimulationError once the writer has
+        failed. ``close`` waits until everything is written.
+    """
+
+    def __init__(self, path: str | pathlib.Path, metadata: dict[str, Any], urdf: str,
+                 typestore: Typestore | None = None, background: bool = False) -> None:
+        self.path = pathlib.Path(path)
+        if self.path.exists():
+            raise SimulationError(f'bag {self.path} already exists; choose a new --out')
+        self.factory = MessageFactory(typestore)
+        self.count = 0
+        self._bag: _BagFile | None = None
+        self._process: multiprocessing.process.BaseProcess | None = None
+        if not background:
+            self._bag = _BagFile(self.path, metadata, urdf, self.factory)
+            return
+        context = multiprocessing.get_context('fork')
+        self._records = context.Queue(maxsize=QUEUE_BATCHES)
+        self._status, child_status = context.Pipe(duplex=False)
+        self._process = context.Process(
+            target=_writer_process, name='bag-writer', daemon=True,
+            args=(self.path, metadata, urdf, self.factory, self._records, child_status))
+        self._process.start()
+        child_status.close()
+        self._batch: list[BagRecord] = []
+
+    def write(self, sample: Sample) -> None:
+        """Record one control instant."""
+        if self._bag is not None:
+            self._bag.write_record(bag_record(sample))
+        elif self._process is not None:
+            self._batch.append(bag_record(sample))
+            if len(self._batch) >= BATCH:
+                batch, self._batch = self._batch, []
+                self._hand_over(batch)
+        else:
+            raise SimulationError(f'bag {self.path} is closed')
+        self.count += 1
+
+    def _hand_over(self, item: list[BagRecord] | None) -> None:
+        """Queue a batch (None: the end) for the writer process, waiting while it is busy."""
+        self._check_writer()
+        while True:
+            try:
+                self._records.put(item, timeout=0.2)
+                return
+            except queue.Full:
+                self._check_writer()
+
+    def _check_writer(self) -> None:
+        """Raise SimulationError if the writer process has failed or ended early."""
+        if self._status.poll() or not self._process.is_alive():
+            process, self._process = self._process, None
+            process.join(timeout=5.0)
+            self._records.cancel_join_thread()
+            raise SimulationError(f'bag writer for {self.path} failed: '
+                                  f'{self._writer_status(process)}')
+
+    def _writer_status(self, process: multiprocessing.process.BaseProcess) -> str:
+        """The writer's report ('ok' or the error), or its exit code if it sent none."""
+        if self._status.poll():
+            try:
+                kind, detail = self._status.recv()
+                return 'ok' if kind == 'ok' else detail
+            except EOFError:
+                pass
+        return f'writer process exited with code {process.exitcode}'
+
+    def close(self) -> None:
+        """Finish the bag (idempotent); a background writer first writes all it was given.
+
+        :raises SimulationError: if the background writer failed.
+        """
+        if self._bag is not None:
+            self._bag.close()
+            self._bag = None
+        if self._process is None:
+            return
+        if self._batch:
+            batch, self._batch = self._batch, []
+            self._hand_over(batch)
+        self._hand_over(None)
+        process, self._process = self._process, None
+        process.join()
+        self._records.cancel_join_thread()  # what a failed writer left unread stays unread
+        self._records.close()
+        status = self._writer_status(process)
+        if status != 'ok':
+            raise SimulationError(f'bag writer for {self.path} failed: {status}')
 
     def __enter__(self) -> BagRecorder:
         """Context manager: the bag is closed on exit, also after an exception."""

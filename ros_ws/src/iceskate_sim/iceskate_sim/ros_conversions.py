@@ -9,7 +9,9 @@ rosbags message objects (bags) alike:
   ``joint_states`` (sensor_msgs/JointState) and ``gait_state`` (GaitState) of one instant;
 * ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a ``JointCommand``,
   refusing NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that
-  names the problem and the source;
+  names the problem and the source (arrays go out as ``array('d')``, which rclpy messages take
+  without a per-element check; all 18 names in order, as the controllers send, skip the
+  reordering);
 * ``StatePairer``: pairs the two state messages of one instant by stamp (no message_filters).
 
 Known loss: GaitState carries ``pivot = PIVOT_NONE`` while the support sole is flat, so the
@@ -19,6 +21,7 @@ q1 = 0, which is all a flat-sole law evaluates.
 
 from __future__ import annotations
 
+from array import array
 import math
 from typing import Any
 
@@ -31,6 +34,7 @@ from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 
 NS_PER_S = 1_000_000_000
 PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
+_NAMES = list(COORDINATE_NAMES)
 _INDEX = {name: i for i, name in enumerate(COORDINATE_NAMES)}
 _IMPEDANCE = ('stiffness', 'damping', 'position_reference')
 
@@ -127,7 +131,7 @@ def _indices(names: list[str], where: str) -> np.ndarray:
 
 
 def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
-    x = np.asarray(getattr(msg, field), dtype=float)
+    x = np.array(getattr(msg, field), dtype=float)  # a copy: never a view of the message
     if x.shape != (n,):
         raise SimulationError(f'{where}: {field} has {x.size} entries for {n} joint names')
     if not np.all(np.isfinite(x)):
@@ -144,36 +148,41 @@ def command_from_message(msg: Any) -> JointCommand:
     """
     where = f'effort command of source {msg.source!r}'
     names = list(msg.joint_names)
-    index = _indices(names, where)
-    n = len(names)
-    effort = np.zeros(N_COORDINATES)
-    effort[index] = _array(msg, 'effort', n, where)
+    index = None if names == _NAMES else _indices(names, where)
+
+    def coordinates(field: str) -> np.ndarray:
+        x = _array(msg, field, len(names), where)
+        if index is None:
+            return x
+        out = np.zeros(N_COORDINATES)
+        out[index] = x
+        return out
+
+    effort = coordinates('effort')
     given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]
     if not any(given):
         return JointCommand(effort)
     if not all(given):
         raise SimulationError(f'{where}: stiffness, damping and position_reference must be '
                               'all empty or all given')
-    parts = []
-    for field in _IMPEDANCE:
-        x = np.zeros(N_COORDINATES)
-        x[index] = _array(msg, field, n, where)
-        parts.append(x)
     try:
-        return JointCommand(effort, *parts)
+        return JointCommand(effort, *(coordinates(f) for f in _IMPEDANCE))
     except SimulationError as exc:
         raise SimulationError(f'{where}: {exc}') from None
 
 
 def command_fields(command: JointCommand) -> dict[str, Any]:
     """EffortCommand fields (joint_names, effort, impedance arrays) of a JointCommand."""
-    empty: list[float] = []
-    fields = {'joint_names': list(COORDINATE_NAMES), 'effort': command.effort.tolist(),
-              'stiffness': empty, 'damping': empty, 'position_reference': empty}
+    fields = {'joint_names': list(COORDINATE_NAMES), 'effort': _doubles(command.effort),
+              'stiffness': array('d'), 'damping': array('d'), 'position_reference': array('d')}
     if command.has_impedance:
-        fields.update(stiffness=command.stiffness.tolist(), damping=command.damping.tolist(),
-                      position_reference=command.reference.tolist())
+        fields.update(stiffness=_doubles(command.stiffness), damping=_doubles(command.damping),
+                      position_reference=_doubles(command.reference))
     return fields
+
+
+def _doubles(x: np.ndarray) -> array:
+    return array('d', np.ascontiguousarray(x, dtype=np.float64).tobytes())
 
 
 # ------------------------------------------------------------------------------------ pairing

@@ -9,7 +9,8 @@ simulation. It writes into DIR:
 * ``events.json``: every transition (time, from/to mode, event, cause, impulse);
 * ``trajectory.npz``: the sampled state (t, q, v, qdd, mode, side, pivot, step, multipliers,
   support forces, CoP, head pose and target, torques by source);
-* ``bag/``: the same run as a rosbag2 MCAP bag (unless the scene turns it off).
+* ``bag/``: the same run as a rosbag2 MCAP bag (unless the scene turns it off), written by a
+  forked writer process while the simulation goes on (``BagRecorder(background=True)``).
 
 A run that diverges raises SimulationError after closing the bag; a fall ends the run with
 ``fell: true`` and the reason in ``failure``.
@@ -54,7 +55,7 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
         out.mkdir(parents=True, exist_ok=True)
         if scene.record_bag:
             recorder = BagRecorder(out / 'bag', scene_metadata(scene),
-                                   robot.urdf_path.read_text(encoding='utf-8'))
+                                   robot.urdf_path.read_text(encoding='utf-8'), background=True)
     n_periods = int(round(scene.duration / scene.simulator.control_period))
     bar = _progress(n_periods, scene.name, progress)
     error: SimulationError | None = None
@@ -92,13 +93,13 @@ def advance_and_sample(sim: Simulator, scene: Scene,
     and return the sample of the period's start: the state, the dynamics under the held
     commands, the effort of every source at that state (headless runner and ROS lockstep)."""
     state = sim.state
+    placement = sim.head_placement()
     push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
                 None)
     sim.advance(HeldCommand.combine(commands.values()), push)
     efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
     if push is not None:
         efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
-    placement = sim.dynamics.frame_placement(state.contact, state.q, 'head_top')
     return Sample(state, sim.start_result, efforts, placement.translation.copy(),
                   placement.rotation.copy(), last_event_before(sim, state.t))
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import pinocchio as pin
 
 from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
@@ -52,6 +53,10 @@ class SimulatorConfig:
         it the integration has diverged (SimulationError), even if no value is non-finite.
     :param max_instant_transitions: transitions allowed at one instant before the run is
         declared chattering.
+    :param zeno_window: transitions fired within this time [s] of each other count as one
+        burst; a burst of more than ``max_instant_transitions`` (a Zeno sequence, whose events
+        come ever closer without reaching one instant) rests the firing guard for
+        ``chatter_dwell``.
     :param chatter_dwell: when a transition would bring back a (mode, side) already visited at
         the same instant (a Zeno cycle of complementary guards, e.g. flat <-> edge in a closed
         double-support chain), it is not applied and its guard is suppressed for this long
@@ -67,6 +72,7 @@ class SimulatorConfig:
     fall_height: float = 1.2
     max_speed: float = 200.0
     max_instant_transitions: int = 20
+    zeno_window: float = 1.0e-6
     chatter_dwell: float = 0.005
 
     def __post_init__(self) -> None:
@@ -121,6 +127,7 @@ class Simulator:
         self._integrator = Integrator(self.config.integrator)
         self._suppressed: dict[str, float] = {}
         self._instant: tuple[float, set[tuple[int, str]]] = (float('nan'), set())
+        self._head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
         self.result = self._evaluate(self.state.q, self.state.v)
         try:
             self._settle()
@@ -143,8 +150,15 @@ class Simulator:
 
     def head_height(self) -> float:
         """Height of the head top [m]."""
-        return float(self.dynamics.frame_placement(self.state.contact, self.state.q,
-                                                   'head_top').translation[2])
+        return float(self.head_placement().translation[2])
+
+    def head_placement(self) -> pin.SE3:
+        """World placement of the head-top frame in the current state (kept until the state
+        changes: the health check and the next sample ask for the same one)."""
+        if self._head[0] is not self.state:
+            self._head = (self.state, self.dynamics.frame_placement(
+                self.state.contact, self.state.q, 'head_top'))
+        return self._head[1]
 
     # ---------------------------------------------------------------- stepping
     def _evaluate(self, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
@@ -216,23 +230,29 @@ class Simulator:
                                           f'{self.state.summary()})') from exc
                 self.stats.steps += seg.steps
                 self.stats.evaluations += seg.evaluations
-                if not np.all(np.isfinite(seg.x)):
+                if not np.isfinite(seg.x).all():
                     self._diverged('non-finite state', replace(self.state, t=seg.t))
                 self.state = replace(self.state, t=seg.t, q=seg.x[:n].copy(),
                                      v=seg.x[n:].copy())
                 self.result = seg.result
                 if seg.fired is not None:
-                    if seg.t - instant > self.config.integrator.event_tolerance * 10:
+                    guard = guards_of(self.state.mode)[seg.fired]
+                    if seg.t - instant > self.config.zeno_window:
                         instant, at_instant = seg.t, 0
                     at_instant += 1
                     if at_instant > self.config.max_instant_transitions:
-                        self._chattering()
-                    guard = guards_of(self.state.mode)[seg.fired]
+                        # a Zeno burst (events ever closer, e.g. stick <-> slip at a heel at
+                        # rest): rest the firing guard, the last resort, counted in the stats
+                        self._suppressed[guard.name] = seg.t + self.config.chatter_dwell
+                        self.stats.suppressed_cycles += 1
+                        instant, at_instant = seg.t, 0
+                        continue
                     self._transition(guard)
                     self._settle()
+            residuals = None
             if self.config.projection and self.state.mode.constraints:
-                self._project()
-            self._check_health()
+                residuals = self._project()
+            self._check_health(residuals)
         except RunEnded as end:
             self._check_speed(end.state)  # a blow-up is not a physical end
             self.ended = end.reason
@@ -292,14 +312,18 @@ class Simulator:
                               f'transitions at one instant ({self.state.summary()}); last '
                               f'events {[e.event for e in self.events[-6:]]}')
 
-    def _project(self) -> None:
-        """Project q onto the active swing constraints and v onto their tangent space."""
+    def _project(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Project q onto the active swing constraints and v onto their tangent space.
+
+        :returns: the residuals (C, J qd) of the state when it needed no correction (the state
+            is then unchanged), else None.
+        """
         s = self.state
         C, Cdot = self.dynamics.constraint_residuals(s.contact, s.q, s.v)
         residual = float(np.max(np.abs(C)))
         self.stats.max_constraint_residual = max(self.stats.max_constraint_residual, residual)
         if residual < 1e-12 and float(np.max(np.abs(Cdot))) < 1e-12:
-            return  # nothing to correct (the profile showed 27 % of a run spent here)
+            return C, Cdot  # nothing to correct (the profile showed 27 % of a run spent here)
         q, _ = project_positions(self.dynamics, s.contact, s.q)
         act = s.mode.active
         J = self.dynamics.constraint_jacobian(s.contact, q)[:, act]
@@ -309,6 +333,7 @@ class Simulator:
         v[act] -= minv_jt @ np.linalg.solve(J @ minv_jt, J @ v[act])
         self.state = replace(s, q=q, v=v)
         self.result = self._evaluate(q, v)
+        return None
 
     def _check_speed(self, state: HybridState) -> None:
         speed = float(np.max(np.abs(state.v)))
@@ -316,13 +341,15 @@ class Simulator:
             self._diverged(f'speed {speed:.3g} beyond {self.config.max_speed:g} rad/s or m/s',
                            state)
 
-    def _check_health(self) -> None:
+    def _check_health(self, residuals: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Non-finite values, speed, constraint residual (``residuals``: C and J qd of the
+        current state if known) and fall height of the current state."""
         s = self.state
-        if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.v))):
+        if not (np.isfinite(s.q).all() and np.isfinite(s.v).all()):
             self._diverged('non-finite state', s)
         self._check_speed(s)
         if s.mode.constraints:
-            C, Cdot = self.dynamics.constraint_residuals(s.contact, s.q, s.v)
+            C, _ = residuals or self.dynamics.constraint_residuals(s.contact, s.q, s.v)
             worst = float(np.max(np.abs(C)))
             self.stats.max_constraint_residual = max(self.stats.max_constraint_residual, worst)
             if worst > self.config.residual_bound:

@@ -1,0 +1,77 @@
+"""The bag recorder: a background writer process writes the same bag as an in-process one, and
+its failures and the run's failures still leave a closed, readable bag."""
+
+from dataclasses import replace
+import pathlib
+
+import pytest
+from rosbags.rosbag2 import Reader
+
+from iceskate_sim import recording, runner
+from iceskate_sim.control_stack import ControlStack
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.recording import BATCH, BagRecorder, Sample
+from iceskate_sim.robot import load_robot
+from iceskate_sim.runner import advance_and_sample, run
+from iceskate_sim.scene import load_scene
+from iceskate_sim.simulation import Simulator
+
+PERIODS = 2 * BATCH + 17  # two full batches and a partial one
+
+
+@pytest.fixture(scope='module')
+def samples() -> list[Sample]:
+    """The first periods of the stand scene (push, visual lifting, posture stabiliser)."""
+    scene = replace(load_scene('stand'), duration=PERIODS * 1e-3)
+    robot = load_robot()
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    stack = ControlStack(scene, robot, sim.observation())
+    return [advance_and_sample(sim, scene, stack.commands(sim.observation()))
+            for _ in range(PERIODS)]
+
+
+def _messages(bag: pathlib.Path) -> list[tuple[str, int, bytes]]:
+    with Reader(bag) as reader:
+        return [(c.topic, t, bytes(data)) for c, t, data in reader.messages()]
+
+
+def _record(path: pathlib.Path, samples: list[Sample], background: bool) -> BagRecorder:
+    urdf = load_robot().urdf_path.read_text(encoding='utf-8')
+    with BagRecorder(path, {'scene': 'stand'}, urdf, background=background) as recorder:
+        for sample in samples:
+            recorder.write(sample)
+    return recorder
+
+
+def test_background_writer_writes_the_same_messages(tmp_path, samples):
+    _record(tmp_path / 'inline', samples, background=False)
+    recorder = _record(tmp_path / 'background', samples, background=True)
+    inline, background = _messages(tmp_path / 'inline'), _messages(tmp_path / 'background')
+    assert recorder.count == PERIODS
+    assert len(background) == 1 + 5 * PERIODS  # the URDF, then 5 topics per sample
+    assert background == inline
+
+
+def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, samples,
+                                                                    monkeypatch):
+    def broken(self, record):
+        raise OSError('disk full')
+    monkeypatch.setattr(recording.MessageFactory, 'record_messages', broken)  # forked along
+    with pytest.raises(SimulationError, match='bag writer .* failed: OSError: disk full'):
+        _record(tmp_path / 'bag', samples, background=True)
+    assert [topic for topic, _, _ in _messages(tmp_path / 'bag')] == ['/robot_description']
+
+
+def test_a_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path, monkeypatch):
+    failing_at = BATCH + 5
+
+    def advance_until_failure(sim, scene, commands):
+        if sim.stats.control_periods == failing_at:
+            raise SimulationError('diverged on purpose')
+        return advance_and_sample(sim, scene, commands)
+    monkeypatch.setattr(runner, 'advance_and_sample', advance_until_failure)
+    with pytest.raises(SimulationError, match='on purpose'):
+        run(replace(load_scene('stand'), duration=0.5), tmp_path, progress=False)
+    clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
+    assert len(clock) == failing_at
+    assert clock[-1] == (failing_at - 1) * 1_000_000
