@@ -14,7 +14,7 @@ from iceskate_sim.runner import main, run
 from iceskate_sim.scene import load_scene
 from iceskate_sim.simulation import Simulator
 
-SHORT_SKATE = 0.8  # s: the start of the skate scene (weight shift and first lift-off)
+SHORT_SKATE = 2.0  # s: the first steps of the skate scene
 
 
 @pytest.fixture(scope='module')
@@ -39,21 +39,25 @@ def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
     assert sum(metrics['mode_time_fraction'].values()) == pytest.approx(1.0)
 
 
-def test_short_skate_run_visits_the_expected_start(skate_run):
-    """Double support (17) with the weight shifting away from the rear foot until it lifts
-    off into single support (mode 1 or, gliding, 3)."""
+def test_short_skate_run_visits_the_expected_modes(skate_run):
+    """Single-support start (1 or 3), then the ice cycle of model-spec 5.5: support gliding
+    (F-G: 3), front heel landing and gliding (Hs: 7 or 8), support exchanges (E6/E7)."""
     out, _metrics = skate_run
     events = json.loads((out / 'events.json').read_text())
-    modes = np.load(out / 'trajectory.npz')['mode']
-    assert modes[0] == 17
-    assert {'S6'} <= {e['event'] for e in events}
-    assert set(modes.tolist()) & {1, 3}
+    modes = set(np.load(out / 'trajectory.npz')['mode'].tolist())
+    assert int(np.load(out / 'trajectory.npz')['mode'][0]) in (1, 3)
+    assert {3} <= modes and modes & {7, 8}
+    exchanges = [e['t'] for e in events if e['event'] in ('E6', 'E7')]
+    assert len(exchanges) >= 3, exchanges
 
 
 def test_y0_never_decreases_on_ice(skate_run):
+    """The support foot never slides backward (toe pick); y0 restarts at each exchange."""
     out, _metrics = skate_run
-    y0 = np.load(out / 'trajectory.npz')['q'][:, 0]
-    assert np.all(np.diff(y0) >= -1e-12)
+    a = np.load(out / 'trajectory.npz')
+    same_support = np.diff(a['step_index']) == 0
+    assert same_support.sum() > 100
+    assert np.all(np.diff(a['q'][:, 0])[same_support] >= -1e-9)  # 1 nm: event-time round-off
 
 
 def test_recorded_accelerations_are_the_dynamics_at_the_sample(skate_run):

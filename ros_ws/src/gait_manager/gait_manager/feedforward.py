@@ -17,8 +17,15 @@ q1..q7). Applied with the swing heel on the floor, the torques press the heel do
 a mode whose constraints contain the heel's z row (and C_fr), the constraint force grows by
 exactly f_des (and tau_n by tau_n,des) and the accelerations do not change: load moves from the
 support foot to the front foot. f_des ramps from 0 to share m g over ``ramp_time`` after the
-heel strike t_touchdown; tau_n,des = moment_arm f_des while the sole is flat (Fs, Fp), which
-puts the front foot's centre of pressure ``moment_arm`` ahead of the heel.
+heel strike t_touchdown ('ramp' rule); tau_n,des = moment_arm f_des while the sole is flat
+(Fs, Fp), which puts the front foot's centre of pressure ``moment_arm`` ahead of the heel.
+
+The 'com' rule instead splits the weight as a static two-foot support would, rear centre of
+pressure at the rear toe and front one at the front heel (tau_n,des = 0): f_des = m g
+(y_x - y_rear_toe) / (y_front_heel - y_rear_toe), clipped to [share_min ramp, share], with
+y_x = y_com + capture_gain v_com sqrt(z_com / g) (the capture point for a gain of 1). The rear
+normal force reaches 0 (the exchange) when y_x passes the front heel, without pushing the
+rear centre of pressure off its sole.
 """
 
 from __future__ import annotations
@@ -31,11 +38,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from gait_manager._params import boolean, build, real, zeros
+from gait_manager._params import boolean, build, choice, real, zeros
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import SupportModel
 
+WEIGHT_RULES = ('ramp', 'com')
 PIVOT, ANKLE, KNEE, SWING_HIP, SWING_KNEE, SWING_ANKLE = 1, 2, 3, 5, 6, 7
 GRAVITY = 9.81  # m/s^2
 
@@ -101,6 +109,11 @@ class WeightTransferParameters:
         (swing foot down since the start, before any heel strike): weight shift (§14.7).
     :param start_ramp: time [s] over which the starting share falls linearly to 0, unloading
         the swing foot so it can lift off; 0 holds it (standing).
+    :param rule: 'ramp' (time ramp to ``share``) or 'com' (static split by the capture point;
+        ``share`` is then the upper bound; see module).
+    :param capture_gain: 'com' rule: weight of v sqrt(z/g) in y_x (1: capture point) [-].
+    :param share_min: 'com' rule: lower bound of the share, reached linearly over
+        ``ramp_time`` after the heel strike [-].
     """
 
     share: float = 1.0
@@ -109,9 +122,17 @@ class WeightTransferParameters:
     joint1_torque: bool = True
     start_share: float = 0.5
     start_ramp: float = 0.5
+    rule: str = 'ramp'
+    capture_gain: float = 1.0
+    share_min: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field (GaitManagerError naming the key)."""
+        choice('rule', self.rule, WEIGHT_RULES)
+        object.__setattr__(self, 'capture_gain',
+                           real('capture_gain', self.capture_gain, low=0.0, high=5.0))
+        object.__setattr__(self, 'share_min', real('share_min', self.share_min, low=0.0,
+                                                   high=2.0))
         object.__setattr__(self, 'share', real('share', self.share, low=0.0, high=2.0))
         object.__setattr__(self, 'ramp_time', real('ramp_time', self.ramp_time, low=0.0))
         object.__setattr__(self, 'moment_arm',
@@ -202,16 +223,39 @@ def swing_heel_z_row(obs: Observation, dynamics: GaitDynamics) -> np.ndarray:
     return row
 
 
+def capture_split_force(obs: Observation, dynamics: GaitDynamics,
+                        params: WeightTransferParameters) -> float:
+    """f_des [N] of the 'com' rule (see module); 0 with the swing foot in the air."""
+    if obs.gait_mode.swing == 'A':
+        return 0.0
+    sm = dynamics.robot.support_model(obs.side, obs.pivot)
+    data = _data_for(sm)
+    pin.centerOfMass(sm.model, data, obs.q, obs.v)
+    pin.updateFramePlacements(sm.model, data)
+    com, com_v = data.com[0], data.vcom[0]
+    rear_toe = data.oMf[sm.frame_ids['support_toe']].translation[1]
+    front_heel = data.oMf[sm.frame_ids['swing_heel']].translation[1]
+    y_x = com[1] + params.capture_gain * com_v[1] * math.sqrt(max(com[2], 0.0) / GRAVITY)
+    share = min(max((y_x - rear_toe) / max(front_heel - rear_toe, 0.02), 0.0), params.share)
+    since = obs.t - obs.t_touchdown
+    floor = params.share_min * (min(since / params.ramp_time, 1.0) if params.ramp_time > 0.0
+                                else 1.0)
+    return max(share, floor) * dynamics.robot.total_mass * GRAVITY
+
+
 def weight_transfer_torque(obs: Observation, dynamics: GaitDynamics,
                            params: WeightTransferParameters) -> np.ndarray:
     """Return tau_wt = -J_c^T f_des - j_r^T tau_n,des [N m] (zero before touchdown)."""
     tau = zeros()
-    force = desired_heel_force(obs, params, dynamics.robot.total_mass)
+    if params.rule == 'com' and obs.t_touchdown > obs.t_exchange:
+        force = capture_split_force(obs, dynamics, params)
+    else:
+        force = desired_heel_force(obs, params, dynamics.robot.total_mass)
     if force == 0.0:
         return tau
     tau -= force * swing_heel_z_row(obs, dynamics)
     mode = obs.gait_mode
-    if mode.swing in ('Fs', 'Fp') and params.moment_arm != 0.0:
+    if params.rule == 'ramp' and mode.swing in ('Fs', 'Fp') and params.moment_arm != 0.0:
         tau[PIVOT:SWING_ANKLE + 1] -= params.moment_arm * force
     tau[0] = 0.0
     if not (mode.q1_active and params.joint1_torque):

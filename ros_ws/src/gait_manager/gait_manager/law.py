@@ -3,7 +3,8 @@
 ``gait_manager_torques`` returns one 18-vector [N m] per *enabled* source and computes nothing
 for the others, so a scene pays only for what it uses. Sources:
 
-* 'posture': posture stabiliser with the moving stance reference (``posture``);
+* 'posture': posture stabiliser with the moving stance reference (``posture``), or the
+  walking stabiliser (``balance``) when ``posture.reference`` is 'balance';
 * 'feedforward': swing hip/knee pulses and push-off (``feedforward``);
 * 'weight_transfer': -J_c^T f_des after heel strike (``feedforward``);
 * 'heel': heel-first landing input on the swing ankle (``heel``);
@@ -21,6 +22,7 @@ import numpy as np
 
 from gait_manager._params import zeros
 from gait_manager.arm_assist import ArmAssistParameters, arm_assist_torque
+from gait_manager.balance import BalanceParameters, balance_command
 from gait_manager.errors import GaitManagerError
 from gait_manager.feedforward import (
     FeedforwardParameters,
@@ -36,7 +38,8 @@ from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 
 SOURCES = ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw')
-_BLOCKS = {'posture': PostureParameters, 'feedforward': FeedforwardParameters,
+_BLOCKS = {'posture': PostureParameters, 'balance': BalanceParameters,
+           'feedforward': FeedforwardParameters,
            'weight_transfer': WeightTransferParameters, 'heel': HeelParameters,
            'arm_assist': ArmAssistParameters, 'yaw': YawParameters}
 
@@ -57,6 +60,7 @@ class GaitManagerParameters:
     """All gait-manager parameter blocks and the set of enabled sources (default: all)."""
 
     posture: PostureParameters = field(default_factory=PostureParameters)
+    balance: BalanceParameters = field(default_factory=BalanceParameters)
     feedforward: FeedforwardParameters = field(default_factory=FeedforwardParameters)
     weight_transfer: WeightTransferParameters = field(default_factory=WeightTransferParameters)
     heel: HeelParameters = field(default_factory=HeelParameters)
@@ -104,7 +108,11 @@ def gait_manager_commands(obs: Observation, dynamics: GaitDynamics,
     out: dict[str, JointCommand] = {}
     enabled = params.enabled
     if 'posture' in enabled:
-        out['posture'] = posture_command(obs, dynamics, params.posture)
+        posture = params.posture
+        out['posture'] = (balance_command(obs, dynamics, params.balance, posture.yaw_stiffness,
+                                          posture.yaw_damping)
+                          if posture.reference == 'balance'
+                          else posture_command(obs, dynamics, posture))
     if 'feedforward' in enabled:
         out['feedforward'] = JointCommand(feedforward_torque(obs, params.feedforward))
     if 'weight_transfer' in enabled:

@@ -41,7 +41,7 @@ from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import SupportModel
 
-REFERENCES = ('moving', 'standing')
+REFERENCES = ('moving', 'standing', 'balance')
 YAW_JOINT = 8
 
 
@@ -49,7 +49,9 @@ YAW_JOINT = 8
 class PostureParameters:
     """Posture stabiliser and stance reference (defaults: model-spec §13.1-3, §14.4).
 
-    :param reference: 'moving' stance reference (walking) or fixed 'standing' posture.
+    :param reference: 'moving' stance reference (§14.4), fixed 'standing' posture, or
+        'balance': the walking stabiliser of ``gait_manager.balance`` (its own parameter
+        block; only the yaw centring spring of this block is used then).
     :param joints: driven joints of the PD (2, 3, 4 stance; 9, 10 torso; not the neck).
     :param stiffness: K_q [N m/rad] (800; 400 also works, 200 is too weak).
     :param damping: B_q [N m s/rad] (16).
@@ -231,7 +233,7 @@ def stance_reference(obs: Observation, dynamics: GaitDynamics,
     q_ref = standing_posture(params)
     q_ref[0] = obs.q[0]
     q_ref[1] = obs.q[1] if obs.gait_mode.q1_active else 0.0
-    if params.reference == 'standing':
+    if params.reference != 'moving':
         return StanceReference(q_ref, np.zeros(2))
     target = hip_target(obs, dynamics, params)
     q_ref[2:5] = support_leg_ik(obs, dynamics, params, target)
@@ -240,7 +242,7 @@ def stance_reference(obs: Observation, dynamics: GaitDynamics,
 
 def head_offset_of(obs: Observation, params: PostureParameters) -> np.ndarray:
     """The head offset (dy, dz) [m] of the stance reference, without the IK."""
-    if params.reference == 'standing':
+    if params.reference != 'moving':
         return np.zeros(2)
     return stance_shift(obs, params)
 

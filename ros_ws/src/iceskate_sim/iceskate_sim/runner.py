@@ -90,13 +90,14 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
 def advance_and_sample(sim: Simulator, scene: Scene,
                        commands: dict[str, JointCommand]) -> Sample:
     """Hold ``commands`` (and the scene's push, if one acts) over one control period, advance,
-    and return the sample of the period's start: the state, the dynamics under the held
-    commands, the effort of every source at that state (headless runner and ROS lockstep)."""
-    state = sim.state
+    and return the sample of the period's start: the state (after the transitions due at that
+    instant), the dynamics under the held commands, the effort of every source at that state
+    (headless runner and ROS lockstep)."""
+    t = sim.state.t
     placement = sim.head_placement()
-    push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(state.t)),
-                None)
+    push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)), None)
     sim.advance(HeldCommand.combine(commands.values()), push)
+    state = sim.start_state
     efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
     if push is not None:
         efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)

@@ -210,6 +210,7 @@ class Simulator:
             command = HeldCommand.torque_only(tau)
         self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
+        self.start_state = self.state
         self.start_result = self._evaluate(self.state.q, self.state.v)
         t_end = self.state.t + self.config.control_period
         n = N_COORDINATES
@@ -217,7 +218,7 @@ class Simulator:
         instant, at_instant = self.state.t, 0
         try:
             self._settle()  # a guard the new command makes due fires at the period start
-            self.start_result = self.result
+            self.start_state, self.start_result = self.state, self.result
             while t_end - self.state.t > 1e-12:
                 self._contact = self.state.contact
                 x0 = np.concatenate([self.state.q, self.state.v])
