@@ -38,13 +38,14 @@ import pinocchio as pin
 
 from gait_manager._params import build, real, smoothstep, zeros
 from gait_manager.errors import GaitManagerError
-from gait_manager.feedforward import _data_for
+from gait_manager.feedforward import scratch_data
 from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 
 ANKLE_HEIGHT = 0.07  # m, ankle above the sole (model-spec §2.4)
 THIGH, SHANK = 0.38, 0.40  # m, leg link lengths (Table 1)
+SWING_START_BEHIND = 0.15  # m, start of the swing-ankle path behind the hip
 GRAVITY_JOINTS = (2, 3, 4, 9, 10)
 SPEED_JOINTS = (2, 3, 4)
 
@@ -144,7 +145,7 @@ def swing_ankle_target(obs: Observation, params: BalanceParameters, hip_y: float
     down = smoothstep((s - params.descent_start) / (1.0 - params.descent_start))
     z = ANKLE_HEIGHT + params.clearance * up - (params.clearance + params.press) * down
     land = com_y + params.step_length / 2.0 + params.placement_gain * (com_vy - params.speed)
-    start = hip_y - 0.15
+    start = hip_y - SWING_START_BEHIND
     return start + (land - start) * smoothstep(s), z
 
 
@@ -155,7 +156,7 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
     q, v = obs.q, obs.v
     mode = obs.gait_mode
     sm = dynamics.robot.support_model(obs.side, obs.pivot)
-    data = _data_for(sm)
+    data = scratch_data(sm)
     pin.centerOfMass(sm.model, data, q, v)  # also places every joint
     com, com_v = data.com[0], data.vcom[0]
     phi3 = (q[1] if mode.q1_active else 0.0) + q[2] + q[3]

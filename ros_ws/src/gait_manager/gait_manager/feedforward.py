@@ -197,7 +197,7 @@ def desired_heel_force(obs: Observation, params: WeightTransferParameters,
 _SCRATCH: dict[int, tuple[SupportModel, pin.Data]] = {}
 
 
-def _data_for(support_model: SupportModel) -> pin.Data:
+def scratch_data(support_model: SupportModel) -> pin.Data:
     """Pinocchio scratch data of one support model, made once (not thread-safe, like
     GaitDynamics; the model is kept referenced so that its id stays unique)."""
     entry = _SCRATCH.get(id(support_model))
@@ -211,7 +211,7 @@ def swing_heel_z_row(obs: Observation, dynamics: GaitDynamics) -> np.ndarray:
     """J_c: d z_heel / d q, the z row of the swing-heel Jacobian (18 entries [m/rad, m/m];
     columns of locked coordinates 0)."""
     sm = dynamics.robot.support_model(obs.side, obs.pivot)
-    data = _data_for(sm)
+    data = scratch_data(sm)
     pin.computeJointJacobians(sm.model, data, obs.q)
     row = pin.getFrameJacobian(sm.model, data, sm.frame_ids['swing_heel'],
                                pin.LOCAL_WORLD_ALIGNED)[2].copy()
@@ -229,7 +229,7 @@ def capture_split_force(obs: Observation, dynamics: GaitDynamics,
     if obs.gait_mode.swing == 'A':
         return 0.0
     sm = dynamics.robot.support_model(obs.side, obs.pivot)
-    data = _data_for(sm)
+    data = scratch_data(sm)
     pin.centerOfMass(sm.model, data, obs.q, obs.v)
     pin.updateFramePlacements(sm.model, data)
     com, com_v = data.com[0], data.vcom[0]

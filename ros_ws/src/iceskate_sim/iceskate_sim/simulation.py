@@ -243,9 +243,8 @@ class Simulator:
                     at_instant += 1
                     if at_instant > self.config.max_instant_transitions:
                         # a Zeno burst (events ever closer, e.g. stick <-> slip at a heel at
-                        # rest): rest the firing guard, the last resort, counted in the stats
-                        self._suppressed[guard.name] = seg.t + self.config.chatter_dwell
-                        self.stats.suppressed_cycles += 1
+                        # rest): rest the firing guard, the last resort
+                        self._rest(guard)
                         instant, at_instant = seg.t, 0
                         continue
                     self._transition(guard)
@@ -285,8 +284,7 @@ class Simulator:
                                           c.damping)
         found = resolve_contact_mode(self.dynamics, self.config.friction, self.state, evaluate)
         if found is None or found[0].contact == self.state.contact:
-            self._suppressed[guard.name] = self.state.t + self.config.chatter_dwell
-            self.stats.suppressed_cycles += 1
+            self._rest(guard)
             return
         new, result = found
         self.stats.resolved_cycles += 1
@@ -297,6 +295,11 @@ class Simulator:
         self._instant[1].add((new.mode.number, new.contact.side))
         self.state = new
         self.result = result
+
+    def _rest(self, guard: Guard) -> None:
+        """Suppress ``guard`` for ``chatter_dwell`` from now (counted in the stats)."""
+        self._suppressed[guard.name] = self.state.t + self.config.chatter_dwell
+        self.stats.suppressed_cycles += 1
 
     def _settle(self) -> None:
         """Apply transitions that are due at once (cascade), with a chattering limit."""
