@@ -63,7 +63,14 @@ class BalanceParameters:
     :param placement_gain: extra landing distance per m/s of speed error [s].
     :param speed: desired forward CoM speed v_d [m/s] (reached over the first 0.5 s).
     :param speed_gain: k_v [N s/m] of the virtual forward force.
-    :param max_force: bound [N] of that force.
+    :param max_force: bound [N] of that force forward.
+    :param max_brake: bound [N] of that force backward (on ice a backward floor force beyond
+        mu N does not exist: a braking command only slides the support foot forward).
+    :param com_stiffness: support-ankle feedback [N m/m] on the horizontal distance of the
+        centre of mass ahead of the support ankle minus ``com_offset`` (ankle strategy; on a
+        gliding foot it is the only way to keep the CoM over the sole).
+    :param com_damping: its rate feedback [N m s/m] on (v_com - v_ankle).
+    :param com_offset: desired distance [m] of the CoM ahead of the support ankle.
     :param stance_knee: support knee angle [rad] (flexion > 0).
     :param trunk: pelvis pitch phi_4 [rad] held in the world frame (> 0 leans back).
     :param stiffness: PD stiffness [N m/rad] of the support knee, hip and torso.
@@ -90,6 +97,10 @@ class BalanceParameters:
     speed: float = 0.4
     speed_gain: float = 100.0
     max_force: float = 40.0
+    max_brake: float = 40.0
+    com_stiffness: float = 0.0
+    com_damping: float = 0.0
+    com_offset: float = 0.0
     stance_knee: float = 0.1
     trunk: float = 0.0
     stiffness: float = 800.0
@@ -110,10 +121,12 @@ class BalanceParameters:
                   'lift_fraction': (0.01, 1.0), 'descent_start': (0.0, 0.99),
                   'step_length': (0.0, 1.0), 'placement_gain': (-1.0, 1.0),
                   'speed': (-1.0, 2.0), 'stance_knee': (0.0, 1.5), 'trunk': (-0.5, 0.5),
-                  'toe_off_flex': (0.0, 1.5), 'push': (-100.0, 200.0), 'blend': (0.0, 2.0)}
+                  'toe_off_flex': (0.0, 1.5), 'push': (-100.0, 200.0), 'blend': (0.0, 2.0),
+                  'com_offset': (-0.2, 0.2)}
         for name, (low, high) in bounds.items():
             object.__setattr__(self, name, real(name, getattr(self, name), low, high))
-        for name in ('speed_gain', 'max_force', 'stiffness', 'ankle_stiffness',
+        for name in ('speed_gain', 'max_force', 'max_brake', 'com_stiffness', 'com_damping',
+                     'stiffness', 'ankle_stiffness',
                      'ankle_damping', 'swing_stiffness', 'swing_damping',
                      'front_hip_stiffness', 'front_knee_stiffness', 'push_ramp'):
             object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
@@ -175,9 +188,14 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
     pd(4, p.stiffness, 80.0, p.trunk - phi3 - q[9] - q[10])
     pd(8, yaw_stiffness, yaw_damping, 0.0)
     ramp = min(obs.t / 0.5, 1.0)
-    force = min(max(p.speed_gain * (p.speed * ramp - com_v[1]), -p.max_force), p.max_force)
+    force = min(max(p.speed_gain * (p.speed * ramp - com_v[1]), -p.max_brake), p.max_force)
     jac_com_y = pin.jacobianCenterOfMass(sm.model, data, q)[1]
     effort[list(SPEED_JOINTS)] += jac_com_y[list(SPEED_JOINTS)] * force
+    if p.com_stiffness or p.com_damping:
+        ankle = sm.model.getJointId('q2')
+        ankle_v = pin.getVelocity(sm.model, data, ankle, pin.LOCAL_WORLD_ALIGNED).linear
+        effort[2] += (p.com_stiffness * (com[1] - data.oMi[ankle].translation[1] - p.com_offset)
+                      + p.com_damping * (com_v[1] - ankle_v[1]))
     gravity = zeros()
     gravity[mode.active] = dynamics.gravity_terms(obs.contact(), q)
     effort[list(GRAVITY_JOINTS)] += gravity[list(GRAVITY_JOINTS)]
