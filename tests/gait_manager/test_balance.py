@@ -15,7 +15,7 @@ from gait_manager.balance import (
 )
 from gait_manager.errors import GaitManagerError
 from gait_manager.feedforward import WeightTransferParameters, capture_split_force
-from iceskate_sim.robot import GRAVITY
+from iceskate_sim.robot import GRAVITY, SOLE_HEEL_Y
 from iceskate_sim.runner import run
 from iceskate_sim.scene import load_scene, standing_posture
 
@@ -97,3 +97,53 @@ def test_walk_scene_walks(tmp_path):
     assert not metrics['fell'], metrics['failure']
     assert metrics['steps'] >= 4
     assert metrics['forward_distance_m'] > 0.5
+
+
+def _central_difference(f, q: np.ndarray, direction: np.ndarray, h: float = 1e-6) -> float:
+    return (f(q + h * direction) - f(q - h * direction)) / (2.0 * h)
+
+
+def test_ankle_com_feedback_is_the_com_offset_from_the_ankle(make_obs, dynamics):
+    """The com_* terms add k (y_com - y_ankle - offset) + b (v_com - v_ankle) to the support
+    ankle; y_ankle from the heel frame (flat sole), velocities by central differences."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    q[4] += 0.1  # lean the torso forward: CoM ahead of the ankle
+    v = np.zeros(18)
+    v[[0, 2, 3, 4, 9]] = [0.3, 0.2, -0.4, 0.5, 0.1]
+    obs = make_obs(t=1.0, q=q, v=v, mode=3)  # flat sole gliding at 0.3 m/s
+    contact = obs.contact()
+    base = BalanceParameters()
+    k, b, offset = 150.0, 30.0, 0.02
+    with_feedback = replace(base, com_stiffness=k, com_damping=b, com_offset=offset)
+
+    def com_y(x: np.ndarray) -> float:
+        return dynamics.center_of_mass(contact, x)[1]
+
+    def ankle_y(x: np.ndarray) -> float:
+        return dynamics.frame_placement(contact, x, 'support_heel').translation[1] - SOLE_HEEL_Y
+
+    expected = (k * (com_y(q) - ankle_y(q) - offset)
+                + b * (_central_difference(com_y, q, v) - _central_difference(ankle_y, q, v)))
+    assert abs(com_y(q) - ankle_y(q) - offset) > 0.01  # the position term is not trivial
+    difference = (balance_command(obs, dynamics, with_feedback, 20.0, 2.0).effort
+                  - balance_command(obs, dynamics, base, 20.0, 2.0).effort)
+    assert difference[2] == pytest.approx(expected, rel=1e-6)
+    assert np.count_nonzero(difference) == 1
+
+
+def test_braking_force_is_bounded_by_max_brake(make_obs, dynamics):
+    """Far above the desired speed the virtual force is -max_brake: the effort on joints 2-4
+    moves by -max_brake times the CoM Jacobian row y (central differences)."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    v = np.zeros(18)
+    v[0] = 2.0  # gliding much faster than params.speed
+    obs = make_obs(t=1.0, q=q, v=v, mode=3)
+    contact = obs.contact()
+    brake = 25.0
+    free = balance_command(obs, dynamics, replace(BalanceParameters(), max_brake=0.0), 20.0, 2.0)
+    braked = balance_command(obs, dynamics, replace(BalanceParameters(), max_brake=brake),
+                             20.0, 2.0)
+    for j in (2, 3, 4):
+        jac = _central_difference(lambda x: dynamics.center_of_mass(contact, x)[1], q,
+                                  np.eye(18)[j])
+        assert braked.effort[j] - free.effort[j] == pytest.approx(-brake * jac, rel=1e-6)
