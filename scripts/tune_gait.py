@@ -81,25 +81,30 @@ def apply(raw: dict, point: dict[str, float]) -> dict:
     return raw
 
 
-def score(metrics: dict, events: list[dict], duration: float) -> tuple[float, int]:
-    """(score, clean exchanges): see the module docstring."""
+def score(metrics: dict, events: list[dict], duration: float,
+          max_rate: float = float('inf')) -> tuple[float, int]:
+    """(score, clean exchanges): see the module docstring; clean exchanges beyond
+    ``max_rate`` per second count -1/2 each instead of +1 (a cadence bound)."""
     clean, last = 0, -np.inf
     for event in events:
         if event['event'] in ('E6', 'E7'):
             clean += event['t'] - last > CLEAN_GAP
             last = event['t']
     survived = metrics.get('sim_time_s', 0.0) / duration
-    return clean + 2.0 * survived + (0.0 if metrics.get('fell', True) else 3.0), clean
+    excess = max(clean - max_rate * duration, 0.0)
+    return (clean - 1.5 * excess + 2.0 * survived + (0.0 if metrics.get('fell', True) else 3.0),
+            clean)
 
 
 def arm_swing_score(with_yaw: dict, without_yaw: dict, events: list[dict],
-                    duration: float) -> float:
+                    duration: float, max_rate: float = float('inf')) -> float:
     """Walking score of the run with yaw, its clean exchanges counted up to the acceptance
     rate (12 in 15 s), plus, when both runs stood: the ratio of the smaller shoulder
     peak-to-peak with yaw to the larger one without (up to 3), plus twice the anti-phase
     -corr(q11, q14) with yaw."""
-    walking, clean = score(with_yaw, events, duration)
-    value = walking - clean + 3.0 * min(clean / (12.0 * duration / 15.0), 1.0)
+    walking, clean = score(with_yaw, events, duration, max_rate)
+    value = walking - min(clean, max_rate * duration) + 3.0 * min(
+        clean / (12.0 * duration / 15.0), 1.0)
     swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
     if with_yaw.get('fell', True) or without_yaw.get('fell', True) or not swing or not reference:
         return value  # fell, or fewer than 4 steps: no arm swing to score
@@ -118,12 +123,13 @@ def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
             return {'steps': 0, 'failure': str(exc)}, []
 
 
-def evaluate(base: dict, duration: float, objective: str, point: dict[str, float]) -> dict:
+def evaluate(base: dict, duration: float, objective: str, max_rate: float,
+             point: dict[str, float]) -> dict:
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
     metrics, events = run_metrics(raw)
-    value, clean = score(metrics, events, duration)
+    value, clean = score(metrics, events, duration, max_rate)
     entry = {'score': value, 'clean_exchanges': clean, 'steps': metrics['steps'],
              'forward_distance_m': metrics.get('forward_distance_m'),
              'sim_time_s': metrics.get('sim_time_s'), 'failure': metrics.get('failure'),
@@ -132,7 +138,7 @@ def evaluate(base: dict, duration: float, objective: str, point: dict[str, float
         gm = raw['inputs']['gait_manager']
         gm['enabled'] = [name for name in gm['enabled'] if name != 'yaw']
         reference, _ = run_metrics(raw)
-        entry['score'] = arm_swing_score(metrics, reference, events, duration)
+        entry['score'] = arm_swing_score(metrics, reference, events, duration, max_rate)
         entry['arm_swing_without_yaw'] = reference.get('arm_swing')
     entry['wall_s'] = time.perf_counter() - start
     return entry
@@ -149,6 +155,8 @@ def main() -> None:
     parser.add_argument('--sigma', type=float, default=0.15, help='CMA-ES step, unit box')
     parser.add_argument('--jobs', type=int, default=1, help='runs in parallel')
     parser.add_argument('--objective', choices=('exchanges', 'arm_swing'), default='exchanges')
+    parser.add_argument('--max-rate', type=float, default=float('inf'),
+                        help='cadence bound [exchanges/s]: more are penalised')
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
     args = parser.parse_args()
     path = next(d / f'{args.scene}.yaml' for d in scene_dirs()
@@ -167,7 +175,8 @@ def main() -> None:
         while len(results) < args.runs:
             units = strategy.ask() if strategy else \
                 [rng.uniform(size=len(SPACE)) for _ in range(args.jobs)]
-            entries = pool.map(functools.partial(evaluate, base, args.duration, args.objective),
+            entries = pool.map(functools.partial(evaluate, base, args.duration, args.objective,
+                                                 args.max_rate),
                                [point_of(u) for u in units])
             if strategy:
                 strategy.tell(units, [-e['score'] for e in entries])
