@@ -57,12 +57,17 @@ def test_the_skate_glides_and_tips_on_its_edges(skate_runs):
     assert np.all(np.diff(a['q'][:, 0])[same_step] >= -1e-9)
 
 
-def test_the_yaw_input_turns_in_phase_arm_swing_into_anti_phase(skate_runs):
-    """From the 4th step on, without tau8 the shoulders swing in phase (the trunk's pitching
-    drives both arms alike); with tau8 they swing in anti-phase. (The paper's 3x larger
-    swing is not reached: see the README.)"""
-    with_yaw = skate_runs['skate'][0]['arm_swing']
-    without_yaw = skate_runs['skate_no_yaw'][0]['arm_swing']
-    assert without_yaw['corr_q11_q14'] > 0.2
-    assert with_yaw['corr_q11_q14'] < -0.2
-    assert with_yaw['samples'] > 5000
+def test_the_yaw_input_swings_the_arms_in_anti_phase(skate_runs):
+    """From the 4th step on (no arm torque): with tau8 corr(q11, q14) <= -0.5; without it the
+    swing is not anti-phase. Over the second half of that window, once the arm-assist
+    transient has decayed, the swing with tau8 is at least 3x the swing without (the
+    paper's result; over the whole window it is not: see the README)."""
+    runs = {name: skate_runs[name][0] for name in ('skate', 'skate_no_yaw')}
+    for key in ('arm_swing', 'arm_swing_steady'):
+        assert runs['skate'][key]['corr_q11_q14'] <= -0.5, key
+        assert runs['skate_no_yaw'][key]['corr_q11_q14'] > -0.5, key
+    steady, reference = runs['skate']['arm_swing_steady'], runs['skate_no_yaw']['arm_swing_steady']
+    ratio = min(steady['q11_peak_to_peak'], steady['q14_peak_to_peak']) / max(
+        reference['q11_peak_to_peak'], reference['q14_peak_to_peak'])
+    assert ratio >= 3.0
+    assert 2000 < steady['samples'] < runs['skate']['arm_swing']['samples']

@@ -74,6 +74,18 @@ def _runs(values: np.ndarray) -> list[int]:
     return out
 
 
+def _arm_swing(q: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:
+    """Peak-to-peak [rad] of the shoulders q11 and q14 and their correlation over the samples
+    of ``mask`` (None for fewer than 3)."""
+    if np.count_nonzero(mask) <= 2:
+        return None
+    q11, q14 = q[mask, 11], q[mask, 14]
+    corr = (float(np.corrcoef(q11, q14)[0, 1])
+            if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
+    return {'q11_peak_to_peak': float(np.ptp(q11)), 'q14_peak_to_peak': float(np.ptp(q14)),
+            'corr_q11_q14': corr, 'samples': int(np.count_nonzero(mask))}
+
+
 def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: float,
                     error: SimulationError | None) -> dict[str, Any]:
     """The figures of a run (see the README's metrics table)."""
@@ -121,14 +133,9 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     metrics['mode_sequence_per_step'] = {str(k): _runs(modes[steps == k])
                                          for k in range(int(steps.max()) + 1)}
     late = steps >= ARM_SWING_FROM_STEP
-    if np.count_nonzero(late) > 2:
-        q11, q14 = a['q'][late, 11], a['q'][late, 14]
-        corr = (float(np.corrcoef(q11, q14)[0, 1])
-                if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
-        metrics['arm_swing'] = {'q11_peak_to_peak': float(np.ptp(q11)),
-                                'q14_peak_to_peak': float(np.ptp(q14)),
-                                'corr_q11_q14': corr, 'samples': int(np.count_nonzero(late))}
-    else:
-        metrics['arm_swing'] = None
+    metrics['arm_swing'] = _arm_swing(a['q'], late)
+    # the second half (in time) of that window: the swing once the transients have decayed
+    t_half = (t[late][0] + t[-1]) / 2.0 if np.any(late) else np.inf
+    metrics['arm_swing_steady'] = _arm_swing(a['q'], late & (t >= t_half))
     metrics['yaw_range_rad'] = [float(a['q'][:, 8].min()), float(a['q'][:, 8].max())]
     return metrics
