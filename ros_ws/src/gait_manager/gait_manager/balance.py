@@ -12,8 +12,11 @@ observation only (world pitch angles phi_k = q1 + ... + q_k along the support-ro
   (world frame), with the swing-hip torque fed forward to cancel its reaction on the pelvis;
 * support knee q3 and ankle q2: PD to ``stance_knee`` and -stance_knee/2 (hip over the
   ankle), blended from the current angles over ``blend`` s after each exchange;
-* speed: a virtual horizontal force F = k_v (v_d - v_com) (|F| <= ``max_force``) at the
-  centre of mass, realised as J_com,y^T F on the support joints 2, 3, 4;
+* speed: a virtual horizontal force F = k_v (v_d - v_com) (-``max_brake`` <= F <=
+  ``max_force``) at the centre of mass, realised as J_com,y^T F on the support joints 2, 3, 4
+  (on ice a braking F only slides the support foot forward, hence its own bound);
+* ankle strategy: the support ankle adds k_c (y_com - y_ankle - ``com_offset``) + b_c (v_com -
+  v_ankle), which keeps the centre of mass over a gliding sole;
 * gravity compensation g(q) on joints 2, 3, 4, 9, 10; torso-yaw centring spring on 8;
 * swing leg in the air: the ankle follows a path from behind the hip to the landing point
   y_land = y_com + step_length/2 + placement_gain (v_com - v_d): it rises by ``clearance`` over
