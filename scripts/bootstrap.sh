@@ -52,9 +52,12 @@ else
   command -v "$PYTHON" >/dev/null || die "no '$PYTHON' on PATH (Python 3.11 is needed)"
   "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' \
     || die "$PYTHON is $("$PYTHON" -V 2>&1); requirements.lock is for Python 3.11 (set PYTHON=...)"
-  log "creating $VENV from requirements.lock (uv $UV_VERSION)"
+  # The interpreter behind $PYTHON, resolved before the old venv goes: from a shell where
+  # `. ./env.sh` activated it, python3 *is* .venv/bin/python3.
+  base_python=$("$PYTHON" -c 'import sys; print(getattr(sys, "_base_executable", sys.executable))')
+  log "creating $VENV from requirements.lock (uv $UV_VERSION, $base_python)"
   rm -rf "$VENV"
-  "$PYTHON" -m venv "$VENV"
+  "$base_python" -m venv "$VENV"
   "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check "uv==$UV_VERSION"
   "$VENV/bin/uv" pip sync --python "$VENV/bin/python" "$LOCK"
   echo "$lock_hash" >"$LOCK_STAMP"
