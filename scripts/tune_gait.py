@@ -54,8 +54,6 @@ SPACE = {
     'weight_transfer.share_min': (0.0, 1.0), 'weight_transfer.ramp_time': (0.1, 0.6),
 }
 CLEAN_GAP = 0.2  # s: exchanges closer than this to the previous one are chatter
-
-
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
 
