@@ -50,8 +50,10 @@ from iceskate_sim.runner import advance_and_sample, last_event_before, scene_met
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
 
-#: Live state topics in publishing order: what the controllers wait for first.
-STATE_TOPICS = ('/joint_states', '/gait_state', '/head_pose', '/clock')
+#: Live state topics the controllers read: published first, as soon as the state is known.
+CONTROL_TOPICS = ('/joint_states', '/gait_state')
+#: Every live state topic, in publishing order.
+STATE_TOPICS = CONTROL_TOPICS + ('/head_pose', '/clock')
 
 
 def ordered_sources(scene: Scene) -> tuple[str, ...]:
@@ -99,7 +101,8 @@ class LockstepSession:
             out.mkdir(parents=True, exist_ok=True)
         if bag:
             self.recorder = BagRecorder(pathlib.Path(bag), scene_metadata(scene),
-                                        self.robot.urdf_path.read_text(encoding='utf-8'))
+                                        self.robot.urdf_path.read_text(encoding='utf-8'),
+                                        background=True)
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
         self.metrics: dict[str, Any] | None = None
         self._restart()
@@ -113,7 +116,7 @@ class LockstepSession:
         self._commands: dict[str, JointCommand] = {}
         self._stamps: dict[str, int] = {}
         self._held = HeldCommand.torque_only(np.zeros(18))
-        self._unrecorded: list[Sample] = []
+        self._unrecorded: list[tuple[Sample, Any]] = []  # (sample, observation) to record
         self._wall_start: float | None = None
 
     # ----------------------------------------------------------------------------- state
@@ -142,8 +145,7 @@ class LockstepSession:
         sample = Sample(s, self.sim.result, {'held': self._held.torque(s.q, s.v)},
                         placement.translation, placement.rotation,
                         last_event_before(self.sim, s.t))
-        messages = self.factory.messages(sample)
-        return {topic: messages[topic] for topic in STATE_TOPICS}
+        return self.factory.messages(sample, STATE_TOPICS)
 
     def serialize(self, topic: str, message: Any) -> bytes:
         """CDR bytes of a bag topic's message (what the bag holds; publishable raw)."""
@@ -200,8 +202,7 @@ class LockstepSession:
         except SimulationError as exc:
             self.error = exc
             return None
-        self.trajectory.append(sample, self._psi_d(obs))
-        self._unrecorded.append(sample)
+        self._unrecorded.append((sample, obs))
         self.periods += 1
         if self.lockstep:
             self._commands.clear()
@@ -219,9 +220,11 @@ class LockstepSession:
         return desired_head_pose(self._vl, obs.t, psi, self._psi_initial, offset)
 
     def flush(self) -> None:
-        """Write the samples not yet in the bag (call it while the controllers compute)."""
-        if self.recorder is not None:
-            for sample in self._unrecorded:
+        """Append the samples of the periods stepped to the trajectory and hand them to the bag
+        (off the lockstep's critical path: call it while the controllers compute)."""
+        for sample, obs in self._unrecorded:
+            self.trajectory.append(sample, self._psi_d(obs))
+            if self.recorder is not None:
                 self.recorder.write(sample)
         self._unrecorded.clear()
 
@@ -372,13 +375,19 @@ class LockstepLoop:
         return False
 
     def publish_state(self, again: bool = False) -> None:
-        """Publish the live state at t_k (``again``: the same t_k once more)."""
-        for topic, message in self.session.state_messages().items():
-            self._publish(topic, message)
+        """Publish the live state at t_k (``again``: the same t_k once more): the controllers'
+        topics first; then, while they compute, the periods stepped are recorded (trajectory,
+        bag) and the other topics go out."""
+        messages = self.session.state_messages()
+        for topic in CONTROL_TOPICS:
+            self._publish(topic, messages.pop(topic))
         self.monitor.published(again)
+        self.session.flush()
+        for topic, message in messages.items():
+            self._publish(topic, message)
 
     def step(self) -> None:
-        """One period; then the next state out and the bag written (while controllers compute)."""
+        """One period, then the next state out (``publish_state``)."""
         start = time.perf_counter()
         self.session.step()
         self.monitor.samples['physics'].append(time.perf_counter() - start)
@@ -386,7 +395,6 @@ class LockstepLoop:
         if self.session.done:
             return self.finish()
         self.publish_state()
-        self.session.flush()
 
     def take(self, msg: Any) -> str | None:
         """Take an EffortCommand message; step once every source has answered t_k (lockstep).
