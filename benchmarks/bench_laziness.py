@@ -40,7 +40,7 @@ from typing import Any
 from bench_work_precision import REPO_ROOT, machine_info, simulate
 import numpy as np
 
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.control_stack import ControlStack
 from iceskate_sim.robot import load_robot
 from iceskate_sim.scene import Scene, load_scene
@@ -57,14 +57,17 @@ class EagerStack(ControlStack):
                                  enabled=frozenset(SOURCES) - self.gait_manager.enabled)
                          if self.gait_manager is not None else None)
 
-    def commands(self, obs: Any) -> dict[str, JointCommand]:
-        """The scene's commands, plus every disabled source computed and zero-weighted."""
+    def commands(self, obs: Any) -> dict[str, ControllerCommand]:
+        """The scene's commands, with every disabled source computed and added zero-weighted
+        into the gait manager's sum."""
         from gait_manager.law import gait_manager_commands
         commands = super().commands(obs)
-        if self.disabled is not None and self.disabled.enabled:
-            for source, command in gait_manager_commands(obs, self.dynamics,
-                                                         self.disabled).items():
-                commands[source] = JointCommand(0.0 * command.effort)
+        if self.disabled is not None and self.disabled.enabled and 'gait_manager' in commands:
+            gm = commands['gait_manager']
+            zeros = [JointCommand(0.0 * c.effort) for c in
+                     gait_manager_commands(obs, self.dynamics, self.disabled).values()]
+            commands['gait_manager'] = replace(gm, command=JointCommand.total([gm.command,
+                                                                               *zeros]))
         return commands
 
 

@@ -157,7 +157,7 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
             commands = stack.commands(sim.observation())
             push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)),
                         None)
-            sim.advance(HeldCommand.combine(commands.values()), push)
+            sim.advance(HeldCommand.of_controllers(commands.values()), push)
             samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(),
                             sim.state.contact, sim.state.step_index))
             if sim.ended is not None:

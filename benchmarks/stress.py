@@ -197,7 +197,7 @@ def scene_case(edit: Callable[[dict], None], base: str = 'stand',
         stack = ControlStack(scene, robot, sim.observation())
 
         def control(s: Simulator) -> HeldCommand:
-            return HeldCommand.combine(stack.commands(s.observation()).values())
+            return HeldCommand.of_controllers(stack.commands(s.observation()).values())
         return sim, control, scene
     return build
 
@@ -444,7 +444,7 @@ def long_stand(duration: float, window: float, robot: Any, wall_limit: float,
                 commands = stack.commands(sim.observation())
                 push = next(((p.frame, np.array(p.force)) for p in scene.pushes
                              if p.active(t)), None)
-                sim.advance(HeldCommand.combine(commands.values()), push)
+                sim.advance(HeldCommand.of_controllers(commands.values()), push)
                 psi = sim.dynamics.head_pose(sim.state.contact, sim.state.q)[0]
                 head_err = max(head_err, float(np.linalg.norm((stack.last_psi_d - psi)[:2])))
                 residual = max(residual, sim.stats.max_constraint_residual)

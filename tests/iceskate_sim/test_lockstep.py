@@ -1,6 +1,7 @@
 """LockstepSession (ROS-free): the simulator side of the graph gives the headless run.
 
-Commands go through EffortCommand/JointState/GaitState CDR bytes and back, as over ROS.
+The state goes through JointState/GaitState CDR bytes and back, as over ROS; each controller
+answers with one ControllerCommand (its sources summed, with the breakdown).
 """
 
 from dataclasses import replace
@@ -10,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import LockstepSession, ordered_sources
+from iceskate_sim.lockstep import LockstepSession, ordered_sources, sources_by_controller
 from iceskate_sim.ros_conversions import observation_from_messages, seconds_to_ns
 from iceskate_sim.runner import run
 from iceskate_sim.scene import load_scene
@@ -39,9 +40,18 @@ def controllers(scene, robot):
         if not psi0:
             psi0.append(dynamics.head_pose(obs.contact(), obs.q)[0])
         task = visual_lifting(obs, dynamics, vl, psi0[0], head_offset(obs, dynamics, gm))
-        return {'visual_lifting': JointCommand(task.tau), **gait_manager_commands(obs, dynamics,
-                                                                                 gm)}
+        return {'visual_lifting': ControllerCommand.of(
+                    {'visual_lifting': JointCommand(task.tau)}, obs.q, obs.v),
+                'gait_manager': ControllerCommand.of(gait_manager_commands(obs, dynamics, gm),
+                                                     obs.q, obs.v)}
     return answer
+
+
+def zero(scene, controller, value=0.0):
+    """A command of ``controller`` applying ``value`` everywhere, with its breakdown."""
+    sources = sources_by_controller(scene)[controller]
+    return ControllerCommand(JointCommand(np.full(18, value)),
+                             {s: np.zeros(18) for s in sources})
 
 
 def drive(session, answer):
@@ -52,8 +62,8 @@ def drive(session, answer):
             ('/joint_states', 'sensor_msgs/msg/JointState'),
             ('/gait_state', 'iceskate_interfaces/msg/GaitState')))
         obs = observation_from_messages(js, gs)
-        for source, command in answer(obs).items():
-            assert session.offer(source, seconds_to_ns(obs.t), command)
+        for controller, command in answer(obs).items():
+            assert session.offer(controller, seconds_to_ns(obs.t), command)
         assert session.missing() == []
         session.step()
         session.flush()
@@ -76,26 +86,49 @@ def test_lockstep_session_reproduces_the_headless_run(scene, tmp_path):
     assert (tmp_path / 'ros' / 'bag' / 'metadata.yaml').is_file()
 
 
-def test_offer_refuses_unknown_sources_and_stale_or_future_stamps(scene):
+def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
     session = LockstepSession(scene)
-    zero = JointCommand(np.zeros(18))
-    with pytest.raises(SimulationError, match="unknown source 'yaw'"):
-        session.offer('yaw', 0, zero)
+    assert session.controllers == ('visual_lifting', 'gait_manager')
+    gm = zero(scene, 'gait_manager')
+    with pytest.raises(SimulationError, match="unknown source 'posture'"):
+        session.offer('posture', 0, gm)  # a source is not a sender: its controller is
     with pytest.raises(SimulationError, match='in the future'):
-        session.offer('posture', 1_000_000, zero)
-    for source in session.sources:
-        assert session.offer(source, 0, zero)
-    assert not session.offer('posture', 0, JointCommand(np.ones(18)))  # repeat: ignored
+        session.offer('gait_manager', 1_000_000, gm)
+    for controller in session.controllers:
+        assert session.offer(controller, 0, zero(scene, controller))
+    assert not session.offer('gait_manager', 0, zero(scene, 'gait_manager', 1.0))  # repeat
     session.step()
-    assert session.missing() == list(session.sources)
-    assert not session.offer('posture', 0, zero)  # a late repeat of t_0: ignored too
+    assert session.missing() == list(session.controllers)
+    assert not session.offer('gait_manager', 0, gm)  # a late repeat of t_0: ignored too
     with pytest.raises(SimulationError, match='without commands'):
         session.step()
-    for source in session.sources:
-        session.offer(source, 1_000_000, zero)
+    for controller in session.controllers:
+        session.offer(controller, 1_000_000, zero(scene, controller))
     session.step()
-    with pytest.raises(SimulationError, match="stale command of 'posture' stamped 0.0 s"):
-        session.offer('posture', 0, zero)
+    with pytest.raises(SimulationError, match="stale command of 'gait_manager' stamped 0.0 s"):
+        session.offer('gait_manager', 0, gm)
+
+
+def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
+    session = LockstepSession(scene)
+    assert sources_by_controller(scene)['gait_manager'] == ('posture', 'weight_transfer')
+    swapped = ControllerCommand(JointCommand(np.zeros(18)),
+                                {'weight_transfer': np.zeros(18), 'posture': np.zeros(18)})
+    with pytest.raises(SimulationError, match=r"breaks down into sources \['weight_transfer', "
+                                              r"'posture'\]; .* runs \['posture', "
+                                              r"'weight_transfer'\]"):
+        session.offer('gait_manager', 0, swapped)
+    with pytest.raises(SimulationError, match='breaks down into sources'):  # none given
+        session.offer('gait_manager', 0, ControllerCommand(JointCommand(np.zeros(18)), {}))
+    # a single-source controller may leave it out: its effort at the state is recorded
+    pd = JointCommand(np.ones(18), np.full(18, 10.0), np.full(18, 2.0), np.full(18, 0.1))
+    assert session.offer('visual_lifting', 0, ControllerCommand(pd, {}))
+    session.offer('gait_manager', 0, zero(scene, 'gait_manager'))
+    state = session.sim.state
+    session.step()
+    session.flush()
+    recorded = session.trajectory.arrays()['tau_visual_lifting'][0]
+    np.testing.assert_array_equal(recorded, pd.torque(state.q, state.v))
 
 
 def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path):
@@ -104,8 +137,8 @@ def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path
         recording.reset()
     recording.finish()
     session = LockstepSession(scene)
-    for source in session.sources:
-        session.offer(source, 0, JointCommand(np.zeros(18)))
+    for controller in session.controllers:
+        session.offer(controller, 0, zero(scene, controller))
     session.step()
     session.reset()
     assert session.t_ns == 0 and session.periods == 0 and len(session.trajectory) == 0
@@ -113,10 +146,10 @@ def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path
 
 def test_free_running_holds_the_latest_command(scene):
     session = LockstepSession(scene, lockstep=False)
-    assert session.missing() == list(session.sources)
+    assert session.missing() == list(session.controllers)
     session.step()  # no command yet: nothing applied
-    session.offer('posture', 0, JointCommand(np.zeros(18)))  # late but not older: taken
+    session.offer('gait_manager', 0, zero(scene, 'gait_manager'))  # late but not older: taken
     session.step()
-    with pytest.raises(SimulationError, match='stale'):  # older than the source's last
-        session.offer('posture', -1, JointCommand(np.zeros(18)))
+    with pytest.raises(SimulationError, match='stale'):  # older than the controller's last
+        session.offer('gait_manager', -1, zero(scene, 'gait_manager'))
     assert session.periods == 2

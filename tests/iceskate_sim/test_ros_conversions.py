@@ -1,4 +1,4 @@
-"""ros_conversions: stamps, Observation from messages, EffortCommand <-> JointCommand (ROS-free).
+"""ros_conversions: stamps, Observation from messages, EffortCommand <-> ControllerCommand.
 
 The messages are rosbags objects (the conversions are duck-typed on fields, so rclpy messages
 behave the same; the integration tests feed those).
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import MessageFactory, Sample
 from iceskate_sim.robot import COORDINATE_NAMES, load_robot
@@ -98,25 +98,35 @@ def test_observation_from_messages_raises_on_mismatched_stamps(factory, simulato
         observation_from_messages(msgs['/joint_states'], msgs['/gait_state'])
 
 
-def test_command_round_trips_with_and_without_impedance(factory):
+def test_command_round_trips_with_and_without_impedance_and_breakdown(factory):
     plain = JointCommand(np.linspace(-1, 1, 18))
     pd = JointCommand(np.ones(18), np.full(18, 800.0), np.full(18, 80.0), np.linspace(0, 1, 18))
-    for command in (plain, pd):
-        msg = factory.effort(0.0, 'posture', np.zeros(18))
-        for key, value in command_fields(command).items():
+    q, v = np.linspace(-0.2, 0.3, 18), np.linspace(1.0, -1.0, 18)
+    for sources in ({'posture': pd}, {'posture': pd, 'yaw': plain}, {}):
+        answer = (ControllerCommand.of(sources, q, v) if sources
+                  else ControllerCommand(plain, {}))
+        msg = factory.effort(0.0, 'gait_manager', np.zeros(18))
+        for key, value in command_fields(answer).items():
             setattr(msg, key, value)
         back = command_from_message(msg)
-        np.testing.assert_array_equal(back.effort, command.effort)
-        assert back.has_impedance == command.has_impedance
-        if command.has_impedance:
-            np.testing.assert_array_equal(back.reference, command.reference)
+        np.testing.assert_array_equal(back.command.effort, answer.command.effort)
+        assert back.command.has_impedance == answer.command.has_impedance
+        if answer.command.has_impedance:
+            np.testing.assert_array_equal(back.command.reference, answer.command.reference)
+        assert list(back.source_efforts) == list(answer.source_efforts)
+        for name, tau in answer.source_efforts.items():
+            np.testing.assert_array_equal(back.source_efforts[name], tau)
 
 
 def test_command_with_a_subset_of_names_in_any_order(factory):
     msg = effort_message(factory, names=['q3', 'y0'], effort=[2.0, 5.0])
-    command = command_from_message(msg)
+    msg.source_names, msg.source_efforts = ['posture', 'yaw'], np.array([1.0, 2.0, 3.0, 4.0])
+    answer = command_from_message(msg)
+    command = answer.command
     assert command.effort[3] == 2.0 and command.effort[0] == 5.0
     assert np.count_nonzero(command.effort) == 2
+    assert answer.source_efforts['yaw'][3] == 3.0 and answer.source_efforts['yaw'][0] == 4.0
+    assert np.count_nonzero(answer.source_efforts['posture']) == 2
 
 
 @pytest.mark.parametrize('change, match', [
@@ -129,11 +139,21 @@ def test_command_with_a_subset_of_names_in_any_order(factory):
      'must be >= 0'),
     ({'stiffness': [1.0] * 18, 'damping': [0.0] * 3, 'position_reference': [0.0] * 18},
      'damping has 3 entries'),
+    ({'source_names': ['posture'], 'source_efforts': [0.0] * 17},
+     'source_efforts has 17 entries for 1 source names x 18 joint names'),
+    ({'source_names': ['yaw', 'yaw'], 'source_efforts': [0.0] * 36},
+     r"repeated source names in \['yaw', 'yaw'\]"),
+    ({'source_names': ['yaw'], 'source_efforts': [float('inf')] + [0.0] * 17},
+     'source_efforts is not finite'),
 ])
 def test_command_from_message_raises_naming_the_problem(factory, change, match):
     names = change.pop('names', None)
     effort = change.pop('effort', None if names is None else [0.0] * len(names))
+    breakdown = {k: change.pop(k) for k in ('source_names', 'source_efforts') if k in change}
     msg = effort_message(factory, names=names, effort=effort, **change)
+    if breakdown:
+        msg.source_names = breakdown['source_names']
+        msg.source_efforts = np.asarray(breakdown['source_efforts'], dtype=float)
     with pytest.raises(SimulationError, match="source 'posture'.*" + match):
         command_from_message(msg)
 

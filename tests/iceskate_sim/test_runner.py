@@ -97,8 +97,9 @@ def test_control_stack_computes_only_the_scene_sources():
     robot = load_robot()
     sim = Simulator(robot, scene.simulator, scene.initial)
     commands = ControlStack(scene, robot, sim.observation()).commands(sim.observation())
-    assert set(commands) == set(scene.sources)
-    assert commands['posture'].has_impedance
+    assert list(commands) == ['visual_lifting', 'gait_manager']
+    assert {s for c in commands.values() for s in c.source_efforts} == set(scene.sources)
+    assert commands['gait_manager'].command.has_impedance  # the posture's
 
 
 def test_main_reports_a_bad_scene_and_exits_non_zero(tmp_path, capsys):

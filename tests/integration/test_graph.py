@@ -20,7 +20,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 from rosbags.highlevel import AnyReader  # noqa: E402
 
 from iceskate_sim.graph import run_graph  # noqa: E402
-from iceskate_sim.lockstep import ordered_sources  # noqa: E402
+from iceskate_sim.lockstep import sources_by_controller  # noqa: E402
 from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
 from iceskate_sim.scene import load_scene  # noqa: E402
 
@@ -79,7 +79,7 @@ def test_live_topics_carry_every_instant_with_matching_stamps(graph_run):
     for topic in ('/gait_state', '/head_pose'):
         assert [stamp_to_ns(msg.header.stamp) for msg in m[topic]][-len(stamps):] == stamps
     assert {msg.header.frame_id for msg in m['/head_pose']} == {'world'}
-    sources = set(ordered_sources(load_scene(TINY)))
+    sources = set(sources_by_controller(load_scene(TINY)))  # one command per node
     answers: dict[int, set[str]] = {}
     for cmd in m['/effort_commands']:
         answers.setdefault(stamp_to_ns(cmd.header.stamp), set()).add(cmd.source)

@@ -63,7 +63,8 @@ def make_messages(typestore, step: int):
     effort = t[EFFORT_COMMAND](
         header=header, source='visual_lifting', joint_names=COORDINATES,
         effort=np.linspace(-3.0, 3.0, n) + step, stiffness=np.full(n, 800.0),
-        damping=np.full(n, 16.0), position_reference=np.linspace(-0.1, 0.1, n))
+        damping=np.full(n, 16.0), position_reference=np.linspace(-0.1, 0.1, n),
+        source_names=['posture', 'yaw'], source_efforts=np.linspace(-1.0, 1.0, 2 * n))
     gait_state = t[GAIT_STATE](
         header=header, mode=1 + step % 20, support_side=step % 2, pivot=step % 3,
         step_index=step, y0_active=step % 2 == 0, q1_active=step % 3 != 0,
@@ -80,7 +81,7 @@ def make_messages(typestore, step: int):
         efforts=[effort, t[EFFORT_COMMAND](
             header=header, source='gait_manager', joint_names=['q8', 'q9'],
             effort=np.array([1.5, -1.5]), stiffness=np.zeros(0), damping=np.zeros(0),
-            position_reference=np.zeros(0))])
+            position_reference=np.zeros(0), source_names=[], source_efforts=np.zeros(0))])
     return gait_state, effort, dynamics
 
 

@@ -1,6 +1,9 @@
 """Joint commands: a feed-forward effort plus an optional joint impedance.
 
-A controller answers each control instant with a ``JointCommand`` per source. The simulator
+Each input source (visual lifting, posture, yaw, ...) gives a ``JointCommand`` per control
+instant; a controller node sums its sources into one ``ControllerCommand`` (what it sends),
+which also carries each source's generalized force at the state answered (what is recorded).
+The simulator
 holds it over the control period (zero-order hold of the *command*) and evaluates
 ``effort + stiffness * (reference - q) - damping * v`` at every physics step, as a real joint
 drive runs its PD loop faster than the controller that sets it. Stiff PD terms on the light
@@ -63,6 +66,45 @@ class JointCommand:
             return self.effort.copy()
         return self.effort + self.stiffness * (self.reference - q) - self.damping * v
 
+    @classmethod
+    def total(cls, commands: Iterable[JointCommand]) -> JointCommand:
+        """One command applying the sum of ``commands``: efforts, stiffnesses and dampings add
+        up; the reference is the stiffness-weighted mean (0 where no stiffness acts)."""
+        commands = list(commands)
+        effort = np.sum([c.effort for c in commands], axis=0) if commands else None
+        impedance = [c for c in commands if c.has_impedance]
+        if not impedance:
+            return cls(effort)
+        if len(impedance) == 1:
+            only = impedance[0]
+            return cls(effort, only.stiffness, only.damping, only.reference)
+        stiffness = np.sum([c.stiffness for c in impedance], axis=0)
+        pull = np.sum([c.stiffness * c.reference for c in impedance], axis=0)
+        reference = np.divide(pull, stiffness, out=np.zeros(N_COORDINATES),
+                              where=stiffness > 0.0)
+        return cls(effort, stiffness, np.sum([c.damping for c in impedance], axis=0),
+                   reference)
+
+
+@dataclass(frozen=True)
+class ControllerCommand:
+    """What one controller sends for one control instant.
+
+    :param command: the sum of its sources' commands (what the simulator applies).
+    :param source_efforts: the generalized force [N m] each source applies at the state the
+        controller answered, by source name, in the controller's order (what is recorded).
+    """
+
+    command: JointCommand
+    source_efforts: dict[str, np.ndarray]
+
+    @classmethod
+    def of(cls, commands: dict[str, JointCommand], q: np.ndarray, v: np.ndarray,
+           ) -> ControllerCommand:
+        """The controller command of its sources' ``commands`` at the state (q, v) answered."""
+        return cls(JointCommand.total(commands.values()),
+                   {source: c.torque(q, v) for source, c in commands.items()})
+
 
 @dataclass(frozen=True)
 class HeldCommand:
@@ -85,6 +127,11 @@ class HeldCommand:
                 stiffness += c.stiffness
                 damping += c.damping
         return cls(bias, stiffness, damping)
+
+    @classmethod
+    def of_controllers(cls, commands: Iterable[ControllerCommand]) -> HeldCommand:
+        """Sum the commands of the controllers (each already the sum of its sources)."""
+        return cls.combine(c.command for c in commands)
 
     @classmethod
     def torque_only(cls, tau: np.ndarray) -> HeldCommand:

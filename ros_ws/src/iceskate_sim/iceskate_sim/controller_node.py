@@ -2,12 +2,14 @@
 
 A ``ControllerNode`` subscribes ``joint_states`` and ``gait_state``, pairs the two messages of one
 instant by stamp (``StatePairer``), rebuilds the ``Observation``, asks the subclass's law
-(``compute``) for its commands and publishes one ``EffortCommand`` per source on
-``effort_commands``, stamped with the state's stamp (the lockstep key); each source's message
-object is made once and refilled at every instant. Parameters: ``scene``
-(name or path; the laws' parameters come from it) and ``use_sim_time`` (true unless overridden).
+(``compute``) for the command of each of its sources and publishes their sum, with the
+per-source breakdown, as one ``EffortCommand`` (source: the node's name) on
+``effort_commands``, stamped with the state's stamp (the lockstep key): one message per instant
+and node keeps the lockstep's deliveries few. The message object is made once and refilled.
+Parameters: ``scene`` (name or path; the laws' parameters come from it) and ``use_sim_time``
+(true unless overridden).
 A law failing at one instant logs an error and sends nothing: the simulator's timeout then names
-the source.
+the node.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.node_support import STATE_QOS, ConfigError, check_unknown, declare
@@ -56,7 +58,7 @@ class ControllerNode(Node):
         if not self.active:
             self.get_logger().warning(f'scene {scene.name!r} does not run {node_name}: idle')
         self._pairer = StatePairer()
-        self._messages: dict[str, EffortCommand] = {}
+        self._message = EffortCommand(source=node_name)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_QOS)
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state, STATE_QOS)
@@ -86,14 +88,13 @@ class ControllerNode(Node):
             return
         ns, joint_state, gait_state = pair
         try:
-            commands = self.compute(observation_from_messages(joint_state, gait_state))
+            obs = observation_from_messages(joint_state, gait_state)
+            commands = self.compute(obs)
         except (SimulationError, *self.law_errors) as exc:
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
             return
-        for source, command in commands.items():
-            msg = self._messages.get(source) or self._messages.setdefault(
-                source, EffortCommand(source=source))
-            for field, value in command_fields(command).items():
-                setattr(msg, field, value)
-            set_stamp(msg.header.stamp, ns)
-            self._publisher.publish(msg)
+        msg = self._message
+        for field, value in command_fields(ControllerCommand.of(commands, obs.q, obs.v)).items():
+            setattr(msg, field, value)
+        set_stamp(msg.header.stamp, ns)
+        self._publisher.publish(msg)

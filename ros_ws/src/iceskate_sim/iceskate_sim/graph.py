@@ -26,7 +26,7 @@ import time
 from typing import Any
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import node_of_source, ordered_sources
+from iceskate_sim.lockstep import sources_by_controller
 from iceskate_sim.scene import load_scene
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
@@ -89,7 +89,7 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
     params.update(simulator_parameters)
     specs = [NodeSpec('iceskate_sim', 'simulator', 'iceskate_sim.simulator_node', 'SimulatorNode',
                       params)]
-    for node in sorted({node_of_source(s) for s in ordered_sources(scene)}, reverse=True):
+    for node in sorted(sources_by_controller(scene), reverse=True):
         specs.append(NodeSpec(node, node, f'{node}.{node}_node', CONTROLLER_CLASSES[node],
                               {'scene': scene_arg}))
     return specs

@@ -1,12 +1,12 @@
 """The simulator side of the ROS graph, ROS-free: commands in, one control period, sample out.
 
 ``LockstepSession`` is what the simulator node drives. At every control instant t_k it gives the
-state messages to publish (``state_messages``), takes the controllers' commands
-(``offer``: checked source, stamp and content), and once every required source has answered
-(``missing()`` is empty) integrates one period (``step``) exactly as the headless runner does:
-the same zero-order hold of the summed commands, the same push, the same ``Sample`` appended to
-the same ``Trajectory`` and written to the same bag. So a lockstep ROS run gives the headless
-trajectory and ``metrics.json``.
+state messages to publish (``state_messages``), takes the controllers' commands (``offer``: one
+per controller node, its sources summed; checked sender, stamp, content and breakdown), and once
+every controller the scene runs has answered (``missing()`` is empty) integrates one period
+(``step``) exactly as the headless runner does: the same zero-order hold of the summed
+commands, the same push, the same ``Sample`` appended to the same ``Trajectory`` and written to
+the same bag. So a lockstep ROS run gives the headless trajectory and ``metrics.json``.
 
 Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
 *starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
@@ -14,7 +14,7 @@ them. The live topics at t_k are published *before* those commands exist: their 
 multipliers are those of the command still held from the previous period, evaluated at t_k (what
 a real robot's sensors would report). Positions, velocities and the gait state agree.
 
-In the free-running mode (``lockstep=False``) each source's latest command is held until it
+In the free-running mode (``lockstep=False``) each controller's latest command is held until it
 sends a newer one; stamps may lag the state but never lead it.
 
 ``LoopMonitor`` is the wall-clock side of the node's loop: the command timeout, the resend of a
@@ -27,7 +27,7 @@ the run; the node gives it a publish function and a report function and wires th
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 import json
 import pathlib
 import time
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import HeldCommand, JointCommand
+from iceskate_sim.command import ControllerCommand, HeldCommand
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
@@ -67,8 +67,17 @@ def ordered_sources(scene: Scene) -> tuple[str, ...]:
 
 
 def node_of_source(source: str) -> str:
-    """Name of the node that publishes a source's commands."""
+    """Name of the controller node whose command holds a source."""
     return 'visual_lifting' if source == 'visual_lifting' else 'gait_manager'
+
+
+def sources_by_controller(scene: Scene) -> dict[str, tuple[str, ...]]:
+    """The scene's controller nodes, in order, each with its sources in order."""
+    out: dict[str, tuple[str, ...]] = {}
+    for source in ordered_sources(scene):
+        node = node_of_source(source)
+        out[node] = out.get(node, ()) + (source,)
+    return out
 
 
 class LockstepSession:
@@ -91,6 +100,8 @@ class LockstepSession:
         self.robot = load_robot()
         self.sim = Simulator(self.robot, scene.simulator, scene.initial)
         self.sources = ordered_sources(scene)
+        self._breakdown = sources_by_controller(scene)
+        self.controllers = tuple(self._breakdown)
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         self._vl = (VisualLiftingParameters.from_dict(scene.visual_lifting or {})
                     if scene.visual_lifting is not None else None)
@@ -113,7 +124,7 @@ class LockstepSession:
         self.trajectory = Trajectory()
         self.periods = 0
         self.error: SimulationError | None = None
-        self._commands: dict[str, JointCommand] = {}
+        self._commands: dict[str, ControllerCommand] = {}
         self._stamps: dict[str, int] = {}
         self._held = HeldCommand.torque_only(np.zeros(18))
         self._unrecorded: list[tuple[Sample, Any]] = []  # (sample, observation) to record
@@ -128,7 +139,7 @@ class LockstepSession:
     @property
     def nodes(self) -> set[str]:
         """Names of the controller nodes the scene's sources need."""
-        return {node_of_source(s) for s in self.sources}
+        return set(self.controllers)
 
     @property
     def done(self) -> bool:
@@ -152,35 +163,50 @@ class LockstepSession:
         return bytes(self.factory.typestore.serialize_cdr(message, TOPICS[topic]))
 
     # -------------------------------------------------------------------------- commands
-    def offer(self, source: str, stamp_ns: int, command: JointCommand) -> bool:
-        """Take a source's command; False for a repeat of the source's last stamp (ignored).
+    def offer(self, controller: str, stamp_ns: int, command: ControllerCommand) -> bool:
+        """Take a controller's command; False for a repeat of its last stamp (ignored).
 
-        :raises SimulationError: for an unknown source, or a stamp that is stale (before
-            t_k, or in free-running mode before the source's last command) or in the future.
+        An empty breakdown is the effort of a controller's only source, named like it,
+        evaluated at the current state.
+
+        :raises SimulationError: for an unknown controller, a breakdown that does not name the
+            controller's sources in order, or a stamp that is stale (before t_k, or in
+            free-running mode before the controller's last command) or in the future.
         """
-        if source not in self.sources:
-            raise SimulationError(f'command from unknown source {source!r}; scene '
-                                  f'{self.scene.name!r} runs {list(self.sources)}')
+        if controller not in self.controllers:
+            raise SimulationError(f'command from unknown source {controller!r}; scene '
+                                  f'{self.scene.name!r} runs the controllers '
+                                  f'{list(self.controllers)}')
+        expected = self._breakdown[controller]
+        if not command.source_efforts and expected == (controller,):
+            state = self.sim.state
+            command = replace(command, source_efforts={
+                controller: command.command.torque(state.q, state.v)})
+        if tuple(command.source_efforts) != expected:
+            raise SimulationError(f'command of {controller!r} breaks down into sources '
+                                  f'{list(command.source_efforts)}; scene {self.scene.name!r} '
+                                  f'runs {list(expected)} on it')
         now = self.t_ns
         if stamp_ns > now:
-            raise SimulationError(f'command of {source!r} stamped {ns_to_seconds(stamp_ns)} s '
-                                  f'is in the future (simulation at {ns_to_seconds(now)} s)')
-        previous = self._stamps.get(source, -1)
+            raise SimulationError(f'command of {controller!r} stamped '
+                                  f'{ns_to_seconds(stamp_ns)} s is in the future (simulation '
+                                  f'at {ns_to_seconds(now)} s)')
+        previous = self._stamps.get(controller, -1)
         if self.lockstep and stamp_ns == previous:  # again (an answer to a resent state)
             return False
         if stamp_ns < now if self.lockstep else stamp_ns < previous:
-            raise SimulationError(f'stale command of {source!r} stamped '
+            raise SimulationError(f'stale command of {controller!r} stamped '
                                   f'{ns_to_seconds(stamp_ns)} s (simulation at '
                                   f'{ns_to_seconds(now)} s)')
-        self._commands[source] = command
-        self._stamps[source] = stamp_ns
+        self._commands[controller] = command
+        self._stamps[controller] = stamp_ns
         return True
 
     def missing(self) -> list[str]:
-        """Sources whose command for t_k has not arrived (free-running: none ever did)."""
+        """Controllers whose command for t_k has not arrived (free-running: none ever did)."""
         if self.lockstep:
-            return [s for s in self.sources if self._stamps.get(s) != self.t_ns]
-        return [s for s in self.sources if s not in self._commands]
+            return [c for c in self.controllers if self._stamps.get(c) != self.t_ns]
+        return [c for c in self.controllers if c not in self._commands]
 
     # -------------------------------------------------------------------------- stepping
     def step(self) -> Sample | None:
@@ -195,8 +221,8 @@ class LockstepSession:
                                   f'{self.missing()}')
         sim = self.sim
         obs = sim.observation()
-        commands = {s: self._commands[s] for s in self.sources if s in self._commands}
-        self._held = HeldCommand.combine(commands.values())
+        commands = {c: self._commands[c] for c in self.controllers if c in self._commands}
+        self._held = HeldCommand.of_controllers(commands.values())
         try:
             sample = advance_and_sample(sim, self.scene, commands)
         except SimulationError as exc:
@@ -261,7 +287,7 @@ class LockstepSession:
 class LoopMonitor:
     """The wall-clock side of the simulator's loop (ROS-free): timeouts, resends, pace, stats.
 
-    :param sources: the command sources of the scene.
+    :param sources: the controllers of the scene (the sources of commands).
     :param control_timeout: a source silent this long [s] ends the run.
     :param period: control period [s]; ``realtime_factor``: free-running pace [-].
     :param resend_after: publish the state t_k again after this long without every command [s].
@@ -337,7 +363,7 @@ class LockstepLoop:
                  realtime_factor: float = 1.0, paused: bool = False,
                  stats_file: str | pathlib.Path | None = None) -> None:
         self.session = session
-        self.monitor = LoopMonitor(session.sources, control_timeout,
+        self.monitor = LoopMonitor(session.controllers, control_timeout,
                                    session.scene.simulator.control_period, realtime_factor)
         self._publish, self._report = publish, report
         self._stats_file = pathlib.Path(stats_file) if stats_file else None
@@ -422,10 +448,9 @@ class LockstepLoop:
         s, m = self.session, self.monitor
         overdue = m.overdue(s.missing(), s.lockstep)
         if overdue:
-            who = ', '.join(f'{x!r} (node {node_of_source(x)})' for x in overdue)
             return self.finish(SimulationError(
-                f'controller timeout at t={s.sim.time:.6f} s: no command from source {who} '
-                f'within {m.timeout} s'))
+                f'controller timeout at t={s.sim.time:.6f} s: no command from node(s) '
+                f'{", ".join(map(repr, overdue))} within {m.timeout} s'))
         if s.lockstep and s.missing() and m.resend_due():
             self.publish_state(again=True)
         for _ in range(0 if s.lockstep else m.due(s.periods)):

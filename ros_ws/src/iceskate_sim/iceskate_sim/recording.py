@@ -239,7 +239,8 @@ class MessageFactory:
         empty = np.zeros(0)
         return self._effort(header=self.header(t), source=source, joint_names=self.names,
                             effort=np.asarray(tau, dtype=np.float64), stiffness=empty,
-                            damping=empty, position_reference=empty)
+                            damping=empty, position_reference=empty, source_names=[],
+                            source_efforts=empty)
 
     def description(self, urdf: str) -> Any:
         """std_msgs/String holding the URDF."""

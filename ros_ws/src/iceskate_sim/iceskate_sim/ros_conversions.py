@@ -7,7 +7,8 @@ rosbags message objects (bags) alike:
   stamps as integer nanoseconds, never as floats;
 * ``observation_from_messages``: the ``Observation`` a control law sees, rebuilt from the
   ``joint_states`` (sensor_msgs/JointState) and ``gait_state`` (GaitState) of one instant;
-* ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a ``JointCommand``,
+* ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a
+  ``ControllerCommand`` (the summed command and its per-source breakdown),
   refusing NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that
   names the problem and the source (arrays go out as ``array('d')``, which rclpy messages take
   without a per-element check; all 18 names in order, as the controllers send, skip the
@@ -27,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
@@ -140,41 +141,64 @@ def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
     return x
 
 
-def command_from_message(msg: Any) -> JointCommand:
-    """The JointCommand of an EffortCommand message (18-vectors; unnamed coordinates 0).
+def command_from_message(msg: Any) -> ControllerCommand:
+    """The ControllerCommand of an EffortCommand message (18-vectors; unnamed coordinates 0).
+
+    An empty breakdown gives empty ``source_efforts`` (a controller with one source named like
+    itself: the simulator evaluates its effort).
 
     :raises SimulationError: on unknown or repeated joint names, wrong lengths, non-finite or
-        negative gains, or a partial impedance; the message names the source and the field.
+        negative gains, a partial impedance, or a breakdown of the wrong length, repeated
+        source names or non-finite values; the message names the source and the field.
     """
     where = f'effort command of source {msg.source!r}'
     names = list(msg.joint_names)
     index = None if names == _NAMES else _indices(names, where)
 
-    def coordinates(field: str) -> np.ndarray:
-        x = _array(msg, field, len(names), where)
+    def coordinates(x: np.ndarray) -> np.ndarray:
         if index is None:
             return x
         out = np.zeros(N_COORDINATES)
         out[index] = x
         return out
 
-    effort = coordinates('effort')
+    def field(name: str) -> np.ndarray:
+        return coordinates(_array(msg, name, len(names), where))
+
+    effort = field('effort')
     given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]
     if not any(given):
-        return JointCommand(effort)
-    if not all(given):
+        command = JointCommand(effort)
+    elif not all(given):
         raise SimulationError(f'{where}: stiffness, damping and position_reference must be '
                               'all empty or all given')
-    try:
-        return JointCommand(effort, *(coordinates(f) for f in _IMPEDANCE))
-    except SimulationError as exc:
-        raise SimulationError(f'{where}: {exc}') from None
+    else:
+        try:
+            command = JointCommand(effort, *(field(f) for f in _IMPEDANCE))
+        except SimulationError as exc:
+            raise SimulationError(f'{where}: {exc}') from None
+    sources = [str(n) for n in msg.source_names]
+    if len(set(sources)) != len(sources):
+        raise SimulationError(f'{where}: repeated source names in {sources}')
+    parts = np.array(msg.source_efforts, dtype=float)
+    if parts.shape != (len(sources) * len(names),):
+        raise SimulationError(f'{where}: source_efforts has {parts.size} entries for '
+                              f'{len(sources)} source names x {len(names)} joint names')
+    if not np.all(np.isfinite(parts)):
+        raise SimulationError(f'{where}: source_efforts is not finite')
+    rows = parts.reshape(len(sources), len(names))
+    return ControllerCommand(command, {name: coordinates(row.copy())
+                                       for name, row in zip(sources, rows, strict=True)})
 
 
-def command_fields(command: JointCommand) -> dict[str, Any]:
-    """EffortCommand fields (joint_names, effort, impedance arrays) of a JointCommand."""
+def command_fields(answer: ControllerCommand) -> dict[str, Any]:
+    """EffortCommand fields (joint_names, effort, impedance arrays, breakdown) of a command."""
+    command = answer.command
     fields = {'joint_names': list(COORDINATE_NAMES), 'effort': _doubles(command.effort),
-              'stiffness': array('d'), 'damping': array('d'), 'position_reference': array('d')}
+              'stiffness': array('d'), 'damping': array('d'), 'position_reference': array('d'),
+              'source_names': list(answer.source_efforts),
+              'source_efforts': _doubles(np.concatenate(list(answer.source_efforts.values()))
+                                         if answer.source_efforts else np.zeros(0))}
     if command.has_impedance:
         fields.update(stiffness=_doubles(command.stiffness), damping=_doubles(command.damping),
                       position_reference=_doubles(command.reference))

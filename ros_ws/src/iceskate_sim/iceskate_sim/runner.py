@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from iceskate_sim.command import HeldCommand, JointCommand
+from iceskate_sim.command import ControllerCommand, HeldCommand
 from iceskate_sim.control_stack import ControlStack
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import Transition
@@ -88,17 +88,19 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict:
 
 
 def advance_and_sample(sim: Simulator, scene: Scene,
-                       commands: dict[str, JointCommand]) -> Sample:
-    """Hold ``commands`` (and the scene's push, if one acts) over one control period, advance,
-    and return the sample of the period's start: the state (after the transitions due at that
-    instant), the dynamics under the held commands, the effort of every source at that state
-    (headless runner and ROS lockstep)."""
+                       commands: dict[str, ControllerCommand]) -> Sample:
+    """Hold the controllers' ``commands`` (and the scene's push, if one acts) over one control
+    period, advance, and return the sample of the period's start: the state (after the
+    transitions due at that instant), the dynamics under the held commands, the effort of
+    every source as its controller reported it (at the state answered) and the push (headless
+    runner and ROS lockstep)."""
     t = sim.state.t
     placement = sim.head_placement()
     push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)), None)
-    sim.advance(HeldCommand.combine(commands.values()), push)
+    sim.advance(HeldCommand.of_controllers(commands.values()), push)
     state = sim.start_state
-    efforts = {source: c.torque(state.q, state.v) for source, c in commands.items()}
+    efforts = {source: tau.copy() for c in commands.values()
+               for source, tau in c.source_efforts.items()}
     if push is not None:
         efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
     return Sample(state, sim.start_result, efforts, placement.translation.copy(),
