@@ -14,6 +14,12 @@ the physics step. The per-hop latency is estimated as (round trip - slowest cont
 compute) / 2, with the controllers' compute timed in this process on the scene's initial
 observation.
 
+It also measures the messaging floor of the three-process lockstep: the same messages per
+period (/clock, joint_states, gait_state out to two processes with use_sim_time; one
+EffortCommand with the scene's breakdown back from each) with no physics and no control law
+(``--floor-periods``; 0 skips it). The real-time factor cannot exceed control period / (floor +
+the compute on the critical path).
+
 Usage (from the repository root, after ``make setup`` and ``. ./env.sh``):
     python benchmarks/bench_graph.py [--duration 0.5] [--scenes skate tests/...yaml] [--json F]
 """
@@ -27,6 +33,7 @@ import pathlib
 import statistics
 import sys
 import tempfile
+import time
 import timeit
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -99,7 +106,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--scenes', nargs='+', default=DEFAULT_SCENES)
     parser.add_argument('--duration', type=float, default=0.5, help='simulated s per run')
     parser.add_argument('--json', type=pathlib.Path, help='also write the figures here')
+    parser.add_argument('--floor-periods', type=int, default=3000,
+                        help='periods of the messaging-floor loop (0: skip it)')
+    parser.add_argument('--echo', help=argparse.SUPPRESS)  # internal: one echo process
     args = parser.parse_args(argv)
+    if args.echo:
+        return _echo(args.echo, args.scenes[0])
     results = []
     with tempfile.TemporaryDirectory(prefix='bench-graph-') as tmp:
         for scene in args.scenes:
@@ -115,8 +127,120 @@ def main(argv: list[str] | None = None) -> int:
                 print(f'  graph {label:<16} RTF {g["rtf"]:.3f}; round trip median/p95/p99 '
                       f'{rt[0]:.2f}/{rt[1]:.2f}/{rt[2]:.2f} ms; physics median/p99 '
                       f'{ph[0]:.2f}/{ph[2]:.2f} ms; hop ~ {g["hop_estimate_ms"]:.2f} ms')
+    if args.floor_periods > 0:
+        floor = messaging_floor(args.scenes[0], args.floor_periods)
+        results.append({'messaging_floor_ms': floor, 'scene': args.scenes[0]})
+        print(f'\nmessaging floor (three processes, no physics, no law; scene {args.scenes[0]}): '
+              f'{floor:.3f} ms per period -> RTF <= {1.0 / floor:.2f} at a 1 ms period '
+              'before any compute')
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + '\n')
+    return 0
+
+
+def messaging_floor(scene_arg: str, periods: int) -> float:
+    """Wall time per period [ms] of the lockstep's messages alone (median of 3 blocks).
+
+    This process publishes the scene's t = 0 state (/clock, joint_states, gait_state, the
+    simulator's CDR bytes, published raw as the node does) and waits for one EffortCommand
+    from each of two echo processes (``--echo``: use_sim_time, both state subscriptions, the
+    scene's breakdown), like the simulator node; nothing is computed.
+    """
+    import subprocess
+
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+
+    from iceskate_interfaces.msg import EffortCommand, GaitState
+    from iceskate_sim.graph import ros_environment, stop
+    from iceskate_sim.lockstep import CONTROL_TOPICS, LockstepSession
+    from iceskate_sim.node_support import CLOCK_QOS, STATE_QOS
+    from iceskate_sim.scene import load_scene
+    session = LockstepSession(load_scene(scene_arg))
+    messages = session.state_messages()
+    payloads = [session.serialize(t, messages[t]) for t in CONTROL_TOPICS]
+    env = ros_environment()
+    echoes = [subprocess.Popen([sys.executable, __file__, '--echo', name, '--scenes', scene_arg],
+                               env=env, start_new_session=True)
+              for name in session.controllers]
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+    try:
+        node = rclpy.create_node('floor', context=context)
+        types = {'/clock': (Clock, CLOCK_QOS), '/joint_states': (JointState, STATE_QOS),
+                 '/gait_state': (GaitState, STATE_QOS)}
+        publishers = [node.create_publisher(*types[t][:1], t, types[t][1])
+                      for t in CONTROL_TOPICS]
+        answers = [0]
+        node.create_subscription(EffortCommand, 'effort_commands',
+                                 lambda _: answers.__setitem__(0, answers[0] + 1), STATE_QOS)
+        executor = EventsExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        n = len(echoes)
+        while (publishers[-1].get_subscription_count() < n
+               or node.count_publishers('effort_commands') < n):
+            if time.monotonic() > deadline:
+                raise RuntimeError('the echo processes did not come up within 60 s')
+            executor.spin_once(timeout_sec=0.05)
+        time.sleep(1.0)  # discovery traffic settles
+        blocks = []
+        for _ in range(3):
+            start = time.perf_counter()
+            for _ in range(periods // 3):
+                expected = answers[0] + n
+                for publisher, payload in zip(publishers, payloads, strict=True):
+                    publisher.publish(payload)
+                deadline = time.monotonic() + 5.0
+                while answers[0] < expected:
+                    if time.monotonic() > deadline:
+                        raise RuntimeError('an echo process stopped answering for 5 s')
+                    executor.spin_once(timeout_sec=1.0)
+            blocks.append((time.perf_counter() - start) / (periods // 3) * 1e3)
+        return statistics.median(blocks)
+    finally:
+        context.try_shutdown()
+        for echo in echoes:
+            stop(echo)
+
+
+def _echo(name: str, scene_arg: str) -> int:
+    """One echo process of ``messaging_floor``: answers every gait_state with a command."""
+    import numpy as np
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.experimental import EventsExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+
+    from iceskate_interfaces.msg import EffortCommand, GaitState
+    from iceskate_sim.command import ControllerCommand, JointCommand
+    from iceskate_sim.lockstep import sources_by_controller
+    from iceskate_sim.node_support import STATE_QOS, spin_until
+    from iceskate_sim.ros_conversions import command_fields
+    from iceskate_sim.scene import load_scene
+    sources = sources_by_controller(load_scene(scene_arg))[name]
+    zero = JointCommand(np.zeros(18))
+    message = EffortCommand(source=name, **command_fields(ControllerCommand.of(
+        dict.fromkeys(sources, zero), np.zeros(18), np.zeros(18))))
+    rclpy.init()
+    node = rclpy.create_node(name, parameter_overrides=[
+        Parameter('use_sim_time', Parameter.Type.BOOL, True)])
+    publisher = node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
+
+    def answer(state: GaitState) -> None:
+        message.header.stamp = state.header.stamp
+        publisher.publish(message)
+    node.create_subscription(JointState, 'joint_states', lambda _: None, STATE_QOS)
+    node.create_subscription(GaitState, 'gait_state', answer, STATE_QOS)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    try:
+        spin_until(executor, lambda: False)
+    except ExternalShutdownException:  # SIGTERM from messaging_floor
+        pass
     return 0
 
 

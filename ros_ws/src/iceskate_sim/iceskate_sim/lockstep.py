@@ -50,10 +50,11 @@ from iceskate_sim.runner import advance_and_sample, last_event_before, scene_met
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
 
-#: Live state topics the controllers read: published first, as soon as the state is known.
-CONTROL_TOPICS = ('/joint_states', '/gait_state')
+#: Live state topics the controllers read (/clock: their sim time), published first, as soon as
+#: the state is known (a /clock later would wake them while they answer).
+CONTROL_TOPICS = ('/clock', '/joint_states', '/gait_state')
 #: Every live state topic, in publishing order.
-STATE_TOPICS = CONTROL_TOPICS + ('/head_pose', '/clock')
+STATE_TOPICS = CONTROL_TOPICS + ('/head_pose',)
 
 
 def ordered_sources(scene: Scene) -> tuple[str, ...]:
