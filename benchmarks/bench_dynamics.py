@@ -78,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
      JOINT_LIMITS, load_robot) = _import_core()
+    from iceskate_sim.dynamics import _solve  # the linear solve of evaluate
 
     robot = load_robot()
     params = DynamicsParameters(mu=0.005)
@@ -111,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
                                     dynamics.evaluate(c, q, v, t), rep, num),
             'floating_base_us': _time_us(lambda c=contact, q=q, v=v, a=applied:
                                          floating.evaluate(c, q, v, a), rep, num),
-            'solve_us': _time_us(lambda A=A, b=b: np.linalg.solve(A, b), rep, num),
+            'solve_us': _time_us(lambda A=A, b=b: _solve(A, b), rep, num),
         })
 
     # The Pinocchio calls evaluate() makes (same 18-joint model in every mode).

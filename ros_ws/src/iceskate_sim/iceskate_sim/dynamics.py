@@ -25,6 +25,7 @@ from operator import itemgetter
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg.lapack import dgesv
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES, GaitMode
@@ -596,9 +597,14 @@ class GaitDynamics:
 
 
 def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
-    """np.linalg.solve(A, b) and whether the solution is finite (LinAlgError if singular)."""
-    with np.errstate(all='ignore'):
-        x = np.linalg.solve(A, b)
+    """x = A^-1 b by LAPACK gesv (LU with partial pivoting, as np.linalg.solve, through scipy's
+    binding: 2.6 us instead of 8 us for 18 unknowns) and whether x is finite.
+
+    :raises np.linalg.LinAlgError: if A is exactly singular.
+    """
+    _, _, x, info = dgesv(A, b)
+    if info > 0:
+        raise np.linalg.LinAlgError(f'singular matrix (zero pivot U[{info - 1}, {info - 1}])')
     return x, bool(np.isfinite(x).all())
 
 
