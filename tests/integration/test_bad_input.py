@@ -53,6 +53,30 @@ def test_killed_controller_ends_the_run_naming_it_and_the_bag_reads(
     assert n == len(np.load(tmp_path / 'out' / 'trajectory.npz')['t']) >= 5
 
 
+def test_sigterm_mid_run_closes_the_bag_the_forked_writer_wrote(
+        listener, ros_domain_id, tmp_path, graph_factory):
+    """The bag writer is forked from the simulator after rclpy started: a SIGTERM to the
+    simulator's process group (what run_scene --ros and a terminal's Ctrl-C send) must still
+    leave a complete, readable bag and the output files."""
+    graph = graph_factory(tmp_path / 'out', duration=30.0).start()
+    listener.subscribe('/clock', Clock)
+    clocks = listener.messages['/clock']
+    try:
+        listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) >= 150 * MS, 60.0,
+                            'the run to pass 150 ms (more than one batch for the writer)')
+        os.killpg(graph.simulator.pid, signal.SIGTERM)
+        listener.spin_until(lambda: graph.simulator.poll() is not None, 30.0,
+                            'the simulator to stop')
+    finally:
+        graph.stop()
+    metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
+    assert metrics['failure'].startswith('stopped at t=')
+    n = len(np.load(tmp_path / 'out' / 'trajectory.npz')['t'])
+    with AnyReader([tmp_path / 'out' / 'bag']) as reader:
+        states = [c for c in reader.connections if c.topic == '/joint_states']
+        assert sum(1 for _ in reader.messages(connections=states)) == n >= 150
+
+
 #: gait_manager's breakdown in tiny_stand (its two sources, zero)
 BREAKDOWN = {'source_names': ['posture', 'weight_transfer'], 'source_efforts': [0.0] * 36}
 
