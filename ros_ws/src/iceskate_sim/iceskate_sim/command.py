@@ -3,12 +3,12 @@
 Each input source (visual lifting, posture, yaw, ...) gives a ``JointCommand`` per control
 instant; a controller node sums its sources into one ``ControllerCommand`` (what it sends),
 which also carries each source's generalized force at the state answered (what is recorded).
-The simulator
-holds it over the control period (zero-order hold of the *command*) and evaluates
-``effort + stiffness * (reference - q) - damping * v`` at every physics step, as a real joint
-drive runs its PD loop faster than the controller that sets it. Stiff PD terms on the light
-links of this model (pelvis, torso segments, hands) are unstable when the torque itself is held
-for a millisecond; run this way they are stable, and the damping can be integrated implicitly.
+The simulator holds the sum over the control period (zero-order hold of the *command*) and
+evaluates ``effort + stiffness * (reference - q) - damping * v`` at every physics step, as a
+real joint drive runs its PD loop faster than the controller that sets it. Stiff PD terms on the
+light links of this model (pelvis, torso segments, hands) are unstable when the torque itself is
+held for a millisecond; run this way they are stable, and the damping can be integrated
+implicitly.
 All arrays have 18 entries [y0, q1..q17]; units N m (N), N m/rad, N m s/rad, rad (m).
 """
 
