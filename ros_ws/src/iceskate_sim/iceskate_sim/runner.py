@@ -99,8 +99,7 @@ def advance_and_sample(sim: Simulator, scene: Scene,
     push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)), None)
     sim.advance(HeldCommand.of_controllers(commands.values()), push)
     state = sim.start_state
-    efforts = {source: tau.copy() for c in commands.values()
-               for source, tau in c.source_efforts.items()}
+    efforts = {source: tau for c in commands.values() for source, tau in c.source_efforts.items()}
     if push is not None:
         efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
     return Sample(state, sim.start_result, efforts, placement.translation.copy(),
