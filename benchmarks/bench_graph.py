@@ -15,8 +15,8 @@ compute) / 2, with the controllers' compute timed in this process on the scene's
 observation.
 
 It also measures the messaging floor of the three-process lockstep: the same messages per
-period (/clock, joint_states, gait_state out to two processes with use_sim_time; one
-EffortCommand with the scene's breakdown back from each) with no physics and no control law
+period (/clock and gait_state out to two processes with use_sim_time; one EffortCommand with
+the scene's breakdown back from each) with no physics and no control law
 (``--floor-periods``; 0 skips it). The real-time factor cannot exceed control period / (floor +
 the compute on the critical path).
 
@@ -141,22 +141,21 @@ def main(argv: list[str] | None = None) -> int:
 def messaging_floor(scene_arg: str, periods: int) -> float:
     """Wall time per period [ms] of the lockstep's messages alone (median of 3 blocks).
 
-    This process publishes the scene's t = 0 state (/clock, joint_states, gait_state, the
-    simulator's CDR bytes, published raw as the node does) and waits for one EffortCommand
-    from each of two echo processes (``--echo``: use_sim_time, both state subscriptions, the
-    scene's breakdown), like the simulator node; nothing is computed.
+    This process publishes the scene's t = 0 state (/clock and gait_state, the simulator's CDR
+    bytes, published raw as the node does) and waits for one EffortCommand from each of two
+    echo processes (``--echo``: use_sim_time, the gait_state subscription, the scene's
+    breakdown), like the simulator node; nothing is computed.
     """
     import subprocess
 
     import rclpy
     from rclpy.experimental import EventsExecutor
     from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import JointState
 
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_sim.graph import ros_environment, stop
     from iceskate_sim.lockstep import CONTROL_TOPICS, LockstepSession
-    from iceskate_sim.node_support import CLOCK_QOS, STATE_QOS
+    from iceskate_sim.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
     from iceskate_sim.scene import load_scene
     session = LockstepSession(load_scene(scene_arg))
     messages = session.state_messages()
@@ -169,13 +168,13 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
     rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
     try:
         node = rclpy.create_node('floor', context=context)
-        types = {'/clock': (Clock, CLOCK_QOS), '/joint_states': (JointState, STATE_QOS),
-                 '/gait_state': (GaitState, STATE_QOS)}
+        types = {'/clock': (Clock, CLOCK_QOS), '/gait_state': (GaitState, STATE_QOS)}
         publishers = [node.create_publisher(*types[t][:1], t, types[t][1])
                       for t in CONTROL_TOPICS]
         answers = [0]
         node.create_subscription(EffortCommand, 'effort_commands',
-                                 lambda _: answers.__setitem__(0, answers[0] + 1), STATE_QOS)
+                                 lambda _: answers.__setitem__(0, answers[0] + 1),
+                                 LOCKSTEP_READER_QOS)
         executor = EventsExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0
@@ -213,12 +212,11 @@ def _echo(name: str, scene_arg: str) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
     from rclpy.parameter import Parameter
-    from sensor_msgs.msg import JointState
 
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_sim.command import ControllerCommand, JointCommand
     from iceskate_sim.lockstep import sources_by_controller
-    from iceskate_sim.node_support import STATE_QOS, spin_until
+    from iceskate_sim.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
     from iceskate_sim.ros_conversions import command_fields
     from iceskate_sim.scene import load_scene
     sources = sources_by_controller(load_scene(scene_arg))[name]
@@ -233,8 +231,7 @@ def _echo(name: str, scene_arg: str) -> int:
     def answer(state: GaitState) -> None:
         message.header.stamp = state.header.stamp
         publisher.publish(message)
-    node.create_subscription(JointState, 'joint_states', lambda _: None, STATE_QOS)
-    node.create_subscription(GaitState, 'gait_state', answer, STATE_QOS)
+    node.create_subscription(GaitState, 'gait_state', answer, LOCKSTEP_READER_QOS)
     executor = EventsExecutor()
     executor.add_node(node)
     try:

@@ -15,7 +15,7 @@ from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.lockstep import LockstepSession, ordered_sources, sources_by_controller
-from iceskate_sim.ros_conversions import observation_from_messages, seconds_to_ns
+from iceskate_sim.ros_conversions import observation_from_gait_state, seconds_to_ns
 from iceskate_sim.runner import run
 from iceskate_sim.scene import load_scene
 
@@ -57,11 +57,9 @@ def zero(scene, controller, value=0.0):
 def drive(session, answer):
     ts = session.factory.typestore
     while not session.done:
-        msgs = session.state_messages()
-        js, gs = (ts.deserialize_cdr(session.serialize(t, msgs[t]), kind) for t, kind in (
-            ('/joint_states', 'sensor_msgs/msg/JointState'),
-            ('/gait_state', 'iceskate_interfaces/msg/GaitState')))
-        obs = observation_from_messages(js, gs)
+        msg = session.state_messages(('/gait_state',))['/gait_state']
+        obs = observation_from_gait_state(ts.deserialize_cdr(
+            session.serialize('/gait_state', msg), 'iceskate_interfaces/msg/GaitState'))
         for controller, command in answer(obs).items():
             assert session.offer(controller, seconds_to_ns(obs.t), command)
         assert session.missing() == []

@@ -1,4 +1,4 @@
-"""ros_conversions: stamps, Observation from messages, EffortCommand <-> ControllerCommand.
+"""ros_conversions: stamps, Observation from GaitState, EffortCommand <-> ControllerCommand.
 
 The messages are rosbags objects (the conversions are duck-typed on fields, so rclpy messages
 behave the same; the integration tests feed those).
@@ -16,11 +16,10 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import MessageFactory, Sample
 from iceskate_sim.robot import COORDINATE_NAMES, load_robot
 from iceskate_sim.ros_conversions import (
-    StatePairer,
     command_fields,
     command_from_message,
     ns_to_sec_nanosec,
-    observation_from_messages,
+    observation_from_gait_state,
     seconds_to_ns,
     set_stamp,
     stamp_to_ns,
@@ -67,17 +66,18 @@ def test_seconds_to_ns_raises_on_negative_or_nan_time():
         seconds_to_ns(float('nan'))
 
 
-def test_observation_from_messages_equals_the_simulators(factory, simulator):
+def gait_state_message(factory, simulator):
+    """The simulator's gait_state, through CDR (as a subscriber gets it)."""
     s = simulator.state
     placement = simulator.dynamics.frame_placement(s.contact, s.q, 'head_top')
     sample = Sample(s, simulator.result, {}, placement.translation, placement.rotation, None)
-    msgs = factory.messages(sample)
-    ts = factory.typestore
-    # through CDR, as a subscriber gets them
-    js = ts.deserialize_cdr(ts.serialize_cdr(msgs['/joint_states'], 'sensor_msgs/msg/JointState'),
-                            'sensor_msgs/msg/JointState')
-    gs = msgs['/gait_state']
-    obs = observation_from_messages(js, gs)
+    msg = factory.messages(sample, ('/gait_state',))['/gait_state']
+    ts, kind = factory.typestore, 'iceskate_interfaces/msg/GaitState'
+    return ts.deserialize_cdr(ts.serialize_cdr(msg, kind), kind)
+
+
+def test_observation_from_gait_state_equals_the_simulators(factory, simulator):
+    obs = observation_from_gait_state(gait_state_message(factory, simulator))
     expected = simulator.observation()
     assert obs.t == expected.t and obs.mode == expected.mode and obs.side == expected.side
     np.testing.assert_array_equal(obs.q, expected.q)
@@ -88,14 +88,28 @@ def test_observation_from_messages_equals_the_simulators(factory, simulator):
         math.isnan(obs.t_touchdown) and math.isnan(expected.t_touchdown))
 
 
-def test_observation_from_messages_raises_on_mismatched_stamps(factory, simulator):
-    s = simulator.state
-    placement = simulator.dynamics.frame_placement(s.contact, s.q, 'head_top')
-    msgs = factory.messages(Sample(s, simulator.result, {}, placement.translation,
-                                   placement.rotation, None))
-    msgs['/gait_state'].header = factory.header(0.001)
-    with pytest.raises(SimulationError, match='stamp .* differ'):
-        observation_from_messages(msgs['/joint_states'], msgs['/gait_state'])
+@pytest.mark.parametrize('field, value, match', [
+    ('position', np.zeros(17), r'position has 17 entries; it needs 18'),
+    ('velocity', np.zeros(0), r'velocity has 0 entries'),
+    ('position', np.r_[np.zeros(3), np.nan, np.zeros(14)], r"position is not finite at \['q3'\]"),
+    ('velocity', np.r_[np.inf, np.zeros(17)], r"velocity is not finite at \['y0'\]"),
+    ('support_side', 2, 'support_side must be 0 or 1'),
+    ('pivot', 7, 'pivot must be 0, 1 or 2'),
+])
+def test_observation_from_gait_state_raises_naming_the_field(factory, simulator, field, value,
+                                                             match):
+    msg = gait_state_message(factory, simulator)
+    setattr(msg, field, value)
+    with pytest.raises(SimulationError, match=match):
+        observation_from_gait_state(msg)
+
+
+def test_the_observation_does_not_alias_the_message(factory, simulator):
+    msg = gait_state_message(factory, simulator)
+    msg.position = msg.position.copy()  # writable, as an rclpy message's array is
+    obs = observation_from_gait_state(msg)
+    msg.position[:] = 1.0
+    assert not np.any(obs.q == 1.0)
 
 
 def test_command_round_trips_with_and_without_impedance_and_breakdown(factory):
@@ -156,19 +170,3 @@ def test_command_from_message_raises_naming_the_problem(factory, change, match):
         msg.source_efforts = np.asarray(breakdown['source_efforts'], dtype=float)
     with pytest.raises(SimulationError, match="source 'posture'.*" + match):
         command_from_message(msg)
-
-
-def header(ns):
-    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(
-        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)))
-
-
-def test_state_pairer_pairs_by_stamp_and_drops_older_halves():
-    pairer = StatePairer()
-    assert pairer.add('joint_states', header(1)) is None
-    assert pairer.add('joint_states', header(2)) is None
-    ns, js, gs = pairer.add('gait_state', header(2))
-    assert ns == 2 and js.header.stamp.nanosec == 2
-    assert pairer.add('gait_state', header(1)) is None  # before the last pair: a reset
-    assert pairer.last_ns is None
-    assert pairer.add('joint_states', header(1))[0] == 1

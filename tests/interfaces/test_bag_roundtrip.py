@@ -73,7 +73,8 @@ def make_messages(typestore, step: int):
         zmp=Point(x=0.0, y=0.1 * step, z=0.0), zmp_inside_support=step % 4 != 0,
         last_transition_cause=f'step_{step}', last_transition_stamp=stamp,
         support_exchange_stamp=stamp, touched_down=step % 2 == 1, touchdown_stamp=stamp,
-        heel_anchor_y=0.01 * step)
+        heel_anchor_y=0.01 * step, position=np.linspace(-0.5, 0.5, n) * step,
+        velocity=np.linspace(1.0, -1.0, n) + step)
     dynamics = t[JOINT_DYNAMICS](
         header=header, name=COORDINATES,
         active=np.array([step % 2 == 0] + [True] * 17, dtype=bool),

@@ -54,6 +54,8 @@ def make_gait_state() -> GaitState:
         zmp_inside_support=True,
         last_transition_cause='cop_reached_toe',
         last_transition_stamp=Time(sec=12, nanosec=1_000_000),
+        position=[0.01 * i for i in range(len(COORDINATES))],
+        velocity=[-0.5 + 0.125 * i for i in range(len(COORDINATES))],
     )
 
 

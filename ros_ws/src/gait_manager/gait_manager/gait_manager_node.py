@@ -1,6 +1,6 @@
 """``ros2 run gait_manager gait_manager``: the gait-manager sources as one ROS node.
 
-Subscribes ``joint_states`` + ``gait_state``, publishes per instant one ``EffortCommand``
+Subscribes ``gait_state`` (the hybrid state), publishes per instant one ``EffortCommand``
 (source 'gait_manager') on ``effort_commands``, stamped with the state's time: the sum of its
 enabled sources ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw'; the
 posture command carries the joint impedance) and each source's share (``source_names``).

@@ -1,11 +1,12 @@
 """The part the controller nodes (visual_lifting, gait_manager) share: state in, commands out.
 
-A ``ControllerNode`` subscribes ``joint_states`` and ``gait_state``, pairs the two messages of one
-instant by stamp (``StatePairer``), rebuilds the ``Observation``, asks the subclass's law
-(``compute``) for the command of each of its sources and publishes their sum, with the
-per-source breakdown, as one ``EffortCommand`` (source: the node's name) on
-``effort_commands``, stamped with the state's stamp (the lockstep key): one message per instant
-and node keeps the lockstep's deliveries few. The message object is made once and refilled.
+A ``ControllerNode`` subscribes ``gait_state`` (the whole hybrid state of an instant: one message
+in per instant, best effort), rebuilds the ``Observation``, asks the subclass's law (``compute``)
+for the command of each of its sources and publishes their sum, with the per-source breakdown,
+as one ``EffortCommand`` (source: the node's name) on ``effort_commands``, stamped with the
+state's stamp (the lockstep key): one message out per instant and node. Each cross-process
+delivery costs tens of microseconds here, so the lockstep keeps them few. The message object is
+made once and refilled.
 Parameters: ``scene`` (name or path; the laws' parameters come from it) and ``use_sim_time``
 (true unless overridden).
 A law failing at one instant logs an error and sends nothing: the simulator's timeout then names
@@ -18,20 +19,25 @@ from typing import Any
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.node_support import STATE_QOS, ConfigError, check_unknown, declare
+from iceskate_sim.node_support import (
+    LOCKSTEP_READER_QOS,
+    STATE_QOS,
+    ConfigError,
+    check_unknown,
+    declare,
+)
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import load_robot
 from iceskate_sim.ros_conversions import (
-    StatePairer,
     command_fields,
-    observation_from_messages,
+    observation_from_gait_state,
     set_stamp,
+    stamp_to_ns,
 )
 from iceskate_sim.scene import Scene, load_scene
 
@@ -57,11 +63,10 @@ class ControllerNode(Node):
         self.active = self.configure(scene)
         if not self.active:
             self.get_logger().warning(f'scene {scene.name!r} does not run {node_name}: idle')
-        self._pairer = StatePairer()
         self._message = EffortCommand(source=node_name)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_states, STATE_QOS)
-        self.create_subscription(GaitState, 'gait_state', self.on_gait_state, STATE_QOS)
+        self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
+                                 LOCKSTEP_READER_QOS)
 
     def declare_extra(self) -> None:
         """Declare the subclass's own parameters (none by default)."""
@@ -74,27 +79,19 @@ class ControllerNode(Node):
         """The commands of every source of this node at ``obs``."""
         raise NotImplementedError
 
-    def on_joint_states(self, msg: JointState) -> None:
-        """Half of an instant's state."""
-        self._on_state('joint_states', msg)
-
     def on_gait_state(self, msg: GaitState) -> None:
-        """The other half."""
-        self._on_state('gait_state', msg)
-
-    def _on_state(self, kind: str, msg: Any) -> None:
-        pair = self._pairer.add(kind, msg) if self.active else None
-        if pair is None:
+        """Answer the state of one instant with this node's command."""
+        if not self.active:
             return
-        ns, joint_state, gait_state = pair
+        ns = stamp_to_ns(msg.header.stamp)
         try:
-            obs = observation_from_messages(joint_state, gait_state)
+            obs = observation_from_gait_state(msg)
             commands = self.compute(obs)
         except (SimulationError, *self.law_errors) as exc:
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
             return
-        msg = self._message
+        message = self._message
         for field, value in command_fields(ControllerCommand.of(commands, obs.q, obs.v)).items():
-            setattr(msg, field, value)
-        set_stamp(msg.header.stamp, ns)
-        self._publisher.publish(msg)
+            setattr(message, field, value)
+        set_stamp(message.header.stamp, ns)
+        self._publisher.publish(message)

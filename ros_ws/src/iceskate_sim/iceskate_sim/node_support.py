@@ -1,6 +1,8 @@
 """What every iceskate node shares: QoS, parameter declaration and the Jazzy main() idiom.
 
-* ``STATE_QOS``: reliable, keep-last 10, volatile (state and command topics);
+* ``STATE_QOS``: reliable, keep-last 10, volatile (what the state and command topics are
+  published with: every reader matches it);
+  ``LOCKSTEP_READER_QOS``: best effort, keep-last 10, volatile (the lockstep's own readers);
   ``LATCHED_QOS``: transient-local depth 1 (robot_description).
 * ``declare``: one parameter with a default and a ``ParameterDescriptor`` (description, range);
   a value out of range or of the wrong type raises ``ConfigError`` naming the parameter, and so
@@ -30,6 +32,11 @@ from iceskate_sim.errors import SimulationError
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+#: The lockstep's readers (the controllers' state, the simulator's commands): best effort, so
+#: no acknowledgement goes back per message (a reliable writer serves a best-effort reader
+#: without them); a message lost is recovered by the simulator's resend of an unanswered state.
+LOCKSTEP_READER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                 durability=DurabilityPolicy.VOLATILE)
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: /clock: reliable writers match best-effort readers too (rclpy's TimeSource reads it so).

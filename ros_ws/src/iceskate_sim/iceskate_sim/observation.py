@@ -1,8 +1,8 @@
 """What a controller sees of the hybrid state: the input of every control law.
 
 The headless runner builds it straight from the simulator state; the ROS nodes build it from
-``joint_states`` and ``gait_state``. Control laws are pure functions of an ``Observation``
-(plus their parameters), so both paths give the same torques.
+``gait_state`` (which holds the whole hybrid state). Control laws are pure functions of an
+``Observation`` (plus their parameters), so both paths give the same torques.
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ the offline analysis reads either:
 * ``/joint_states`` (sensor_msgs/JointState): the 18 coordinates y0, q1..q17; position,
   velocity and the total input effort held over the period
 * ``/head_pose`` (geometry_msgs/PoseStamped, frame ``world``): the head-top frame
-* ``/gait_state`` (iceskate_interfaces/GaitState)
+* ``/gait_state`` (iceskate_interfaces/GaitState): the whole hybrid state (q, v and the
+  discrete part), what the controllers read
 * ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations at the sample and the
   effort of every input source (plus ``passive``: damping and soft stops)
 * ``/robot_description`` (std_msgs/String, once): the URDF
@@ -222,7 +223,7 @@ class MessageFactory:
             support_exchange_stamp=stamp(self.typestore, t_exchange),
             touched_down=touched,
             touchdown_stamp=stamp(self.typestore, t_touchdown if touched else 0.0),
-            heel_anchor_y=float(heel_anchor_y))
+            heel_anchor_y=float(heel_anchor_y), position=q.copy(), velocity=x[_V].copy())
 
     def _dynamics_message(self, record: BagRecord, t: float) -> Any:
         x = record.values

@@ -5,15 +5,14 @@ rosbags message objects (bags) alike:
 
 * stamps: ``builtin_interfaces/Time`` <-> integer nanoseconds <-> seconds; the lockstep compares
   stamps as integer nanoseconds, never as floats;
-* ``observation_from_messages``: the ``Observation`` a control law sees, rebuilt from the
-  ``joint_states`` (sensor_msgs/JointState) and ``gait_state`` (GaitState) of one instant;
+* ``observation_from_gait_state``: the ``Observation`` a control law sees, rebuilt from the
+  ``gait_state`` (GaitState) of one instant, which holds the whole hybrid state;
 * ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a
   ``ControllerCommand`` (the summed command and its per-source breakdown),
   refusing NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that
   names the problem and the source (arrays go out as ``array('d')``, which rclpy messages take
   without a per-element check; all 18 names in order, as the controllers send, skip the
-  reordering);
-* ``StatePairer``: pairs the two state messages of one instant by stamp (no message_filters).
+  reordering).
 
 Known loss: GaitState carries ``pivot = PIVOT_NONE`` while the support sole is flat, so the
 observation then says 'toe'. The support models of either pivot give the same kinematics while
@@ -77,34 +76,22 @@ def set_stamp(stamp: Any, ns: int) -> Any:
 
 
 # ------------------------------------------------------------------------------ observation
-def _coordinates(names: Any, values: Any, what: str) -> np.ndarray:
-    names = list(names)
-    x = np.asarray(values, dtype=float)
-    if x.shape != (len(names),):
-        raise SimulationError(f'joint_states {what} has {x.size} entries for {len(names)} names')
-    if names == list(COORDINATE_NAMES):
-        return x
-    out = np.zeros(N_COORDINATES)
-    order = _indices(names, 'joint_states')
-    if len(order) != N_COORDINATES:
-        raise SimulationError(f'joint_states must name all {N_COORDINATES} coordinates '
-                              f'{list(COORDINATE_NAMES)}, got {names}')
-    out[order] = x
-    return out
+def _state_vector(gait_state: Any, field: str) -> np.ndarray:
+    x = np.array(getattr(gait_state, field), dtype=float)  # a copy: never a view of the message
+    if x.shape != (N_COORDINATES,):
+        raise SimulationError(f'gait_state {field} has {x.size} entries; it needs '
+                              f'{N_COORDINATES} (y0, q1..q17)')
+    if not np.isfinite(x).all():
+        bad = [COORDINATE_NAMES[i] for i in np.flatnonzero(~np.isfinite(x))]
+        raise SimulationError(f'gait_state {field} is not finite at {bad}')
+    return x
 
 
-def observation_from_messages(joint_state: Any, gait_state: Any) -> Observation:
-    """The Observation of one instant from its JointState and GaitState messages.
+def observation_from_gait_state(gait_state: Any) -> Observation:
+    """The Observation of one instant from its GaitState message (the whole hybrid state).
 
-    :raises SimulationError: when the stamps differ or a field is malformed.
+    :raises SimulationError: when a field is malformed (naming it).
     """
-    ns = stamp_to_ns(joint_state.header.stamp)
-    if stamp_to_ns(gait_state.header.stamp) != ns:
-        raise SimulationError(
-            f'joint_states stamp {ns} ns and gait_state stamp '
-            f'{stamp_to_ns(gait_state.header.stamp)} ns differ')
-    q = _coordinates(joint_state.name, joint_state.position, 'position')
-    v = _coordinates(joint_state.name, joint_state.velocity, 'velocity')
     side = int(gait_state.support_side)
     if side not in (0, 1):
         raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
@@ -113,8 +100,10 @@ def observation_from_messages(joint_state: Any, gait_state: Any) -> Observation:
         raise SimulationError(f'gait_state pivot must be 0, 1 or 2, got {gait_state.pivot}')
     touchdown = (stamp_to_seconds(gait_state.touchdown_stamp) if gait_state.touched_down
                  else float('nan'))
-    return Observation(ns_to_seconds(ns), q, v, int(gait_state.mode), SIDES[side], pivot,
-                       int(gait_state.step_index),
+    return Observation(stamp_to_seconds(gait_state.header.stamp),
+                       _state_vector(gait_state, 'position'),
+                       _state_vector(gait_state, 'velocity'), int(gait_state.mode),
+                       SIDES[side], pivot, int(gait_state.step_index),
                        stamp_to_seconds(gait_state.support_exchange_stamp),
                        float(gait_state.heel_anchor_y), touchdown)
 
@@ -207,40 +196,3 @@ def command_fields(answer: ControllerCommand) -> dict[str, Any]:
 
 def _doubles(x: np.ndarray) -> array:
     return array('d', np.ascontiguousarray(x, dtype=np.float64).tobytes())
-
-
-# ------------------------------------------------------------------------------------ pairing
-class StatePairer:
-    """Pairs the joint_states and gait_state messages of one instant by their stamp.
-
-    ``add`` returns the pair once both messages of a stamp are in; older unmatched messages are
-    dropped. A stamp earlier than the last paired one (a reset of the simulation) starts over.
-    """
-
-    KINDS = ('joint_states', 'gait_state')
-
-    def __init__(self) -> None:
-        self._pending: dict[str, dict[int, Any]] = {k: {} for k in self.KINDS}
-        self.last_ns: int | None = None
-
-    def add(self, kind: str, msg: Any) -> tuple[int, Any, Any] | None:
-        """Store one message; return (stamp ns, joint_state, gait_state) when complete."""
-        ns = stamp_to_ns(msg.header.stamp)
-        if self.last_ns is not None and ns < self.last_ns:
-            self.reset()
-        self._pending[kind][ns] = msg
-        other = self._pending[self.KINDS[1 - self.KINDS.index(kind)]]
-        if ns not in other:
-            return None
-        pair = self._pending['joint_states'].pop(ns), self._pending['gait_state'].pop(ns)
-        for table in self._pending.values():
-            for old in [k for k in table if k < ns]:
-                del table[old]
-        self.last_ns = ns
-        return ns, pair[0], pair[1]
-
-    def reset(self) -> None:
-        """Forget everything (the simulation was reset)."""
-        for table in self._pending.values():
-            table.clear()
-        self.last_ns = None

@@ -1,12 +1,13 @@
 """``ros2 run iceskate_sim simulator``: the simulator node, a thin adapter over LockstepLoop.
 
-Publishes ``joint_states``, ``head_pose``, ``gait_state`` and ``/clock`` at every control instant
-(the CDR bytes of the bag's message types, published raw; a topic nobody subscribes to is
-skipped) and ``robot_description`` once (transient local); takes ``effort_commands``; services
-``~/step``, ``~/pause``, ``~/resume``, ``~/reset``. Lockstep: state t_k out, a command stamped
-t_k from every source the scene runs, one period, repeat; a source silent for
-``control_timeout`` s ends the run with an error naming it and its node. The bag is written
-while the controllers compute. ``~/step`` answers at once with the time the steps will reach
+Publishes ``gait_state``, ``/clock``, ``joint_states`` and ``head_pose`` at every control
+instant (the CDR bytes of the bag's message types, published raw; a topic nobody subscribes to
+is neither built nor sent) and ``robot_description`` once (transient local); takes
+``effort_commands`` (best effort: see ``LOCKSTEP_READER_QOS``); services ``~/step``,
+``~/pause``, ``~/resume``, ``~/reset``. Lockstep: state t_k out, a command stamped t_k from
+every source the scene runs, one period, repeat; a source silent for ``control_timeout`` s ends
+the run with an error naming it and its node. The bag is written while the controllers compute.
+``~/step`` answers at once with the time the steps will reach
 (the EventsExecutor cannot defer a response): watch /clock.
 """
 
@@ -31,6 +32,7 @@ from iceskate_sim.lockstep import LockstepLoop, LockstepSession
 from iceskate_sim.node_support import (
     CLOCK_QOS,
     LATCHED_QOS,
+    LOCKSTEP_READER_QOS,
     STATE_QOS,
     ConfigError,
     declare_all,
@@ -70,7 +72,8 @@ class SimulatorNode(Node):
             raise ConfigError(f'parameter scene={c.scene!r} (or record_bag, out_dir): {exc}') \
                 from None
         self.loop = LockstepLoop(self.session, self._publish, self._report, c.control_timeout,
-                                 c.realtime_factor, c.start_paused, c.stats_file)
+                                 c.realtime_factor, c.start_paused, c.stats_file,
+                                 self._listened)
         self._pub = {'/clock': self.create_publisher(Clock, '/clock', CLOCK_QOS)} | {
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
             (('joint_states', JointState), ('head_pose', PoseStamped), ('gait_state', GaitState))}
@@ -82,7 +85,7 @@ class SimulatorNode(Node):
                                                              getattr(self.loop, name)))
         self.create_timer(self.loop.timer_period, self.timer_callback)
         self.create_subscription(EffortCommand, 'effort_commands', self.on_effort_commands,
-                                 STATE_QOS)
+                                 LOCKSTEP_READER_QOS)
 
     @property
     def finished(self) -> bool:
@@ -94,10 +97,11 @@ class SimulatorNode(Node):
         """1 if the run ended with an error, else 0."""
         return self.loop.exit_code
 
+    def _listened(self, topic: str) -> bool:
+        return self._pub[topic].get_subscription_count() > 0
+
     def _publish(self, topic: str, message: Any) -> None:
-        publisher = self._pub[topic]
-        if publisher.get_subscription_count():  # else nobody gets it: skip serializing
-            publisher.publish(self.session.serialize(topic, message))
+        self._pub[topic].publish(self.session.serialize(topic, message))
 
     def _report(self, text: str, failed: bool) -> None:
         if not self.context.ok():  # stopped by a signal: rosout is gone
@@ -115,11 +119,9 @@ class SimulatorNode(Node):
         self._try_start() if self.loop.phase == 'starting' else self.loop.tick()
 
     def _try_start(self) -> None:
-        up = {i.node_name for i in self.get_publishers_info_by_topic('effort_commands')}
-        for topic in ('joint_states', 'gait_state'):
-            up &= {i.node_name for i in self.get_subscriptions_info_by_topic(topic)}
-        matched = min(self._pub[t].get_subscription_count() for t in ('/joint_states',
-                                                                       '/gait_state'))
+        up = ({i.node_name for i in self.get_publishers_info_by_topic('effort_commands')}
+              & {i.node_name for i in self.get_subscriptions_info_by_topic('gait_state')})
+        matched = self._pub['/gait_state'].get_subscription_count()
         if self.loop.try_begin(up, matched, self.config.startup_timeout):
             self.get_logger().info(f'running {self.session.scene.name!r}: sources '
                                    f'{list(self.session.sources)}, nodes '

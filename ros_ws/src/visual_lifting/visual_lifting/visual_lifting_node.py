@@ -1,6 +1,6 @@
 """``ros2 run visual_lifting visual_lifting``: the eq. (9) head-pose controller as a ROS node.
 
-Subscribes ``joint_states`` + ``gait_state``, publishes one ``EffortCommand`` (source
+Subscribes ``gait_state`` (the hybrid state), publishes one ``EffortCommand`` (source
 'visual_lifting') per instant on ``effort_commands``, stamped with the state's time. Its
 parameters are the scene's ``inputs.visual_lifting`` block (parameter ``scene``). The target's
 origin psi(0) is the head pose of the state at t = 0 (latched again after a reset); the moving
