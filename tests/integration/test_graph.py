@@ -134,7 +134,7 @@ def test_bag_reads_back_with_rosbags_and_mcap(graph_run):
                 .iter_decoded_messages():
             decoded[channel.topic] = decoded.get(channel.topic, 0) + 1
             if channel.topic == '/joint_dynamics':
-                assert len(msg.acceleration) == 18 and msg.efforts[0].source == 'visual_lifting'
+                assert len(msg.acceleration) == 18 and msg.source_names[0] == 'visual_lifting'
     assert decoded == counts
 
 

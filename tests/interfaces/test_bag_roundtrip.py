@@ -79,10 +79,8 @@ def make_messages(typestore, step: int):
         header=header, name=COORDINATES,
         active=np.array([step % 2 == 0] + [True] * 17, dtype=bool),
         acceleration=np.arange(len(COORDINATES), dtype=np.float64) * 0.25 - step,
-        efforts=[effort, t[EFFORT_COMMAND](
-            header=header, source='gait_manager', joint_names=['q8', 'q9'],
-            effort=np.array([1.5, -1.5]), stiffness=np.zeros(0), damping=np.zeros(0),
-            position_reference=np.zeros(0), source_names=[], source_efforts=np.zeros(0))])
+        source_names=['visual_lifting', 'passive'],
+        source_efforts=np.linspace(-2.0, 2.0, 2 * n) * step)
     return gait_state, effort, dynamics
 
 
@@ -163,5 +161,6 @@ def test_mcap_ros2_decodes_bag_with_embedded_definitions(bag):
     assert {topic: s.name for topic, s in schemas.items()} == {
         '/gait_state': GAIT_STATE, '/effort_command': EFFORT_COMMAND,
         '/joint_dynamics': JOINT_DYNAMICS}
-    assert b'EffortCommand[] efforts' in schemas['/joint_dynamics'].data
+    assert b'float64[] source_efforts' in schemas['/joint_dynamics'].data
+    assert b'MSG: geometry_msgs/Point' in schemas['/gait_state'].data  # nested definitions
     assert got == expected

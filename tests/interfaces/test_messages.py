@@ -70,13 +70,14 @@ def make_effort_command(source: str = 'visual_lifting') -> EffortCommand:
 
 
 def make_joint_dynamics() -> JointDynamics:
-    """Return a JointDynamics with two effort sources nested."""
+    """Return a JointDynamics with two effort sources."""
     return JointDynamics(
         header=Header(stamp=Time(sec=3, nanosec=251_000_000), frame_id='world'),
         name=COORDINATES,
         active=[False, True] + [True] * 16,
         acceleration=[0.0, -1.5] + [math.sin(i) for i in range(16)],
-        efforts=[make_effort_command('visual_lifting'), make_effort_command('gait_manager')],
+        source_names=['visual_lifting', 'passive'],
+        source_efforts=[0.25 * i - 3.0 for i in range(2 * len(COORDINATES))],
     )
 
 

@@ -144,3 +144,44 @@ def test_read_bag_refuses_an_unknown_definition_of_our_message(tmp_path, sim_bag
         writer.close()
     with pytest.raises(SimulationError, match='/joint_dynamics.*incompatible message'):
         read_bag(path)
+
+
+def _rewrite_joint_dynamics(source: pathlib.Path, path: pathlib.Path, change) -> pathlib.Path:
+    """Copy the bag at ``source`` to ``path`` with ``change(msg)`` applied to /joint_dynamics."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    with AnyReader([source]) as reader:
+        ts = reader.typestore
+        writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=ts)
+               for c in reader.connections}
+        for conn, stamp, raw in reader.messages():
+            if conn.topic == '/joint_dynamics':
+                msg = reader.deserialize(raw, conn.msgtype)
+                change(msg)
+                raw = ts.serialize_cdr(msg, conn.msgtype)
+            writer.write(out[conn.id], stamp, raw)
+        writer.close()
+    return path
+
+
+@pytest.mark.parametrize('change, match', [
+    (lambda m: setattr(m, 'source_efforts', m.source_efforts[:-1]),
+     r'source_efforts has \d+ values for \d+ sources x 18 names'),
+    (lambda m: setattr(m, 'source_names', [m.source_names[0]] * len(m.source_names)),
+     'repeated source names'),
+])
+def test_read_bag_refuses_a_malformed_effort_breakdown(tmp_path, sim_bag, change, match):
+    broken = _rewrite_joint_dynamics(sim_bag, tmp_path / 'broken', change)
+    with pytest.raises(SimulationError, match=f'/joint_dynamics at .*{match}'):
+        read_bag(broken)
+
+
+def test_the_breakdown_survives_a_rewrite_unchanged(tmp_path, sim_bag):
+    """The copy above changes nothing by itself (the refusals come from the changes)."""
+    same = read_bag(_rewrite_joint_dynamics(sim_bag, tmp_path / 'same', lambda m: None))
+    original = read_bag(sim_bag)
+    assert set(same.efforts) == set(original.efforts)
+    for source, tau in original.efforts.items():
+        np.testing.assert_array_equal(same.efforts[source], tau)

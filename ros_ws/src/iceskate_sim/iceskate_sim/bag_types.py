@@ -22,10 +22,12 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-__all__ = ['INTERFACES_PACKAGE', 'find_msg_dir', 'make_typestore', 'msg_types']
+__all__ = ['INTERFACES_PACKAGE', 'PASSIVE', 'find_msg_dir', 'make_typestore', 'msg_types']
 
 #: ROS package that defines our messages.
 INTERFACES_PACKAGE = 'iceskate_interfaces'
+#: Source name of the joint damping and soft-stop torques in JointDynamics.source_names.
+PASSIVE = 'passive'
 
 # ros_ws/src/iceskate_sim/iceskate_sim/bag_types.py -> ros_ws/src/interfaces/msg
 # (resolve() follows colcon's --symlink-install links back to the source tree).

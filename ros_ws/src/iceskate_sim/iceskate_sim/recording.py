@@ -39,7 +39,7 @@ import pinocchio as pin
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys.store import Typestore
 
-from iceskate_sim.bag_types import make_typestore
+from iceskate_sim.bag_types import PASSIVE, make_typestore
 from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState, Transition
@@ -148,7 +148,6 @@ class MessageFactory:
         self._quaternion = types['geometry_msgs/msg/Quaternion']
         self._gait_state = types['iceskate_interfaces/msg/GaitState']
         self._dynamics = types['iceskate_interfaces/msg/JointDynamics']
-        self._effort = types['iceskate_interfaces/msg/EffortCommand']
         self._string = types['std_msgs/msg/String']
         self.names = list(COORDINATE_NAMES)
 
@@ -228,20 +227,12 @@ class MessageFactory:
     def _dynamics_message(self, record: BagRecord, t: float) -> Any:
         x = record.values
         mode = get_mode(record.mode)
-        effort_messages = [self.effort(t, source, tau)
-                           for source, tau in self._efforts(record).items()]
-        effort_messages.append(self.effort(t, 'passive', x[_PASSIVE]))
+        efforts = x[_EFFORTS:_EFFORTS + len(record.sources) * _N]
         return self._dynamics(header=self.header(t), name=self.names,
                               active=np.isin(np.arange(_N), mode.active),
-                              acceleration=x[_QDD].copy(), efforts=effort_messages)
-
-    def effort(self, t: float, source: str, tau: np.ndarray) -> Any:
-        """EffortCommand holding the generalized force of one source at the sample [N m]."""
-        empty = np.zeros(0)
-        return self._effort(header=self.header(t), source=source, joint_names=self.names,
-                            effort=np.asarray(tau, dtype=np.float64), stiffness=empty,
-                            damping=empty, position_reference=empty, source_names=[],
-                            source_efforts=empty)
+                              acceleration=x[_QDD].copy(),
+                              source_names=[*record.sources, PASSIVE],
+                              source_efforts=np.concatenate([efforts, x[_PASSIVE]]))
 
     def description(self, urdf: str) -> Any:
         """std_msgs/String holding the URDF."""

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from iceskate_sim.analysis._progress import progress_bar
+from iceskate_sim.bag_types import PASSIVE
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
@@ -63,8 +64,6 @@ _WHAT = {
 SIDE_NAMES = ('right', 'left')
 #: GaitState.pivot code -> pivot name ('none': sole flat; the flat models use the toe pivot).
 PIVOT_NAMES = ('none', 'toe', 'heel')
-#: Source name of the joint damping and soft-stop torques in JointDynamics.efforts.
-PASSIVE = 'passive'
 
 
 @dataclass(frozen=True)
@@ -297,13 +296,16 @@ def _read_joint_dynamics(rows: _Rows, msg: Any, where: str) -> None:
     order = _order(msg.name, '/joint_dynamics', where)
     qdd = _vector(msg.acceleration, order, '/joint_dynamics', 'acceleration', where)
     active = np.asarray(msg.active, dtype=bool)[order]
-    efforts: dict[str, np.ndarray] = {}
-    for command in msg.efforts:
-        c_order = _order(command.joint_names, f'/joint_dynamics effort {command.source!r}',
-                         where)
-        tau = _vector(command.effort, c_order, '/joint_dynamics', f'effort {command.source!r}',
-                      where)
-        efforts[command.source] = efforts.get(command.source, 0.0) + tau
+    sources = [str(s) for s in msg.source_names]
+    if len(set(sources)) != len(sources):
+        raise SimulationError(f'/joint_dynamics at {where}: repeated source names {sources}')
+    n = len(msg.name)
+    values = np.asarray(msg.source_efforts, dtype=float)
+    if values.shape != (len(sources) * n,):
+        raise SimulationError(f'/joint_dynamics at {where}: source_efforts has {values.size} '
+                              f'values for {len(sources)} sources x {n} names')
+    efforts = {source: _vector(row, order, '/joint_dynamics', f'effort of {source!r}', where)
+               for source, row in zip(sources, values.reshape(len(sources), n), strict=True)}
     rows.put(rows.dyn, _stamp_ns(msg), (qdd, active, efforts))
 
 
