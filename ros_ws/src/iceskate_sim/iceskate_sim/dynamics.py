@@ -535,12 +535,10 @@ class GaitDynamics:
         pin.computeJointJacobians(model, data, q)
         placement = pin.updateFramePlacement(model, data, fid)
         jac = pin.getFrameJacobian(model, data, fid, _LWA)
-        z_axis = placement.rotation[:, 2]
-        zx, zy, zz = z_axis
+        zx, zy, zz = placement.rotation[:, 2]
         denom = zy * zy + zz * zz
-        pitch = float(np.arctan2(-zy, zz))
         pitch_row = np.array([1.0, -zx * zy / denom, -zx * zz / denom]) @ jac[3:]
-        psi = np.array([placement.translation[1], placement.translation[2], pitch])
+        psi = head_psi(placement.translation, placement.rotation)
         jac_h = np.vstack([jac[1], jac[2], pitch_row])
         jac_h[:, _locked(contact.mode)] = 0.0
         return psi, jac_h
@@ -594,6 +592,13 @@ class GaitDynamics:
     def pivot_y(self, contact: ContactState, q: np.ndarray) -> float:
         """World y of the support pivot edge [m]."""
         return float(q[Y0] + PIVOT_Y[contact.pivot])
+
+
+def head_psi(translation: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """Head-top pose psi = (y [m], z [m], pitch [rad]) of its world placement: pitch is the angle
+    of the head z axis in the world y-z plane (positive tilts the head back)."""
+    return np.array([translation[1], translation[2],
+                     float(np.arctan2(-rotation[1, 2], rotation[2, 2]))])
 
 
 def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.command import ControllerCommand, HeldCommand
+from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
@@ -237,13 +238,14 @@ class LockstepSession:
             self._commands.clear()
         return sample
 
-    def _psi_d(self, obs: Any) -> np.ndarray:
-        """The visual-lifting target at obs, as the headless control stack records it."""
+    def _psi_d(self, sample: Sample, obs: Any) -> np.ndarray:
+        """The visual-lifting target at the sample's state (observed as ``obs``), as the
+        headless control stack records it."""
         if self._vl is None:
             return self._psi_initial.copy()
         from gait_manager.law import head_offset
         from visual_lifting.law import desired_head_pose
-        psi = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
+        psi = head_psi(sample.head_position, sample.head_rotation)
         offset = (head_offset(obs, self.sim.dynamics, self._gm) if self._gm is not None
                   else np.zeros(2))
         return desired_head_pose(self._vl, obs.t, psi, self._psi_initial, offset)
@@ -252,7 +254,7 @@ class LockstepSession:
         """Append the samples of the periods stepped to the trajectory and hand them to the bag
         (off the lockstep's critical path: call it while the controllers compute)."""
         for sample, obs in self._unrecorded:
-            self.trajectory.append(sample, self._psi_d(obs))
+            self.trajectory.append(sample, self._psi_d(sample, obs))
             if self.recorder is not None:
                 self.recorder.write(sample)
         self._unrecorded.clear()
@@ -419,8 +421,9 @@ class LockstepLoop:
     def _publish_live(self, topics: tuple[str, ...]) -> None:
         """Build and publish the state messages of the ``topics`` somebody listens to."""
         wanted = tuple(topic for topic in topics if self._listened(topic))
-        for topic, message in self.session.state_messages(wanted).items():
-            self._publish(topic, message)
+        if wanted:
+            for topic, message in self.session.state_messages(wanted).items():
+                self._publish(topic, message)
 
     def step(self) -> None:
         """One period, then the next state out (``publish_state``)."""

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import Sample
 from iceskate_sim.robot import SOLE_HEEL_Y, SOLE_TOE_Y
@@ -26,7 +27,6 @@ class Trajectory:
     def append(self, sample: Sample, psi_d: np.ndarray) -> None:
         """Add one sample and the visual-lifting target psi_d at it."""
         s, r = sample.state, sample.result
-        rot = sample.head_rotation
         row = {
             't': s.t, 'q': s.q, 'v': s.v, 'qdd': r.qdd, 'mode': s.mode.number,
             'side': SIDE_CODE[s.contact.side],
@@ -34,8 +34,7 @@ class Trajectory:
             'step_index': s.step_index, 'multipliers': r.multipliers,
             'support_normal': r.support_normal, 'support_tangential': r.support_tangential,
             'cop_y': r.cop_y,
-            'psi': np.array([sample.head_position[1], sample.head_position[2],
-                             np.arctan2(-rot[1, 2], rot[2, 2])]),
+            'psi': head_psi(sample.head_position, sample.head_rotation),
             'psi_d': np.asarray(psi_d, dtype=float), 'applied': r.applied,
         }
         for source, tau in sample.efforts.items():
