@@ -201,12 +201,60 @@ class _Plan:
             A[:n, self.fr_row] = -fr[act]
 
 
+class _StateTerms:
+    """What ``evaluate`` needs of a state (q, v) in one plan, whatever the input: M over the
+    active coordinates, the bias forces, the passive torques, the constraint rows and drifts,
+    the centre-of-mass row of a gliding support, the swing-foot points. Kept for the last
+    states evaluated (``GaitDynamics._STATE_CACHE``): a period evaluates the same state under
+    the old and the new command, and the implicit step evaluates the period's start again.
+    The arrays are read-only (results share them)."""
+
+    __slots__ = ('key', 'm_aa', 'nle', 'engaged', 'passive', 'heel', 'heel_velocity', 'toe_z',
+                 'rows', 'heel_y', 'drift', 'jcom', 'acom_z')
+
+    def __init__(self, key: tuple, plan: _Plan, dynamics: GaitDynamics, q: np.ndarray,
+                 v: np.ndarray, ql: list[float]) -> None:
+        model, data, heel = plan.model, plan.data, plan.heel
+        self.key = key
+        pin.computeAllTerms(model, data, q, v)  # leaves data.a = velocity products (a = 0)
+        self.heel = _frozen(pin.updateFramePlacement(model, data, heel).translation.copy())
+        self.m_aa = _frozen(data.M.reshape(-1, order='F').take(plan.m_index))  # symmetric
+        self.nle = _frozen(data.nle[plan.sel].copy())  # copies: data is overwritten later
+        self.engaged = dynamics.params.joint_limits and dynamics._limits_engaged(ql)
+        self.passive = _frozen(dynamics.passive_forces(q, v) if self.engaged
+                               else dynamics._neg_damping * v)
+        self.rows = self.heel_y = self.drift = self.jcom = None
+        self.acom_z = 0.0
+        mode = plan.mode
+        if plan.nc:
+            jac = pin.getFrameJacobian(model, data, heel, _LWA)
+            self.rows = _frozen(jac.take(plan.j_index))
+            if mode.swing_sliding:
+                self.heel_y = _frozen(jac.take(plan.heel_y_index))
+            acc = pin.getFrameClassicalAcceleration(model, data, heel, _LWA).linear
+            self.drift = (float(acc[2]), float(acc[1]))
+        if mode.y0_active:
+            pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
+            self.jcom = _frozen(data.Jcom[2, plan.sel].copy())
+            self.acom_z = float(data.acom[0][2])
+        self.heel_velocity = _frozen(pin.getFrameVelocity(model, data, heel, _LWA).linear.copy())
+        self.toe_z = float(pin.updateFramePlacement(model, data, plan.toe).translation[2])
+
+
+def _frozen(x: np.ndarray) -> np.ndarray:
+    x.flags.writeable = False
+    return x
+
+
 class GaitDynamics:
     """Per-mode dynamics and derived quantities of the humanoid.
 
     Holds one Pinocchio data object per support model, so an instance is not thread-safe;
     make one per thread.
     """
+
+    #: States whose input-free terms ``evaluate`` keeps (an event search alternates two).
+    _STATE_CACHE = 2
 
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         self.robot = robot
@@ -223,6 +271,7 @@ class GaitDynamics:
         self._neg_damping = -self._damping
         self._limit_list = [(int(i), float(lo), float(hi)) for i, (lo, hi) in limits]
         self._plans: dict[tuple[int, str, str], _Plan] = {}
+        self._states: list[_StateTerms] = []  # most recent first
 
     # ----------------------------------------------------------------- helpers
     def _model(self, contact: ContactState) -> tuple[pin.Model, pin.Data, dict[str, int]]:
@@ -349,62 +398,58 @@ class GaitDynamics:
                 locked = plan.locked
                 raise SimulationError(f'{plan.where}: locked coordinates '
                                       f'{locked} must have zero velocity, got {v[locked]}')
-        model, data, heel = plan.model, plan.data, plan.heel
+        model, data = plan.model, plan.data
         n, nc, sel, A, b = plan.n, plan.nc, plan.sel, plan.A, plan.b
         params = self.params
         mu = params.mu
+        terms = self._state_terms(plan, q, v, ql, fresh=push is not None)
 
-        pin.computeAllTerms(model, data, q, v)  # leaves data.a = velocity products (a = 0)
-        heel_position = pin.updateFramePlacement(model, data, heel).translation.copy()
-        engaged = params.joint_limits and self._limits_engaged(ql)
-        passive = self.passive_forces(q, v) if engaged else self._neg_damping * v
+        passive = terms.passive
         applied = passive + tau
         if stiffness is not None:
             applied -= stiffness * q + damping * v
         if not mode.q1_active:
             applied[Q1] = 0.0
         applied[Y0] = 0.0
-        if push is not None:
+        if push is not None:  # the terms are fresh: data holds this state's Jacobians
             jac = pin.getFrameJacobian(model, data, plan.frames[push[0]], _LWA)
             applied += jac[:3].T @ push[1]
 
-        plan.A_mm[...] = data.M.reshape(-1, order='F').take(plan.m_index)  # symmetric M_aa
-        np.subtract(applied[sel], data.nle[sel], out=plan.b_top)
+        plan.A_mm[...] = terms.m_aa
+        np.subtract(applied[sel], terms.nle, out=plan.b_top)
         if implicit_step > 0.0:
-            implicit = (self._damping + self._limit_damping_engaged(q) if engaged
+            implicit = (self._damping + self._limit_damping_engaged(q) if terms.engaged
                         else self._damping.copy())
             if damping is not None:
                 implicit = implicit + damping
             implicit[Y0] = 0.0
             plan.A_diag += implicit_step * implicit[sel]
         if nc:
-            jac = pin.getFrameJacobian(model, data, heel, _LWA)
-            rows = jac.take(plan.j_index)
+            rows = terms.rows
             plan.A_jac[...] = rows
             plan.A_mc_jac[...] = -rows.T  # generalized-force directions -J^T
             if mode.swing_sliding:  # friction mu f_nz on the heel, against its velocity
-                np.subtract(mu * contact.heel_slide_dir * jac.take(plan.heel_y_index),
-                            plan.A_c0, out=plan.A_mc0)
-            acc = pin.getFrameClassicalAcceleration(model, data, heel, _LWA).linear
-            b[n] = -acc[2]
+                np.subtract(mu * contact.heel_slide_dir * terms.heel_y, plan.A_c0,
+                            out=plan.A_mc0)
+            b[n] = -terms.drift[0]
             if plan.n_jac == 2:
-                b[n + 1] = -acc[1]
+                b[n + 1] = -terms.drift[1]
             if plan.fr_row is not None:
                 b[plan.fr_row] = -0.0
             alpha = params.baumgarte
             if alpha:
                 rows = np.zeros((nc, N_COORDINATES))
                 rows[:, plan.act] = plan.A_cm
+                heel_position = terms.heel
                 position = [heel_position[2] if name == 'hz'
                             else heel_position[1] - contact.heel_anchor_y if name == 'hy'
                             else q[_LEG_CHAIN].sum() for name in mode.constraints]
                 b[n:] -= 2.0 * alpha * rows @ v + alpha * alpha * np.array(position)
         if mode.y0_active:  # Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
-            pin.centerOfMass(model, data, pin.KinematicLevel.ACCELERATION, False)
             k = mu * contact.support_slide_dir
             km = k * self._mass
-            plan.A_row0 += km * data.Jcom[2, sel]
-            b[0] -= km * (GRAVITY + float(data.acom[0][2]))
+            plan.A_row0 += km * terms.jcom
+            b[0] -= km * (GRAVITY + terms.acom_z)
             if nc:
                 A[0, n] -= k
         if nc:
@@ -424,15 +469,32 @@ class GaitDynamics:
         multipliers = np.array(values)
         heel_friction = (-mu * contact.heel_slide_dir * values[_F_NZ]
                          if mode.swing_sliding else 0.0)
-        wrench = self._support_wrench(plan, heel_position, q, v, qdd, values, heel_friction,
+        wrench = self._support_wrench(plan, terms.heel, q, v, qdd, values, heel_friction,
                                       applied, push)
         normal = float(wrench[2])
         cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
-        heel_velocity = pin.getFrameVelocity(model, data, heel, _LWA).linear.copy()
-        toe_z = float(pin.updateFramePlacement(model, data, plan.toe).translation[2])
         return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
-                              float(heel_friction), applied, heel_position, heel_velocity, toe_z,
-                              passive)
+                              float(heel_friction), applied, terms.heel, terms.heel_velocity,
+                              terms.toe_z, passive)
+
+    def _state_terms(self, plan: _Plan, q: np.ndarray, v: np.ndarray, ql: list[float],
+                     fresh: bool = False) -> _StateTerms:
+        """The input-free terms of (q, v) in ``plan``: kept ones if this state was evaluated
+        lately (bit-identical to computing them again), else computed (always if ``fresh``:
+        Pinocchio's data then holds this state for the caller)."""
+        key = (plan, q.tobytes(), v.tobytes())
+        states = self._states
+        for i, terms in enumerate(states):
+            if terms.key == key:
+                del states[i]
+                if not fresh:
+                    states.insert(0, terms)
+                    return terms
+                break
+        terms = _StateTerms(key, plan, self, q, v, ql)
+        states.insert(0, terms)
+        del states[self._STATE_CACHE:]
+        return terms
 
     def _check_rank_fast(self, jac: np.ndarray, contact: ContactState) -> None:
         """``_check_rank`` with the Hadamard ratio in closed form (1 to 3 rows); the exact check
