@@ -50,8 +50,25 @@ def test_controller_command_records_each_source_at_the_state_answered():
                                sum(answer.source_efforts.values()), rtol=1e-12, atol=1e-9)
 
 
-def test_a_command_refuses_non_finite_or_negative_gains():
+@pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize('field', ['effort', 'stiffness', 'damping', 'reference'])
+def test_a_command_refuses_a_non_finite_entry(field, bad):
+    values = {f: np.ones(18) for f in ('effort', 'stiffness', 'damping', 'reference')}
+    values[field][7] = bad
+    with pytest.raises(SimulationError, match=f'{field} has non-finite entries'):
+        JointCommand(**values)
+
+
+def test_a_command_refuses_opposite_infinities_and_takes_an_overflowing_finite_sum():
     with pytest.raises(SimulationError, match='non-finite'):
-        JointCommand(np.full(18, np.nan))
+        JointCommand(np.r_[np.inf, -np.inf, np.zeros(16)])  # the sum is nan
+    huge = JointCommand(np.full(18, 1e308))  # the sum overflows, every entry is finite
+    assert np.isfinite(huge.effort).all()
+
+
+@pytest.mark.parametrize('field', ['stiffness', 'damping'])
+def test_a_command_refuses_a_negative_gain(field):
+    values = {f: np.ones(18) for f in ('stiffness', 'damping', 'reference')}
+    values[field][17] = -1e-12
     with pytest.raises(SimulationError, match='>= 0'):
-        JointCommand(np.zeros(18), -np.ones(18), np.zeros(18), np.zeros(18))
+        JointCommand(np.zeros(18), **values)

@@ -15,6 +15,7 @@ All arrays have 18 entries [y0, q1..q17]; units N m (N), N m/rad, N m s/rad, rad
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from typing import Iterable
 
 import numpy as np
@@ -23,12 +24,18 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import N_COORDINATES
 
 
+def all_finite(x: np.ndarray) -> bool:
+    """Whether every entry of a float array is finite: a finite float sum proves it (0.3 us for
+    18 entries; ``np.isfinite(x).all()``: 1.2 us), a sum that overflowed gets the exact check."""
+    return math.isfinite(sum(x.tolist())) or bool(np.isfinite(x).all())
+
+
 def _vector(name: str, value: np.ndarray | None) -> np.ndarray:
     x = np.zeros(N_COORDINATES) if value is None else np.asarray(value, dtype=float)
     if x.shape != (N_COORDINATES,):
         raise SimulationError(f'joint command {name} must have {N_COORDINATES} entries, '
                               f'got shape {x.shape}')
-    if not np.isfinite(x).all():  # the method form: a third of the cost of np.all
+    if not all_finite(x):
         raise SimulationError(f'joint command {name} has non-finite entries')
     return x
 
@@ -52,7 +59,7 @@ class JointCommand:
         if all(given):
             for name in ('stiffness', 'damping', 'reference'):
                 object.__setattr__(self, name, _vector(name, getattr(self, name)))
-            if (self.stiffness < 0).any() or (self.damping < 0).any():
+            if min(self.stiffness.tolist()) < 0.0 or min(self.damping.tolist()) < 0.0:
                 raise SimulationError('joint command stiffness and damping must be >= 0')
 
     @property

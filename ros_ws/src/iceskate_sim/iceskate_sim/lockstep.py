@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import ControllerCommand, HeldCommand
+from iceskate_sim.command import ControllerCommand
 from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import Trajectory, compute_metrics
@@ -130,7 +130,6 @@ class LockstepSession:
         self.error: SimulationError | None = None
         self._commands: dict[str, ControllerCommand] = {}
         self._stamps: dict[str, int] = {}
-        self._held = HeldCommand.torque_only(np.zeros(18))
         self._unrecorded: list[tuple[Sample, Any]] = []  # (sample, observation) to record
         self._wall_start: float | None = None
 
@@ -157,7 +156,7 @@ class LockstepSession:
             self._wall_start = time.perf_counter()
         s = self.sim.state
         placement = self.sim.head_placement()
-        sample = Sample(s, self.sim.result, {'held': self._held.torque(s.q, s.v)},
+        sample = Sample(s, self.sim.result, {'held': self.sim.command.torque(s.q, s.v)},
                         placement.translation, placement.rotation,
                         last_event_before(self.sim, s.t))
         return self.factory.messages(sample, topics)
@@ -226,7 +225,6 @@ class LockstepSession:
         sim = self.sim
         obs = sim.observation()
         commands = {c: self._commands[c] for c in self.controllers if c in self._commands}
-        self._held = HeldCommand.of_controllers(commands.values())
         try:
             sample = advance_and_sample(sim, self.scene, commands)
         except SimulationError as exc:

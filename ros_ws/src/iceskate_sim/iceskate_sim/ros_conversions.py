@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_sim.command import ControllerCommand, JointCommand, all_finite
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
@@ -81,7 +81,7 @@ def _state_vector(gait_state: Any, field: str) -> np.ndarray:
     if x.shape != (N_COORDINATES,):
         raise SimulationError(f'gait_state {field} has {x.size} entries; it needs '
                               f'{N_COORDINATES} (y0, q1..q17)')
-    if not np.isfinite(x).all():
+    if not all_finite(x):
         bad = [COORDINATE_NAMES[i] for i in np.flatnonzero(~np.isfinite(x))]
         raise SimulationError(f'gait_state {field} is not finite at {bad}')
     return x
@@ -124,7 +124,7 @@ def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
     x = np.array(getattr(msg, field), dtype=float)  # a copy: never a view of the message
     if x.shape != (n,):
         raise SimulationError(f'{where}: {field} has {x.size} entries for {n} joint names')
-    if not np.all(np.isfinite(x)):
+    if not all_finite(x):
         bad = [str(msg.joint_names[i]) for i in np.flatnonzero(~np.isfinite(x))]
         raise SimulationError(f'{where}: {field} is not finite at {bad}')
     return x
@@ -173,7 +173,7 @@ def command_from_message(msg: Any) -> ControllerCommand:
     if parts.shape != (len(sources) * len(names),):
         raise SimulationError(f'{where}: source_efforts has {parts.size} entries for '
                               f'{len(sources)} source names x {len(names)} joint names')
-    if not np.all(np.isfinite(parts)):
+    if not all_finite(parts):
         raise SimulationError(f'{where}: source_efforts is not finite')
     rows = parts.reshape(len(sources), len(names))
     return ControllerCommand(command, {name: coordinates(row.copy())

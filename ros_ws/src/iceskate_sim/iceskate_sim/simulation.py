@@ -137,6 +137,11 @@ class Simulator:
 
     # -------------------------------------------------------------- accessors
     @property
+    def command(self) -> HeldCommand:
+        """The input held over the last period (zero torque before the first)."""
+        return self._command
+
+    @property
     def time(self) -> float:
         """Simulation time [s]."""
         return self.state.t
