@@ -42,15 +42,15 @@ import pinocchio as pin
 from gait_manager._params import build, real, smoothstep, zeros
 from gait_manager.errors import GaitManagerError
 from gait_manager.feedforward import scratch_data
-from iceskate_sim.command import JointCommand
+from iceskate_sim.command import JointCommand, all_finite
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
 
 ANKLE_HEIGHT = 0.07  # m, ankle above the sole (model-spec §2.4)
 THIGH, SHANK = 0.38, 0.40  # m, leg link lengths (Table 1)
 SWING_START_BEHIND = 0.15  # m, start of the swing-ankle path behind the hip
-GRAVITY_JOINTS = (2, 3, 4, 9, 10)
-SPEED_JOINTS = (2, 3, 4)
+GRAVITY_JOINTS = np.array([2, 3, 4, 9, 10])
+SPEED_JOINTS = np.array([2, 3, 4])
 
 
 @dataclass(frozen=True)
@@ -193,7 +193,7 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
     ramp = min(obs.t / 0.5, 1.0)
     force = min(max(p.speed_gain * (p.speed * ramp - com_v[1]), -p.max_brake), p.max_force)
     jac_com_y = pin.jacobianCenterOfMass(sm.model, data, q)[1]
-    effort[list(SPEED_JOINTS)] += jac_com_y[list(SPEED_JOINTS)] * force
+    effort[SPEED_JOINTS] += jac_com_y[SPEED_JOINTS] * force
     if p.com_stiffness or p.com_damping:
         ankle = sm.model.getJointId('q2')
         ankle_v = pin.getVelocity(sm.model, data, ankle, pin.LOCAL_WORLD_ALIGNED).linear
@@ -201,7 +201,7 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
                       + p.com_damping * (com_v[1] - ankle_v[1]))
     gravity = zeros()
     gravity[mode.active] = dynamics.gravity_terms(obs.contact(), q)
-    effort[list(GRAVITY_JOINTS)] += gravity[list(GRAVITY_JOINTS)]
+    effort[GRAVITY_JOINTS] += gravity[GRAVITY_JOINTS]
     if mode.swing == 'A':
         hip = data.oMi[sm.model.getJointId('q5')].translation
         y, z = swing_ankle_target(obs, p, hip[1], com[1], com_v[1])
@@ -218,6 +218,6 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
             K[2] *= 1.0 - r
             effort[2] += p.push * r
             R[3] = p.stance_knee + r * (p.toe_off_flex - p.stance_knee)
-    if not (np.isfinite(effort).all() and np.isfinite(R).all()):
+    if not (all_finite(effort) and all_finite(R)):
         raise GaitManagerError(f'balance command is not finite at t = {obs.t}')
     return JointCommand(effort, K, B, R)

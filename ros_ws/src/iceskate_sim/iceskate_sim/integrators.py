@@ -77,6 +77,19 @@ class Segment:
     evaluations: int
 
 
+def _remembered(at: Callable[[float], tuple]) -> Callable[[float], tuple]:
+    """``at(s)`` that computes each offset once: the event search asks again for the zero it
+    found (to move onto its due side) and for the state there."""
+    seen: dict[float, tuple] = {}
+
+    def remembered(s: float) -> tuple:
+        found = seen.get(s)
+        if found is None:
+            found = seen[s] = at(s)
+        return found
+    return remembered
+
+
 def _crossed(g0: np.ndarray, g1: np.ndarray) -> np.ndarray:
     return np.flatnonzero((g0 <= GUARD_MARGIN) & (g1 > GUARD_MARGIN))
 
@@ -132,16 +145,15 @@ class Integrator:
             g1 = guards(t + h, x1, r1)
             crossed = _crossed(g0, g1)
             if crossed.size:
-                def at(s: float, t=t, x=x, f0=f0) -> tuple[np.ndarray, DynamicsResult,
-                                                          np.ndarray]:
+                @_remembered
+                def at(s: float, t=t, x=x, f0=f0) -> tuple[np.ndarray, DynamicsResult]:
                     xs = self._step(rhs, t, x, s, f0)[0] if s > 0.0 else x
-                    fs, rs = rhs(t + s, xs)
-                    return xs, rs, fs
+                    return xs, rhs(t + s, xs)[1]
                 def guard_at(s: float, t=t, at=at) -> np.ndarray:
-                    return guards(t + s, *at(s)[:2])
+                    return guards(t + s, *at(s))
                 s_hit, index, count = self._locate(guard_at, g0, crossed, h)
                 evaluations += count * 4
-                xs, rs, _ = at(s_hit)
+                xs, rs = at(s_hit)
                 return Segment(t + s_hit, xs, rs, index, steps, evaluations)
             t, x, f0, r0, g0 = t + h, x1, f1, r1, g1
         return Segment(t_end, x, r0, None, steps, evaluations)
@@ -203,14 +215,18 @@ class Integrator:
                 dense = solver.dense_output()
                 t_prev = solver.t_old
 
-                def guard_at(s: float, dense=dense, t_prev=t_prev) -> np.ndarray:
+                @_remembered
+                def at(s: float, dense=dense, t_prev=t_prev) -> tuple[np.ndarray,
+                                                                     DynamicsResult]:
                     xs = dense(t_prev + s)
-                    return guards(t_prev + s, xs, rhs(t_prev + s, xs)[1])
+                    return xs, rhs(t_prev + s, xs)[1]
+
+                def guard_at(s: float, t_prev=t_prev, at=at) -> np.ndarray:
+                    return guards(t_prev + s, *at(s))
                 s_hit, index, calls = self._locate(guard_at, g0, crossed, t1 - t_prev)
-                t_hit = t_prev + s_hit
-                x_hit = dense(t_hit)
-                r_hit = rhs(t_hit, x_hit)[1]
-                return Segment(t_hit, x_hit, r_hit, index, steps, counter[0] + calls + 1)
+                x_hit, r_hit = at(s_hit)
+                return Segment(t_prev + s_hit, x_hit, r_hit, index, steps,
+                               counter[0] + calls + 1)
             g0 = g1
             r0 = r1
         return Segment(solver.t, solver.y.copy(), r0, None, steps, counter[0])
