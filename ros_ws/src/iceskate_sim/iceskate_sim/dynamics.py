@@ -27,6 +27,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
+from iceskate_sim.command import all_finite
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES, GaitMode
 from iceskate_sim.robot import (
@@ -672,7 +673,7 @@ def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     _, _, x, info = dgesv(A, b)
     if info > 0:
         raise np.linalg.LinAlgError(f'singular matrix (zero pivot U[{info - 1}, {info - 1}])')
-    return x, bool(np.isfinite(x).all())
+    return x, all_finite(x)
 
 
 def _minus_force_at(fx: float, fy: float, fz: float, mx: float, my: float, mz: float,

@@ -228,8 +228,9 @@ class MessageFactory:
         x = record.values
         mode = get_mode(record.mode)
         efforts = x[_EFFORTS:_EFFORTS + len(record.sources) * _N]
-        return self._dynamics(header=self.header(t), name=self.names,
-                              active=np.isin(np.arange(_N), mode.active),
+        active = np.zeros(_N, dtype=bool)  # np.isin would take 10 % of the writer's time
+        active[mode.active] = True
+        return self._dynamics(header=self.header(t), name=self.names, active=active,
                               acceleration=x[_QDD].copy(),
                               source_names=[*record.sources, PASSIVE],
                               source_efforts=np.concatenate([efforts, x[_PASSIVE]]))
