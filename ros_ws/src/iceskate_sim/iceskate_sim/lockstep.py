@@ -38,6 +38,7 @@ import numpy as np
 from iceskate_sim.command import ControllerCommand
 from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import HybridState
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
 from iceskate_sim.robot import load_robot
@@ -49,7 +50,7 @@ from iceskate_sim.ros_conversions import (
 )
 from iceskate_sim.runner import advance_and_sample, last_event_before, scene_metadata
 from iceskate_sim.scene import Scene
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.simulation import Simulator, observation_of
 
 #: Live state topics the controllers read, published first, as soon as the state is known: the
 #: state, then /clock (their sim time) at once, while their transport threads are still awake
@@ -130,7 +131,7 @@ class LockstepSession:
         self.error: SimulationError | None = None
         self._commands: dict[str, ControllerCommand] = {}
         self._stamps: dict[str, int] = {}
-        self._unrecorded: list[tuple[Sample, Any]] = []  # (sample, observation) to record
+        self._unrecorded: list[tuple[Sample, HybridState]] = []  # (sample, state answered)
         self._wall_start: float | None = None
 
     # ----------------------------------------------------------------------------- state
@@ -223,14 +224,14 @@ class LockstepSession:
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
                                   f'{self.missing()}')
         sim = self.sim
-        obs = sim.observation()
+        state = sim.state  # the state the commands answered (its Observation: in flush)
         commands = {c: self._commands[c] for c in self.controllers if c in self._commands}
         try:
             sample = advance_and_sample(sim, self.scene, commands)
         except SimulationError as exc:
             self.error = exc
             return None
-        self._unrecorded.append((sample, obs))
+        self._unrecorded.append((sample, state))
         self.periods += 1
         if self.lockstep:
             self._commands.clear()
@@ -251,8 +252,8 @@ class LockstepSession:
     def flush(self) -> None:
         """Append the samples of the periods stepped to the trajectory and hand them to the bag
         (off the lockstep's critical path: call it while the controllers compute)."""
-        for sample, obs in self._unrecorded:
-            self.trajectory.append(sample, self._psi_d(sample, obs))
+        for sample, state in self._unrecorded:
+            self.trajectory.append(sample, self._psi_d(sample, observation_of(state)))
             if self.recorder is not None:
                 self.recorder.write(sample)
         self._unrecorded.clear()

@@ -35,6 +35,13 @@ from iceskate_sim.observation import Observation
 from iceskate_sim.robot import N_COORDINATES, Robot
 
 
+def observation_of(s: HybridState) -> Observation:
+    """The controller's view of a hybrid state (copies of q and v)."""
+    return Observation(s.t, s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
+                       s.contact.pivot, s.step_index, s.t_exchange, s.contact.heel_anchor_y,
+                       s.t_touchdown)
+
+
 @dataclass(frozen=True)
 class SimulatorConfig:
     """Settings of a simulation run.
@@ -148,10 +155,7 @@ class Simulator:
 
     def observation(self) -> Observation:
         """The controller's view of the current state."""
-        s = self.state
-        return Observation(s.t, s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
-                           s.contact.pivot, s.step_index, s.t_exchange,
-                           s.contact.heel_anchor_y, s.t_touchdown)
+        return observation_of(self.state)
 
     def head_height(self) -> float:
         """Height of the head top [m]."""
