@@ -56,7 +56,7 @@ def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, sa
                                                                     monkeypatch):
     def broken(self, record):
         raise OSError('disk full')
-    monkeypatch.setattr(recording.MessageFactory, 'record_messages', broken)  # forked along
+    monkeypatch.setattr(recording.RecordEncoder, 'encode', broken)  # forked along
     with pytest.raises(SimulationError, match='bag writer .* failed: OSError: disk full'):
         _record(tmp_path / 'bag', samples, background=True)
     assert [topic for topic, _, _ in _messages(tmp_path / 'bag')] == ['/robot_description']
