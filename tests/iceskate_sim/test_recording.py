@@ -4,6 +4,7 @@ its failures and the run's failures still leave a closed, readable bag."""
 from dataclasses import replace
 import pathlib
 
+import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
@@ -75,3 +76,55 @@ def test_a_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path, 
     clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
     assert len(clock) == failing_at
     assert clock[-1] == (failing_at - 1) * 1_000_000
+
+
+@pytest.fixture(scope='module')
+def skate_records() -> list[recording.BagRecord]:
+    """1.5 s of the skate scene: support exchanges, heel strikes, several gait modes."""
+    scene = load_scene('skate')
+    robot = load_robot()
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    stack = ControlStack(scene, robot, sim.observation())
+    return [recording.bag_record(advance_and_sample(sim, scene, stack.commands(sim.observation())))
+            for _ in range(1500)]
+
+
+def _rosbags_bytes(factory: recording.MessageFactory,
+                   record: recording.BagRecord) -> dict[str, bytes]:
+    return {topic: bytes(factory.typestore.serialize_cdr(message, recording.TOPICS[topic]))
+            for topic, message in factory.record_messages(record).items()}
+
+
+def test_the_encoder_writes_what_rosbags_serialises(skate_records):
+    factory = recording.MessageFactory()
+    encoder = recording.RecordEncoder(factory)
+    for record in skate_records:
+        assert encoder.encode(record) == _rosbags_bytes(factory, record)
+    layouts = [layout for by_topic in encoder._layouts.values() for layout in by_topic.values()]
+    assert len(encoder._layouts) >= 10 and len({r.mode for r in skate_records}) >= 3
+    assert all(layout is not None for layout in layouts)  # every key learned, none fell back
+
+
+def test_the_encoder_handles_non_finite_and_missing_values(skate_records):
+    factory = recording.MessageFactory()
+    encoder = recording.RecordEncoder(factory, capacity=2)  # evicts as it goes
+    nan, inf = float('nan'), float('inf')
+    edits = [{6: nan}, {2: nan}, {6: inf, 2: inf}, {10: nan, 11: -inf, 12: -0.0}, {-1: nan}]
+    for record in skate_records[::150]:
+        for edit in edits:
+            values = record.values.copy()
+            for i, value in edit.items():
+                values[i] = value
+            for cause in (record.last_cause, None):
+                changed = record._replace(values=values, last_cause=cause)
+                assert encoder.encode(changed) == _rosbags_bytes(factory, changed)
+
+
+def test_the_encoder_falls_back_to_rosbags_when_no_layout_fits(skate_records, monkeypatch):
+    monkeypatch.setattr(recording, 'sentinels', lambda size: np.full(size, 0.5))  # ambiguous
+    factory = recording.MessageFactory()
+    encoder = recording.RecordEncoder(factory)
+    for record in skate_records[::100]:
+        assert encoder.encode(record) == _rosbags_bytes(factory, record)
+    layouts = [layout for by_topic in encoder._layouts.values() for layout in by_topic.values()]
+    assert layouts and all(layout is None for layout in layouts)

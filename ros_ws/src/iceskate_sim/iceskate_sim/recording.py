@@ -17,10 +17,12 @@ the offline analysis reads either:
 Bag metadata (``custom_data``) holds the scene, its parameters, the integrator and the project
 version.
 
-Building and serialising the messages costs about as much as simulating the period, so
-``BagRecorder(..., background=True)`` hands each sample, packed into one float array
-(``BagRecord``), to a writer process that builds, serialises and writes the same messages while
-the simulation goes on (the bag's messages are byte-identical to an in-process recording).
+Serialising the messages with rosbags costs about a quarter of a period's work, so the bag
+writes each record through ``RecordEncoder`` (the same bytes, patched into layouts learned from
+rosbags: 16 us instead of 57 us per record), and ``BagRecorder(..., background=True)`` hands
+each sample, packed into one float array (``BagRecord``), to a writer process that encodes and
+writes the messages while the simulation goes on (the bag's messages are byte-identical to an
+in-process recording).
 """
 
 from __future__ import annotations
@@ -371,9 +373,11 @@ class RecordEncoder:
             return None
         layout = _Layout(actual, np.array([(o - 4) // 8 for o, _ in slots], dtype=np.intp),
                          np.array([e for _, e in slots], dtype=np.intp), tuple(stamps))
-        if layout.fill(probe_numbers) != probe or layout.fill(numbers) != actual:
-            return None
-        return layout
+        try:
+            fits = layout.fill(probe_numbers) == probe and layout.fill(numbers) == actual
+        except ValueError:  # a stamp of a non-finite number: ambiguous sentinels
+            fits = False
+        return layout if fits else None
 
 
 class _BagFile:
