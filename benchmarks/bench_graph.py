@@ -158,8 +158,7 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
     from iceskate_sim.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
     from iceskate_sim.scene import load_scene
     session = LockstepSession(load_scene(scene_arg))
-    messages = session.state_messages()
-    payloads = [session.serialize(t, messages[t]) for t in CONTROL_TOPICS]
+    payloads = list(session.state_bytes(CONTROL_TOPICS).values())
     env = ros_environment()
     echoes = [subprocess.Popen([sys.executable, __file__, '--echo', name, '--scenes', scene_arg],
                                env=env, start_new_session=True)

@@ -32,8 +32,7 @@ def gait_manager(ros_context):
 
 
 def _state_bytes(session: LockstepSession) -> bytes:
-    return session.serialize('/gait_state',
-                             session.state_messages(('/gait_state',))['/gait_state'])
+    return session.state_bytes(('/gait_state',))['/gait_state']
 
 
 def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_manager):

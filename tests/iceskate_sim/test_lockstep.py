@@ -57,9 +57,9 @@ def zero(scene, controller, value=0.0):
 def drive(session, answer):
     ts = session.factory.typestore
     while not session.done:
-        msg = session.state_messages(('/gait_state',))['/gait_state']
         obs = observation_from_gait_state(ts.deserialize_cdr(
-            session.serialize('/gait_state', msg), 'iceskate_interfaces/msg/GaitState'))
+            session.state_bytes(('/gait_state',))['/gait_state'],
+            'iceskate_interfaces/msg/GaitState'))
         for controller, command in answer(obs).items():
             assert session.offer(controller, seconds_to_ns(obs.t), command)
         assert session.missing() == []

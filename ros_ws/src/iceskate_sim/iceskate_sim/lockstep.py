@@ -1,7 +1,7 @@
 """The simulator side of the ROS graph, ROS-free: commands in, one control period, sample out.
 
 ``LockstepSession`` is what the simulator node drives. At every control instant t_k it gives the
-state messages to publish (``state_messages``), takes the controllers' commands (``offer``: one
+state messages to publish (``state_bytes``), takes the controllers' commands (``offer``: one
 per controller node, its sources summed; checked sender, stamp, content and breakdown), and once
 every controller the scene runs has answered (``missing()`` is empty) integrates one period
 (``step``) exactly as the headless runner does: the same zero-order hold of the summed
@@ -40,7 +40,13 @@ from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.metrics import Trajectory, compute_metrics
-from iceskate_sim.recording import TOPICS, BagRecorder, MessageFactory, Sample
+from iceskate_sim.recording import (
+    BagRecorder,
+    MessageFactory,
+    RecordEncoder,
+    Sample,
+    bag_record,
+)
 from iceskate_sim.robot import load_robot
 from iceskate_sim.ros_conversions import (
     command_from_message,
@@ -120,6 +126,7 @@ class LockstepSession:
                                         self.robot.urdf_path.read_text(encoding='utf-8'),
                                         background=True)
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
+        self.encoder = RecordEncoder(self.factory)
         self.metrics: dict[str, Any] | None = None
         self._restart()
 
@@ -151,8 +158,9 @@ class LockstepSession:
         return (self.periods >= self.n_periods or self.sim.ended is not None
                 or self.error is not None)
 
-    def state_messages(self, topics: tuple[str, ...] = STATE_TOPICS) -> dict[str, Any]:
-        """rosbags messages of live ``topics`` at t_k (see the module docstring)."""
+    def state_bytes(self, topics: tuple[str, ...] = STATE_TOPICS) -> dict[str, bytes]:
+        """CDR bytes of the live ``topics``' messages at t_k (see the module docstring), the
+        bag's message types, publishable raw (encoded as the bag's records are)."""
         if self._wall_start is None:
             self._wall_start = time.perf_counter()
         s = self.sim.state
@@ -160,11 +168,7 @@ class LockstepSession:
         sample = Sample(s, self.sim.result, {'held': self.sim.command.torque(s.q, s.v)},
                         placement.translation, placement.rotation,
                         last_event_before(self.sim, s.t))
-        return self.factory.messages(sample, topics)
-
-    def serialize(self, topic: str, message: Any) -> bytes:
-        """CDR bytes of a bag topic's message (what the bag holds; publishable raw)."""
-        return bytes(self.factory.typestore.serialize_cdr(message, TOPICS[topic]))
+        return self.encoder.encode(bag_record(sample), topics)
 
     # -------------------------------------------------------------------------- commands
     def offer(self, controller: str, stamp_ns: int, command: ControllerCommand) -> bool:
@@ -354,7 +358,7 @@ class LockstepLoop:
     """The simulator node's loop without ROS: phases, pause and step budget, commands, outputs.
 
     :param session: the run.
-    :param publish: ``publish(topic, message)`` sends one live state message (rosbags object).
+    :param publish: ``publish(topic, data)`` sends one live state message (CDR bytes).
     :param report: ``report(text, failed)`` tells how the run ended (once).
     :param control_timeout: a source silent this long [s] ends the run.
     :param realtime_factor: free-running pace [simulated s per wall s].
@@ -364,7 +368,7 @@ class LockstepLoop:
         built only then).
     """
 
-    def __init__(self, session: LockstepSession, publish: Callable[[str, Any], None],
+    def __init__(self, session: LockstepSession, publish: Callable[[str, bytes], None],
                  report: Callable[[str, bool], None], control_timeout: float = 5.0,
                  realtime_factor: float = 1.0, paused: bool = False,
                  stats_file: str | pathlib.Path | None = None,
@@ -421,8 +425,8 @@ class LockstepLoop:
         """Build and publish the state messages of the ``topics`` somebody listens to."""
         wanted = tuple(topic for topic in topics if self._listened(topic))
         if wanted:
-            for topic, message in self.session.state_messages(wanted).items():
-                self._publish(topic, message)
+            for topic, data in self.session.state_bytes(wanted).items():
+                self._publish(topic, data)
 
     def step(self) -> None:
         """One period, then the next state out (``publish_state``)."""

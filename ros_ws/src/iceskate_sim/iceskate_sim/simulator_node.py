@@ -100,8 +100,8 @@ class SimulatorNode(Node):
     def _listened(self, topic: str) -> bool:
         return self._pub[topic].get_subscription_count() > 0
 
-    def _publish(self, topic: str, message: Any) -> None:
-        self._pub[topic].publish(self.session.serialize(topic, message))
+    def _publish(self, topic: str, data: bytes) -> None:
+        self._pub[topic].publish(data)
 
     def _report(self, text: str, failed: bool) -> None:
         if not self.context.ok():  # stopped by a signal: rosout is gone
