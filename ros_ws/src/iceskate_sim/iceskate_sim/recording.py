@@ -361,7 +361,8 @@ class RecordEncoder:
         probe = self._serialize(topic, record, probe_numbers, flags)
         if len(probe) != len(actual):
             return None
-        slots, index, stamps = [], [], []
+        slots: list[tuple[int, int]] = []
+        stamps: list[tuple[int, int]] = []
         for entry, value in enumerate(probe_numbers.tolist()):
             for pattern, found in ((struct.pack('<d', value), slots),
                                    (_TIME.pack(*stamp_parts(value)), stamps)):
