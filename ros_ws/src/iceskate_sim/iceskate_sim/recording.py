@@ -49,6 +49,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState, Transition
 from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SOLE_HEEL_Y, SOLE_TOE_Y
+from iceskate_sim.ros_conversions import ns_to_sec_nanosec, seconds_to_ns
 
 PROJECT_VERSION = '0.1.0'
 TOPICS = {
@@ -140,9 +141,11 @@ def record_numbers(record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS)
 
 
 def stamp_parts(t: float) -> tuple[int, int]:
-    """(sec, nanosec) of a simulation time t [s] (t >= 0), rounded to the nanosecond."""
-    ns = int(round(t * 1e9))
-    return ns // 1_000_000_000, ns % 1_000_000_000
+    """(sec, nanosec) of a simulation time t [s] (rounded to the nanosecond).
+
+    :raises SimulationError: for a time that is not finite and >= 0.
+    """
+    return ns_to_sec_nanosec(seconds_to_ns(t))
 
 
 def stamp(typestore: Typestore, t: float) -> Any:
@@ -376,7 +379,7 @@ class RecordEncoder:
                          np.array([e for _, e in slots], dtype=np.intp), tuple(stamps))
         try:
             fits = layout.fill(probe_numbers) == probe and layout.fill(numbers) == actual
-        except ValueError:  # a stamp of a non-finite number: ambiguous sentinels
+        except SimulationError:  # a stamp of a non-finite number: ambiguous sentinels
             fits = False
         return layout if fits else None
 
