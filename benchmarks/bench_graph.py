@@ -2,8 +2,8 @@
 """Speed of the ROS 2 lockstep graph at a 1 ms control period (a benchmark, not a test).
 
 For each scene it runs ``--duration`` simulated seconds (0: the whole scene; bag recorded, as
-``run_scene``) three ways and prints the real-time factor (simulated / wall time of the control
-loop):
+``run_scene``, unless ``--no-bag``) three ways and prints the real-time factor (simulated / wall
+time of the control loop):
 
 * headless: ``iceskate_sim.runner.run`` (physics + laws, no transport), the lower bound;
 * graph, 3 processes: simulator, visual_lifting, gait_manager as separate processes;
@@ -24,7 +24,8 @@ the compute on the critical path).
 Usage (from the repository root, after ``make setup`` and ``. ./env.sh``):
     python benchmarks/bench_graph.py [--duration 0.5] [--scenes skate tests/...yaml] [--json F]
     python benchmarks/bench_graph.py --scenes skate --duration 0 --repeat 3 --floor-periods 0
-        (the speed goal where it is stated: the whole skate scene, three runs of the graph)
+        (the speed goal where it is stated: the whole skate scene, three runs of the graph;
+        add --no-bag for the lockstep alone, without the bag writer)
 """
 
 from __future__ import annotations
@@ -74,19 +75,21 @@ def _median_ms(func) -> float:
     return statistics.median(timeit.Timer(func).repeat(repeat=7, number=50)) / 50 * 1e3
 
 
-def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int = 1) -> dict:
+def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int = 1,
+                bag: bool = True) -> dict:
     """Headless, 3-process (``repeat`` times) and 1-process runs of one scene.
 
     :param duration: simulated s per run; 0 or less: the scene's own duration.
+    :param bag: record the bag (if the scene records one) in every run.
     """
     from iceskate_sim.graph import run_graph
     from iceskate_sim.runner import run
     from iceskate_sim.scene import load_scene
     scene = load_scene(scene_arg)
     duration = duration if duration > 0 else scene.duration
-    scene = replace(scene, duration=duration)
+    scene = replace(scene, duration=duration, record_bag=scene.record_bag and bag)
     name = scene.name
-    result = {'scene': name, 'duration_s': duration,
+    result = {'scene': name, 'duration_s': duration, 'bag': scene.record_bag,
               'control_period_s': scene.simulator.control_period,
               'controller_compute_ms': controller_compute_ms(scene)}
     result['headless_rtf'] = run(scene, work / f'{name}-headless', progress=False)[
@@ -97,7 +100,8 @@ def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int
             out = work / f'{name}-{label}-{k}'
             stats = work / f'{name}-{label}-{k}-stats.json'
             metrics = run_graph(scene_arg, out, duration=duration, single_process=single,
-                                stats_file=str(stats), timeout=60.0 + 20.0 * duration)
+                                stats_file=str(stats), timeout=60.0 + 20.0 * duration,
+                                **({} if scene.record_bag else {'record_bag': ''}))
             rtfs.append(metrics['real_time_factor'])
         loop = json.loads(stats.read_text())  # the loop timings of the last run
         result[label] = {'rtf': statistics.median(rtfs), 'rtf_runs': rtfs,
@@ -119,6 +123,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulated s per run (0: each scene's own duration)")
     parser.add_argument('--repeat', type=int, default=1,
                         help='runs of the three-process graph (its RTF: their median)')
+    parser.add_argument('--bag', action=argparse.BooleanOptionalAction, default=True,
+                        help='record the bag in every run (--no-bag: the loop alone)')
     parser.add_argument('--json', type=pathlib.Path, help='also write the figures here')
     parser.add_argument('--floor-periods', type=int, default=3000,
                         help='periods of the messaging-floor loop (0: skip it)')
@@ -129,10 +135,12 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     with tempfile.TemporaryDirectory(prefix='bench-graph-') as tmp:
         for scene in args.scenes:
-            r = bench_scene(scene, args.duration, pathlib.Path(tmp), max(1, args.repeat))
+            r = bench_scene(scene, args.duration, pathlib.Path(tmp), max(1, args.repeat),
+                            args.bag)
             results.append(r)
             print(f"\nscene {r['scene']}: {r['duration_s']} s at "
-                  f"{1e3 * r['control_period_s']:g} ms; controller compute "
+                  f"{1e3 * r['control_period_s']:g} ms, {'with' if r['bag'] else 'no'} bag; "
+                  "controller compute "
                   + ', '.join(f'{k} {v:.2f} ms' for k, v in r['controller_compute_ms'].items()))
             print(f"  headless               RTF {r['headless_rtf']:.3f}")
             for label in ('three_process', 'single_process'):

@@ -67,6 +67,17 @@ def test_free_running_mode_is_paced_to_wall_time(tmp_path, ros_domain_id):
     assert metrics['wall_time_s'] >= 0.9 * metrics['sim_time_s'] / 0.1
 
 
+def test_three_processes_take_string_parameters_that_look_like_other_types(tmp_path,
+                                                                             ros_domain_id):
+    # '-p record_bag:=' does not parse, and an unquoted '1' would arrive as an integer
+    metrics = run_graph(str(TINY), tmp_path / 'no_bag', domain_id=ros_domain_id, timeout=120.0,
+                        record_bag='', duration=0.01)
+    assert metrics['failure'] is None
+    assert metrics['sim_time_s'] == pytest.approx(0.01, abs=1e-9)
+    assert not (tmp_path / 'no_bag' / 'bag').exists()
+    assert (tmp_path / 'no_bag' / 'trajectory.npz').exists()
+
+
 def test_live_topics_carry_every_instant_with_matching_stamps(graph_run):
     m = graph_run.messages
     stamps = [stamp_to_ns(msg.header.stamp) for msg in m['/joint_states']]

@@ -44,10 +44,11 @@ class NodeSpec:
     parameters: dict[str, Any]
 
     def ros_args(self) -> list[str]:
-        """--ros-args: the node's YAML, then the overrides (-p wins over the file)."""
+        """--ros-args: the node's YAML, then the overrides (-p wins over the file), each value
+        a YAML scalar of its Python type (JSON's spelling: '' and '1.5' stay strings)."""
         args = ['--ros-args', '--params-file', str(config_file(self.package, self.executable))]
         for name, value in self.parameters.items():
-            args += ['-p', f'{name}:={value}']
+            args += ['-p', f'{name}:={json.dumps(value)}']
         return args
 
 
