@@ -67,9 +67,8 @@ def test_free_running_mode_is_paced_to_wall_time(tmp_path, ros_domain_id):
     assert metrics['wall_time_s'] >= 0.9 * metrics['sim_time_s'] / 0.1
 
 
-def test_three_processes_take_string_parameters_that_look_like_other_types(tmp_path,
-                                                                             ros_domain_id):
-    # '-p record_bag:=' does not parse, and an unquoted '1' would arrive as an integer
+def test_three_processes_take_an_empty_string_parameter(tmp_path, ros_domain_id):
+    # the simulator's command line: '-p record_bag:=' does not parse, '-p record_bag:=""' does
     metrics = run_graph(str(TINY), tmp_path / 'no_bag', domain_id=ros_domain_id, timeout=120.0,
                         record_bag='', duration=0.01)
     assert metrics['failure'] is None
