@@ -502,7 +502,7 @@ class LockstepLoop:
         if ok:
             self.budget = total
             self._go_on()
-        return ok, int(round(target * 1e9)), text
+        return ok, seconds_to_ns(target), text
 
     def _go_on(self) -> None:
         self.monitor.wait_anew()

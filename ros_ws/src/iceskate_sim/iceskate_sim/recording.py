@@ -405,11 +405,11 @@ class _BagFile:
     def write(self, topic: str, t: float, message: Any) -> None:
         """Serialise ``message`` and write it at simulation time t [s]."""
         data = self.factory.typestore.serialize_cdr(message, TOPICS[topic])
-        self._writer.write(self._connections[topic], int(round(t * 1e9)), data)
+        self._writer.write(self._connections[topic], seconds_to_ns(t), data)
 
     def write_record(self, record: BagRecord) -> None:
         """Write the messages of one packed sample."""
-        ns = int(round(float(record.values[0]) * 1e9))
+        ns = seconds_to_ns(float(record.values[0]))
         for topic, data in self._encoder.encode(record).items():
             self._writer.write(self._connections[topic], ns, data)
 

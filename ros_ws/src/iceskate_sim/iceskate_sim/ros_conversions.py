@@ -22,6 +22,7 @@ q1 = 0, which is all a flat-sole law evaluates.
 from __future__ import annotations
 
 from array import array
+from collections.abc import Sequence
 import math
 from typing import Any
 
@@ -76,15 +77,24 @@ def set_stamp(stamp: Any, ns: int) -> Any:
 
 
 # ------------------------------------------------------------------------------ observation
-def _state_vector(gait_state: Any, field: str) -> np.ndarray:
-    x = np.array(getattr(gait_state, field), dtype=float)  # a copy: never a view of the message
-    if x.shape != (N_COORDINATES,):
-        raise SimulationError(f'gait_state {field} has {x.size} entries; it needs '
-                              f'{N_COORDINATES} (y0, q1..q17)')
+def _finite_vector(values: Any, names: Sequence[str], what: str, length: str) -> np.ndarray:
+    """``values`` as a new float array of one entry per name, all finite.
+
+    :param what: the field, as the error messages name it.
+    :param length: what a wrong length is told against (appended to 'has N entries').
+    """
+    x = np.array(values, dtype=float)  # a copy: never a view of the message
+    if x.shape != (len(names),):
+        raise SimulationError(f'{what} has {x.size} entries{length}')
     if not all_finite(x):
-        bad = [COORDINATE_NAMES[i] for i in np.flatnonzero(~np.isfinite(x))]
-        raise SimulationError(f'gait_state {field} is not finite at {bad}')
+        bad = [str(names[i]) for i in np.flatnonzero(~np.isfinite(x))]
+        raise SimulationError(f'{what} is not finite at {bad}')
     return x
+
+
+def _state_vector(gait_state: Any, field: str) -> np.ndarray:
+    return _finite_vector(getattr(gait_state, field), COORDINATE_NAMES, f'gait_state {field}',
+                          f'; it needs {N_COORDINATES} (y0, q1..q17)')
 
 
 def observation_from_gait_state(gait_state: Any) -> Observation:
@@ -120,14 +130,9 @@ def _indices(names: list[str], where: str) -> np.ndarray:
     return np.array([_INDEX[n] for n in names], dtype=np.intp)
 
 
-def _array(msg: Any, field: str, n: int, where: str) -> np.ndarray:
-    x = np.array(getattr(msg, field), dtype=float)  # a copy: never a view of the message
-    if x.shape != (n,):
-        raise SimulationError(f'{where}: {field} has {x.size} entries for {n} joint names')
-    if not all_finite(x):
-        bad = [str(msg.joint_names[i]) for i in np.flatnonzero(~np.isfinite(x))]
-        raise SimulationError(f'{where}: {field} is not finite at {bad}')
-    return x
+def _array(msg: Any, field: str, names: list[str], where: str) -> np.ndarray:
+    return _finite_vector(getattr(msg, field), names, f'{where}: {field}',
+                          f' for {len(names)} joint names')
 
 
 def command_from_message(msg: Any) -> ControllerCommand:
@@ -152,7 +157,7 @@ def command_from_message(msg: Any) -> ControllerCommand:
         return out
 
     def field(name: str) -> np.ndarray:
-        return coordinates(_array(msg, name, len(names), where))
+        return coordinates(_array(msg, name, names, where))
 
     effort = field('effort')
     given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]
