@@ -522,28 +522,67 @@ def test_head_pose_at_simple_postures(dynamics, side, assert_close):
 
 
 @pytest.mark.parametrize(('number', 'side', 'pivot'), _cases(ALL_MODES))
-def test_kept_state_terms_give_a_fresh_evaluation_bit_for_bit(robot, random_state, rng, number,
-                                                               side, pivot):
+def test_kept_terms_and_systems_give_a_fresh_evaluation_bit_for_bit(robot, random_state, rng,
+                                                                     number, side, pivot):
     """``evaluate`` keeps the input-free terms of its last states (a period evaluates one state
-    under two commands and the implicit step; an event search alternates two states). Under
-    any input sequence over three states, a push, soft stops and the implicit step, each result
-    equals that of a new GaitDynamics exactly, and results cannot alter the kept terms."""
+    under two commands and the implicit step; an event search alternates two states), and
+    ``implicit_acceleration`` reuses the system ``evaluate`` assembled just before for the same
+    state and inputs. Under any sequence of evaluations and implicit steps over three states,
+    two slide directions, repeated or new inputs, a push and soft stops, each result equals
+    that of a new GaitDynamics exactly, and results cannot alter the kept terms."""
     mode = get_mode(number)
-    contact = ContactState(mode, side, pivot, heel_anchor_y=0.1, heel_slide_dir=-1.0)
+    contacts = [ContactState(mode, side, pivot, heel_anchor_y=0.1, heel_slide_dir=direction)
+                for direction in (-1.0, 1.0)]
     params = DynamicsParameters(baumgarte=20.0)
     kept = GaitDynamics(robot, params)
     states = [random_state(mode), random_state(mode), random_state(mode, within_limits=False,
                                                                     scale=1.5)]
-    for i in (0, 0, 1, 0, 1, 2, 0, 2, 2, 1):
+    inputs = None
+    for i in (0, 0, 1, 0, 1, 2, 0, 2, 2, 1, 1, 0, 2, 2):
         q, v = states[i]
-        tau, gains = _tau(rng), rng.uniform(0.0, 50.0, (2, N_COORDINATES))
-        push = ('chest', rng.normal(0.0, 20.0, 3)) if rng.random() < 0.3 else None
-        step = float(rng.choice([0.0, 1e-3]))
-        got = kept.evaluate(contact, q, v, tau, push, *gains, step)
-        want = GaitDynamics(robot, params).evaluate(contact, q, v, tau, push, *gains, step)
-        for field in fields(DynamicsResult):
-            np.testing.assert_array_equal(getattr(got, field.name), getattr(want, field.name),
-                                          err_msg=field.name)
-        with pytest.raises(ValueError, match='read-only'):
-            got.passive[0] = 1.0
+        contact = contacts[int(rng.integers(2))]
+        if inputs is None or rng.random() < 0.5:  # else the same inputs again
+            inputs = (_tau(rng), *rng.uniform(0.0, 50.0, (2, N_COORDINATES)))
+        push = ('chest', rng.normal(0.0, 20.0, 3)) if rng.random() < 0.2 else None
+        if rng.random() < 0.5:
+            got = kept.evaluate(contact, q, v, inputs[0], push, *inputs[1:])
+            want = GaitDynamics(robot, params).evaluate(contact, q, v, inputs[0], push,
+                                                        *inputs[1:])
+            for field in fields(DynamicsResult):
+                np.testing.assert_array_equal(getattr(got, field.name),
+                                              getattr(want, field.name), err_msg=field.name)
+            with pytest.raises(ValueError, match='read-only'):
+                got.passive[0] = 1.0
+        step = float(rng.choice([1e-3, 4e-4]))
+        if rng.random() < 0.3:  # the same state and inputs in the other slide direction
+            contact = contacts[1] if contact is contacts[0] else contacts[0]
+        got = kept.implicit_acceleration(contact, q, v, inputs[0], push, *inputs[1:], step)
+        want = GaitDynamics(robot, params).implicit_acceleration(contact, q, v, inputs[0], push,
+                                                                 *inputs[1:], step)
+        np.testing.assert_array_equal(got, want, err_msg='implicit acceleration')
+
+
+@pytest.mark.parametrize(('number', 'side', 'pivot'), _cases(ALL_MODES))
+def test_implicit_acceleration_without_damping_is_the_exact_one(robot, random_state, rng,
+                                                                number, side, pivot):
+    """With no damping at all (joints, soft stops inside their range, impedance) the implicit
+    step's matrix M + h D is M: its accelerations are ``evaluate``'s, bit for bit, whether the
+    system is reused or assembled anew; with damping they differ by O(h)."""
+    mode = get_mode(number)
+    contact = ContactState(mode, side, pivot)
+    q, v = random_state(mode)
+    tau, stiffness = _tau(rng), rng.uniform(0.0, 50.0, N_COORDINATES)
+    undamped = GaitDynamics(robot, DynamicsParameters(damping=False))
+    exact = undamped.evaluate(contact, q, v, tau, None, stiffness, np.zeros(N_COORDINATES))
+    for dynamics in (undamped, GaitDynamics(robot, DynamicsParameters(damping=False))):
+        np.testing.assert_array_equal(dynamics.implicit_acceleration(
+            contact, q, v, tau, None, stiffness, np.zeros(N_COORDINATES), 1e-3), exact.qdd)
+    damped = GaitDynamics(robot, DynamicsParameters())
+    gap = [np.max(np.abs(damped.implicit_acceleration(contact, q, v, tau, None, stiffness,
+                                                      np.full(N_COORDINATES, 5.0), h)
+                         - damped.evaluate(contact, q, v, tau, None, stiffness,
+                                           np.full(N_COORDINATES, 5.0)).qdd))
+           for h in (2e-6, 1e-6)]
+    assert gap[0] > 0.0
+    assert gap[1] == pytest.approx(gap[0] / 2.0, rel=0.05)  # first order in h
 

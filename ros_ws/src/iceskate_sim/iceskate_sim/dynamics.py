@@ -152,7 +152,7 @@ class _Plan:
     __slots__ = ('mode', 'model', 'data', 'frames', 'heel', 'toe', 'where', 'locked', 'act',
                  'sel', 'n', 'nc', 'n_jac', 'fr_row', 'm_index', 'j_index', 'heel_y_index',
                  'pick', 'origin_x', 'A', 'b', 'A_mm', 'A_cm', 'A_jac', 'A_mc_jac', 'A_c0',
-                 'A_mc0', 'A_row0', 'A_diag', 'b_top')
+                 'A_mc0', 'A_row0', 'A_diag', 'b_top', 'assembled')
 
     def __init__(self, mode: GaitMode, model: pin.Model, data: pin.Data,
                  frames: dict[str, int]) -> None:
@@ -195,6 +195,7 @@ class _Plan:
         self.A_row0 = A[0, :n]
         self.A_diag = A.reshape(-1)[:n * (size + 1):size + 1]
         self.b_top = b[:n]
+        self.assembled: tuple | None = None  # _input_key of the system in A, b (None: other)
         if self.fr_row is not None:  # C_fr = q0 + q1 + ... + q7: a constant row
             fr = np.zeros(N_COORDINATES)
             fr[_LEG_CHAIN] = 1.0
@@ -359,7 +360,7 @@ class GaitDynamics:
     def evaluate(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
                  tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
                  stiffness: np.ndarray | None = None, damping: np.ndarray | None = None,
-                 implicit_step: float = 0.0) -> DynamicsResult:
+                 ) -> DynamicsResult:
         """Solve eq. (7) of ``contact.mode`` at (q, v) under input torques ``tau``.
 
         :param contact: mode, support side, pivot and contact anchors.
@@ -372,10 +373,68 @@ class GaitDynamics:
         :param stiffness: joint-impedance stiffness K (18,) [N m/rad]: adds -K q (the K q_ref
             part belongs in ``tau``).
         :param damping: joint-impedance damping B (18,) [N m s/rad]: adds -B v.
-        :param implicit_step: h > 0 returns the acceleration of a step of size h with joint,
-            impedance and soft-stop damping taken implicitly, (M + h D) a = f - D v (MuJoCo's
-            implicitfast idea); 0 gives the exact acceleration.
         :raises SimulationError: on malformed input or a rank-deficient constraint set.
+        """
+        plan, terms, applied = self._assemble(contact, q, v, tau, push, stiffness, damping)
+        q = np.asarray(q, dtype=float)
+        v = np.asarray(v, dtype=float)
+        x = self._solve_assembled(plan, q, v)
+        mode, mu, n = plan.mode, self.params.mu, plan.n
+        qdd = np.zeros(N_COORDINATES)
+        qdd[plan.sel] = x[:n]
+        values = plan.pick(x[n:].tolist() + [0.0])  # (f_nz, f_ny, tau_n)
+        multipliers = np.array(values)
+        heel_friction = (-mu * contact.heel_slide_dir * values[_F_NZ]
+                         if mode.swing_sliding else 0.0)
+        wrench = self._support_wrench(plan, terms.heel, q, v, qdd, values, heel_friction,
+                                      applied, push)
+        normal = float(wrench[2])
+        cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
+        return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
+                              float(heel_friction), applied, terms.heel, terms.heel_velocity,
+                              terms.toe_z, terms.passive)
+
+    def implicit_acceleration(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
+                              tau: np.ndarray, push: tuple[str, np.ndarray] | None,
+                              stiffness: np.ndarray | None, damping: np.ndarray | None,
+                              step: float) -> np.ndarray:
+        """Accelerations (18,) of a step of size ``step`` [s] with the joint, impedance and
+        soft-stop damping D taken implicitly: (M + h D) a = f - D v over the constrained system
+        of ``evaluate`` (MuJoCo's implicitfast idea); the other arguments as in ``evaluate``.
+
+        When the last system assembled in this mode is ``evaluate``'s at the same state and
+        inputs (the period's start, evaluated just before), only h D is added to it: the same
+        matrix, bit for bit, without assembling it again.
+        """
+        mode = contact.mode
+        plan = self._plans.get((mode.number, contact.side, contact.pivot))
+        key = None
+        if plan is not None and plan.mode is mode and push is None:
+            key = _input_key(contact, q, v, tau, stiffness, damping)
+        if key is None or plan.assembled != key:
+            plan, _, _ = self._assemble(contact, q, v, tau, push, stiffness, damping)
+        plan.assembled = None  # the diagonal below changes the system
+        q = np.asarray(q, dtype=float)
+        engaged = self.params.joint_limits and self._limits_engaged(q.tolist())
+        implicit = (self._damping + self._limit_damping_engaged(q) if engaged
+                    else self._damping.copy())
+        if damping is not None:
+            implicit = implicit + damping
+        implicit[Y0] = 0.0
+        plan.A_diag += step * implicit[plan.sel]
+        x = self._solve_assembled(plan, q, np.asarray(v, dtype=float))
+        qdd = np.zeros(N_COORDINATES)
+        qdd[plan.sel] = x[:plan.n]
+        return qdd
+
+    def _assemble(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
+                  tau: np.ndarray, push: tuple[str, np.ndarray] | None,
+                  stiffness: np.ndarray | None, damping: np.ndarray | None,
+                  ) -> tuple[_Plan, _StateTerms, np.ndarray]:
+        """Check the input and write eq. (7)'s system A x = b of ``contact.mode`` at (q, v)
+        into the mode's plan buffers (``plan.assembled`` then names the state and inputs).
+
+        :returns: the plan, the state's input-free terms and the applied force (18,).
         """
         mode = contact.mode
         plan = self._plans.get((mode.number, contact.side, contact.pivot))
@@ -405,8 +464,7 @@ class GaitDynamics:
         mu = params.mu
         terms = self._state_terms(plan, q, v, ql, fresh=push is not None)
 
-        passive = terms.passive
-        applied = passive + tau
+        applied = terms.passive + tau
         if stiffness is not None:
             applied -= stiffness * q + damping * v
         if not mode.q1_active:
@@ -418,13 +476,6 @@ class GaitDynamics:
 
         plan.A_mm[...] = terms.m_aa
         np.subtract(applied[sel], terms.nle, out=plan.b_top)
-        if implicit_step > 0.0:
-            implicit = (self._damping + self._limit_damping_engaged(q) if terms.engaged
-                        else self._damping.copy())
-            if damping is not None:
-                implicit = implicit + damping
-            implicit[Y0] = 0.0
-            plan.A_diag += implicit_step * implicit[sel]
         if nc:
             rows = terms.rows
             plan.A_jac[...] = rows
@@ -455,28 +506,25 @@ class GaitDynamics:
                 A[0, n] -= k
         if nc:
             self._check_rank_fast(plan.A_cm, contact)
-        try:
-            x, finite = _solve(A, b)
-        except np.linalg.LinAlgError as exc:
-            raise SimulationError(f'mode {mode.number}: singular dynamics matrix ({exc})') from exc
-        if not finite:
-            raise SimulationError(f'mode {mode.number} dynamics: the solution is not finite '
-                                  f'(|v|max {np.max(np.abs(v)):.3g}, |q|max '
-                                  f'{np.max(np.abs(q)):.3g})')
+        plan.assembled = (None if push is not None
+                          else _input_key(contact, q, v, tau, stiffness, damping))
+        return plan, terms, applied
 
-        qdd = np.zeros(N_COORDINATES)
-        qdd[sel] = x[:n]
-        values = plan.pick(x[n:].tolist() + [0.0])  # (f_nz, f_ny, tau_n)
-        multipliers = np.array(values)
-        heel_friction = (-mu * contact.heel_slide_dir * values[_F_NZ]
-                         if mode.swing_sliding else 0.0)
-        wrench = self._support_wrench(plan, terms.heel, q, v, qdd, values, heel_friction,
-                                      applied, push)
-        normal = float(wrench[2])
-        cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
-        return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
-                              float(heel_friction), applied, terms.heel, terms.heel_velocity,
-                              terms.toe_z, passive)
+    def _solve_assembled(self, plan: _Plan, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """x = A^-1 b of the plan's assembled system (A and b are left as they are).
+
+        :raises SimulationError: for a singular or non-finite solution.
+        """
+        try:
+            x, finite = _solve(plan.A, plan.b)
+        except np.linalg.LinAlgError as exc:
+            raise SimulationError(f'mode {plan.mode.number}: singular dynamics matrix '
+                                  f'({exc})') from exc
+        if not finite:
+            raise SimulationError(f'mode {plan.mode.number} dynamics: the solution is not '
+                                  f'finite (|v|max {np.max(np.abs(v)):.3g}, |q|max '
+                                  f'{np.max(np.abs(q)):.3g})')
+        return x
 
     def _state_terms(self, plan: _Plan, q: np.ndarray, v: np.ndarray, ql: list[float],
                      fresh: bool = False) -> _StateTerms:
@@ -674,6 +722,15 @@ def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     if info > 0:
         raise np.linalg.LinAlgError(f'singular matrix (zero pivot U[{info - 1}, {info - 1}])')
     return x, all_finite(x)
+
+
+def _input_key(contact: ContactState, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
+               stiffness: np.ndarray | None, damping: np.ndarray | None) -> tuple:
+    """What the system ``_assemble`` writes for a plan depends on (bytes of the arrays):
+    equal keys give equal systems."""
+    return (contact.heel_anchor_y, contact.support_slide_dir, contact.heel_slide_dir,
+            *(None if x is None else np.asarray(x, dtype=float).tobytes()
+              for x in (q, v, tau, stiffness, damping)))
 
 
 def _minus_force_at(fx: float, fy: float, fz: float, mx: float, my: float, mz: float,

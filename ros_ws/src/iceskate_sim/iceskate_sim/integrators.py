@@ -25,7 +25,8 @@ from scipy import optimize
 from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
 
-Rhs = Callable[..., tuple[np.ndarray, DynamicsResult]]  # rhs(t, x, implicit_step=0.0)
+#: rhs(t, x, implicit_step=0.0) -> (xdot, dynamics); an implicit step's dynamics may be None
+Rhs = Callable[..., tuple[np.ndarray, DynamicsResult | None]]
 GuardFn = Callable[[float, np.ndarray, DynamicsResult], np.ndarray]
 METHODS = ('symplectic_euler', 'implicit_euler', 'rk4', 'rk45', 'dop853')
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')

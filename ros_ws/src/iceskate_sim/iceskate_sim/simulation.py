@@ -176,11 +176,18 @@ class Simulator:
                                       c.damping)
 
     def _rhs(self, t: float, x: np.ndarray, implicit_step: float = 0.0,
-             ) -> tuple[np.ndarray, DynamicsResult]:
+             ) -> tuple[np.ndarray, DynamicsResult | None]:
+        """(xdot, dynamics) at x; with ``implicit_step`` h > 0 the accelerations of an implicit
+        step of size h, without the rest of the dynamics (None)."""
         n = N_COORDINATES
         c = self._command
+        if implicit_step > 0.0:
+            qdd = self.dynamics.implicit_acceleration(self._contact, x[:n], x[n:], c.bias,
+                                                      self._push, c.stiffness, c.damping,
+                                                      implicit_step)
+            return np.concatenate([x[n:], qdd]), None
         result = self.dynamics.evaluate(self._contact, x[:n], x[n:], c.bias, self._push,
-                                        c.stiffness, c.damping, implicit_step)
+                                        c.stiffness, c.damping)
         return np.concatenate([x[n:], result.qdd]), result
 
     def _guards(self, t: float, x: np.ndarray, result: DynamicsResult) -> np.ndarray:
