@@ -2,7 +2,7 @@
 
 Publishes ``gait_state``, ``/clock``, ``joint_states`` and ``head_pose`` at every control
 instant (the CDR bytes of the bag's message types, published raw; a topic nobody subscribes to
-is neither built nor sent) and ``robot_description`` once (transient local); takes
+is neither built nor sent: its readers are counted by the 20 ms timer, not at every instant) and ``robot_description`` once (transient local); takes
 ``effort_commands`` (best effort: see ``LOCKSTEP_READER_QOS``); services ``~/step``,
 ``~/pause``, ``~/resume``, ``~/reset``. Lockstep: state t_k out, a command stamped t_k from
 every source the scene runs, one period, repeat; a source silent for ``control_timeout`` s ends
@@ -77,6 +77,7 @@ class SimulatorNode(Node):
         self._pub = {'/clock': self.create_publisher(Clock, '/clock', CLOCK_QOS)} | {
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
             (('joint_states', JointState), ('head_pose', PoseStamped), ('gait_state', GaitState))}
+        self._readers: set[str] = set()  # live topics with readers (``_count_readers``)
         self.create_publisher(String, 'robot_description', LATCHED_QOS).publish(
             String(data=self.session.robot.urdf_path.read_text(encoding='utf-8')))
         self.create_service(StepSimulation, '~/step', self.step_callback)
@@ -98,7 +99,11 @@ class SimulatorNode(Node):
         return self.loop.exit_code
 
     def _listened(self, topic: str) -> bool:
-        return self._pub[topic].get_subscription_count() > 0
+        return topic in self._readers
+
+    def _count_readers(self) -> None:
+        """Note which live topics have readers (4 rmw calls: not at every instant)."""
+        self._readers = {t for t, pub in self._pub.items() if pub.get_subscription_count()}
 
     def _publish(self, topic: str, data: bytes) -> None:
         self._pub[topic].publish(data)
@@ -116,6 +121,7 @@ class SimulatorNode(Node):
 
     def timer_callback(self) -> None:
         """Start once the controllers are up; watchdog and resend; free-running pace."""
+        self._count_readers()
         self._try_start() if self.loop.phase == 'starting' else self.loop.tick()
 
     def _try_start(self) -> None:
