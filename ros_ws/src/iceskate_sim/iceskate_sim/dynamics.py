@@ -208,8 +208,8 @@ class _StateTerms:
     active coordinates, the bias forces, the passive torques, the constraint rows and drifts,
     the centre-of-mass row of a gliding support, the swing-foot points. Kept for the last
     states evaluated (``GaitDynamics._STATE_CACHE``): a period evaluates the same state under
-    the old and the new command, and the implicit step evaluates the period's start again.
-    The arrays are read-only (results share them)."""
+    the old and the new command, and an event search alternates two states. The arrays are
+    read-only (results share them)."""
 
     __slots__ = ('key', 'm_aa', 'nle', 'engaged', 'passive', 'heel', 'heel_velocity', 'toe_z',
                  'rows', 'heel_y', 'drift', 'jcom', 'acom_z')
