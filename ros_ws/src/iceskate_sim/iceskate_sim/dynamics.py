@@ -195,7 +195,8 @@ class _Plan:
         self.A_row0 = A[0, :n]
         self.A_diag = A.reshape(-1)[:n * (size + 1):size + 1]
         self.b_top = b[:n]
-        self.assembled: tuple | None = None  # _input_key of the system in A, b (None: other)
+        #: (_input_key, state terms) of the system in A, b (None: another one)
+        self.assembled: tuple[tuple, _StateTerms] | None = None
         if self.fr_row is not None:  # C_fr = q0 + q1 + ... + q7: a constant row
             fr = np.zeros(N_COORDINATES)
             fr[_LEG_CHAIN] = 1.0
@@ -408,15 +409,16 @@ class GaitDynamics:
         """
         mode = contact.mode
         plan = self._plans.get((mode.number, contact.side, contact.pivot))
-        key = None
-        if plan is not None and plan.mode is mode and push is None:
-            key = _input_key(contact, q, v, tau, stiffness, damping)
-        if key is None or plan.assembled != key:
-            plan, _, _ = self._assemble(contact, q, v, tau, push, stiffness, damping)
+        kept = None
+        if plan is not None and plan.mode is mode and push is None and plan.assembled:
+            key, terms = plan.assembled
+            if key == _input_key(contact, q, v, tau, stiffness, damping):
+                kept = terms
+        if kept is None:
+            plan, kept, _ = self._assemble(contact, q, v, tau, push, stiffness, damping)
         plan.assembled = None  # the diagonal below changes the system
         q = np.asarray(q, dtype=float)
-        engaged = self.params.joint_limits and self._limits_engaged(q.tolist())
-        implicit = (self._damping + self._limit_damping_engaged(q) if engaged
+        implicit = (self._damping + self._limit_damping_engaged(q) if kept.engaged
                     else self._damping.copy())
         if damping is not None:
             implicit = implicit + damping
@@ -507,7 +509,7 @@ class GaitDynamics:
         if nc:
             self._check_rank_fast(plan.A_cm, contact)
         plan.assembled = (None if push is not None
-                          else _input_key(contact, q, v, tau, stiffness, damping))
+                          else (_input_key(contact, q, v, tau, stiffness, damping), terms))
         return plan, terms, applied
 
     def _solve_assembled(self, plan: _Plan, q: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -217,7 +217,8 @@ class LockstepSession:
     def missing(self) -> list[str]:
         """Controllers whose command for t_k has not arrived (free-running: none ever did)."""
         if self.lockstep:
-            return [c for c in self.controllers if self._stamps.get(c) != self.t_ns]
+            now = self.t_ns
+            return [c for c in self.controllers if self._stamps.get(c) != now]
         return [c for c in self.controllers if c not in self._commands]
 
     # -------------------------------------------------------------------------- stepping
