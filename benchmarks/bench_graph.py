@@ -7,7 +7,9 @@ time of the control loop):
 
 * headless: ``iceskate_sim.runner.run`` (physics + laws, no transport), the lower bound;
 * graph, 3 processes: simulator, visual_lifting, gait_manager as separate processes;
-* graph, 1 process: the three nodes on one EventsExecutor.
+* graph, 1 process: the three nodes on one EventsExecutor;
+* with ``--rt-priority N`` also: graph, 3 processes under real-time scheduling (SCHED_FIFO at
+  priority N; its runs alternate with the default ones, so both see the same hour).
 
 From the simulator's loop timings (``stats_file``) it prints, per control period, the median,
 p95 and p99 of the round trip (state published -> last command in) and the median and p99 of
@@ -25,7 +27,8 @@ Usage (from the repository root, after ``make setup`` and ``. ./env.sh``):
     python benchmarks/bench_graph.py [--duration 0.5] [--scenes skate tests/...yaml] [--json F]
     python benchmarks/bench_graph.py --scenes skate --duration 0 --repeat 3 --floor-periods 0
         (the speed goal where it is stated: the whole skate scene, three runs of the graph;
-        add --no-bag for the lockstep alone, without the bag writer)
+        add --no-bag for the lockstep alone, without the bag writer, and --rt-priority 10
+        for the same graph under SCHED_FIFO beside it)
 """
 
 from __future__ import annotations
@@ -76,11 +79,13 @@ def _median_ms(func) -> float:
 
 
 def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int = 1,
-                bag: bool = True) -> dict:
+                bag: bool = True, rt_priority: int = 0) -> dict:
     """Headless, 3-process (``repeat`` times) and 1-process runs of one scene.
 
     :param duration: simulated s per run; 0 or less: the scene's own duration.
     :param bag: record the bag (if the scene records one) in every run.
+    :param rt_priority: also run the 3-process graph under SCHED_FIFO at this priority
+        (``three_process_fifo``, its runs alternating with the default ones; 0: not).
     """
     from iceskate_sim.graph import run_graph
     from iceskate_sim.runner import run
@@ -91,27 +96,35 @@ def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int
     name = scene.name
     result = {'scene': name, 'duration_s': duration, 'bag': scene.record_bag,
               'control_period_s': scene.simulator.control_period,
-              'controller_compute_ms': controller_compute_ms(scene)}
+              'controller_compute_ms': controller_compute_ms(scene), 'rt_priority': rt_priority}
     result['headless_rtf'] = run(scene, work / f'{name}-headless', progress=False)[
         'real_time_factor']
-    for label, single, runs in (('three_process', False, repeat), ('single_process', True, 1)):
-        rtfs = []
-        for k in range(runs):
+    variants = [('three_process', False, 0, repeat)]
+    if rt_priority:
+        variants.append(('three_process_fifo', False, rt_priority, repeat))
+    variants.append(('single_process', True, 0, 1))
+    rtfs: dict[str, list[float]] = {label: [] for label, *_ in variants}
+    loops: dict[str, dict] = {}
+    for k in range(repeat):  # the variants' runs alternate
+        for label, single, priority, runs in variants:
+            if k >= runs:
+                continue
             out = work / f'{name}-{label}-{k}'
             stats = work / f'{name}-{label}-{k}-stats.json'
             metrics = run_graph(scene_arg, out, duration=duration, single_process=single,
                                 stats_file=str(stats), timeout=60.0 + 20.0 * duration,
+                                rt_priority=priority,
                                 **({} if scene.record_bag else {'record_bag': ''}))
-            rtfs.append(metrics['real_time_factor'])
-        loop = json.loads(stats.read_text())  # the loop timings of the last run
-        result[label] = {'rtf': statistics.median(rtfs), 'rtf_runs': rtfs,
-                         'round_trip_ms': [1e3 * x for x in loop['round_trip']],
-                         'physics_ms': [1e3 * x for x in loop['physics']],
-                         'periods': loop['periods']}
+            rtfs[label].append(metrics['real_time_factor'])
+            loops[label] = json.loads(stats.read_text())  # the loop timings of the last run
     slowest = max(result['controller_compute_ms'].values(), default=0.0)
-    for label in ('three_process', 'single_process'):
-        rt = result[label]['round_trip_ms'][0]
-        result[label]['hop_estimate_ms'] = max(0.0, (rt - slowest) / 2.0)
+    for label, loop in loops.items():
+        round_trip = [1e3 * x for x in loop['round_trip']]
+        result[label] = {'rtf': statistics.median(rtfs[label]), 'rtf_runs': rtfs[label],
+                         'round_trip_ms': round_trip,
+                         'physics_ms': [1e3 * x for x in loop['physics']],
+                         'periods': loop['periods'],
+                         'hop_estimate_ms': max(0.0, (round_trip[0] - slowest) / 2.0)}
     return result
 
 
@@ -128,6 +141,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', type=pathlib.Path, help='also write the figures here')
     parser.add_argument('--floor-periods', type=int, default=3000,
                         help='periods of the messaging-floor loop (0: skip it)')
+    parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
+                        help='also run the three-process graph under SCHED_FIFO at priority N '
+                             '(runs alternating with the default scheduling; needs root, '
+                             'CAP_SYS_NICE or an rtprio limit)')
     parser.add_argument('--echo', help=argparse.SUPPRESS)  # internal: one echo process
     args = parser.parse_args(argv)
     if args.echo:
@@ -136,20 +153,22 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix='bench-graph-') as tmp:
         for scene in args.scenes:
             r = bench_scene(scene, args.duration, pathlib.Path(tmp), max(1, args.repeat),
-                            args.bag)
+                            args.bag, args.rt_priority)
             results.append(r)
             print(f"\nscene {r['scene']}: {r['duration_s']} s at "
                   f"{1e3 * r['control_period_s']:g} ms, {'with' if r['bag'] else 'no'} bag; "
                   "controller compute "
                   + ', '.join(f'{k} {v:.2f} ms' for k, v in r['controller_compute_ms'].items()))
-            print(f"  headless               RTF {r['headless_rtf']:.3f}")
-            for label in ('three_process', 'single_process'):
+            print(f"  headless                 RTF {r['headless_rtf']:.3f}")
+            for label in ('three_process', 'three_process_fifo', 'single_process'):
+                if label not in r:
+                    continue
                 g = r[label]
                 rt, ph = g['round_trip_ms'], g['physics_ms']
                 runs = (f' (median of {len(g["rtf_runs"])} runs: '
                         + ', '.join(f'{x:.3f}' for x in g['rtf_runs']) + ')'
                         if len(g['rtf_runs']) > 1 else '')
-                print(f'  graph {label:<16} RTF {g["rtf"]:.3f}{runs}; round trip median/p95/p99 '
+                print(f'  graph {label:<18} RTF {g["rtf"]:.3f}{runs}; round trip median/p95/p99 '
                       f'{rt[0]:.2f}/{rt[1]:.2f}/{rt[2]:.2f} ms; physics median/p99 '
                       f'{ph[0]:.2f}/{ph[2]:.2f} ms; hop ~ {g["hop_estimate_ms"]:.2f} ms')
     if args.floor_periods > 0:

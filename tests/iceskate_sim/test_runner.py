@@ -107,3 +107,10 @@ def test_main_reports_a_bad_scene_and_exits_non_zero(tmp_path, capsys):
     bad.write_text('scene: bad\nduration: 1.0\ncontrol_period: 0.001\ninputs: {}\nfoo: 1\n')
     assert main([str(bad), '--out', str(tmp_path / 'out'), '--quiet']) == 1
     assert "scene key 'foo'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('option', [['--rt-priority', '10'], ['--single-process']])
+def test_main_refuses_graph_options_without_ros(tmp_path, capsys, option):
+    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', *option]) == 1
+    assert '--single-process and --rt-priority need --ros' in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()

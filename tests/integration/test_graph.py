@@ -8,7 +8,9 @@ one process) records the same message payloads.
 
 import hashlib
 import json
+import os
 from pathlib import Path
+import time
 
 import numpy as np
 import pytest
@@ -19,7 +21,14 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 from rosbags.highlevel import AnyReader  # noqa: E402
 
-from iceskate_sim.graph import run_graph  # noqa: E402
+from iceskate_sim import graph  # noqa: E402
+from iceskate_sim.errors import SimulationError  # noqa: E402
+from iceskate_sim.graph import (  # noqa: E402
+    graph_nodes,
+    realtime_scheduling,
+    ros_environment,
+    run_graph,
+)
 from iceskate_sim.lockstep import sources_by_controller  # noqa: E402
 from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
 from iceskate_sim.scene import load_scene  # noqa: E402
@@ -184,3 +193,58 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
     assert result.returncode == 1
     assert 'run_scene: error: the simulator exited with 1' in result.stderr
     assert 'already exists' in result.stderr
+
+
+def _fifo_permitted() -> bool:
+    try:
+        with realtime_scheduling(10):
+            return True
+    except SimulationError:
+        return False
+
+
+needs_fifo = pytest.mark.skipif(not _fifo_permitted(), reason='SCHED_FIFO is not permitted here')
+
+
+@needs_fifo
+def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(
+        graph_run, tmp_path, ros_domain_id, monkeypatch, assert_same_trajectory):
+    started = []
+
+    def spy(spec, env, start=graph.start):
+        started.append((spec.executable, os.sched_getscheduler(0), os.sched_getparam(0)))
+        return start(spec, env)
+    monkeypatch.setattr(graph, 'start', spy)
+    before = (os.sched_getscheduler(0), os.sched_getparam(0))
+    out = tmp_path / 'fifo'
+    metrics = run_graph(str(TINY), out, domain_id=ros_domain_id, timeout=120.0, rt_priority=10)
+    assert metrics['failure'] is None
+    assert sorted(name for name, *_ in started) == sorted(
+        ['simulator', *sources_by_controller(load_scene(TINY))])
+    assert all(policy == os.SCHED_FIFO and param.sched_priority == 10
+               for _, policy, param in started)
+    assert (os.sched_getscheduler(0), os.sched_getparam(0)) == before  # this thread: restored
+    assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
+
+
+@needs_fifo
+def test_every_thread_of_a_node_started_under_rt_priority_is_sched_fifo(tmp_path, ros_domain_id):
+    env = ros_environment(ros_domain_id, tmp_path)
+    spec = next(s for s in graph_nodes(str(TINY), tmp_path / 'out') if s.executable != 'simulator')
+    with realtime_scheduling(10):
+        process = graph.start(spec, env)  # a controller: up until stopped, waiting for states
+    try:
+        deadline = time.monotonic() + 60.0
+        while True:
+            assert process.poll() is None, graph.stop(process)
+            tasks = list(Path(f'/proc/{process.pid}/task').iterdir())
+            if any((t / 'comm').read_text().startswith('dds.') for t in tasks):
+                break
+            assert time.monotonic() < deadline, 'no transport threads within 60 s'
+            time.sleep(0.1)
+        # /proc/<tid>/stat after the command name: field 40 rt_priority, 41 policy
+        fields = {t.name: (t / 'stat').read_text().rsplit(')', 1)[1].split() for t in tasks}
+        assert len(fields) > 3
+        assert {(int(f[37]), int(f[38])) for f in fields.values()} == {(10, os.SCHED_FIFO)}
+    finally:
+        graph.stop(process)  # maybe still starting up: its exit code is not this test's

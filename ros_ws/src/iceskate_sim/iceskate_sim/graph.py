@@ -6,6 +6,10 @@ as separate processes, each in its own process group, on one DDS domain (see
 simulator to end the run; stops the controllers with SIGTERM (SIGKILL after a grace period).
 DIR then holds what the headless runner writes: metrics.json, events.json, trajectory.npz and
 bag/. ``single_process=True`` runs the three nodes in one process on one EventsExecutor instead.
+``rt_priority=N`` (``--rt-priority N``) runs the nodes under real-time scheduling (SCHED_FIFO
+at priority N, as ``chrt --fifo N`` would; every thread and the bag writer inherit it): the
+processes are started from a thread switched to it for that moment (or, in one process, the
+run's thread is switched while it runs).
 
 The executables are the installed ones (``<prefix>/lib/<pkg>/<exe>``, as ``ros2 run`` finds
 them), else ``python -m <module>`` from the sources. Node logs go to
@@ -14,6 +18,8 @@ them), else ``python -m <module>`` from the sources. Node logs go to
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+import contextlib
 from dataclasses import dataclass
 import json
 import os
@@ -132,6 +138,35 @@ def stop(process: subprocess.Popen, grace: float = GRACE) -> int:
     return process.wait()
 
 
+@contextlib.contextmanager
+def realtime_scheduling(priority: int) -> Iterator[None]:
+    """The calling thread under SCHED_FIFO at ``priority`` (1-99; 0: scheduling unchanged)
+    while the block runs, restored afterwards; threads and processes started meanwhile keep it.
+
+    :raises SimulationError: for a priority out of range, or where SCHED_FIFO is not permitted
+        (it needs root, CAP_SYS_NICE or an rtprio limit, e.g. in /etc/security/limits.conf).
+    """
+    if priority == 0:
+        yield
+        return
+    low, high = (os.sched_get_priority_min(os.SCHED_FIFO),
+                 os.sched_get_priority_max(os.SCHED_FIFO))
+    if not low <= priority <= high:
+        raise SimulationError(f'rt_priority must be 0 (off) or {low}..{high}, got {priority}')
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError as exc:
+        raise SimulationError(
+            f'rt_priority {priority}: real-time scheduling (SCHED_FIFO) is not permitted here '
+            f'({exc.strerror}); it needs root, CAP_SYS_NICE or an rtprio limit >= {priority} '
+            '(e.g. "@realtime - rtprio 99" in /etc/security/limits.conf)') from None
+    try:
+        yield
+    finally:
+        os.sched_setscheduler(0, policy, param)
+
+
 def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
     """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log."""
     log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.executable}.log', 'wb')  # noqa: SIM115
@@ -142,10 +177,12 @@ def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
 
 def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = None,
               single_process: bool = False, domain_id: int | None = None,
-              timeout: float | None = None, **simulator_parameters: Any) -> dict[str, Any]:
+              timeout: float | None = None, rt_priority: int = 0,
+              **simulator_parameters: Any) -> dict[str, Any]:
     """Run a scene through the ROS graph; return its metrics (also in ``out/metrics.json``).
 
     :param timeout: wall-clock limit of the whole run [s] (None: none).
+    :param rt_priority: SCHED_FIFO priority of the nodes (0: the default scheduling).
     :param simulator_parameters: extra simulator parameters (e.g. control_timeout=2.0).
     :raises SimulationError: when the simulator fails; the message holds its error.
     """
@@ -156,9 +193,11 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
     env = ros_environment(domain_id)
     print(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}', file=sys.stderr)
     if single_process:
-        code = run_single_process(specs, env, timeout)
+        with realtime_scheduling(rt_priority):
+            code = run_single_process(specs, env, timeout)
     else:
-        processes = [start(spec, env) for spec in specs]
+        with realtime_scheduling(rt_priority):
+            processes = [start(spec, env) for spec in specs]
         try:
             why = _wait(processes, specs, timeout,
                         float(simulator_parameters.get('control_timeout', 5.0)) + GRACE)

@@ -141,8 +141,13 @@ def main(argv: list[str] | None = None) -> int:
                         help='run through the ROS 2 node graph (iceskate_sim.graph)')
     parser.add_argument('--single-process', action='store_true',
                         help='with --ros: all nodes in one process and one executor')
+    parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
+                        help='with --ros: run the nodes under SCHED_FIFO at priority N (1-99; '
+                             'needs root, CAP_SYS_NICE or an rtprio limit; default 0: off)')
     args = parser.parse_args(argv)
     try:
+        if not args.ros and (args.single_process or args.rt_priority):
+            raise SimulationError('--single-process and --rt-priority need --ros')
         scene = load_scene(args.scene)
         if args.duration is not None:
             if not args.duration > 0:
@@ -152,7 +157,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.ros:
             from iceskate_sim.graph import run_graph
             metrics = run_graph(args.scene, args.out, duration=args.duration,
-                                single_process=args.single_process)
+                                single_process=args.single_process,
+                                rt_priority=args.rt_priority)
         else:
             metrics = run(scene, args.out, progress=not args.quiet)
     except SimulationError as exc:
