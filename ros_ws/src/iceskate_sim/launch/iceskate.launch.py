@@ -2,7 +2,8 @@
 
 The three nodes of the graph (what ``run_scene <scene> --ros`` starts without ROS 2 launch);
 the whole launch shuts down when the simulator exits at the end of the run. A controller whose
-law the scene does not run stays idle.
+law the scene does not run stays idle. Real-time scheduling, as ``run_scene --rt-priority 10``:
+``ros2 launch --launch-prefix 'chrt --fifo 10' iceskate_sim iceskate.launch.py scene:=skate``.
 """
 
 from launch import LaunchDescription
