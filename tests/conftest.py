@@ -131,3 +131,15 @@ def make_obs() -> Callable[..., object]:
                            side, pivot, step_index, t_exchange, heel_anchor_y, t_touchdown)
 
     return make
+
+
+@pytest.fixture
+def needs_fifo() -> None:
+    """Skip the test where this process may not use SCHED_FIFO (not root, no rtprio limit)."""
+    from iceskate_sim.errors import SimulationError
+    from iceskate_sim.graph import realtime_scheduling
+    try:
+        with realtime_scheduling(10):
+            pass
+    except SimulationError as exc:
+        pytest.skip(str(exc))

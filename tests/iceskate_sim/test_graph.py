@@ -8,14 +8,6 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.graph import realtime_scheduling
 
 
-def _fifo_permitted() -> bool:
-    try:
-        with realtime_scheduling(10):
-            return True
-    except SimulationError:
-        return False
-
-
 def test_priority_zero_leaves_the_scheduling_as_it_is():
     before = (os.sched_getscheduler(0), os.sched_getparam(0))
     with realtime_scheduling(0):
@@ -39,8 +31,7 @@ def test_missing_permission_is_a_clear_error(monkeypatch):
     assert 'Operation not permitted' in str(info.value) and 'rtprio' in str(info.value)
 
 
-@pytest.mark.skipif(not _fifo_permitted(), reason='SCHED_FIFO is not permitted here')
-def test_the_block_runs_under_sched_fifo_and_the_old_policy_comes_back():
+def test_the_block_runs_under_sched_fifo_and_the_old_policy_comes_back(needs_fifo):
     before = (os.sched_getscheduler(0), os.sched_getparam(0))
     with pytest.raises(RuntimeError), realtime_scheduling(12):
         assert os.sched_getscheduler(0) == os.SCHED_FIFO

@@ -22,7 +22,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 from rosbags.highlevel import AnyReader  # noqa: E402
 
 from iceskate_sim import graph  # noqa: E402
-from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.graph import (  # noqa: E402
     graph_nodes,
     realtime_scheduling,
@@ -195,20 +194,8 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
     assert 'already exists' in result.stderr
 
 
-def _fifo_permitted() -> bool:
-    try:
-        with realtime_scheduling(10):
-            return True
-    except SimulationError:
-        return False
-
-
-needs_fifo = pytest.mark.skipif(not _fifo_permitted(), reason='SCHED_FIFO is not permitted here')
-
-
-@needs_fifo
 def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(
-        graph_run, tmp_path, ros_domain_id, monkeypatch, assert_same_trajectory):
+        needs_fifo, graph_run, tmp_path, ros_domain_id, monkeypatch, assert_same_trajectory):
     started = []
 
     def spy(spec, env, start=graph.start):
@@ -227,8 +214,8 @@ def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(
     assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
 
 
-@needs_fifo
-def test_every_thread_of_a_node_started_under_rt_priority_is_sched_fifo(tmp_path, ros_domain_id):
+def test_every_thread_of_a_node_started_under_rt_priority_is_sched_fifo(needs_fifo, tmp_path,
+                                                                       ros_domain_id):
     env = ros_environment(ros_domain_id, tmp_path)
     spec = next(s for s in graph_nodes(str(TINY), tmp_path / 'out') if s.executable != 'simulator')
     with realtime_scheduling(10):
