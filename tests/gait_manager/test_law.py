@@ -1,4 +1,4 @@
-"""Gait-manager entry point: enabled sources only, head offset, nested parameter validation."""
+"""Gait-manager entry point: enabled sources only, head stance, nested parameter validation."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from gait_manager.law import (
     SOURCES,
     GaitManagerParameters,
     gait_manager_torques,
-    head_offset,
+    head_stance,
     total_torque,
 )
 from gait_manager.posture import PostureParameters, posture_torque
@@ -40,14 +40,19 @@ def test_disabled_sources_are_absent_and_not_computed(make_obs, enabled):
     assert np.all(total_torque(torques) == sum(torques.values(), np.zeros(18)))
 
 
-def test_head_offset_follows_the_posture_source(make_obs, dynamics):
+def test_head_stance_follows_the_posture_source(make_obs):
     obs = make_obs(t=2.0, t_exchange=1.0, t_touchdown=1.5)
-    np.testing.assert_allclose(head_offset(obs, dynamics, GaitManagerParameters()),
-                               [0.2, -0.03])
+    params = GaitManagerParameters()
+    stance = head_stance(params)
+    assert stance == params.posture.stance
+    np.testing.assert_allclose(stance.shift(obs), [0.2, -0.03])
+    moved = GaitManagerParameters(posture=PostureParameters(shift_y1=0.05, shift_time2=0.2))
+    assert head_stance(moved) == moved.posture.stance != stance
     no_posture = GaitManagerParameters(enabled=frozenset({'yaw'}))
-    np.testing.assert_array_equal(head_offset(obs, dynamics, no_posture), [0.0, 0.0])
-    standing = GaitManagerParameters(posture=PostureParameters(reference='standing'))
-    np.testing.assert_array_equal(head_offset(obs, dynamics, standing), [0.0, 0.0])
+    assert head_stance(no_posture) is None
+    for reference in ('standing', 'balance'):
+        other = GaitManagerParameters(posture=PostureParameters(reference=reference))
+        assert head_stance(other) is None
 
 
 def test_from_dict_nested():

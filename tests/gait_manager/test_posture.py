@@ -1,4 +1,4 @@
-"""Posture stabiliser and its moving stance reference (model-spec 13.1-3, 14.4)."""
+"""Posture stabiliser and its moving stance reference (docs/model.md, posture stabiliser)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,6 @@ import pytest
 from gait_manager.errors import GaitManagerError
 from gait_manager.posture import (
     PostureParameters,
-    head_offset_of,
     hip_target,
     posture_torque,
     stance_reference,
@@ -14,7 +13,7 @@ from gait_manager.posture import (
 )
 from iceskate_sim.scene import standing_posture as scene_posture
 
-BENT = scene_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1, a = 0.05 rad
+BENT = scene_posture('bent_knees', 0.05, 0.0)[0]  # the bent-knee standing posture, a = 0.05 rad
 STANCE_AND_TORSO = [2, 3, 4, 9, 10]
 
 
@@ -89,8 +88,9 @@ def test_standing_reference_is_fixed(make_obs, dynamics):
     q_ref, offset = stance_reference(obs, dynamics, params)
     np.testing.assert_array_equal(q_ref, BENT)
     np.testing.assert_array_equal(offset, [0.0, 0.0])
-    np.testing.assert_array_equal(head_offset_of(obs, params), [0.0, 0.0])
-    np.testing.assert_allclose(head_offset_of(obs, PostureParameters()), [0.2, -0.03])
+    moving = stance_reference(obs, dynamics, PostureParameters())
+    np.testing.assert_allclose(moving.head_offset, [0.2, -0.03])
+    np.testing.assert_array_equal(moving.head_offset, PostureParameters().stance.shift(obs))
 
 
 def test_gravity_compensation_at_the_reference(make_obs, dynamics):
@@ -141,7 +141,7 @@ def test_null_space_projection_does_not_fight_the_head_task(make_obs, dynamics):
     assert tau[8] == plain[8]  # the yaw spring is not projected
 
 
-def test_defaults_follow_the_spec():
+def test_defaults_follow_the_model():
     p = PostureParameters()
     assert p.joints == (2, 3, 4, 9, 10) and 17 not in p.joints
     assert (p.stiffness, p.damping, p.yaw_stiffness, p.yaw_damping) == (800, 16, 20, 2)

@@ -1,8 +1,8 @@
-"""Arm auxiliary input of steps 1-3 (seed §5.2, model-spec §7.5), ROS-free.
+"""Arm auxiliary input of steps 1-3 (seed §5.2; docs/model.md, arm assist), ROS-free.
 
 Before the 4th step the shoulders get an anti-phase sinusoid, tau_11 = +A sin(Phi) (a = 0) or
 -A sin(Phi) (a = 1) and tau_14 = -tau_11, and the elbows and wrists a PD to 0. From the 4th step
-on (``step_index`` >= 3 exchanges, model-spec §11 #21) every arm joint gets no torque at all.
+on (``step_index`` >= 3 exchanges) every arm joint gets no torque at all.
 """
 
 from __future__ import annotations
@@ -14,8 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from gait_manager._params import PHASE_READINGS, build, choice, integer, phase, real, zeros
+from gait_manager._params import PHASE_READINGS, phase, zeros
+from gait_manager.errors import GaitManagerError
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
 
 RIGHT_SHOULDER, LEFT_SHOULDER = 11, 14
 ELBOWS_AND_WRISTS = (12, 13, 15, 16)
@@ -23,37 +25,30 @@ ELBOWS_AND_WRISTS = (12, 13, 15, 16)
 
 @dataclass(frozen=True)
 class ArmAssistParameters:
-    """Parameters of the arm assist (model-spec §7.5 defaults).
+    """Parameters of the arm assist (docs/model.md, arm assist). Each field's description, unit
+    and range are its ``setting``."""
 
-    :param amplitude: A_arm [N m] of the shoulder sinusoid (2).
-    :param period: T [s] of the phase (1.85, as eq. 10).
-    :param phase: phase reading, as for the yaw input ('B' default; 'A', 'B_clipped').
-    :param stiffness: K [N m/rad] of the elbow/wrist PD to 0 (10).
-    :param damping: B [N m s/rad] of the elbow/wrist PD (1).
-    :param off_from_step_index: all arm torques are 0 once ``step_index`` reaches this many
-        exchanges (3: from the 4th step on, seed §5.2).
-    """
-
-    amplitude: float = 2.0
-    period: float = 1.85
-    phase: str = 'B'
-    stiffness: float = 10.0
-    damping: float = 1.0
-    off_from_step_index: int = 3
+    amplitude: float = setting(2.0, 'A_arm, amplitude of the shoulder sinusoid', unit='N m',
+                               low=0.0)
+    period: float = setting(1.85, 'T of the phase (as in eq. 10)', unit='s', low=0.0,
+                            open_low=True)
+    phase: str = setting('B', "phase reading, as for the yaw input: 'B' 2 pi (t - t_e)/T, 'A' "
+                         "2 (t - t_e)/T, 'B_clipped' reading B clipped to [0, pi]",
+                         choices=PHASE_READINGS)
+    stiffness: float = setting(10.0, 'K of the elbow and wrist PD to 0', unit='N m/rad',
+                               low=0.0)
+    damping: float = setting(1.0, 'B of the elbow and wrist PD', unit='N m s/rad', low=0.0)
+    off_from_step_index: int = setting(3, 'all arm torques are 0 once step_index reaches this '
+                                       'many exchanges (3: from the 4th step on)', low=0)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        object.__setattr__(self, 'amplitude', real('amplitude', self.amplitude, low=0.0))
-        object.__setattr__(self, 'period', real('period', self.period, low=0.0, open_low=True))
-        choice('phase', self.phase, PHASE_READINGS)
-        object.__setattr__(self, 'stiffness', real('stiffness', self.stiffness, low=0.0))
-        object.__setattr__(self, 'damping', real('damping', self.damping, low=0.0))
-        integer('off_from_step_index', self.off_from_step_index, low=0)
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ArmAssistParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'arm_assist.')
+        return from_mapping(cls, d, GaitManagerError, 'arm_assist.')
 
 
 def arm_assist_torque(obs: Observation, params: ArmAssistParameters) -> np.ndarray:

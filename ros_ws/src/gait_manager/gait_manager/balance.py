@@ -1,12 +1,12 @@
 """Walking posture stabiliser: foot placement, swing-foot path and speed regulation, ROS-free.
 
-The 'balance' reference of the posture stabiliser (model-spec §13.2 leaves the form open: "the
-reference posture and the joint set must let the legs move"). The §7.1 feed-forward pulses
-with the §14.4 moving stance reference did not sustain walking in this model (3-5 exchanges at
-best, see scripts/tune_gait.py); this form, in the spirit of SIMBICON (Yin et al. 2007) and
-Raibert's foot placement, does. Everything is a joint impedance (run by the simulator at its
-physics rate) plus a feed-forward effort, recomputed at every control instant from the
-observation only (world pitch angles phi_k = q1 + ... + q_k along the support-rooted chain):
+The 'balance' reference of the posture stabiliser (docs/model.md, walking stabiliser). The
+feed-forward pulses with the moving stance reference did not sustain walking in this model
+(3-5 exchanges at best, see scripts/tune_gait.py); this form, in the spirit of SIMBICON (Yin
+et al. 2007) and Raibert's foot placement, does. Everything is a joint impedance (run by the
+simulator at its physics rate) plus a feed-forward effort, recomputed at every control instant
+from the observation only (world pitch angles phi_k = q1 + ... + q_k along the support-rooted
+chain):
 
 * trunk: joints 9, 10 held at 0; the support hip q4 holds the pelvis pitch phi_4 at ``trunk``
   (world frame), with the swing-hip torque fed forward to cancel its reaction on the pelvis;
@@ -39,14 +39,16 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from gait_manager._params import build, real, smoothstep, zeros
+from gait_manager._params import zeros
 from gait_manager.errors import GaitManagerError
 from gait_manager.feedforward import scratch_data
 from iceskate_sim.command import JointCommand, all_finite
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
+from iceskate_sim.stance import smoothstep
 
-ANKLE_HEIGHT = 0.07  # m, ankle above the sole (model-spec §2.4)
+ANKLE_HEIGHT = 0.07  # m, ankle above the sole (docs/model.md, foot and other offsets)
 THIGH, SHANK = 0.38, 0.40  # m, leg link lengths (Table 1)
 SWING_START_BEHIND = 0.15  # m, start of the swing-ankle path behind the hip
 GRAVITY_JOINTS = np.array([2, 3, 4, 9, 10])
@@ -55,89 +57,73 @@ SPEED_JOINTS = np.array([2, 3, 4])
 
 @dataclass(frozen=True)
 class BalanceParameters:
-    """Walking stabiliser (values found by random search, see scripts/tune_gait.py).
+    """Parameters of the walking stabiliser (values found by random search, see
+    scripts/tune_gait.py). Each field's description, unit and range are its ``setting``."""
 
-    :param swing_time: duration [s] of the swing-foot path after the exchange.
-    :param clearance: height [m] the swing ankle rises above its floor height.
-    :param press: depth [m] below the floor the path ends at (makes the heel strike).
-    :param lift_fraction: part of ``swing_time`` spent rising.
-    :param descent_start: part of ``swing_time`` after which the path descends.
-    :param step_length: nominal step [m]; the foot lands half of it ahead of the CoM.
-    :param placement_gain: extra landing distance per m/s of speed error [s].
-    :param speed: desired forward CoM speed v_d [m/s] (reached over the first 0.5 s).
-    :param speed_gain: k_v [N s/m] of the virtual forward force.
-    :param max_force: bound [N] of that force forward.
-    :param max_brake: bound [N] of that force backward (on ice a backward floor force beyond
-        mu N does not exist: a braking command only slides the support foot forward).
-    :param com_stiffness: support-ankle feedback [N m/m] on the horizontal distance of the
-        centre of mass ahead of the support ankle minus ``com_offset`` (ankle strategy; on a
-        gliding foot it is the only way to keep the CoM over the sole).
-    :param com_damping: its rate feedback [N m s/m] on (v_com - v_ankle).
-    :param com_offset: desired distance [m] of the CoM ahead of the support ankle.
-    :param stance_knee: support knee angle [rad] (flexion > 0).
-    :param trunk: pelvis pitch phi_4 [rad] held in the world frame (> 0 leans back).
-    :param stiffness: PD stiffness [N m/rad] of the support knee, hip and torso.
-    :param ankle_stiffness: PD stiffness [N m/rad] of the support ankle.
-    :param ankle_damping: its damping [N m s/rad].
-    :param swing_stiffness: PD stiffness [N m/rad] of the swing hip and knee in the air.
-    :param swing_damping: their damping [N m s/rad].
-    :param front_hip_stiffness: [N m/rad] of the front hip in double support.
-    :param front_knee_stiffness: [N m/rad] of the front knee in double support.
-    :param push: rear-ankle push-off torque [N m] reached ``push_ramp`` s after heel strike.
-    :param push_ramp: [s], see ``push``.
-    :param toe_off_flex: rear knee angle [rad] reached at the end of ``push_ramp``.
-    :param blend: time [s] over which support references move from the current angles to
-        their nominal values after an exchange (no reference jump at the exchange).
-    """
-
-    swing_time: float = 0.45
-    clearance: float = 0.04
-    press: float = 0.02
-    lift_fraction: float = 0.25
-    descent_start: float = 0.6
-    step_length: float = 0.3
-    placement_gain: float = 0.2
-    speed: float = 0.4
-    speed_gain: float = 100.0
-    max_force: float = 40.0
-    max_brake: float = 40.0
-    com_stiffness: float = 0.0
-    com_damping: float = 0.0
-    com_offset: float = 0.0
-    stance_knee: float = 0.1
-    trunk: float = 0.0
-    stiffness: float = 800.0
-    ankle_stiffness: float = 30.0
-    ankle_damping: float = 5.0
-    swing_stiffness: float = 300.0
-    swing_damping: float = 30.0
-    front_hip_stiffness: float = 300.0
-    front_knee_stiffness: float = 300.0
-    push: float = 20.0
-    push_ramp: float = 0.3
-    toe_off_flex: float = 0.5
-    blend: float = 0.2
+    swing_time: float = setting(0.45, 'duration of the swing-foot path after the exchange',
+                                unit='s', low=0.05, high=2.0)
+    clearance: float = setting(0.04, 'height the swing ankle rises above its floor height',
+                               unit='m', low=0.0, high=0.2)
+    press: float = setting(0.02, 'depth below the floor the swing path ends at (makes the heel '
+                           'strike)', unit='m', low=0.0, high=0.1)
+    lift_fraction: float = setting(0.25, 'fraction of swing_time spent rising', low=0.01,
+                                   high=1.0)
+    descent_start: float = setting(0.6, 'fraction of swing_time after which the path descends',
+                                   low=0.0, high=0.99)
+    step_length: float = setting(0.3, 'nominal step; the foot lands half of it ahead of the '
+                                 'CoM', unit='m', low=0.0, high=1.0)
+    placement_gain: float = setting(0.2, 'extra landing distance per m/s of speed error',
+                                    unit='s', low=-1.0, high=1.0)
+    speed: float = setting(0.4, 'desired forward CoM speed v_d (reached over the first 0.5 s)',
+                           unit='m/s', low=-1.0, high=2.0)
+    speed_gain: float = setting(100.0, 'k_v of the virtual forward force', unit='N s/m',
+                                low=0.0)
+    max_force: float = setting(40.0, 'bound of the virtual force forward', unit='N', low=0.0)
+    max_brake: float = setting(40.0, 'bound of the virtual force backward (on ice braking only '
+                               'slides the support foot forward)', unit='N', low=0.0)
+    com_stiffness: float = setting(0.0, 'support-ankle feedback on the CoM distance ahead of '
+                                   'the support ankle minus com_offset (ankle strategy)',
+                                   unit='N m/m', low=0.0)
+    com_damping: float = setting(0.0, 'support-ankle rate feedback on v_com - v_ankle',
+                                 unit='N m s/m', low=0.0)
+    com_offset: float = setting(0.0, 'desired distance of the CoM ahead of the support ankle',
+                                unit='m', low=-0.2, high=0.2)
+    stance_knee: float = setting(0.1, 'support knee angle (flexion > 0)', unit='rad', low=0.0,
+                                 high=1.5)
+    trunk: float = setting(0.0, 'pelvis pitch phi_4 held in the world frame (> 0 leans back)',
+                           unit='rad', low=-0.5, high=0.5)
+    stiffness: float = setting(800.0, 'PD stiffness of the support knee, hip and torso',
+                               unit='N m/rad', low=0.0)
+    ankle_stiffness: float = setting(30.0, 'PD stiffness of the support ankle', unit='N m/rad',
+                                     low=0.0)
+    ankle_damping: float = setting(5.0, 'PD damping of the support ankle', unit='N m s/rad',
+                                   low=0.0)
+    swing_stiffness: float = setting(300.0, 'PD stiffness of the swing hip and knee in the air',
+                                     unit='N m/rad', low=0.0)
+    swing_damping: float = setting(30.0, 'PD damping of the swing hip and knee in the air',
+                                   unit='N m s/rad', low=0.0)
+    front_hip_stiffness: float = setting(300.0, 'PD stiffness of the front hip in double '
+                                         'support', unit='N m/rad', low=0.0)
+    front_knee_stiffness: float = setting(300.0, 'PD stiffness of the front knee in double '
+                                          'support', unit='N m/rad', low=0.0)
+    push: float = setting(20.0, 'rear-ankle push-off torque reached push_ramp after the heel '
+                          'strike', unit='N m', low=-100.0, high=200.0)
+    push_ramp: float = setting(0.3, 'ramp time of the push-off torque and the rear knee flexion',
+                               unit='s', low=0.0)
+    toe_off_flex: float = setting(0.5, 'rear knee angle reached at the end of push_ramp',
+                                  unit='rad', low=0.0, high=1.5)
+    blend: float = setting(0.2, 'time over which the support references move from the current '
+                           'angles to their nominal values after an exchange', unit='s',
+                           low=0.0, high=2.0)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        bounds = {'swing_time': (0.05, 2.0), 'clearance': (0.0, 0.2), 'press': (0.0, 0.1),
-                  'lift_fraction': (0.01, 1.0), 'descent_start': (0.0, 0.99),
-                  'step_length': (0.0, 1.0), 'placement_gain': (-1.0, 1.0),
-                  'speed': (-1.0, 2.0), 'stance_knee': (0.0, 1.5), 'trunk': (-0.5, 0.5),
-                  'toe_off_flex': (0.0, 1.5), 'push': (-100.0, 200.0), 'blend': (0.0, 2.0),
-                  'com_offset': (-0.2, 0.2)}
-        for name, (low, high) in bounds.items():
-            object.__setattr__(self, name, real(name, getattr(self, name), low, high))
-        for name in ('speed_gain', 'max_force', 'max_brake', 'com_stiffness', 'com_damping',
-                     'stiffness', 'ankle_stiffness',
-                     'ankle_damping', 'swing_stiffness', 'swing_damping',
-                     'front_hip_stiffness', 'front_knee_stiffness', 'push_ramp'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> BalanceParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'balance.')
+        return from_mapping(cls, d, GaitManagerError, 'balance.')
 
 
 def leg_ik(d_y: float, d_z: float, thigh: float, shank: float) -> tuple[float, float]:

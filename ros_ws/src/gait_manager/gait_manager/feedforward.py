@@ -1,5 +1,5 @@
-"""Feed-forward leg torques (joints 1, 2, 3, 5, 6; model-spec §7.1, §14) and weight transfer
-(§14.5), ROS-free.
+"""Feed-forward leg torques (joints 1, 2, 3, 5, 6; docs/model.md, feed-forward pulses) and
+weight transfer (docs/model.md, weight transfer), ROS-free.
 
 Feed-forward (seed §5.2: "feed-forward-like" torques on joints 1, 2, 3 for push-off and 5 for
 the swing), event-triggered, measured from the last support exchange t_e:
@@ -38,9 +38,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from gait_manager._params import boolean, build, choice, real, zeros
+from gait_manager._params import zeros
+from gait_manager.errors import GaitManagerError
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
 from iceskate_sim.robot import SupportModel
 
 WEIGHT_RULES = ('ramp', 'com')
@@ -50,102 +52,75 @@ GRAVITY = 9.81  # m/s^2
 
 @dataclass(frozen=True)
 class FeedforwardParameters:
-    """Feed-forward leg torques (defaults: model-spec §7.1 and §14.1-2).
+    """Parameters of the feed-forward leg torques (docs/model.md, feed-forward pulses). Each
+    field's description, unit and range are its ``setting``."""
 
-    :param hip_amplitude: A5 [N m] of the swing-hip pulse (40).
-    :param hip_duration: D5 [s] of the swing-hip pulse (0.35).
-    :param knee_amplitude: A6 [N m] of the swing-knee flexion pulse (20; §14.2: 15-25).
-    :param knee_duration: D6 [s] of the knee pulse (0.25).
-    :param knee_stiffness: K6 [N m/rad] of the knee extension PD after the pulse (50).
-    :param knee_reference: q6_ref [rad] of that PD (-0.05, slightly flexed).
-    :param knee_damping: B6 [N m s/rad] of that PD (5).
-    :param ankle_push: A2 [N m], support ankle push-off (20).
-    :param knee_push: A3 [N m], support knee extension during push-off (10).
-    :param pivot_push: A1 [N m], heel-up torque on the floor pivot q1 (10).
-    :param joint1_torque: apply the q1 entry at all (model-spec §3.3 / §11 #18 switch).
-    """
-
-    hip_amplitude: float = 40.0
-    hip_duration: float = 0.35
-    knee_amplitude: float = 20.0
-    knee_duration: float = 0.25
-    knee_stiffness: float = 50.0
-    knee_reference: float = -0.05
-    knee_damping: float = 5.0
-    ankle_push: float = 20.0
-    knee_push: float = 10.0
-    pivot_push: float = 10.0
-    joint1_torque: bool = True
+    hip_amplitude: float = setting(40.0, 'A5, amplitude of the swing-hip pulse', unit='N m',
+                                   low=0.0)
+    hip_duration: float = setting(0.35, 'D5, duration of the swing-hip pulse', unit='s',
+                                  low=0.0, open_low=True)
+    knee_amplitude: float = setting(20.0, 'A6, amplitude of the swing-knee flexion pulse '
+                                    '(15-25 work)', unit='N m', low=0.0)
+    knee_duration: float = setting(0.25, 'D6, duration of the swing-knee pulse', unit='s',
+                                   low=0.0, open_low=True)
+    knee_stiffness: float = setting(50.0, 'K6 of the swing-knee extension PD after the pulse',
+                                    unit='N m/rad', low=0.0)
+    knee_reference: float = setting(-0.05, 'q6_ref of the swing-knee extension PD (slightly '
+                                    'flexed)', unit='rad', low=-2.5, high=0.0)
+    knee_damping: float = setting(5.0, 'B6 of the swing-knee extension PD', unit='N m s/rad',
+                                  low=0.0)
+    ankle_push: float = setting(20.0, 'A2, support-ankle push-off (plantar flexion)',
+                                unit='N m', low=0.0)
+    knee_push: float = setting(10.0, 'A3, support-knee extension during push-off', unit='N m',
+                               low=0.0)
+    pivot_push: float = setting(10.0, 'A1, heel-up torque on the floor pivot q1 during '
+                                'push-off', unit='N m', low=0.0)
+    joint1_torque: bool = setting(True, 'apply the q1 (floor pivot) entry at all')
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        for name in ('hip_amplitude', 'knee_amplitude', 'knee_stiffness', 'knee_damping',
-                     'ankle_push', 'knee_push', 'pivot_push'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
-        for name in ('hip_duration', 'knee_duration'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0,
-                                                open_low=True))
-        object.__setattr__(self, 'knee_reference',
-                           real('knee_reference', self.knee_reference, low=-2.5, high=0.0))
-        boolean('joint1_torque', self.joint1_torque)
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FeedforwardParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'feedforward.')
+        return from_mapping(cls, d, GaitManagerError, 'feedforward.')
 
 
 @dataclass(frozen=True)
 class WeightTransferParameters:
-    """Weight transfer after heel strike (defaults: model-spec §14.5).
+    """Parameters of the weight transfer after heel strike (docs/model.md, weight transfer).
+    Each field's description, unit and range are its ``setting``."""
 
-    :param share: final f_des as a fraction of the robot's weight m g (1.0: full transfer,
-        which drives the rear normal force to 0, the E7 exchange; 0.3 settles in double
-        support).
-    :param ramp_time: time [s] of the linear ramp of f_des from 0 after t_touchdown (0.5).
-    :param moment_arm: tau_n,des / f_des [m] while the front sole is flat (0.05; 0 disables).
-    :param joint1_torque: apply the q1 entry while q1 is active (switch, model-spec §3.3).
-    :param start_share: f_des / (m g) on the second foot in the starting double support
-        (swing foot down since the start, before any heel strike): weight shift (§14.7).
-    :param start_ramp: time [s] over which the starting share falls linearly to 0, unloading
-        the swing foot so it can lift off; 0 holds it (standing).
-    :param rule: 'ramp' (time ramp to ``share``) or 'com' (static split by the capture point;
-        ``share`` is then the upper bound; see module).
-    :param capture_gain: 'com' rule: weight of v sqrt(z/g) in y_x (1: capture point) [-].
-    :param share_min: 'com' rule: lower bound of the share, reached linearly over
-        ``ramp_time`` after the heel strike [-].
-    """
-
-    share: float = 1.0
-    ramp_time: float = 0.5
-    moment_arm: float = 0.05
-    joint1_torque: bool = True
-    start_share: float = 0.5
-    start_ramp: float = 0.5
-    rule: str = 'ramp'
-    capture_gain: float = 1.0
-    share_min: float = 0.0
+    share: float = setting(1.0, 'final f_des as a fraction of the weight m g (1: full '
+                           'transfer, the rear normal force reaches 0; 0.3 settles in double '
+                           "support); the 'com' rule's upper bound", low=0.0, high=2.0)
+    ramp_time: float = setting(0.5, 'time of the linear ramp of f_des from 0 after the heel '
+                               'strike', unit='s', low=0.0)
+    moment_arm: float = setting(0.05, 'tau_n,des / f_des while the front sole is flat (0 '
+                                'disables)', unit='m', low=-0.26, high=0.26)
+    joint1_torque: bool = setting(True, 'apply the q1 (floor pivot) entry while q1 is active')
+    start_share: float = setting(0.5, 'f_des / (m g) on the second foot in the starting double '
+                                 'support (weight shift before the first step)', low=0.0,
+                                 high=1.0)
+    start_ramp: float = setting(0.5, 'time over which the starting share falls linearly to 0 '
+                                '(unloading the swing foot for lift-off); 0 holds it',
+                                unit='s', low=0.0)
+    rule: str = setting('ramp', "'ramp' (time ramp to share) or 'com' (static split by the "
+                        'capture point)', choices=WEIGHT_RULES)
+    capture_gain: float = setting(1.0, "'com' rule: weight of v sqrt(z/g) in y_x (1: the "
+                                  'capture point)', low=0.0, high=5.0)
+    share_min: float = setting(0.0, "'com' rule: lower bound of the share, reached linearly "
+                               'over ramp_time after the heel strike', low=0.0, high=2.0)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        choice('rule', self.rule, WEIGHT_RULES)
-        object.__setattr__(self, 'capture_gain',
-                           real('capture_gain', self.capture_gain, low=0.0, high=5.0))
-        object.__setattr__(self, 'share_min', real('share_min', self.share_min, low=0.0,
-                                                   high=2.0))
-        object.__setattr__(self, 'share', real('share', self.share, low=0.0, high=2.0))
-        object.__setattr__(self, 'ramp_time', real('ramp_time', self.ramp_time, low=0.0))
-        object.__setattr__(self, 'moment_arm',
-                           real('moment_arm', self.moment_arm, low=-0.26, high=0.26))
-        boolean('joint1_torque', self.joint1_torque)
-        object.__setattr__(self, 'start_share',
-                           real('start_share', self.start_share, low=0.0, high=1.0))
-        object.__setattr__(self, 'start_ramp', real('start_ramp', self.start_ramp, low=0.0))
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> WeightTransferParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'weight_transfer.')
+        return from_mapping(cls, d, GaitManagerError, 'weight_transfer.')
 
 
 def _pulse(amplitude: float, duration: float, dt: float) -> float:

@@ -1,10 +1,12 @@
-"""Heel-first landing input on the swing ankle, joint 7 (model-spec §7.3, §14.3), ROS-free.
+"""Heel-first landing input on the swing ankle, joint 7 (docs/model.md, heel-first landing),
+ROS-free.
 
 In the air (swing code 'A') a PD drives the swing-sole pitch theta_sf = q1 + ... + q7 (q1 only
 while active; q0 = 0) to a landing pitch that ramps from 0 to theta_land (toe up) after t_e:
 tau_7 = K7 (theta_land(t) - theta_sf) - B7 d(theta_sf)/dt. With the heel on the floor (Hs, Hp) a
 softer PD lowers the sole to theta_sf = 0; with the sole flat (Fs, Fp) the constraint C_fr holds
-it and the input is 0. Positive pitch lifts the toe (model-spec §1).
+it and the input is 0. Positive pitch lifts the toe (docs/model.md, world frame and angle
+signs).
 """
 
 from __future__ import annotations
@@ -15,43 +17,40 @@ from typing import Any
 
 import numpy as np
 
-from gait_manager._params import build, real, zeros
+from gait_manager._params import zeros
+from gait_manager.errors import GaitManagerError
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
 
 SWING_ANKLE = 7
 
 
 @dataclass(frozen=True)
 class HeelParameters:
-    """Parameters of the heel-first input (model-spec §14.3 values).
+    """Parameters of the heel-first landing input (docs/model.md, heel-first landing). Each
+    field's description, unit and range are its ``setting``."""
 
-    :param stiffness: K7 [N m/rad] in the air (150; §7.3's 30 lets the toe scuff).
-    :param damping: B7 [N m s/rad] in the air (6).
-    :param landing_pitch: theta_land [rad], toe up (0.15).
-    :param ramp_time: time [s] over which theta_land ramps linearly from 0 after t_e (0.15).
-    :param contact_stiffness: K [N m/rad] of the PD to theta_sf = 0 in Hs/Hp (30).
-    :param contact_damping: B [N m s/rad] of that PD (3, the §7.3 ratio; an assumption).
-    """
-
-    stiffness: float = 150.0
-    damping: float = 6.0
-    landing_pitch: float = 0.15
-    ramp_time: float = 0.15
-    contact_stiffness: float = 30.0
-    contact_damping: float = 3.0
+    stiffness: float = setting(150.0, 'K7 of the swing-sole pitch PD in the air (30 lets the '
+                               'toe scuff)', unit='N m/rad', low=0.0)
+    damping: float = setting(6.0, 'B7 of the swing-sole pitch PD in the air', unit='N m s/rad',
+                             low=0.0)
+    landing_pitch: float = setting(0.15, 'theta_land, landing sole pitch (toe up)', unit='rad',
+                                   low=-0.5, high=0.5)
+    ramp_time: float = setting(0.15, 'time over which theta_land ramps linearly from 0 after '
+                               'the exchange', unit='s', low=0.0)
+    contact_stiffness: float = setting(30.0, 'K of the PD to a flat sole with the heel on the '
+                                       'floor (Hs, Hp)', unit='N m/rad', low=0.0)
+    contact_damping: float = setting(3.0, 'B of the PD to a flat sole with the heel on the '
+                                     'floor', unit='N m s/rad', low=0.0)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        for name in ('stiffness', 'damping', 'contact_stiffness', 'contact_damping',
-                     'ramp_time'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
-        object.__setattr__(self, 'landing_pitch',
-                           real('landing_pitch', self.landing_pitch, low=-0.5, high=0.5))
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> HeelParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'heel.')
+        return from_mapping(cls, d, GaitManagerError, 'heel.')
 
 
 def swing_sole_pitch(obs: Observation) -> tuple[float, float]:

@@ -1,4 +1,5 @@
-"""Gait-manager entry point: every gait-manager torque source, ROS-free (model-spec §7, §13-14).
+"""Gait-manager entry point: every gait-manager torque source, ROS-free (docs/model.md,
+gait-manager sources).
 
 ``gait_manager_torques`` returns one 18-vector [N m] per *enabled* source and computes nothing
 for the others, so a scene pays only for what it uses. Sources:
@@ -14,8 +15,8 @@ for the others, so a scene pays only for what it uses. Sources:
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,50 +32,40 @@ from gait_manager.feedforward import (
     weight_transfer_torque,
 )
 from gait_manager.heel import HeelParameters, heel_torque
-from gait_manager.posture import PostureParameters, head_offset_of, posture_command
+from gait_manager.posture import PostureParameters, posture_command
 from gait_manager.yaw import YawParameters, yaw_torque
 from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import block, check_fields, from_mapping, setting
+from iceskate_sim.stance import StanceSchedule
 
 SOURCES = ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw')
-_BLOCKS = {'posture': PostureParameters, 'balance': BalanceParameters,
-           'feedforward': FeedforwardParameters,
-           'weight_transfer': WeightTransferParameters, 'heel': HeelParameters,
-           'arm_assist': ArmAssistParameters, 'yaw': YawParameters}
-
-
-def _enabled(value: Any) -> frozenset[str]:
-    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
-        raise GaitManagerError(f'enabled must be a list of sources among {SOURCES}, '
-                               f'got {value!r}')
-    items = list(value)
-    for item in items:
-        if item not in SOURCES:
-            raise GaitManagerError(f'enabled: unknown source {item!r}; expected among {SOURCES}')
-    return frozenset(items)
 
 
 @dataclass(frozen=True)
 class GaitManagerParameters:
-    """All gait-manager parameter blocks and the set of enabled sources (default: all)."""
+    """All gait-manager parameter blocks and the set of enabled sources (default: all). Each
+    block and ``enabled`` is a ``block``/``setting`` with its description."""
 
-    posture: PostureParameters = field(default_factory=PostureParameters)
-    balance: BalanceParameters = field(default_factory=BalanceParameters)
-    feedforward: FeedforwardParameters = field(default_factory=FeedforwardParameters)
-    weight_transfer: WeightTransferParameters = field(default_factory=WeightTransferParameters)
-    heel: HeelParameters = field(default_factory=HeelParameters)
-    arm_assist: ArmAssistParameters = field(default_factory=ArmAssistParameters)
-    yaw: YawParameters = field(default_factory=YawParameters)
-    enabled: frozenset[str] = frozenset(SOURCES)
+    posture: PostureParameters = block(
+        PostureParameters, "posture stabiliser and stance reference (source 'posture')")
+    balance: BalanceParameters = block(
+        BalanceParameters, "walking stabiliser (source 'posture' with reference 'balance')")
+    feedforward: FeedforwardParameters = block(
+        FeedforwardParameters, "swing pulses and push-off (source 'feedforward')")
+    weight_transfer: WeightTransferParameters = block(
+        WeightTransferParameters, "weight transfer after heel strike (source 'weight_transfer')")
+    heel: HeelParameters = block(HeelParameters, "heel-first landing input (source 'heel')")
+    arm_assist: ArmAssistParameters = block(
+        ArmAssistParameters, "arm assist of steps 1-3 (source 'arm_assist')")
+    yaw: YawParameters = block(YawParameters, "torso-yaw input of eq. (10) (source 'yaw')")
+    enabled: frozenset[str] = setting(frozenset(SOURCES), 'torque sources to compute and send',
+                                      choices=SOURCES)
 
     def __post_init__(self) -> None:
-        """Validate the blocks' types and the enabled set (GaitManagerError naming the key)."""
-        for name, cls in _BLOCKS.items():
-            if not isinstance(getattr(self, name), cls):
-                raise GaitManagerError(f'{name} must be a {cls.__name__}, '
-                                       f'got {getattr(self, name)!r}')
-        object.__setattr__(self, 'enabled', _enabled(self.enabled))
+        """Check every block's type and the enabled set (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> GaitManagerParameters:
@@ -83,18 +74,7 @@ class GaitManagerParameters:
         Missing blocks keep their defaults; unknown keys and bad values raise
         GaitManagerError with a message naming the key (e.g. 'posture.stiffness').
         """
-        if not isinstance(d, Mapping):
-            raise GaitManagerError(f'gait-manager parameters must be a mapping, got {d!r}')
-        known = [f.name for f in fields(cls)]
-        kwargs: dict[str, Any] = {}
-        for key, value in d.items():
-            if key not in known:
-                raise GaitManagerError(f'unknown key {key!s}; expected one of {known}')
-            if key == 'enabled':
-                kwargs[key] = _enabled(value)
-            else:
-                kwargs[key] = _BLOCKS[key].from_dict(value)
-        return cls(**kwargs)
+        return from_mapping(cls, d, GaitManagerError)
 
 
 def gait_manager_commands(obs: Observation, dynamics: GaitDynamics,
@@ -142,11 +122,9 @@ def total_torque(torques: Mapping[str, np.ndarray]) -> np.ndarray:
     return total
 
 
-def head_offset(obs: Observation, dynamics: GaitDynamics,
-                params: GaitManagerParameters) -> np.ndarray:
-    """(dy, dz) [m] to add to visual lifting's y_d, z_d: the moving-stance shift while the
-    posture source is enabled with the 'moving' reference, else (0, 0)."""
-    del dynamics  # the shift is a function of time only; kept for a uniform signature
-    if 'posture' not in params.enabled:
-        return np.zeros(2)
-    return head_offset_of(obs, params.posture)
+def head_stance(params: GaitManagerParameters) -> StanceSchedule | None:
+    """The moving stance visual lifting's head target should follow: the posture source's
+    schedule while it runs with the 'moving' reference, else None (no shift)."""
+    if 'posture' not in params.enabled or params.posture.reference != 'moving':
+        return None
+    return params.posture.stance

@@ -1,26 +1,26 @@
-"""Posture stabiliser (model-spec §13.2, §13.3, §14.4), ROS-free.
+"""Posture stabiliser (docs/model.md, posture stabiliser), ROS-free.
 
-Visual lifting alone cannot hold the robot up (model-spec §13.2): its 3-row task leaves a null
-space (knee squat, trunk folding, ...) unstable. This term adds, as its own switchable source,
+Visual lifting alone cannot hold the robot up: its 3-row task leaves a null space (knee squat,
+trunk folding, ...) unstable. This term adds, as its own switchable source,
 
     tau_post = N^T [K_q (q_ref - q) - B_q dq]  on the driven joints (default 2, 3, 4, 9, 10)
              + g(q)                            on the gravity joints (default the same; switch)
-             - K_8 q_8 - B_8 dq_8              on the torso yaw (centring spring, §13.3)
+             - K_8 q_8 - B_8 dq_8              on the torso yaw (centring spring)
 
 with N^T = I - J_H^T (J_H^+)^T over the driven joints when the null-space projection is on
-(default off), else I. The neck (17) is left out by default: its PD cancels visual lifting there
-(§14.4).
+(default off), else I. The neck (17) is left out by default: its PD cancels visual lifting there.
 
 Reference posture q_ref:
-* 'standing': the bent-knee posture q2..q7 = (-a, 2a, -a, a, -2a, a), a = 0.05 rad (§13.1);
-* 'moving' (§14.4): the pelvis centre follows a target that starts at the standing posture's
-  position over the support ankle at t_e, moves +dy1 forward and dz1 down over T1 (smoothstep),
-  then a further +dy2 over T2 after the heel strike t_touchdown. The support leg angles q2, q3,
-  q4 come from a planar 2-link IK (ankle -> hip, shank 0.40 m, thigh 0.38 m, read from the
-  model) with the knee forward (q3 >= 0) and the pelvis pitch phi_4 = q1 + q2 + q3 + q4 held at
-  its reference; the ankle position uses the current y0 and q1. Torso, arms and neck go to 0
-  (trunk upright), the swing leg to the standing posture. The same shift (dy, -dz) is returned
-  as a head offset so that visual lifting's y_d, z_d move with the stance.
+* 'standing': the bent-knee posture q2..q7 = (-a, 2a, -a, a, -2a, a), a = 0.05 rad;
+* 'moving', the moving stance: the pelvis centre follows a target that starts at the
+  standing posture's position over the support ankle at t_e, moves +dy1 forward and dz1 down
+  over T1 (smoothstep), then a further +dy2 over T2 after the heel strike t_touchdown
+  (``iceskate_sim.stance``). The support leg angles q2, q3, q4 come from a planar 2-link IK
+  (ankle -> hip, shank 0.40 m, thigh 0.38 m, read from the model) with the knee forward
+  (q3 >= 0) and the pelvis pitch phi_4 = q1 + q2 + q3 + q4 held at its reference; the ankle
+  position uses the current y0 and q1. Torso, arms and neck go to 0 (trunk upright), the swing
+  leg to the standing posture. The same shift (dy, -dz) is returned as a head offset so that
+  visual lifting's y_d, z_d move with the stance.
 Entries 0 and 1 of q_ref copy the current y0 and q1 (not driven), so forward kinematics of q_ref
 puts the pelvis centre on the target.
 """
@@ -34,12 +34,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from gait_manager._params import boolean, build, choice, joints, real, smoothstep, zeros
+from gait_manager._params import zeros
 from gait_manager.errors import GaitManagerError
 from iceskate_sim.command import JointCommand
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
 from iceskate_sim.robot import SupportModel
+from iceskate_sim.stance import StanceSchedule
 
 REFERENCES = ('moving', 'standing', 'balance')
 YAW_JOINT = 8
@@ -47,69 +49,56 @@ YAW_JOINT = 8
 
 @dataclass(frozen=True)
 class PostureParameters:
-    """Posture stabiliser and stance reference (defaults: model-spec §13.1-3, §14.4).
+    """Parameters of the posture stabiliser and its stance reference (docs/model.md, posture
+    stabiliser). Each field's description, unit and range are its ``setting``."""
 
-    :param reference: 'moving' stance reference (§14.4), fixed 'standing' posture, or
-        'balance': the walking stabiliser of ``gait_manager.balance`` (its own parameter
-        block; only the yaw centring spring of this block is used then).
-    :param joints: driven joints of the PD (2, 3, 4 stance; 9, 10 torso; not the neck).
-    :param stiffness: K_q [N m/rad] (800; 400 also works, 200 is too weak).
-    :param damping: B_q [N m s/rad] (16).
-    :param gravity_compensation: add g(q) on ``gravity_joints`` (on).
-    :param gravity_joints: joints that get g(q) (stance and torso: 2, 3, 4, 9, 10). Never the
-        swing leg in the air (§14.1: it throws the leg up).
-    :param yaw_stiffness: K_8 [N m/rad] of the torso-yaw centring spring (20, §13.3).
-    :param yaw_damping: B_8 [N m s/rad] of that spring (2).
-    :param null_space: project the PD into the null space of J_H over the driven joints (off).
-    :param bend: a [rad] of the bent-knee standing posture (0.05, §13.1).
-    :param pelvis_pitch: phi_4 = q1 + q2 + q3 + q4 [rad] kept by the moving reference (0).
-    :param shift_y1: forward hip shift dy1 [m] after t_e (0.10).
-    :param shift_z1: downward hip shift dz1 [m] after t_e (0.03).
-    :param shift_time1: duration T1 [s] of the first shift (0.6).
-    :param shift_y2: further forward shift dy2 [m] after the heel strike (0.10).
-    :param shift_time2: duration T2 [s] of the second shift (0.5).
-    """
-
-    reference: str = 'moving'
-    joints: tuple[int, ...] = (2, 3, 4, 9, 10)
-    stiffness: float = 800.0
-    damping: float = 16.0
-    gravity_compensation: bool = True
-    gravity_joints: tuple[int, ...] = (2, 3, 4, 9, 10)
-    yaw_stiffness: float = 20.0
-    yaw_damping: float = 2.0
-    null_space: bool = False
-    bend: float = 0.05
-    pelvis_pitch: float = 0.0
-    shift_y1: float = 0.10
-    shift_z1: float = 0.03
-    shift_time1: float = 0.6
-    shift_y2: float = 0.10
-    shift_time2: float = 0.5
+    reference: str = setting(
+        'moving', "reference posture: 'moving' stance, fixed 'standing' posture, or 'balance' "
+        '(the walking stabiliser of the balance block; only the yaw spring of this block is '
+        'used then)', choices=REFERENCES)
+    joints: tuple[int, ...] = setting(
+        (2, 3, 4, 9, 10), 'joints driven by the PD (stance 2, 3, 4; torso 9, 10; not the neck)',
+        low=2, high=17, distinct=True)
+    stiffness: float = setting(800.0, 'K_q of the PD (400 also works, 200 is too weak)',
+                               unit='N m/rad', low=0.0)
+    damping: float = setting(16.0, 'B_q of the PD', unit='N m s/rad', low=0.0)
+    gravity_compensation: bool = setting(True, 'add the gravity torque g(q) on gravity_joints')
+    gravity_joints: tuple[int, ...] = setting(
+        (2, 3, 4, 9, 10), 'joints that get g(q) (stance and torso; never the swing leg in the '
+        'air: it throws the leg up)', low=2, high=17, distinct=True)
+    yaw_stiffness: float = setting(20.0, 'K_8 of the torso-yaw centring spring', unit='N m/rad',
+                                   low=0.0)
+    yaw_damping: float = setting(2.0, 'B_8 of the torso-yaw centring spring', unit='N m s/rad',
+                                 low=0.0)
+    null_space: bool = setting(False, 'project the PD into the null space of the head Jacobian '
+                               'J_H over the driven joints')
+    bend: float = setting(0.05, 'knee bend a of the bent-knee standing posture', unit='rad',
+                          low=0.0, high=0.5)
+    pelvis_pitch: float = setting(0.0, 'pelvis pitch phi_4 = q1 + q2 + q3 + q4 kept by the '
+                                  "'moving' reference", unit='rad', low=-0.8, high=0.8)
+    shift_y1: float = setting(0.10, 'forward hip shift dy1 after the support exchange',
+                              unit='m', low=-0.4, high=0.4)
+    shift_z1: float = setting(0.03, 'downward hip shift dz1 after the support exchange',
+                              unit='m', low=-0.1, high=0.3)
+    shift_time1: float = setting(0.6, 'duration T1 of the first shift', unit='s', low=0.0)
+    shift_y2: float = setting(0.10, 'further forward hip shift dy2 after the heel strike',
+                              unit='m', low=-0.4, high=0.4)
+    shift_time2: float = setting(0.5, 'duration T2 of the second shift', unit='s', low=0.0)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        choice('reference', self.reference, REFERENCES)
-        object.__setattr__(self, 'joints', joints('joints', self.joints, low=2))
-        object.__setattr__(self, 'gravity_joints',
-                           joints('gravity_joints', self.gravity_joints, low=2))
-        for name in ('stiffness', 'damping', 'yaw_stiffness', 'yaw_damping', 'shift_time1',
-                     'shift_time2'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=0.0))
-        boolean('gravity_compensation', self.gravity_compensation)
-        boolean('null_space', self.null_space)
-        object.__setattr__(self, 'bend', real('bend', self.bend, low=0.0, high=0.5))
-        object.__setattr__(self, 'pelvis_pitch',
-                           real('pelvis_pitch', self.pelvis_pitch, low=-0.8, high=0.8))
-        for name in ('shift_y1', 'shift_y2'):
-            object.__setattr__(self, name, real(name, getattr(self, name), low=-0.4, high=0.4))
-        object.__setattr__(self, 'shift_z1', real('shift_z1', self.shift_z1, low=-0.1,
-                                                  high=0.3))
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> PostureParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'posture.')
+        return from_mapping(cls, d, GaitManagerError, 'posture.')
+
+    @property
+    def stance(self) -> StanceSchedule:
+        """The moving stance schedule of the shift_* fields."""
+        return StanceSchedule(self.shift_y1, self.shift_z1, self.shift_time1, self.shift_y2,
+                              self.shift_time2)
 
 
 class StanceReference(NamedTuple):
@@ -120,28 +109,17 @@ class StanceReference(NamedTuple):
 
 
 def standing_posture(params: PostureParameters) -> np.ndarray:
-    """The bent-knee posture of model-spec §13.1 as an 18-vector (y0 = q1 = 0)."""
+    """The bent-knee standing posture as an 18-vector (y0 = q1 = 0)."""
     a = params.bend
     q = zeros()
     q[2:8] = (-a, 2.0 * a, -a, a, -2.0 * a, a)
     return q
 
 
-def _ramp(dt: float, duration: float) -> float:
-    if duration == 0.0:
-        return 1.0 if dt >= 0.0 else 0.0
-    return smoothstep(dt / duration)
-
-
 def stance_shift(obs: Observation, params: PostureParameters) -> np.ndarray:
     """(dy, dz) [m] of the moving pelvis target relative to the standing posture (dz < 0 is
     down): +dy1, -dz1 over T1 after t_e, then +dy2 over T2 after t_touchdown."""
-    s1 = _ramp(obs.t - obs.t_exchange, params.shift_time1)
-    dy = params.shift_y1 * s1
-    dz = -params.shift_z1 * s1
-    if math.isfinite(obs.t_touchdown):
-        dy += params.shift_y2 * _ramp(obs.t - obs.t_touchdown, params.shift_time2)
-    return np.array([dy, dz])
+    return params.stance.shift(obs)
 
 
 def _rot(angle: float, v: np.ndarray) -> np.ndarray:
@@ -238,13 +216,6 @@ def stance_reference(obs: Observation, dynamics: GaitDynamics,
     target = hip_target(obs, dynamics, params)
     q_ref[2:5] = support_leg_ik(obs, dynamics, params, target)
     return StanceReference(q_ref, stance_shift(obs, params))
-
-
-def head_offset_of(obs: Observation, params: PostureParameters) -> np.ndarray:
-    """The head offset (dy, dz) [m] of the stance reference, without the IK."""
-    if params.reference != 'moving':
-        return np.zeros(2)
-    return stance_shift(obs, params)
 
 
 def posture_command(obs: Observation, dynamics: GaitDynamics,

@@ -1,4 +1,4 @@
-"""Torso-yaw input of the paper's eq. (10) (model-spec §7.4), ROS-free.
+"""Torso-yaw input of the paper's eq. (10) (docs/model.md, torso yaw), ROS-free.
 
 tau_8 = +A sin(Phi) while the right foot supports (a = 0) and -A sin(Phi) while the left foot
 supports (a = 1), with Phi measured from the last support exchange t_e.
@@ -13,36 +13,33 @@ from typing import Any
 
 import numpy as np
 
-from gait_manager._params import PHASE_READINGS, build, choice, phase, real, zeros
+from gait_manager._params import PHASE_READINGS, phase, zeros
+from gait_manager.errors import GaitManagerError
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
 
 YAW_JOINT = 8
 
 
 @dataclass(frozen=True)
 class YawParameters:
-    """Parameters of eq. (10).
+    """Parameters of the torso-yaw input, eq. (10) (docs/model.md, torso yaw). Each
+    field's description, unit and range are its ``setting``."""
 
-    :param amplitude: A [N m] (seed eq. 10: 30).
-    :param period: T [s] (seed: 1.85).
-    :param phase: reading of the phase: 'B' Phi = 2 pi (t - t_e)/T (default, model-spec §7.4),
-        'A' Phi = 2 (t - t_e)/T (the literal text), 'B_clipped' reading B clipped to [0, pi].
-    """
-
-    amplitude: float = 30.0
-    period: float = 1.85
-    phase: str = 'B'
+    amplitude: float = setting(30.0, 'A of eq. (10)', unit='N m', low=0.0)
+    period: float = setting(1.85, 'T of eq. (10)', unit='s', low=0.0, open_low=True)
+    phase: str = setting('B', "phase reading: 'B' Phi = 2 pi (t - t_e)/T, 'A' Phi = 2 (t - "
+                         "t_e)/T (the literal text), 'B_clipped' reading B clipped to [0, pi]",
+                         choices=PHASE_READINGS)
 
     def __post_init__(self) -> None:
-        """Validate every field (GaitManagerError naming the key)."""
-        object.__setattr__(self, 'amplitude', real('amplitude', self.amplitude, low=0.0))
-        object.__setattr__(self, 'period', real('period', self.period, low=0.0, open_low=True))
-        choice('phase', self.phase, PHASE_READINGS)
+        """Check and normalise every field (GaitManagerError naming the key)."""
+        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> YawParameters:
         """Build from a mapping; unknown keys and bad values raise GaitManagerError."""
-        return build(cls, d, 'yaw.')
+        return from_mapping(cls, d, GaitManagerError, 'yaw.')
 
 
 def yaw_phase(obs: Observation, params: YawParameters) -> float:
