@@ -5,7 +5,7 @@ For each scene it runs ``--duration`` simulated seconds (0: the whole scene; bag
 ``run_scene``, unless ``--no-bag``) three ways and prints the real-time factor (simulated / wall
 time of the control loop):
 
-* headless: ``iceskate_sim.runner.run`` (physics + laws, no transport), the lower bound;
+* headless: ``iceskate_bringup.runner.run`` (physics + laws, no transport), the lower bound;
 * graph, 3 processes: simulator, visual_lifting, gait_manager as separate processes;
 * graph, 1 process: the three nodes on one EventsExecutor;
 * with ``--rt-priority N`` also: graph, 3 processes under real-time scheduling (SCHED_FIFO at
@@ -87,9 +87,9 @@ def bench_scene(scene_arg: str, duration: float, work: pathlib.Path, repeat: int
     :param rt_priority: also run the 3-process graph under SCHED_FIFO at this priority
         (``three_process_fifo``, its runs alternating with the default ones; 0: not).
     """
-    from iceskate_sim.graph import run_graph
-    from iceskate_sim.runner import run
-    from iceskate_sim.scene import load_scene
+    from iceskate_bringup.graph import run_graph
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene
     scene = load_scene(scene_arg)
     duration = duration if duration > 0 else scene.duration
     scene = replace(scene, duration=duration, record_bag=scene.record_bag and bag)
@@ -196,11 +196,11 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
     from rclpy.experimental import EventsExecutor
     from rosgraph_msgs.msg import Clock
 
+    from iceskate_bringup.graph import ros_environment, stop
+    from iceskate_bringup.scene import load_scene
     from iceskate_interfaces.msg import EffortCommand, GaitState
-    from iceskate_sim.graph import ros_environment, stop
     from iceskate_sim.lockstep import CONTROL_TOPICS, LockstepSession
     from iceskate_sim.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
-    from iceskate_sim.scene import load_scene
     session = LockstepSession(load_scene(scene_arg))
     payloads = list(session.state_bytes(CONTROL_TOPICS).values())
     env = ros_environment()
@@ -256,12 +256,12 @@ def _echo(name: str, scene_arg: str) -> int:
     from rclpy.experimental import EventsExecutor
     from rclpy.parameter import Parameter
 
+    from iceskate_bringup.scene import load_scene
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_sim.command import ControllerCommand, JointCommand
     from iceskate_sim.lockstep import sources_by_controller
     from iceskate_sim.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
     from iceskate_sim.ros_conversions import command_fields
-    from iceskate_sim.scene import load_scene
     sources = sources_by_controller(load_scene(scene_arg))[name]
     zero = JointCommand(np.zeros(18))
     message = EffortCommand(source=name, **command_fields(ControllerCommand.of(

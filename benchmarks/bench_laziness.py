@@ -40,10 +40,11 @@ from typing import Any
 from bench_work_precision import REPO_ROOT, machine_info, simulate
 import numpy as np
 
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.command import ControllerCommand, JointCommand
-from iceskate_sim.control_stack import ControlStack
 from iceskate_sim.robot import load_robot
-from iceskate_sim.scene import Scene, load_scene
+from iceskate_sim.scene import Scene
 
 
 class EagerStack(ControlStack):
@@ -106,7 +107,7 @@ def _obs(scene: Scene, robot: Any):
 
 def compare_recording(scene: Scene, duration: float, repeat: int, log) -> dict:
     """run_scene with bag + files, files only, nothing."""
-    from iceskate_sim.runner import run
+    from iceskate_bringup.runner import run
     walls: dict[str, list[float]] = {'bag': [], 'files': [], 'none': []}
     totals: dict[str, list[float]] = {k: [] for k in walls}
     trajectories = {}
@@ -194,7 +195,7 @@ def profile(scene: Scene, duration: float, out_dir: pathlib.Path, top: int, log)
     """One pyinstrument profile of the headless runner on ``scene``."""
     from pyinstrument import Profiler
 
-    from iceskate_sim.runner import run
+    from iceskate_bringup.runner import run
     profiler = Profiler(interval=0.0005)
     profiler.start()
     run(replace(scene, duration=duration), None, progress=False)

@@ -22,12 +22,12 @@ import time
 
 from bench_work_precision import machine_info
 
-from iceskate_sim.control_stack import ControlStack
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.runner import advance_and_sample, scene_metadata
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.metrics import Trajectory
 from iceskate_sim.recording import BagRecorder
 from iceskate_sim.robot import load_robot
-from iceskate_sim.runner import advance_and_sample, scene_metadata
-from iceskate_sim.scene import load_scene
 from iceskate_sim.simulation import Simulator
 
 PARTS = ('observation', 'control laws', 'advance and sample', 'trajectory row', 'bag write',

@@ -27,7 +27,7 @@ constraint residual (measured before each end-of-period projection) [m, rad].
 Outputs into ``--out`` (default runs/bench): ``work_precision_<case>.png`` (log-log error against
 wall time, one line per method), ``work_precision.md`` (tables) and ``work_precision.json`` (raw
 figures, machine). Then the headline: real-time factor of the headless ``stand`` and ``skate``
-scenes at their shipped settings (``iceskate_sim.runner.run``, no output), set against the goal
+scenes at their shipped settings (``iceskate_bringup.runner.run``, no output), set against the goal
 (headless skate >= 20x real time with head-trajectory error <= 1e-6 m).
 
 Usage (from the repository root, environment sourced):
@@ -70,12 +70,13 @@ def import_core() -> None:
 
 import_core()
 
+from iceskate_bringup.composition import ControlStack  # noqa: E402
+from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.command import HeldCommand  # noqa: E402
-from iceskate_sim.control_stack import ControlStack  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.integrators import IntegratorConfig  # noqa: E402
 from iceskate_sim.robot import load_robot  # noqa: E402
-from iceskate_sim.scene import Scene, load_scene, parse_scene  # noqa: E402
+from iceskate_sim.scene import Scene  # noqa: E402
 from iceskate_sim.simulation import Simulator  # noqa: E402
 
 
@@ -418,7 +419,7 @@ def machine_info() -> dict[str, Any]:
 # --------------------------------------------------------------------------- headline
 def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict[str, Any]:
     """Real-time factor of headless stand and skate at their shipped settings, and the goal."""
-    from iceskate_sim.runner import run
+    from iceskate_bringup.runner import run
     durations = {'stand': 2.5, 'skate': 2.0} if quick else {'stand': None, 'skate': None}
     figures: dict[str, Any] = {}
     for name, duration in durations.items():

@@ -56,13 +56,14 @@ for _package in ('iceskate_sim', 'visual_lifting', 'gait_manager'):
     if importlib.util.find_spec(_package) is None:  # workspace not sourced: use the sources
         sys.path.insert(0, str(REPO_ROOT / 'ros_ws' / 'src' / _package))
 
+from iceskate_bringup.composition import ControlStack  # noqa: E402
+from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.command import HeldCommand, JointCommand  # noqa: E402
-from iceskate_sim.control_stack import ControlStack  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.hybrid import FrictionModel, RunEnded  # noqa: E402
 from iceskate_sim.integrators import IntegratorConfig  # noqa: E402
 from iceskate_sim.robot import N_COORDINATES, load_robot  # noqa: E402
-from iceskate_sim.scene import Scene, load_scene, parse_scene  # noqa: E402
+from iceskate_sim.scene import Scene  # noqa: E402
 from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state  # noqa: E402
 
 OUTCOMES = ('completed', 'ended', 'error', 'nan', 'hang', 'crash')
@@ -178,7 +179,7 @@ def _scene_variant(name: str, edit: Callable[[dict], None]) -> Scene:
     raw = copy.deepcopy(load_scene(name).raw)
     edit(raw)
     raw.setdefault('record', {})['bag'] = False
-    return parse_scene(raw, f'{name} (stress variant)')
+    return parse_scene(raw)
 
 
 def scene_case(edit: Callable[[dict], None], base: str = 'stand',

@@ -32,9 +32,9 @@ import cma
 import numpy as np
 import yaml
 
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import parse_scene, scene_dirs
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.runner import run
-from iceskate_sim.scene import parse_scene, scene_dirs
 
 # block.key -> (low, high)
 SPACE = {

@@ -136,8 +136,8 @@ def make_obs() -> Callable[..., object]:
 @pytest.fixture
 def needs_fifo() -> None:
     """Skip the test where this process may not use SCHED_FIFO (not root, no rtprio limit)."""
+    from iceskate_bringup.graph import realtime_scheduling
     from iceskate_sim.errors import SimulationError
-    from iceskate_sim.graph import realtime_scheduling
     try:
         with realtime_scheduling(10):
             pass

@@ -15,9 +15,10 @@ from gait_manager.balance import (
 )
 from gait_manager.errors import GaitManagerError
 from gait_manager.feedforward import WeightTransferParameters, capture_split_force
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.robot import GRAVITY, SOLE_HEEL_Y
-from iceskate_sim.runner import run
-from iceskate_sim.scene import load_scene, standing_posture
+from iceskate_sim.scene import standing_posture
 
 
 @pytest.mark.parametrize('target', [(0.1, -0.7), (-0.15, -0.72), (0.3, -0.6), (0.0, -0.5)])

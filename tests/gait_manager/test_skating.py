@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from iceskate_sim.runner import run
-from iceskate_sim.scene import load_scene
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import load_scene
 
 EDGE_MODES = {2, 4, 6, 8, 10, 12, 14, 16, 18, 20}  # support on its toe or heel edge (Table 2)
 

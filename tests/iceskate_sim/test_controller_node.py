@@ -6,22 +6,32 @@ import pytest
 pytest.importorskip('rclpy')
 pytestmark = [pytest.mark.ros]
 
-from rclpy.parameter import Parameter  # noqa: E402
 
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
-from gait_manager.law import GaitManagerParameters, gait_manager_commands  # noqa: E402
+from gait_manager.law import gait_manager_commands  # noqa: E402
+from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
 from iceskate_sim.command import ControllerCommand, JointCommand  # noqa: E402
 from iceskate_sim.dynamics import GaitDynamics  # noqa: E402
 from iceskate_sim.lockstep import LockstepSession  # noqa: E402
+from iceskate_sim.node_support import write_parameter_file  # noqa: E402
+from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.robot import load_robot  # noqa: E402
 from iceskate_sim.ros_conversions import command_from_message, stamp_to_ns  # noqa: E402
-from iceskate_sim.scene import load_scene  # noqa: E402
+from iceskate_sim.session import Session  # noqa: E402
+
+
+def skate_session() -> LockstepSession:
+    scene = load_scene('skate')
+    return LockstepSession(Session(scene), scene_sources(scene))
 
 
 @pytest.fixture
-def gait_manager(ros_context):
-    node = GaitManagerNode(context=ros_context, parameter_overrides=[
-        Parameter('scene', Parameter.Type.STRING, 'skate')])
+def gait_manager(ros_context, tmp_path):
+    params = tmp_path / 'gait_manager.yaml'  # the skate scene's block, as a launch writes it
+    write_parameter_file(params, {'gait_manager': flatten(
+        node_parameters(load_scene('skate'))['gait_manager'])})
+    node = GaitManagerNode(context=ros_context, cli_args=['--ros-args', '--params-file',
+                                                          str(params)])
     sent = []
     node._publisher.publish = lambda msg: sent.append(
         (stamp_to_ns(msg.header.stamp), command_from_message(msg)))
@@ -37,9 +47,9 @@ def _state_bytes(session: LockstepSession) -> bytes:
 
 def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_manager):
     node, sent = gait_manager
-    scene = load_scene('skate')
-    session = LockstepSession(scene)
-    params = GaitManagerParameters.from_dict(scene.gait_manager)
+    session = skate_session()
+    params = node_parameters(session.scene)['gait_manager']
+    assert node.params == params
     dynamics = GaitDynamics(load_robot())
     for _ in range(3):  # t = 0 and two later states (the held command moves the robot)
         obs = session.sim.observation()
@@ -61,7 +71,7 @@ def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_m
 
 def test_undecodable_gait_state_bytes_get_no_answer_and_the_next_state_does(gait_manager):
     node, sent = gait_manager
-    data = _state_bytes(LockstepSession(load_scene('skate')))
+    data = _state_bytes(skate_session())
     node.on_gait_state(data[:len(data) // 3])
     assert sent == []
     node.on_gait_state(data)

@@ -11,13 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.command import ControllerCommand, JointCommand
-from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import LockstepSession, ordered_sources, sources_by_controller
+from iceskate_sim.lockstep import LockstepSession
 from iceskate_sim.ros_conversions import observation_from_gait_state, seconds_to_ns
-from iceskate_sim.runner import run
-from iceskate_sim.scene import load_scene
+from iceskate_sim.session import Session
 
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 
@@ -27,29 +28,20 @@ def scene():
     return replace(load_scene(TINY), duration=0.01)
 
 
-def controllers(scene, robot):
-    """The controller side of the graph, from messages (what the two nodes compute)."""
-    from gait_manager.law import GaitManagerParameters, gait_manager_commands, head_offset
-    from visual_lifting.law import VisualLiftingParameters, visual_lifting
-    dynamics = GaitDynamics(robot)
-    vl = VisualLiftingParameters.from_dict(scene.visual_lifting)
-    gm = GaitManagerParameters.from_dict(scene.gait_manager)
-    psi0 = []
+def make_session(scene, out=None, bag=None, lockstep=True):
+    """The simulator side of the graph for ``scene`` (as the simulator node builds it)."""
+    return LockstepSession(Session(scene, out, bag), scene_sources(scene), lockstep)
 
-    def answer(obs):
-        if not psi0:
-            psi0.append(dynamics.head_pose(obs.contact(), obs.q)[0])
-        task = visual_lifting(obs, dynamics, vl, psi0[0], head_offset(obs, dynamics, gm))
-        return {'visual_lifting': ControllerCommand.of(
-                    {'visual_lifting': JointCommand(task.tau)}, obs.q, obs.v),
-                'gait_manager': ControllerCommand.of(gait_manager_commands(obs, dynamics, gm),
-                                                     obs.q, obs.v)}
-    return answer
+
+def controllers(scene, session):
+    """The controller side of the graph, from messages (what the two nodes compute)."""
+    stack = ControlStack(scene, session.robot, session.session.observation())
+    return stack.commands
 
 
 def zero(scene, controller, value=0.0):
     """A command of ``controller`` applying ``value`` everywhere, with its breakdown."""
-    sources = sources_by_controller(scene)[controller]
+    sources = scene_sources(scene)[controller]
     return ControllerCommand(JointCommand(np.full(18, value)),
                              {s: np.zeros(18) for s in sources})
 
@@ -70,8 +62,8 @@ def drive(session, answer):
 
 def test_lockstep_session_reproduces_the_headless_run(scene, tmp_path):
     run(scene, tmp_path / 'headless', progress=False)
-    session = LockstepSession(scene, tmp_path / 'ros', tmp_path / 'ros' / 'bag')
-    metrics = drive(session, controllers(scene, session.robot))
+    session = make_session(scene, tmp_path / 'ros', tmp_path / 'ros' / 'bag')
+    metrics = drive(session, controllers(scene, session))
     a = np.load(tmp_path / 'ros' / 'trajectory.npz')
     b = np.load(tmp_path / 'headless' / 'trajectory.npz')
     assert sorted(a.files) == sorted(b.files)
@@ -79,13 +71,14 @@ def test_lockstep_session_reproduces_the_headless_run(scene, tmp_path):
         scale = max(1.0, float(np.max(np.abs(b[key])))) if b[key].size else 1.0
         assert np.max(np.abs(a[key] - b[key]), initial=0.0) <= 1e-12 * scale, key
     headless = json.loads((tmp_path / 'headless' / 'metrics.json').read_text())
-    assert metrics['sources'] == headless['sources'] == list(ordered_sources(scene))
+    assert metrics['sources'] == headless['sources'] == ['visual_lifting', 'posture',
+                                                          'weight_transfer']
     assert metrics['sim_time_s'] == headless['sim_time_s']
     assert (tmp_path / 'ros' / 'bag' / 'metadata.yaml').is_file()
 
 
 def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
-    session = LockstepSession(scene)
+    session = make_session(scene)
     assert session.controllers == ('visual_lifting', 'gait_manager')
     gm = zero(scene, 'gait_manager')
     with pytest.raises(SimulationError, match="unknown source 'posture'"):
@@ -108,8 +101,8 @@ def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
 
 
 def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
-    session = LockstepSession(scene)
-    assert sources_by_controller(scene)['gait_manager'] == ('posture', 'weight_transfer')
+    session = make_session(scene)
+    assert scene_sources(scene)['gait_manager'] == ('posture', 'weight_transfer')
     swapped = ControllerCommand(JointCommand(np.zeros(18)),
                                 {'weight_transfer': np.zeros(18), 'posture': np.zeros(18)})
     with pytest.raises(SimulationError, match=r"breaks down into sources \['weight_transfer', "
@@ -125,25 +118,25 @@ def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
     state = session.sim.state
     session.step()
     session.flush()
-    recorded = session.trajectory.arrays()['tau_visual_lifting'][0]
+    recorded = session.session.trajectory.arrays()['tau_visual_lifting'][0]
     np.testing.assert_array_equal(recorded, pd.torque(state.q, state.v))
 
 
 def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path):
-    recording = LockstepSession(scene, bag=tmp_path / 'bag')
+    recording = make_session(scene, bag=tmp_path / 'bag')
     with pytest.raises(SimulationError, match='refused while'):
         recording.reset()
     recording.finish()
-    session = LockstepSession(scene)
+    session = make_session(scene)
     for controller in session.controllers:
         session.offer(controller, 0, zero(scene, controller))
     session.step()
     session.reset()
-    assert session.t_ns == 0 and session.periods == 0 and len(session.trajectory) == 0
+    assert session.t_ns == 0 and session.periods == 0 and len(session.session.trajectory) == 0
 
 
 def test_free_running_holds_the_latest_command(scene):
-    session = LockstepSession(scene, lockstep=False)
+    session = make_session(scene, lockstep=False)
     assert session.missing() == list(session.controllers)
     session.step()  # no command yet: nothing applied
     session.offer('gait_manager', 0, zero(scene, 'gait_manager'))  # late but not older: taken

@@ -46,7 +46,7 @@ def empty_command(factory, source):
     return factory.typestore.types['iceskate_interfaces/msg/EffortCommand'](
         header=factory.header(0.002), source=source, joint_names=[], effort=empty,
         stiffness=empty, damping=empty, position_reference=empty, source_names=[],
-        source_efforts=empty)
+        source_efforts=empty, head_target=empty)
 
 
 def effort_message(factory, source='posture', names=None, effort=None, **impedance):

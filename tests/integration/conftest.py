@@ -20,7 +20,7 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
-from iceskate_sim.graph import graph_nodes, ros_environment, start, stop  # noqa: E402
+from iceskate_bringup.graph import graph_nodes, ros_environment, start, stop  # noqa: E402
 from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
 
 DATA = Path(__file__).resolve().parent / 'data'
@@ -179,10 +179,10 @@ def graph_run(tmp_path_factory: pytest.TempPathFactory) -> GraphRun:
     from std_msgs.msg import String
     from std_srvs.srv import Trigger
 
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_interfaces.srv import StepSimulation
-    from iceskate_sim.runner import run
-    from iceskate_sim.scene import load_scene
     root = tmp_path_factory.mktemp('graph')
     run(load_scene(TINY), root / 'headless', progress=False)
     domain = module_domain_id()

@@ -18,9 +18,9 @@ from rosbags.highlevel import AnyReader  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from iceskate_bringup.graph import command_of, graph_nodes  # noqa: E402
 from iceskate_interfaces.msg import EffortCommand  # noqa: E402
 from iceskate_interfaces.srv import StepSimulation  # noqa: E402
-from iceskate_sim.graph import command_of, graph_nodes  # noqa: E402
 from iceskate_sim.node_support import STATE_QOS  # noqa: E402
 from iceskate_sim.robot import COORDINATE_NAMES  # noqa: E402
 from iceskate_sim.ros_conversions import set_stamp, stamp_to_ns  # noqa: E402

@@ -21,16 +21,16 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 from rosbags.highlevel import AnyReader  # noqa: E402
 
-from iceskate_sim import graph  # noqa: E402
-from iceskate_sim.graph import (  # noqa: E402
+from iceskate_bringup.graph import (  # noqa: E402
     graph_nodes,
     realtime_scheduling,
     ros_environment,
     run_graph,
 )
+from iceskate_bringup.scene import load_scene  # noqa: E402
+from iceskate_sim import graph  # noqa: E402
 from iceskate_sim.lockstep import sources_by_controller  # noqa: E402
 from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
-from iceskate_sim.scene import load_scene  # noqa: E402
 
 TESTS = Path(__file__).resolve().parent
 TINY = TESTS / 'data' / 'tiny_stand.yaml'
@@ -170,7 +170,7 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
     import sys
     out = tmp_path / 'cli'
     result = subprocess.run(
-        [sys.executable, '-m', 'iceskate_sim.runner', str(TINY), '--ros', '--out', str(out)],
+        [sys.executable, '-m', 'iceskate_bringup.runner', str(TINY), '--ros', '--out', str(out)],
         env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
         timeout=120)
     assert result.returncode == 0, result.stderr
@@ -186,7 +186,7 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
     out = tmp_path / 'cli'
     (out / 'bag').mkdir(parents=True)  # the bag may not be overwritten: the simulator refuses
     result = subprocess.run(
-        [sys.executable, '-m', 'iceskate_sim.runner', str(TINY), '--ros', '--out', str(out)],
+        [sys.executable, '-m', 'iceskate_bringup.runner', str(TINY), '--ros', '--out', str(out)],
         env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
         timeout=120)
     assert result.returncode == 1

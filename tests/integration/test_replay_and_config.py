@@ -14,9 +14,9 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
+from iceskate_bringup.graph import NodeSpec, command_of, config_file  # noqa: E402
 from iceskate_interfaces.msg import GaitState, JointDynamics  # noqa: E402
 from iceskate_sim.bag_types import make_typestore  # noqa: E402
-from iceskate_sim.graph import NodeSpec, command_of, config_file  # noqa: E402
 
 TINY = Path(__file__).resolve().parent / 'data' / 'tiny_stand.yaml'
 TYPES = {'/clock': Clock, '/joint_states': JointState, '/head_pose': PoseStamped,
@@ -40,7 +40,7 @@ def test_replay_republishes_the_bags_messages_with_clock(graph_run, listener, ro
     for topic, kind in TYPES.items():
         listener.subscribe(topic, kind, raw=True)
     listener.subscribe('/robot_description', String, depth=1, raw=True, latched=True)
-    spec = NodeSpec('iceskate_sim', 'replay', 'iceskate_sim.replay', '', {})
+    spec = NodeSpec('iceskate_sim', 'replay', 'iceskate_analysis.replay', '', {})
     replay = subprocess.Popen(command_of(spec) + [str(bag), '--fast',
                                                   '--wait-for-subscribers', '30'],
                               env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)

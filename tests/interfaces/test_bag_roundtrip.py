@@ -64,7 +64,8 @@ def make_messages(typestore, step: int):
         header=header, source='visual_lifting', joint_names=COORDINATES,
         effort=np.linspace(-3.0, 3.0, n) + step, stiffness=np.full(n, 800.0),
         damping=np.full(n, 16.0), position_reference=np.linspace(-0.1, 0.1, n),
-        source_names=['posture', 'yaw'], source_efforts=np.linspace(-1.0, 1.0, 2 * n))
+        source_names=['posture', 'yaw'], source_efforts=np.linspace(-1.0, 1.0, 2 * n),
+        head_target=np.array([0.1 * step, 1.6, -0.01]))
     gait_state = t[GAIT_STATE](
         header=header, mode=1 + step % 20, support_side=step % 2, pivot=step % 3,
         step_index=step, y0_active=step % 2 == 0, q1_active=step % 3 != 0,

@@ -150,8 +150,8 @@ def test_desired_head_pose_options():
 def test_visual_lifting_bundles_the_pieces(make_obs, dynamics):
     obs = make_obs(t=1.0, q=_posture(-0.1, 0.2), mode=2)
     psi0 = np.array([0.0, 1.69, 0.0])
-    params = VisualLiftingParameters()
-    task = visual_lifting(obs, dynamics, params, psi0, (0.05, -0.01))
+    params = VisualLiftingParameters(shift_y1=0.05, shift_z1=0.01, shift_time1=0.0)
+    task = visual_lifting(obs, dynamics, params, psi0)  # obs: t_e = 0, so the shift is whole
     psi, _ = dynamics.head_pose(obs.contact(), obs.q)
     psi_d = desired_head_pose(params, 1.0, psi, psi0, (0.05, -0.01))
     np.testing.assert_array_equal(task.psi, psi)

@@ -23,7 +23,7 @@ data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
 ]
-for folder in ('urdf', 'config', 'scenes', 'launch'):
+for folder in ('urdf', 'config'):
     data_files += share_tree(folder)
 
 setup(
@@ -43,10 +43,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'run_scene = iceskate_sim.runner:main',
             'simulator = iceskate_sim.simulator_node:main',
-            'replay = iceskate_sim.replay:main',
-            'coupling_analysis = iceskate_sim.coupling_cli:main',
         ],
     },
 )

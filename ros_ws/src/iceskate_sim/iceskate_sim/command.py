@@ -109,17 +109,20 @@ class ControllerCommand:
     :param command: the sum of its sources' commands (what the simulator applies).
     :param source_efforts: the generalized force [N m] each source applies at the state the
         controller answered, by source name, in the controller's order (what is recorded).
+    :param head_target: the head-top target (y [m], z [m], pitch [rad]) the controller steers
+        to at that state (visual lifting), recorded beside the head pose; None: none.
     """
 
     command: JointCommand
     source_efforts: dict[str, np.ndarray]
+    head_target: np.ndarray | None = None
 
     @classmethod
     def of(cls, commands: dict[str, JointCommand], q: np.ndarray, v: np.ndarray,
-           ) -> ControllerCommand:
+           head_target: np.ndarray | None = None) -> ControllerCommand:
         """The controller command of its sources' ``commands`` at the state (q, v) answered."""
         return cls(JointCommand.total(commands.values()),
-                   {source: c.torque(q, v) for source, c in commands.items()})
+                   {source: c.torque(q, v) for source, c in commands.items()}, head_target)
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,9 @@
 state messages to publish (``state_bytes``), takes the controllers' commands (``offer``: one
 per controller node, its sources summed; checked sender, stamp, content and breakdown), and once
 every controller the scene runs has answered (``missing()`` is empty) integrates one period
-(``step``) exactly as the headless runner does: the same zero-order hold of the summed
-commands, the same push, the same ``Sample`` appended to the same ``Trajectory`` and written to
-the same bag. So a lockstep ROS run gives the headless trajectory and ``metrics.json``.
+with the ``Session`` the headless runner uses: the same zero-order hold of the summed
+commands, the same push, the same samples in the same trajectory and bag. So a lockstep ROS run
+gives the headless trajectory and ``metrics.json``.
 
 Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
 *starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
@@ -27,7 +27,7 @@ the run; the node gives it a publish function and a report function and wires th
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import replace
 import json
 import pathlib
 import time
@@ -36,28 +36,16 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.command import ControllerCommand
-from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState
-from iceskate_sim.metrics import Trajectory, compute_metrics
-from iceskate_sim.recording import (
-    BagRecord,
-    BagRecorder,
-    MessageFactory,
-    RecordEncoder,
-    Sample,
-    bag_record,
-)
-from iceskate_sim.robot import load_robot
+from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record
 from iceskate_sim.ros_conversions import (
     command_from_message,
     ns_to_seconds,
     seconds_to_ns,
     stamp_to_ns,
 )
-from iceskate_sim.runner import advance_and_sample, last_event_before, scene_metadata
-from iceskate_sim.scene import Scene
-from iceskate_sim.simulation import Simulator, observation_of
+from iceskate_sim.session import Session, last_event_before
 
 #: Live state topics the controllers read, published first, as soon as the state is known: the
 #: state, then /clock (their sim time) at once, while their transport threads are still awake
@@ -68,79 +56,34 @@ CONTROL_TOPICS = ('/gait_state', '/clock')
 STATE_TOPICS = CONTROL_TOPICS + ('/joint_states', '/head_pose')
 
 
-def ordered_sources(scene: Scene) -> tuple[str, ...]:
-    """The scene's command sources in the order the headless control stack produces them."""
-    from gait_manager.law import SOURCES, GaitManagerParameters
-    names = ['visual_lifting'] if scene.visual_lifting is not None else []
-    if scene.gait_manager is not None:
-        enabled = GaitManagerParameters.from_dict(scene.gait_manager or {}).enabled
-        names += [s for s in SOURCES if s in enabled]
-    return tuple(names)
-
-
-def node_of_source(source: str) -> str:
-    """Name of the controller node whose command holds a source."""
-    return 'visual_lifting' if source == 'visual_lifting' else 'gait_manager'
-
-
-def sources_by_controller(scene: Scene) -> dict[str, tuple[str, ...]]:
-    """The scene's controller nodes, in order, each with its sources in order."""
-    out: dict[str, tuple[str, ...]] = {}
-    for source in ordered_sources(scene):
-        node = node_of_source(source)
-        out[node] = out.get(node, ()) + (source,)
-    return out
-
-
 class LockstepSession:
-    """One run of a scene driven by commands that arrive from outside (the ROS nodes).
+    """A ``Session`` driven by commands that arrive from outside (the controller nodes).
 
-    :param scene: the validated scene (its ``duration`` is the run length).
-    :param out: directory for metrics.json, events.json and trajectory.npz (None or '': none).
-    :param bag: path of the MCAP bag to record (None or '': no bag).
-    :param lockstep: wait for a command stamped t_k from every source (True), or hold each
-        source's latest command (False).
+    :param session: the run.
+    :param controllers: the controller nodes the scene runs, in summing order, each with the
+        names of its command sources in order (its breakdown).
+    :param lockstep: wait for a command stamped t_k from every controller (True), or hold each
+        controller's latest command (False).
     """
 
-    def __init__(self, scene: Scene, out: str | pathlib.Path | None = None,
-                 bag: str | pathlib.Path | None = None, lockstep: bool = True) -> None:
-        from gait_manager.law import GaitManagerParameters
-        from visual_lifting.law import VisualLiftingParameters
-        self.scene = scene
-        self.out = out = pathlib.Path(out) if out else None
+    def __init__(self, session: Session, controllers: dict[str, tuple[str, ...]],
+                 lockstep: bool = True) -> None:
+        self.session = session
+        self.scene = session.scene
+        self.sim = session.sim
+        self.robot = session.robot
         self.lockstep = lockstep
-        self.robot = load_robot()
-        self.sim = Simulator(self.robot, scene.simulator, scene.initial)
-        self.sources = ordered_sources(scene)
-        self._breakdown = sources_by_controller(scene)
-        self.controllers = tuple(self._breakdown)
-        self.n_periods = int(round(scene.duration / scene.simulator.control_period))
-        self._vl = (VisualLiftingParameters.from_dict(scene.visual_lifting or {})
-                    if scene.visual_lifting is not None else None)
-        self._gm = (GaitManagerParameters.from_dict(scene.gait_manager or {})
-                    if scene.gait_manager is not None else None)
-        self.recorder = None
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-        if bag:
-            self.recorder = BagRecorder(pathlib.Path(bag), scene_metadata(scene),
-                                        self.robot.urdf_path.read_text(encoding='utf-8'),
-                                        background=True)
+        self._breakdown = dict(controllers)
+        self.controllers = tuple(controllers)
+        self.sources = tuple(s for sources in controllers.values() for s in sources)
+        self.recorder = session.recorder
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
         self.encoder = RecordEncoder(self.factory)
-        self.metrics: dict[str, Any] | None = None
         self._restart()
 
     def _restart(self) -> None:
-        obs = self.sim.observation()
-        self._psi_initial = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
-        self.trajectory = Trajectory()
-        self.periods = 0
-        self.error: SimulationError | None = None
         self._commands: dict[str, ControllerCommand] = {}
         self._stamps: dict[str, int] = {}
-        self._unrecorded: list[tuple[Sample, HybridState]] = []  # (sample, state answered)
-        self._wall_start: float | None = None
         self._live: tuple[HybridState, BagRecord] | None = None  # (state, its live record)
 
     # ----------------------------------------------------------------------------- state
@@ -157,14 +100,26 @@ class LockstepSession:
     @property
     def done(self) -> bool:
         """The run is over: duration reached, physically ended, or failed."""
-        return (self.periods >= self.n_periods or self.sim.ended is not None
-                or self.error is not None)
+        return self.session.done
+
+    @property
+    def error(self) -> SimulationError | None:
+        """Why the run failed (None: it did not)."""
+        return self.session.error
+
+    @property
+    def periods(self) -> int:
+        """Control periods stepped."""
+        return self.session.periods
+
+    @property
+    def metrics(self) -> dict[str, Any] | None:
+        """The metrics once the run is finished."""
+        return self.session.metrics
 
     def state_bytes(self, topics: tuple[str, ...] = STATE_TOPICS) -> dict[str, bytes]:
         """CDR bytes of the live ``topics``' messages at t_k (see the module docstring), the
         bag's message types, publishable raw (encoded as the bag's records are)."""
-        if self._wall_start is None:
-            self._wall_start = time.perf_counter()
         s = self.sim.state
         if self._live is None or self._live[0] is not s:  # built once per instant
             placement = self.sim.head_placement()
@@ -223,78 +178,31 @@ class LockstepSession:
 
     # -------------------------------------------------------------------------- stepping
     def step(self) -> Sample | None:
-        """Integrate one control period under the commands in; None if the run is done.
-
-        A SimulationError of the physics ends the run (``error``) instead of propagating.
-        """
+        """Integrate one period under the commands in (``Session.step``); None if done."""
         if self.done:
             return None
         if self.lockstep and self.missing():
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
                                   f'{self.missing()}')
-        sim = self.sim
-        state = sim.state  # the state the commands answered (its Observation: in flush)
         commands = {c: self._commands[c] for c in self.controllers if c in self._commands}
-        try:
-            sample = advance_and_sample(sim, self.scene, commands)
-        except SimulationError as exc:
-            self.error = exc
-            return None
-        self._unrecorded.append((sample, state))
-        self.periods += 1
+        sample = self.session.step(commands)
         if self.lockstep:
             self._commands.clear()
         return sample
 
-    def _psi_d(self, sample: Sample, obs: Any) -> np.ndarray:
-        """The visual-lifting target at the sample's state (observed as ``obs``), as the
-        headless control stack records it."""
-        if self._vl is None:
-            return self._psi_initial.copy()
-        from gait_manager.law import head_offset
-        from visual_lifting.law import desired_head_pose
-        psi = head_psi(sample.head_position, sample.head_rotation)
-        offset = (head_offset(obs, self.sim.dynamics, self._gm) if self._gm is not None
-                  else np.zeros(2))
-        return desired_head_pose(self._vl, obs.t, psi, self._psi_initial, offset)
-
     def flush(self) -> None:
-        """Append the samples of the periods stepped to the trajectory and hand them to the bag
-        (off the lockstep's critical path: call it while the controllers compute)."""
-        for sample, state in self._unrecorded:
-            self.trajectory.append(sample, self._psi_d(sample, observation_of(state)))
-            if self.recorder is not None:
-                self.recorder.write(sample)
-        self._unrecorded.clear()
+        """Record the periods stepped (off the lockstep's critical path: call it while the
+        controllers compute)."""
+        self.session.flush()
 
     def reset(self) -> None:
         """Back to the scene's initial state (refused while recording a bag)."""
-        if self.recorder is not None:
-            raise SimulationError('reset is refused while the run is recorded to a bag')
-        self.sim.reset()
-        self.metrics = None
+        self.session.reset()
         self._restart()
 
     def finish(self, error: SimulationError | None = None) -> dict[str, Any]:
         """End the run: close the bag, compute the metrics, write the output files (once)."""
-        if self.metrics is not None:
-            return self.metrics
-        if error is not None and self.error is None:
-            self.error = error
-        try:
-            self.flush()
-        finally:
-            if self.recorder is not None:
-                self.recorder.close()
-        start = self._wall_start if self._wall_start is not None else time.perf_counter()
-        self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
-                                       time.perf_counter() - start, self.error)
-        if self.out is not None:
-            (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
-            (self.out / 'events.json').write_text(json.dumps(
-                [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
-            self.trajectory.save(self.out / 'trajectory.npz')
-        return self.metrics
+        return self.session.finish(error)
 
 
 class LoopMonitor:

@@ -7,7 +7,10 @@
 * ``declare``: one parameter with a default and a ``ParameterDescriptor`` (description, range);
   a value out of range or of the wrong type raises ``ConfigError`` naming the parameter, and so
   does a parameter the node does not have (``check_unknown``: a typo in a params file);
-  ``declare_all``: a table of them at once, then ``check_unknown``.
+  ``declare_all``: a table of them at once, then ``check_unknown``;
+  ``declare_parameters``: every field of a parameter class (``iceskate_sim.parameters``) as a
+  typed parameter, changes at run time checked by the class's own rules;
+  ``write_parameter_file``: a ROS 2 parameter file of such values.
 * ``run_node``: rclpy.init, construct, spin an ``EventsExecutor`` with a ``spin_once`` loop
   (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop on SIGTERM/SIGINT
   (``ExternalShutdownException``), destroy and shut down; a ``ConfigError`` or
@@ -16,19 +19,39 @@
 
 from __future__ import annotations
 
+import array
 from collections.abc import Callable, Iterable
+import pathlib
 import sys
 from types import SimpleNamespace
-from typing import Any
+import typing
+from typing import Any, TypeVar
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+import yaml
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.parameters import (
+    Rules,
+    flatten,
+    from_mapping,
+    leaf_fields,
+    optional_inner,
+    unflatten,
+)
+
+T = TypeVar('T')
 
 STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
@@ -69,16 +92,126 @@ def declare(node: Node, name: str, default: Any, description: str,
     return value
 
 
-def declare_all(node: Node, table: Iterable[tuple[str, Any, str, tuple[float, float] | None]]
-                ) -> SimpleNamespace:
-    """Declare (name, default, description, float bounds or None) rows; refuse unknown ones.
+def declare_all(node: Node, table: Iterable[tuple[str, Any, str, tuple[float, float] | None]],
+                extra: Callable[[], None] | None = None) -> SimpleNamespace:
+    """Declare (name, default, description, float bounds or None) rows, then ``extra()`` (more
+    declarations); refuse unknown ones.
 
-    :returns: the values as attributes named like the parameters.
+    :returns: the values of the table as attributes named like the parameters.
     """
     values = {name: declare(node, name, default, text, *(bounds or ()))
               for name, default, text, bounds in table}
+    if extra is not None:
+        extra()
     check_unknown(node)
     return SimpleNamespace(**values)
+
+
+def _ros_type(tp: Any) -> Parameter.Type:
+    """The ROS parameter type of a parameter-class field type."""
+    tp = optional_inner(tp)
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (tuple, frozenset):
+        return _ARRAY_TYPES[args[0]]
+    return _SCALAR_TYPES[tp]
+
+
+_SCALAR_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
+                 float: Parameter.Type.DOUBLE, str: Parameter.Type.STRING}
+_ARRAY_TYPES = {bool: Parameter.Type.BOOL_ARRAY, int: Parameter.Type.INTEGER_ARRAY,
+                float: Parameter.Type.DOUBLE_ARRAY, str: Parameter.Type.STRING_ARRAY}
+
+
+def _descriptor(name: str, ros_type: Parameter.Type, rules: Rules) -> ParameterDescriptor:
+    """The descriptor of a field: description with unit, range and choices, the type."""
+    text = rules.description + (f' [{rules.unit}]' if rules.unit else '')
+    if rules.choices:
+        text += f'; one of {list(rules.choices)}'
+    descriptor = ParameterDescriptor(name=name, type=ros_type.value, description=text)
+    if rules.low is not None or rules.high is not None:
+        descriptor.additional_constraints = f'range {rules.bounds_text()}'
+        low = rules.low if rules.low is not None else -sys.float_info.max
+        high = rules.high if rules.high is not None else sys.float_info.max
+        if ros_type == Parameter.Type.DOUBLE:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(low), to_value=float(high), step=0.0)]
+        elif ros_type == Parameter.Type.INTEGER:
+            descriptor.integer_range = [IntegerRange(
+                from_value=int(max(low, -2**63)), to_value=int(min(high, 2**63 - 1)), step=0)]
+    return descriptor
+
+
+def declare_parameters(node: Node, cls: type[T], error: type[Exception],
+                       on_change: Callable[[T], None] | None = None) -> T:
+    """Declare every field of parameter class ``cls`` as a typed ROS parameter (dotted names
+    for nested blocks; description, unit and range from its ``setting``; an unset optional
+    number is NaN) and return the parameter object built from the node's values.
+
+    ``ros2 param set`` then goes through the class's own rules: a bad value is refused with
+    their reason, a good one gives ``on_change`` the new object.
+
+    :raises ConfigError: for a value the rules refuse (naming the parameter).
+    """
+    defaults = flatten(cls())
+    for name, (tp, rules, _) in leaf_fields(cls).items():
+        ros_type = _ros_type(tp)
+        descriptor = _descriptor(name, ros_type, rules)
+        value = defaults[name]
+        try:
+            node.declare_parameter(name, value if value != [] else ros_type, descriptor)
+        except ParameterException as exc:
+            raise ConfigError(f'parameter {name!r}: {exc}') from None
+
+    def current(changes: dict[str, Any]) -> T:
+        values = {name: _python_value(node.get_parameter(name).value)
+                  for name in defaults} | changes
+        return from_mapping(cls, unflatten(cls, values), error)
+
+    try:
+        params = current({})
+    except error as exc:
+        raise ConfigError(f'parameters of {node.get_name()!r}: {exc}') from None
+
+    def validate(changes: list[Parameter]) -> SetParametersResult:
+        ours = {p.name: _python_value(p.value) for p in changes if p.name in defaults}
+        if not ours:
+            return SetParametersResult(successful=True)
+        try:
+            new = current(ours)
+        except error as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if on_change is not None:
+            on_change(new)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(validate)
+    return params
+
+
+def _python_value(value: Any) -> Any:
+    """A parameter value as the parameter classes take it (arrays as lists, unset: [])."""
+    if value is None:
+        return []
+    if isinstance(value, (array.array, tuple)):
+        return list(value)
+    return value
+
+
+def write_parameter_file(path: pathlib.Path, nodes: dict[str, dict[str, Any]]) -> None:
+    """Write a ROS 2 parameter file: ``{node: {ros__parameters: {name: value}}}`` (dotted
+    names nested as ROS expects, NaN as .nan)."""
+    def nested(flat: dict[str, Any]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for name, value in flat.items():
+            *heads, leaf = name.split('.')
+            where = out
+            for head in heads:
+                where = where.setdefault(head, {})
+            where[leaf] = value
+        return out
+
+    document = {node: {'ros__parameters': nested(values)} for node, values in nodes.items()}
+    path.write_text(yaml.safe_dump(document, sort_keys=False, default_flow_style=None))
 
 
 def check_unknown(node: Node) -> None:

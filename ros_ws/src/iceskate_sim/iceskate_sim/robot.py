@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import functools
+import os
 import pathlib
 
 import numpy as np
@@ -82,7 +83,7 @@ def default_urdf_path() -> pathlib.Path:
     """Return the URDF shipped with the package (installed share dir or source tree)."""
     here = pathlib.Path(__file__).resolve().parent
     candidates = [here.parent / 'urdf' / 'iceskate_humanoid.urdf']
-    for prefix in _ament_prefixes():
+    for prefix in ament_prefixes():
         candidates.append(prefix / 'share' / 'iceskate_sim' / 'urdf' / 'iceskate_humanoid.urdf')
     for path in candidates:
         if path.is_file():
@@ -90,9 +91,10 @@ def default_urdf_path() -> pathlib.Path:
     raise SimulationError(f'iceskate_humanoid.urdf not found (looked in {candidates})')
 
 
-def _ament_prefixes() -> list[pathlib.Path]:
-    import os
-    return [pathlib.Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(':') if p]
+def ament_prefixes() -> list[pathlib.Path]:
+    """The install prefixes of $AMENT_PREFIX_PATH, in order (where ROS looks for packages)."""
+    return [pathlib.Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
+            if p]
 
 
 @dataclass(frozen=True)

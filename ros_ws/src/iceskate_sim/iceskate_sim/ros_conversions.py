@@ -181,18 +181,26 @@ def command_from_message(msg: Any) -> ControllerCommand:
     if not all_finite(parts):
         raise SimulationError(f'{where}: source_efforts is not finite')
     rows = parts.reshape(len(sources), len(names))
+    target = np.array(msg.head_target, dtype=float)
+    if target.shape not in ((0,), (3,)) or not all_finite(target):
+        raise SimulationError(f'{where}: head_target must be empty or 3 finite values '
+                              f'(y, z, pitch), got {target.tolist()}')
     return ControllerCommand(command, {name: coordinates(row.copy())
-                                       for name, row in zip(sources, rows, strict=True)})
+                                       for name, row in zip(sources, rows, strict=True)},
+                             target if target.size else None)
 
 
 def command_fields(answer: ControllerCommand) -> dict[str, Any]:
-    """EffortCommand fields (joint_names, effort, impedance arrays, breakdown) of a command."""
+    """EffortCommand fields (joint_names, effort, impedance arrays, breakdown, head target) of a
+    command."""
     command = answer.command
     fields = {'joint_names': list(COORDINATE_NAMES), 'effort': _doubles(command.effort),
               'stiffness': array('d'), 'damping': array('d'), 'position_reference': array('d'),
               'source_names': list(answer.source_efforts),
               'source_efforts': _doubles(np.concatenate(list(answer.source_efforts.values()))
-                                         if answer.source_efforts else np.zeros(0))}
+                                         if answer.source_efforts else np.zeros(0)),
+              'head_target': _doubles(answer.head_target if answer.head_target is not None
+                                      else np.zeros(0))}
     if command.has_impedance:
         fields.update(stiffness=_doubles(command.stiffness), damping=_doubles(command.damping),
                       position_reference=_doubles(command.reference))

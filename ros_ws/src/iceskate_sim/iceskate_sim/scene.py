@@ -1,17 +1,21 @@
-"""Scenes: one YAML file per experiment, validated once before the run.
+"""Scenes: one YAML file per experiment, validated once before the run (the simulator's part).
 
-A scene declares the floor, the initial posture and mode, which inputs run (visual lifting and
-the gait-manager sources), disturbances, duration, control period, integrator and tolerance,
-and what is recorded. An unknown key, a wrong type or an out-of-range value is refused with a
-``SimulationError`` naming the key (e.g. ``integrator.step``). Shipped scenes live in
-``share/iceskate_sim/scenes/<name>.yaml``.
+A scene declares the floor, the initial posture and mode, which controllers run (``inputs``:
+one parameter block per controller node), disturbances, duration, control period, integrator
+and tolerance, and what is recorded. This module validates everything the simulator uses; the
+controllers' blocks are kept as given and validated by the layer that composes the controllers
+(``parse_scene``'s ``validate_inputs``; ``iceskate_bringup.scene`` does it for the shipped
+controllers). An unknown key, a wrong type or an out-of-range value is refused with a
+``SimulationError`` naming the key (e.g. ``integrator.step``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 import math
 import pathlib
+import re
 from typing import Any
 
 import numpy as np
@@ -21,7 +25,7 @@ from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import FrictionModel, HybridState
 from iceskate_sim.integrators import METHODS, IntegratorConfig
-from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES, _ament_prefixes
+from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.simulation import SimulatorConfig, initial_state
 
 POSTURES = ('bent_knees', 'staggered', 'upright')
@@ -55,22 +59,12 @@ class Scene:
     duration: float  # s
     simulator: SimulatorConfig
     initial: HybridState
-    visual_lifting: dict[str, Any] | None  # parameters for VisualLiftingParameters, or off
-    gait_manager: dict[str, Any] | None  # parameters for GaitManagerParameters, or off
+    #: parameter block of each controller node the scene runs, by node name, in file order
+    inputs: dict[str, dict[str, Any]]
     pushes: tuple[Push, ...] = ()
     record_bag: bool = True
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
-    @property
-    def sources(self) -> tuple[str, ...]:
-        """Names of the input sources this scene runs (effort-command sources)."""
-        names: list[str] = []
-        if self.visual_lifting is not None:
-            names.append('visual_lifting')
-        if self.gait_manager is not None:
-            from gait_manager.law import GaitManagerParameters
-            names += sorted(GaitManagerParameters.from_dict(self.gait_manager).enabled)
-        return tuple(names)
 
 
 # ---------------------------------------------------------------- validation helpers
@@ -154,8 +148,14 @@ _TOP = {'scene', 'description', 'duration', 'control_period', 'floor', 'initial'
         'dynamics', 'inputs', 'disturbances', 'record', 'fall_height'}
 
 
-def parse_scene(raw: Any, source: str = '<scene>') -> Scene:
-    """Validate a scene mapping and build a Scene; raise SimulationError naming the key."""
+def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None] | None = None
+                ) -> Scene:
+    """Validate a scene mapping and build a Scene; raise SimulationError naming the key.
+
+    :param validate_inputs: ``validate_inputs(node, block)`` checks the parameter block of one
+        controller node (raising SimulationError naming the key); None: blocks are taken as
+        given (the simulator needs only their node names).
+    """
     raw = _check_keys(raw, '', _TOP, {'scene', 'duration', 'control_period', 'inputs'})
     name = raw['scene']
     if not isinstance(name, str) or not name:
@@ -222,10 +222,16 @@ def parse_scene(raw: Any, source: str = '<scene>') -> Scene:
         raise _fail('initial.v', f'{COORDINATE_NAMES[locked[0]]} is not a coordinate of mode '
                     f'{mode}; its velocity must be 0')
 
-    inputs = _check_keys(raw['inputs'], 'inputs', {'visual_lifting', 'gait_manager'})
-    vl = inputs.get('visual_lifting')
-    gm = inputs.get('gait_manager')
-    _validate_controllers(vl, gm)
+    if not isinstance(raw['inputs'], dict):
+        raise _fail('inputs', f'must be a mapping, got {type(raw["inputs"]).__name__}')
+    inputs: dict[str, dict[str, Any]] = {}
+    for node, block in raw['inputs'].items():
+        block = {} if block is None else block
+        if not isinstance(block, dict):
+            raise _fail(f'inputs.{node}', f'must be a mapping, got {type(block).__name__}')
+        if validate_inputs is not None:
+            validate_inputs(str(node), block)
+        inputs[str(node)] = block
 
     pushes = []
     for k, item in enumerate(raw.get('disturbances', []) or []):
@@ -243,60 +249,37 @@ def parse_scene(raw: Any, source: str = '<scene>') -> Scene:
                            _number(item, 'duration', f'{path}.duration', 0.0, positive=True),
                            frame, tuple(float(f) for f in force)))
     record = _check_keys(raw.get('record', {}), 'record', {'bag'})
-    return Scene(name, description, duration, simulator, initial, vl, gm, tuple(pushes),
+    return Scene(name, description, duration, simulator, initial, inputs, tuple(pushes),
                  _boolean(record, 'bag', 'record.bag', True), raw)
 
-
-def _validate_controllers(vl: Any, gm: Any) -> None:
-    from gait_manager.errors import GaitManagerError
-    from gait_manager.law import GaitManagerParameters
-    from visual_lifting.errors import VisualLiftingError
-    from visual_lifting.law import VisualLiftingParameters
-    if vl is not None:
-        try:
-            VisualLiftingParameters.from_dict(vl or {})
-        except VisualLiftingError as exc:
-            raise _fail('inputs.visual_lifting', str(exc)) from None
-    if gm is not None:
-        try:
-            GaitManagerParameters.from_dict(gm or {})
-        except GaitManagerError as exc:
-            raise _fail('inputs.gait_manager', str(exc)) from None
+def load_scene(path: str | pathlib.Path,
+               validate_inputs: Callable[[str, dict[str, Any]], None] | None = None) -> Scene:
+    """Load and validate the scene YAML file at ``path`` (see ``parse_scene``)."""
+    return parse_scene(read_yaml(path, 'scene'), validate_inputs)
 
 
-def scene_dirs() -> list[pathlib.Path]:
-    """Directories searched for shipped scenes (installed share dir, then the source tree)."""
-    here = pathlib.Path(__file__).resolve().parent
-    dirs = [p / 'share' / 'iceskate_sim' / 'scenes' for p in _ament_prefixes()]
-    dirs.append(here.parent / 'scenes')
-    return [d for d in dirs if d.is_dir()]
+class _Yaml12Loader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2's floats: ``1e-6``, ``2.0e7`` and ``1E12`` are numbers
+    (YAML 1.1 wants a dot and a signed exponent and reads them as strings)."""
 
 
-def shipped_scenes() -> list[str]:
-    """Names of the scenes shipped with the package."""
-    names = set()
-    for d in scene_dirs():
-        names.update(p.stem for p in d.glob('*.yaml'))
-    return sorted(names)
+_Yaml12Loader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+    list('-+0123456789'))
 
 
-def load_scene(name_or_path: str | pathlib.Path) -> Scene:
-    """Load a shipped scene by name (e.g. 'skate') or a YAML file by path."""
-    path = pathlib.Path(name_or_path)
-    if not path.suffix:
-        for d in scene_dirs():
-            if (d / f'{path.name}.yaml').is_file():
-                path = d / f'{path.name}.yaml'
-                break
-        else:
-            raise SimulationError(f'unknown scene {str(name_or_path)!r}; shipped scenes: '
-                                  f'{shipped_scenes()}')
+def read_yaml(path: str | pathlib.Path, what: str) -> Any:
+    """The YAML document at ``path`` (YAML 1.2 numbers), or SimulationError naming ``what``,
+    the path and the problem (unreadable, not UTF-8 text, malformed)."""
+    path = pathlib.Path(path)
     try:
-        text = path.read_text(encoding='utf-8')
+        text = path.read_bytes().decode('utf-8')
     except OSError as exc:
-        raise SimulationError(f'cannot read scene {path}: {exc}') from exc
+        raise SimulationError(f'cannot read {what} {path}: {exc.strerror or exc}') from None
+    except UnicodeDecodeError:
+        raise SimulationError(f'{what} {path} is not UTF-8 text (a binary file?)') from None
     try:
-        raw = yaml.safe_load(text)
+        return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
-        raise SimulationError(f'malformed YAML in scene {path}: {exc}') from exc
-    return parse_scene(raw, str(path))
+        raise SimulationError(f'malformed YAML in {what} {path}: {exc}') from None

@@ -11,6 +11,7 @@ reason (``Simulator.ended``) instead.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -33,13 +34,24 @@ from iceskate_sim.hybrid import (
 from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, IntegratorConfig
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import N_COORDINATES, Robot
+from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
+
+
+def stamp_time(t: float) -> float:
+    """Time t [s] at a stamp's resolution (whole nanoseconds)."""
+    return ns_to_seconds(seconds_to_ns(t))
 
 
 def observation_of(s: HybridState) -> Observation:
-    """The controller's view of a hybrid state (copies of q and v)."""
-    return Observation(s.t, s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
-                       s.contact.pivot, s.step_index, s.t_exchange, s.contact.heel_anchor_y,
-                       s.t_touchdown)
+    """The controller's view of a hybrid state (copies of q and v).
+
+    Its times are those a message carries: rounded to whole nanoseconds (the resolution of a
+    ROS stamp), so a controller computes the same torque in-process as from a GaitState.
+    """
+    touchdown = stamp_time(s.t_touchdown) if math.isfinite(s.t_touchdown) else s.t_touchdown
+    return Observation(stamp_time(s.t), s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
+                       s.contact.pivot, s.step_index, stamp_time(s.t_exchange),
+                       s.contact.heel_anchor_y, touchdown)
 
 
 @dataclass(frozen=True)

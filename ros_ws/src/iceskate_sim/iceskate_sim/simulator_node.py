@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 from functools import partial
+import pathlib
 import sys
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -40,11 +43,13 @@ from iceskate_sim.node_support import (
     run_node,
 )
 from iceskate_sim.ros_conversions import set_stamp
-from iceskate_sim.scene import load_scene
+from iceskate_sim.scene import Scene, load_scene
+from iceskate_sim.session import Session
 
 #: name, default, description (units), bounds of a float (see config/simulator.yaml).
 PARAMETERS = (
-    ('scene', 'stand', 'shipped scene name, or path of a scene YAML', None),
+    ('scene', '', 'path of the scene YAML (its simulator part: floor, initial state, '
+     'integrator, disturbances, duration, recording)', None),
     ('duration', 0.0, 'run length [s]; 0: the scene duration', (0.0, 3600.0)),
     ('lockstep', True, 'wait for every command stamped t_k (else free-running)', None),
     ('realtime_factor', 1.0, 'free-running pace [simulated s per wall s]', (1e-3, 1e3)),
@@ -64,14 +69,17 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **kwargs)
-        c = self.config = declare_all(self, PARAMETERS)
+        c = self.config = declare_all(self, PARAMETERS, extra=self._declare_controllers)
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
-            self.session = LockstepSession(scene, c.out_dir, c.record_bag, c.lockstep)
+            session = Session(scene, pathlib.Path(c.out_dir) if c.out_dir else None,
+                              pathlib.Path(c.record_bag) if c.record_bag else None)
         except SimulationError as exc:
             raise ConfigError(f'parameter scene={c.scene!r} (or record_bag, out_dir): {exc}') \
                 from None
+        controllers = self._controllers(scene)
+        self.session = LockstepSession(session, controllers, c.lockstep)
         self.loop = LockstepLoop(self.session, self._publish, self._report, c.control_timeout,
                                  c.realtime_factor, c.start_paused, c.stats_file,
                                  self._listened)
@@ -88,6 +96,27 @@ class SimulatorNode(Node):
         self.create_timer(self.loop.timer_period, self.timer_callback)
         self.create_subscription(EffortCommand, 'effort_commands', self.on_effort_commands,
                                  LOCKSTEP_READER_QOS)
+
+    def _declare_controllers(self) -> None:
+        """``controllers`` and, for each, ``sources.<controller>`` (string arrays)."""
+        self.declare_parameter('controllers', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description='controller nodes whose commands are summed, in order (empty: the '
+                        "scene's inputs, each with one source named like it)"))
+        overrides = getattr(self, '_parameter_overrides', {})
+        for name in overrides.get('controllers', Parameter('', value=[])).value or []:
+            self.declare_parameter(f'sources.{name}', Parameter.Type.STRING_ARRAY,
+                                   ParameterDescriptor(description=f'command sources of {name}, '
+                                                       'in the order of its breakdown'))
+
+    def _controllers(self, scene: Scene) -> dict[str, tuple[str, ...]]:
+        """Each controller node with its sources (parameters, else the scene's inputs)."""
+        names = list(self.get_parameter('controllers').value or []) or list(scene.inputs)
+        out = {}
+        for name in names:
+            sources = (self.get_parameter(f'sources.{name}').value
+                       if self.has_parameter(f'sources.{name}') else None)
+            out[name] = tuple(sources or (name,))
+        return out
 
     @property
     def finished(self) -> bool:

@@ -12,15 +12,15 @@ Every function here is pure: it depends only on its arguments. Torques are 18-ve
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
-import math
-import numbers
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.observation import Observation
+from iceskate_sim.parameters import check_fields, from_mapping, setting
+from iceskate_sim.stance import StanceSchedule
 from visual_lifting.errors import VisualLiftingError
 
 N_COORDINATES = 18
@@ -29,71 +29,53 @@ DESIRED_Y_OPTIONS = ('moving', 'follow', 'fixed')
 
 @dataclass(frozen=True)
 class VisualLiftingParameters:
-    """Parameters of the visual-lifting law (defaults: model-spec §6 and §11).
+    """Parameters of the visual-lifting law (docs/model.md, visual lifting).
 
-    :param kp: K_p = diag(k_y [N/m], k_z [N/m], k_pitch [N m/rad]) on psi = (y, z, pitch);
-        seed eq. (9): (20, 290, 1100), order and SI units per model-spec §6/§11 #6.
-    :param joints: joints that receive the torque (seed §5.2: 1, 2, 3, 4, 8, 9, 10, 17); a
-        joint gets torque only while its coordinate is active in the mode.
-    :param joint1_torque: apply the joint-1 (floor pivot) entry while q1 is active
-        (model-spec §3.3 / §11 #18 switch).
-    :param desired_y: forward target y_d: 'moving' y_H(0) + v_d t, 'follow' y_H(t) (forward
-        term off), 'fixed' y_H(0) (model-spec §6, §11 #7).
-    :param v_d: forward speed of the 'moving' target [m/s] (model-spec §6: 0.3).
-    :param z_d: target head-top height [m]; None means the initial height z_H(0).
-    :param pitch_d: target head pitch [rad] (model-spec §6: 0).
-    :param max_dy: saturation of |delta y| [m] (model-spec §11 #24: 0.3); None disables it.
+    Each field's description, unit and range are its ``setting``; the node declares them as
+    typed ROS parameters (``ros2 param list /visual_lifting``).
     """
 
-    kp: tuple[float, float, float] = (20.0, 290.0, 1100.0)
-    joints: tuple[int, ...] = (1, 2, 3, 4, 8, 9, 10, 17)
-    joint1_torque: bool = True
-    desired_y: str = 'moving'
-    v_d: float = 0.3
-    z_d: float | None = None
-    pitch_d: float = 0.0
-    max_dy: float | None = 0.3
+    kp: tuple[float, float, float] = setting(
+        (20.0, 290.0, 1100.0), 'K_p = diag(k_y, k_z, k_pitch) on the head pose (y, z, pitch); '
+        'the paper: 20, 290, 1100', unit='N/m, N/m, N m/rad', low=0.0)
+    joints: tuple[int, ...] = setting(
+        (1, 2, 3, 4, 8, 9, 10, 17), 'joints that receive the torque (support foot to head); a '
+        'joint gets torque only while its coordinate is active in the mode', low=1, high=17,
+        distinct=True)
+    joint1_torque: bool = setting(True, 'apply the joint-1 (floor pivot) entry while q1 is active')
+    desired_y: str = setting(
+        'moving', "forward target y_d: 'moving' y_H(0) + v_d t, 'follow' y_H(t) (forward term "
+        "off), 'fixed' y_H(0)", choices=DESIRED_Y_OPTIONS)
+    v_d: float = setting(0.3, "forward speed of the 'moving' target", unit='m/s', low=-5.0,
+                         high=5.0)
+    z_d: float | None = setting(None, 'target head-top height; unset (NaN): the initial height',
+                                unit='m', low=0.0, open_low=True)
+    pitch_d: float = setting(0.0, 'target head pitch', unit='rad', low=-1.0, high=1.0)
+    max_dy: float | None = setting(0.3, 'saturation of |y_d - y|; unset (NaN): none', unit='m',
+                                   low=0.0, open_low=True)
+    shift_y1: float = setting(0.0, 'forward shift of the target after a support exchange (the '
+                              "gait manager's moving stance)", unit='m', low=-0.4, high=0.4)
+    shift_z1: float = setting(0.0, 'downward shift of the target after a support exchange',
+                              unit='m', low=-0.1, high=0.3)
+    shift_time1: float = setting(0.6, 'duration of the first shift', unit='s', low=0.0)
+    shift_y2: float = setting(0.0, 'further forward shift after the swing heel strike', unit='m',
+                              low=-0.4, high=0.4)
+    shift_time2: float = setting(0.5, 'duration of the second shift', unit='s', low=0.0)
 
     def __post_init__(self) -> None:
-        """Validate and normalise every field (raises VisualLiftingError naming the key)."""
-        kp = _sequence('kp', self.kp)
-        if len(kp) != 3:
-            raise VisualLiftingError(f'kp must have 3 entries (y, z, pitch), got {len(kp)}')
-        kp = tuple(_real('kp', k, low=0.0) for k in kp)
-        joints = _sequence('joints', self.joints)
-        checked = []
-        for j in joints:
-            if isinstance(j, bool) or not isinstance(j, numbers.Integral) or not 1 <= j <= 17:
-                raise VisualLiftingError(f'joints entries must be integers in 1..17, got {j!r}')
-            checked.append(int(j))
-        if len(set(checked)) != len(checked):
-            raise VisualLiftingError(f'joints must not repeat a joint, got {checked}')
-        if not isinstance(self.joint1_torque, bool):
-            raise VisualLiftingError(f'joint1_torque must be a bool, got {self.joint1_torque!r}')
-        if self.desired_y not in DESIRED_Y_OPTIONS:
-            raise VisualLiftingError(
-                f'desired_y must be one of {DESIRED_Y_OPTIONS}, got {self.desired_y!r}')
-        z_d = None if self.z_d is None else _real('z_d', self.z_d, low=0.0, open_low=True)
-        max_dy = (None if self.max_dy is None
-                  else _real('max_dy', self.max_dy, low=0.0, open_low=True))
-        object.__setattr__(self, 'kp', kp)
-        object.__setattr__(self, 'joints', tuple(checked))
-        object.__setattr__(self, 'v_d', _real('v_d', self.v_d))
-        object.__setattr__(self, 'z_d', z_d)
-        object.__setattr__(self, 'pitch_d', _real('pitch_d', self.pitch_d))
-        object.__setattr__(self, 'max_dy', max_dy)
+        """Check and normalise every field (VisualLiftingError naming the key)."""
+        check_fields(self, VisualLiftingError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> VisualLiftingParameters:
         """Build from a mapping (e.g. YAML); unknown keys and bad values raise an error."""
-        if not isinstance(d, Mapping):
-            raise VisualLiftingError(f'visual-lifting parameters must be a mapping, got {d!r}')
-        known = {f.name for f in fields(cls)}
-        for key in d:
-            if key not in known:
-                raise VisualLiftingError(
-                    f'unknown visual-lifting parameter {key!r}; expected one of {sorted(known)}')
-        return cls(**dict(d))
+        return from_mapping(cls, d, VisualLiftingError)
+
+    @property
+    def stance(self) -> StanceSchedule:
+        """The moving stance the target follows (no shift by default)."""
+        return StanceSchedule(self.shift_y1, self.shift_z1, self.shift_time1, self.shift_y2,
+                              self.shift_time2)
 
 
 class HeadTask(NamedTuple):
@@ -163,28 +145,19 @@ def visual_lifting_torque(obs: Observation, dynamics: GaitDynamics,
     return tau
 
 
+def head_origin(obs: Observation, dynamics: GaitDynamics) -> np.ndarray:
+    """psi(0): the head pose (y [m], z [m], pitch [rad]) at the first state, origin of the
+    target."""
+    return dynamics.head_pose(obs.contact(), obs.q)[0]
+
+
 def visual_lifting(obs: Observation, dynamics: GaitDynamics, params: VisualLiftingParameters,
-                   psi_initial: np.ndarray, offset: Sequence[float] = (0.0, 0.0)) -> HeadTask:
-    """Evaluate the whole law once (one head-pose computation): torque, psi, psi_d, error."""
+                   psi_initial: np.ndarray) -> HeadTask:
+    """Evaluate the whole law once (one head-pose computation): torque, psi, psi_d, error.
+
+    The target follows the moving stance of ``params`` (``stance``).
+    """
     psi, jac = dynamics.head_pose(obs.contact(), obs.q)
-    psi_d = desired_head_pose(params, obs.t, psi, psi_initial, offset)
+    psi_d = desired_head_pose(params, obs.t, psi, psi_initial, params.stance.shift(obs))
     tau = visual_lifting_torque(obs, dynamics, params, psi_d, pose=(psi, jac))
     return HeadTask(tau, psi, psi_d, head_error(psi_d, psi, params))
-
-
-def _sequence(name: str, value: Any) -> tuple[Any, ...]:
-    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
-        raise VisualLiftingError(f'{name} must be a list, got {value!r}')
-    return tuple(value)
-
-
-def _real(name: str, value: Any, low: float | None = None, open_low: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise VisualLiftingError(f'{name} must be a number, got {value!r}')
-    x = float(value)
-    if not math.isfinite(x):
-        raise VisualLiftingError(f'{name} must be finite, got {value!r}')
-    if low is not None and (x < low or (open_low and x == low)):
-        bound = '>' if open_low else '>='
-        raise VisualLiftingError(f'{name} must be {bound} {low}, got {value!r}')
-    return x

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iceskate_sim.analysis.animation import (
+from iceskate_analysis.animation import (
     POINTS,
     frame_indices,
     link_positions,
     render_gif,
     render_keyframes,
 )
-from iceskate_sim.analysis.bag_io import read_bag
+from iceskate_analysis.bag_io import read_bag
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import SOLE_HEEL_Y, load_robot
 

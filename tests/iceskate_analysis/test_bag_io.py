@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from iceskate_sim.analysis.bag_io import read_bag, resolve_bag_path
+from iceskate_analysis.bag_io import read_bag, resolve_bag_path
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
 

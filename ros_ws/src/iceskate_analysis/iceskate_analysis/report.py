@@ -18,8 +18,8 @@ import math
 import pathlib
 from typing import Any
 
-from iceskate_sim.analysis.bag_io import read_bag
-from iceskate_sim.analysis.coupling import (
+from iceskate_analysis.bag_io import read_bag
+from iceskate_analysis.coupling import (
     RIGHT_SHOULDER,
     CaseResult,
     analyse_case,
@@ -80,7 +80,7 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
     :return: the summary (as written to summary.json).
     :raises SimulationError: on an unreadable bag or a bad joint (the message names it).
     """
-    from iceskate_sim.analysis import plots
+    from iceskate_analysis import plots
     joint = parse_joint(joint)
     out = pathlib.Path(out)
     if out.exists() and not out.is_dir():
@@ -102,7 +102,7 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
             write_csv(out / f'{case.label}_series.csv', case_columns(case)),
         ]
         if animate:
-            from iceskate_sim.analysis.animation import render_gif, render_keyframes
+            from iceskate_analysis.animation import render_gif, render_keyframes
             robot = robot_for_bag(case.bag)
             written.append(render_gif(case.bag, robot, out / f'{case.label}_animation.gif',
                                       max_frames=frames, progress=progress))

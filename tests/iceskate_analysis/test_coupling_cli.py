@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from iceskate_sim.coupling_cli import main
+from iceskate_analysis.coupling_cli import main
 
 
 @pytest.fixture(scope='module')

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from iceskate_sim.analysis._progress import progress_bar
+from iceskate_analysis._progress import progress_bar
 from iceskate_sim.bag_types import PASSIVE
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES

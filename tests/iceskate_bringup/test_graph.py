@@ -4,8 +4,8 @@ import os
 
 import pytest
 
+from iceskate_bringup.graph import realtime_scheduling
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.graph import realtime_scheduling
 
 
 def test_priority_zero_leaves_the_scheduling_as_it_is():

@@ -1,7 +1,7 @@
 """``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``.
 
 The paper's eq. (11) analysis of a recorded run (no re-simulation): figures, CSV and
-summary.json (see ``iceskate_sim.analysis.report``). Exit status 0 on success, 1 on a bag or
+summary.json (see ``iceskate_analysis.report``). Exit status 0 on success, 1 on a bag or
 argument the analysis refuses (the message names what is wrong).
 """
 
@@ -37,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Console entry point."""
     args = _parser().parse_args(argv)
-    from iceskate_sim.analysis.report import run_analysis
+    from iceskate_analysis.report import run_analysis
     try:
         if args.frames < 1:
             raise SimulationError(f'--frames must be >= 1, got {args.frames}')

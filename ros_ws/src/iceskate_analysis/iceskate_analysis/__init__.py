@@ -6,11 +6,11 @@
 * ``plots``: the paper's Figs. 5-8 as PNG.
 * ``animation``: a stick-figure GIF and a key-frame strip of a run.
 
-The console script ``coupling_analysis`` (``iceskate_sim.coupling_cli``) drives them.
+The console script ``coupling_analysis`` (``iceskate_analysis.coupling_cli``) drives them.
 """
 
-from iceskate_sim.analysis.bag_io import BagData, read_bag
-from iceskate_sim.analysis.coupling import (
+from iceskate_analysis.bag_io import BagData, read_bag
+from iceskate_analysis.coupling import (
     ArmSwing,
     CaseResult,
     JointDecomposition,

@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from iceskate_sim.control_stack import ControlStack
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.runner import main, run
+from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.dynamics import ContactState, GaitDynamics
 from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import SIDES, load_robot
-from iceskate_sim.runner import main, run
-from iceskate_sim.scene import load_scene
 from iceskate_sim.simulation import Simulator
 
 SHORT_SKATE = 2.0  # s: the first steps of the skate scene
@@ -98,7 +98,7 @@ def test_control_stack_computes_only_the_scene_sources():
     sim = Simulator(robot, scene.simulator, scene.initial)
     commands = ControlStack(scene, robot, sim.observation()).commands(sim.observation())
     assert list(commands) == ['visual_lifting', 'gait_manager']
-    assert {s for c in commands.values() for s in c.source_efforts} == set(scene.sources)
+    assert {node: tuple(c.source_efforts) for node, c in commands.items()} == scene_sources(scene)
     assert commands['gait_manager'].command.has_impedance  # the posture's
 
 

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from iceskate_sim.analysis.coupling import CaseResult, JointDecomposition
+    from iceskate_analysis.coupling import CaseResult, JointDecomposition
 
 __all__ = ['plot_compare_shoulders', 'plot_coupling', 'plot_shoulders', 'plot_terms']
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from iceskate_sim.analysis import plots
-from iceskate_sim.analysis.bag_io import read_bag
-from iceskate_sim.analysis.coupling import analyse_case
+from iceskate_analysis import plots
+from iceskate_analysis.bag_io import read_bag
+from iceskate_analysis.coupling import analyse_case
 
 
 @pytest.fixture(scope='module')

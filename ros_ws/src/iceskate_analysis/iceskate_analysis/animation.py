@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.analysis._progress import progress_bar
+from iceskate_analysis._progress import progress_bar
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import LINK_NAMES, Robot
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from matplotlib.lines import Line2D
     from matplotlib.text import Text
 
-    from iceskate_sim.analysis.bag_io import BagData
+    from iceskate_analysis.bag_io import BagData
 
 __all__ = ['SEGMENTS', 'frame_indices', 'link_positions', 'render_gif', 'render_keyframes']
 

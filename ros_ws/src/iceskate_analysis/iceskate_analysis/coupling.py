@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.analysis._progress import progress_bar
-from iceskate_sim.analysis.bag_io import PASSIVE, BagData
+from iceskate_analysis._progress import progress_bar
+from iceskate_analysis.bag_io import PASSIVE, BagData
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES, get_mode

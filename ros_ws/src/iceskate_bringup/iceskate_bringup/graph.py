@@ -31,9 +31,11 @@ import tempfile
 import time
 from typing import Any
 
+from iceskate_bringup.scene import load_scene, node_parameters, scene_path, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import sources_by_controller
-from iceskate_sim.scene import load_scene
+from iceskate_sim.node_support import write_parameter_file
+from iceskate_sim.parameters import flatten
+from iceskate_sim.robot import ament_prefixes
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
 CONTROLLER_CLASSES = {'visual_lifting': 'VisualLiftingNode', 'gait_manager': 'GaitManagerNode'}
@@ -41,31 +43,24 @@ CONTROLLER_CLASSES = {'visual_lifting': 'VisualLiftingNode', 'gait_manager': 'Ga
 
 @dataclass(frozen=True)
 class NodeSpec:
-    """One node of the graph: package, executable (= node name), module, parameters."""
+    """One node of the graph: package, executable (= node name), module, class, and the
+    parameter file of this run (written by ``graph_nodes``)."""
 
     package: str
     executable: str
     module: str
     node_class: str
-    parameters: dict[str, Any]
+    parameter_file: pathlib.Path
 
     def ros_args(self) -> list[str]:
-        """--ros-args: the node's YAML, then the overrides (-p wins over the file), each value
-        a YAML scalar of its Python type (JSON's spelling: '' and '1.5' stay strings)."""
-        args = ['--ros-args', '--params-file', str(config_file(self.package, self.executable))]
-        for name, value in self.parameters.items():
-            args += ['-p', f'{name}:={json.dumps(value)}']
-        return args
-
-
-def _prefixes() -> list[pathlib.Path]:
-    paths = os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
-    return [pathlib.Path(p) for p in paths if p]
+        """--ros-args: the node's shipped YAML, then this run's parameter file (which wins)."""
+        return ['--ros-args', '--params-file', str(config_file(self.package, self.executable)),
+                '--params-file', str(self.parameter_file)]
 
 
 def config_file(package: str, node: str) -> pathlib.Path:
     """The node's YAML: installed share/<pkg>/config, else the source tree."""
-    for prefix in _prefixes():
+    for prefix in ament_prefixes():
         path = prefix / 'share' / package / 'config' / f'{node}.yaml'
         if path.is_file():
             return path
@@ -77,7 +72,7 @@ def config_file(package: str, node: str) -> pathlib.Path:
 
 def command_of(spec: NodeSpec) -> list[str]:
     """How to start a node: the installed executable, else ``python -m``."""
-    for prefix in _prefixes():
+    for prefix in ament_prefixes():
         exe = prefix / 'lib' / spec.package / spec.executable
         if exe.is_file() and os.access(exe, os.X_OK):
             return [str(exe)]
@@ -86,19 +81,30 @@ def command_of(spec: NodeSpec) -> list[str]:
 
 def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None,
                 **simulator_parameters: Any) -> list[NodeSpec]:
-    """The simulator and the controller nodes the scene needs, with their parameters."""
+    """The simulator and the controller nodes the scene runs, each with its parameter file
+    written into ``out/params/`` (``<node>.yaml``: the scene composed into node parameters;
+    reusable to start the nodes by hand)."""
     scene = load_scene(scene_arg)
-    params: dict[str, Any] = {'scene': scene_arg, 'out_dir': str(out)}
+    controllers = scene_sources(scene)
+    folder = out / 'params'
+    folder.mkdir(parents=True, exist_ok=True)
+    params: dict[str, Any] = {'scene': str(scene_path(scene_arg).resolve()), 'out_dir': str(out)}
     if scene.record_bag:
         params['record_bag'] = str(out / 'bag')
     if duration is not None:
         params['duration'] = float(duration)
     params.update(simulator_parameters)
+    if controllers:
+        params['controllers'] = list(controllers)
+        params |= {f'sources.{node}': list(sources) for node, sources in controllers.items()}
+    write_parameter_file(folder / 'simulator.yaml', {'simulator': params})
     specs = [NodeSpec('iceskate_sim', 'simulator', 'iceskate_sim.simulator_node', 'SimulatorNode',
-                      params)]
-    for node in sorted(sources_by_controller(scene), reverse=True):
+                      folder / 'simulator.yaml')]
+    composed = node_parameters(scene)
+    for node in sorted(controllers, reverse=True):
+        write_parameter_file(folder / f'{node}.yaml', {node: flatten(composed[node])})
         specs.append(NodeSpec(node, node, f'{node}.{node}_node', CONTROLLER_CLASSES[node],
-                              {'scene': scene_arg}))
+                              folder / f'{node}.yaml'))
     return specs
 
 
@@ -118,11 +124,6 @@ def ros_environment(domain_id: int | None = None, log_dir: pathlib.Path | None =
     env['ROS_LOG_DIR'] = str(log_dir or tempfile.mkdtemp(prefix='iceskate-ros-log-'))
     env['PYTHONUNBUFFERED'] = '1'
     return env
-
-
-def _resolve(scene_arg: str) -> str:
-    path = pathlib.Path(scene_arg)
-    return str(path.resolve()) if path.suffix and path.is_file() else scene_arg
 
 
 def stop(process: subprocess.Popen, grace: float = GRACE) -> int:
@@ -186,7 +187,6 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
     :param simulator_parameters: extra simulator parameters (e.g. control_timeout=2.0).
     :raises SimulationError: when the simulator fails; the message holds its error.
     """
-    scene_arg = _resolve(scene_arg)
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     specs = graph_nodes(scene_arg, out, duration, **simulator_parameters)

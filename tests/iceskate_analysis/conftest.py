@@ -61,8 +61,8 @@ def spec() -> SimpleNamespace:
 @pytest.fixture(scope='session')
 def sim_bag(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     """A 40 ms run of TINY_SKATE recorded by the headless runner; returns the bag directory."""
-    from iceskate_sim.runner import run
-    from iceskate_sim.scene import parse_scene
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import parse_scene
     out = tmp_path_factory.mktemp('sim_run')
     run(parse_scene(dict(TINY_SKATE)), out, progress=False)
     return out / 'bag'

@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.analysis.bag_io import read_bag
-from iceskate_sim.analysis.coupling import (
+from iceskate_analysis.bag_io import read_bag
+from iceskate_analysis.coupling import (
     analyse_case,
     arm_swing,
     decompose,

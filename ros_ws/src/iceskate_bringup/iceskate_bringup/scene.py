@@ -1,0 +1,107 @@
+"""Scenes with their controllers: shipped names, validation of every block, the sources.
+
+``iceskate_sim.scene`` validates what the simulator uses; here the ``inputs`` blocks are
+validated too, by the controller packages' own parameter classes (``VisualLiftingParameters``,
+``GaitManagerParameters``), so a scene is checked whole before anything starts. Shipped scenes
+live in ``share/iceskate_bringup/scenes/<name>.yaml`` (the source tree's ``scenes/`` before the
+workspace is built).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import pathlib
+from typing import Any
+
+from gait_manager.errors import GaitManagerError
+from gait_manager.law import SOURCES, GaitManagerParameters, head_stance
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.robot import ament_prefixes
+from iceskate_sim.scene import Scene
+from iceskate_sim.scene import load_scene as load_scene_file
+from iceskate_sim.scene import parse_scene as parse_simulator_scene
+from visual_lifting.errors import VisualLiftingError
+from visual_lifting.law import VisualLiftingParameters
+
+#: The controller nodes a scene may run, in the order their commands are summed.
+CONTROLLERS = ('visual_lifting', 'gait_manager')
+
+
+def validate_inputs(node: str, block: dict[str, Any]) -> None:
+    """Check the parameter block of controller ``node`` (SimulationError naming the key)."""
+    try:
+        controller_parameters(node, block)
+    except (VisualLiftingError, GaitManagerError) as exc:
+        raise SimulationError(f'scene key {f"inputs.{node}"!r}: {exc}') from None
+
+
+def controller_parameters(node: str, block: dict[str, Any]
+                          ) -> VisualLiftingParameters | GaitManagerParameters:
+    """The validated parameters of controller ``node`` from its scene block."""
+    if node == 'visual_lifting':
+        return VisualLiftingParameters.from_dict(block)
+    if node == 'gait_manager':
+        return GaitManagerParameters.from_dict(block)
+    raise SimulationError(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
+                          f'{list(CONTROLLERS)}')
+
+
+def node_parameters(scene: Scene) -> dict[str, VisualLiftingParameters | GaitManagerParameters]:
+    """The parameters of each controller node the scene runs, composed: visual lifting's head
+    target follows the gait manager's moving stance when that runs (``head_stance``)."""
+    params = {node: controller_parameters(node, block) for node, block in scene.inputs.items()}
+    vl, gm = params.get('visual_lifting'), params.get('gait_manager')
+    if isinstance(vl, VisualLiftingParameters) and isinstance(gm, GaitManagerParameters):
+        stance = head_stance(gm)
+        if stance is not None:
+            params['visual_lifting'] = replace(vl, shift_y1=stance.dy1, shift_z1=stance.dz1,
+                                               shift_time1=stance.t1, shift_y2=stance.dy2,
+                                               shift_time2=stance.t2)
+    return params
+
+
+def parse_scene(raw: Any) -> Scene:
+    """Validate a whole scene mapping (simulator part and controller blocks)."""
+    return parse_simulator_scene(raw, validate_inputs)
+
+
+def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
+    """The scene's controller nodes, in summing order, each with its command sources in order
+    (an idle gait manager, with no source enabled, is left out)."""
+    out: dict[str, tuple[str, ...]] = {}
+    if 'visual_lifting' in scene.inputs:
+        out['visual_lifting'] = ('visual_lifting',)
+    if 'gait_manager' in scene.inputs:
+        enabled = GaitManagerParameters.from_dict(scene.inputs['gait_manager']).enabled
+        if enabled:
+            out['gait_manager'] = tuple(s for s in SOURCES if s in enabled)
+    return out
+
+
+def scene_dirs() -> list[pathlib.Path]:
+    """Directories searched for shipped scenes (installed share dir, then the source tree)."""
+    dirs = [p / 'share' / 'iceskate_bringup' / 'scenes' for p in ament_prefixes()]
+    dirs.append(pathlib.Path(__file__).resolve().parents[1] / 'scenes')
+    return [d for d in dirs if d.is_dir()]
+
+
+def shipped_scenes() -> list[str]:
+    """Names of the shipped scenes."""
+    return sorted({p.stem for d in scene_dirs() for p in d.glob('*.yaml')})
+
+
+def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
+    """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself."""
+    path = pathlib.Path(name_or_path)
+    if path.suffix:
+        return path
+    for d in scene_dirs():
+        if (d / f'{path.name}.yaml').is_file():
+            return d / f'{path.name}.yaml'
+    raise SimulationError(f'unknown scene {str(name_or_path)!r}; shipped scenes: '
+                          f'{shipped_scenes()}')
+
+
+def load_scene(name_or_path: str | pathlib.Path) -> Scene:
+    """Load a shipped scene by name or a scene YAML by path, validated whole."""
+    return load_scene_file(scene_path(name_or_path), validate_inputs)

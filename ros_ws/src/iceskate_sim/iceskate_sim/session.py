@@ -1,0 +1,166 @@
+"""One run of a scene, ROS-free: the loop that the headless runner and the simulator node share.
+
+A ``Session`` owns the simulator, the period count, the recorder (bag) and the trajectory. At
+every control instant t_k the caller gives it the controllers' commands for t_k (computed from
+``observation()``, in-process by the headless runner, or received as messages by the simulator
+node) and ``step`` holds their sum over [t_k, t_k+1] (zero-order hold), applies the scene's
+push, advances the hybrid simulation and returns the sample of t_k. ``flush`` hands the samples
+stepped to the trajectory and the bag (the node calls it while the controllers compute);
+``finish`` closes the bag, computes the metrics and writes ``metrics.json``, ``events.json`` and
+``trajectory.npz``. Both paths run exactly this code, so they give the same trajectory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict
+import json
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+from iceskate_sim.command import ControllerCommand, HeldCommand
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import Transition
+from iceskate_sim.metrics import Trajectory, compute_metrics
+from iceskate_sim.observation import Observation
+from iceskate_sim.recording import BagRecorder, Sample
+from iceskate_sim.robot import Robot, load_robot
+from iceskate_sim.scene import Scene
+from iceskate_sim.simulation import Simulator
+
+
+def scene_metadata(scene: Scene) -> dict[str, str]:
+    """Bag custom_data: scene name, its full parameters, the integrator."""
+    return {'scene': scene.name, 'scene_parameters': json.dumps(scene.raw, sort_keys=True),
+            'integrator': json.dumps(asdict(scene.simulator.integrator), sort_keys=True)}
+
+
+def last_event_before(sim: Simulator, t: float) -> Transition | None:
+    """The latest transition at or before time t (None before the first)."""
+    for event in reversed(sim.events):
+        if event.t <= t:
+            return event
+    return None
+
+
+class Session:
+    """One run of ``scene``.
+
+    :param scene: the validated scene (its ``duration`` is the run length).
+    :param out: directory for metrics.json, events.json and trajectory.npz (None: none).
+    :param bag: path of the MCAP bag to record (None: none).
+    :param robot: the robot model (loaded if None).
+    """
+
+    def __init__(self, scene: Scene, out: pathlib.Path | None = None,
+                 bag: pathlib.Path | None = None, robot: Robot | None = None) -> None:
+        self.scene = scene
+        self.out = out
+        self.robot = robot or load_robot()
+        self.sim = Simulator(self.robot, scene.simulator, scene.initial)
+        self.n_periods = int(round(scene.duration / scene.simulator.control_period))
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+        self.recorder = (BagRecorder(bag, scene_metadata(scene),
+                                     self.robot.urdf_path.read_text(encoding='utf-8'),
+                                     background=True) if bag is not None else None)
+        self.metrics: dict[str, Any] | None = None
+        self._restart()
+
+    def _restart(self) -> None:
+        obs = self.sim.observation()
+        #: head pose at t = 0 (y, z, pitch): the target recorded where no controller sets one
+        self.psi_initial = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
+        self.trajectory = Trajectory()
+        self.periods = 0
+        self.error: SimulationError | None = None
+        self._unrecorded: list[tuple[Sample, np.ndarray]] = []  # (sample, head target)
+        self._wall_start: float | None = None
+
+    @property
+    def done(self) -> bool:
+        """The run is over: duration reached, physically ended, or failed."""
+        return (self.periods >= self.n_periods or self.sim.ended is not None
+                or self.error is not None)
+
+    def observation(self) -> Observation:
+        """What the controllers see at t_k (times at the stamps' nanosecond resolution)."""
+        return self.sim.observation()
+
+    def step(self, commands: Mapping[str, ControllerCommand]) -> Sample | None:
+        """Hold the controllers' ``commands`` for t_k (and the scene's push, if one acts) over
+        one control period, advance, and return the sample of t_k; None if the run is done.
+
+        The sample holds the state at t_k (after the transitions due then), the dynamics under
+        the held commands, each source's effort as its controller reported it and the push. A
+        SimulationError of the physics ends the run (``error``) instead of propagating.
+        """
+        if self.done:
+            return None
+        if self._wall_start is None:
+            self._wall_start = time.perf_counter()
+        sim = self.sim
+        t = sim.state.t
+        placement = sim.head_placement()
+        push = next(((p.frame, np.array(p.force)) for p in self.scene.pushes if p.active(t)),
+                    None)
+        try:
+            sim.advance(HeldCommand.of_controllers(commands.values()), push)
+        except SimulationError as exc:
+            self.error = exc
+            return None
+        state = sim.start_state
+        efforts = {source: tau for c in commands.values()
+                   for source, tau in c.source_efforts.items()}
+        if push is not None:
+            efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
+        sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
+                        placement.rotation.copy(), last_event_before(sim, state.t))
+        target = next((c.head_target for c in commands.values() if c.head_target is not None),
+                      self.psi_initial)
+        self._unrecorded.append((sample, target))
+        self.periods += 1
+        return sample
+
+    def flush(self) -> None:
+        """Append the samples stepped since the last flush to the trajectory and the bag."""
+        for sample, target in self._unrecorded:
+            self.trajectory.append(sample, target)
+            if self.recorder is not None:
+                self.recorder.write(sample)
+        self._unrecorded.clear()
+
+    def reset(self) -> None:
+        """Back to the scene's initial state (refused while recording a bag)."""
+        if self.recorder is not None:
+            raise SimulationError('a reset is refused while the run is recorded to a bag')
+        self.sim.reset()
+        self.metrics = None
+        self._restart()
+
+    def finish(self, error: SimulationError | None = None) -> dict[str, Any]:
+        """End the run (once): close the bag, compute the metrics, write the output files.
+
+        :param error: why the run was ended from outside (kept unless the physics failed).
+        """
+        if self.metrics is not None:
+            return self.metrics
+        if error is not None and self.error is None:
+            self.error = error
+        try:
+            self.flush()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()
+        start = self._wall_start if self._wall_start is not None else time.perf_counter()
+        self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
+                                       time.perf_counter() - start, self.error)
+        if self.out is not None:
+            (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
+            (self.out / 'events.json').write_text(json.dumps(
+                [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
+            self.trajectory.save(self.out / 'trajectory.npz')
+        return self.metrics
