@@ -49,7 +49,7 @@ def test_background_writer_writes_the_same_messages(tmp_path, samples):
     recorder = _record(tmp_path / 'background', samples, background=True)
     inline, background = _messages(tmp_path / 'inline'), _messages(tmp_path / 'background')
     assert recorder.count == PERIODS
-    assert len(background) == 1 + 5 * PERIODS  # the URDF, then 5 topics per sample
+    assert len(background) == 1 + 6 * PERIODS  # the URDF, then 6 topics per sample
     assert background == inline
 
 

@@ -12,6 +12,11 @@ the offline analysis reads either:
   discrete part), what the controllers read
 * ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations at the sample and the
   effort of every input source (plus ``passive``: damping and soft stops)
+* ``/tf`` (tf2_msgs/TFMessage): the world pose of every URDF link as a viewer expects it
+  (robot_state_publisher's layout, ``LinkTransforms``): ``world`` -> the URDF's root link, then
+  parent link -> child link for every URDF joint, the fixed ones included in every message; with
+  ``/robot_description`` it shows the robot moving (e.g. in Foxglove). Bags only: the live
+  simulator node does not publish it (no tf2_msgs for rclpy here).
 * ``/robot_description`` (std_msgs/String, once): the URDF
 
 Bag metadata (``custom_data``) holds the scene, its parameters, the integrator and the project
@@ -22,7 +27,9 @@ writes each record through ``RecordEncoder`` (the same bytes, patched into layou
 rosbags: 16 us instead of 57 us per record), and ``BagRecorder(..., background=True)`` hands
 each sample, packed into one float array (``BagRecord``), to a writer process that encodes and
 writes the messages while the simulation goes on (the bag's messages are byte-identical to an
-in-process recording).
+in-process recording). The writer also computes the /tf link poses from the record's q, side
+and pivot (the robot model is loaded before the fork), so /tf costs the simulating process
+nothing.
 """
 
 from __future__ import annotations
@@ -48,7 +55,16 @@ from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import HybridState, Transition
 from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SOLE_HEEL_Y, SOLE_TOE_Y
+from iceskate_sim.robot import (
+    COORDINATE_NAMES,
+    N_COORDINATES,
+    SIDES,
+    SOLE_HEEL_Y,
+    SOLE_TOE_Y,
+    Robot,
+    anatomical_map,
+    load_robot,
+)
 from iceskate_sim.ros_conversions import ns_to_sec_nanosec, seconds_to_ns
 
 PROJECT_VERSION = '0.1.0'
@@ -59,9 +75,11 @@ TOPICS = {
     '/gait_state': 'iceskate_interfaces/msg/GaitState',
     '/joint_dynamics': 'iceskate_interfaces/msg/JointDynamics',
     '/robot_description': 'std_msgs/msg/String',
+    '/tf': 'tf2_msgs/msg/TFMessage',
 }
 #: The topics written at every control instant, in this order.
-RECORDED_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state', '/joint_dynamics')
+RECORDED_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state', '/joint_dynamics',
+                   '/tf')
 PIVOT_CODE = {'toe': 1, 'heel': 2}
 BATCH = 100  # samples per hand-over to the writer process
 QUEUE_BATCHES = 40  # batches in flight before ``write`` waits for the writer process
@@ -164,6 +182,96 @@ def rotation_to_quaternion(rotation: np.ndarray) -> np.ndarray:
 _TOTAL, _QUAT = slice(-_N - 4, -4), slice(-4, None)
 
 
+class LinkTransforms:
+    """The /tf transforms of a recorded state in robot_state_publisher's layout: ``world`` ->
+    the URDF's root link, then one per URDF joint, parent link -> child link (the fixed joints
+    too, constant, in every message), each a row (x, y, z [m], qx, qy, qz, qw).
+
+    The root link's world pose is its placement in the support-rooted model of the state's
+    side and pivot at q, as the simulation places every link (``head_placement``); the mode
+    and the contact anchors do not enter (q holds the locked coordinates too). A revolute
+    joint's row is its origin turned about its axis by its URDF angle (``anatomical_map``).
+
+    :param robot: the robot (its URDF model and support models).
+    :raises SimulationError: for a URDF joint neither revolute nor fixed, or one without a
+        Table-2 coordinate.
+    :ivar frames: (frame_id, child_frame_id) of each row: URDF link names, and ``world``.
+    """
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self._data = {key: support.new_data() for key, support in robot.models.items()}
+        model = robot.urdf_model
+        frames = model.frames
+        child_of = {f.parentFrame: f for f in frames if f.type == pin.FrameType.BODY}
+        self.root = child_of[0].name  # the link on the universe frame
+        self.frames = [('world', self.root)]
+        origins = [pin.SE3.Identity()]
+        moving: list[int] = []
+        joints: list[str] = []
+        axes: list[np.ndarray] = []
+        for k, frame in enumerate(frames):
+            if k == 0 or frame.type not in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
+                continue
+            parent, child = frames[frame.parentFrame], child_of[k]
+            self.frames.append((parent.name, child.name))
+            if frame.type == pin.FrameType.FIXED_JOINT:
+                origins.append(parent.placement.inverse() * child.placement)
+                continue
+            origins.append(parent.placement.inverse() * model.jointPlacements[frame.parentJoint])
+            moving.append(len(origins) - 1)
+            joints.append(frame.name)
+            axes.append(_revolute_axis(model, frame.parentJoint))
+        self._constant = np.array([[*m.translation, *rotation_to_quaternion(m.rotation)]
+                                   for m in origins])
+        self._moving = np.array(moving, dtype=np.intp)
+        # origin quaternion (v, w) times the turn (a sin h, cos h) about axis a by angle 2 h:
+        # sin h (w a + v x a, -v . a) + cos h (v, w)
+        v, w, a = self._constant[moving, 3:6], self._constant[moving, 6:], np.array(axes)
+        self._sin_part = np.hstack([w * a + np.cross(v, a), -np.sum(v * a, axis=1, keepdims=True)])
+        self._cos_part = self._constant[moving, 3:]
+        self._coordinates: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for side in SIDES:
+            coordinate = {name: (i, sign) for i, name, sign in anatomical_map(side)}
+            missing = sorted(set(joints) - set(coordinate))
+            if missing:
+                raise SimulationError(f'URDF joints {missing} have no Table-2 coordinate')
+            index, sign = zip(*(coordinate[name] for name in joints), strict=True)
+            self._coordinates[side] = np.array(index, dtype=np.intp), np.array(sign)
+
+    def rows(self, q: np.ndarray, side: str, pivot: str) -> np.ndarray:
+        """The rows (one per ``frames`` entry, shape (n, 7)) at Table-2 coordinates q (18,)
+        [m, rad] with the ``side`` foot supporting about its ``pivot`` edge."""
+        support = self.robot.support_model(side, pivot)
+        data = self._data[(side, pivot)]
+        pin.forwardKinematics(support.model, data, q)
+        root = pin.updateFramePlacement(support.model, data, support.frame_ids[self.root])
+        out = self._constant.copy()
+        out[0] = pin.SE3ToXYZQUAT(root)  # translation, quaternion: 0.2 us (a 10th of ours)
+        index, sign = self._coordinates[side]
+        half = (0.5 * q[index] * sign)[:, None]
+        with np.errstate(invalid='ignore'):  # an infinite angle: NaN, as the bag copies it
+            sin, cos = np.sin(half), np.cos(half)
+        out[self._moving, 3:] = sin * self._sin_part + cos * self._cos_part
+        return out
+
+
+def _revolute_axis(model: pin.Model, joint: int) -> np.ndarray:
+    """The unit axis of a revolute joint of ``model``, in its frame.
+
+    :raises SimulationError: if the joint is not revolute (one coordinate, no translation).
+    """
+    joint_model = model.joints[joint]
+    if joint_model.nq == joint_model.nv == 1:
+        data = joint_model.createData()
+        joint_model.calc(data, np.zeros(1))
+        subspace = np.ravel(data.S)  # (linear, angular) velocity of a unit joint speed
+        if not np.any(subspace[:3]):
+            return subspace[3:]
+    raise SimulationError(f'URDF joint {model.names[joint]} ({joint_model.shortname()}) is '
+                          'neither revolute nor fixed; /tf cannot place its link')
+
+
 class RecordFlags(NamedTuple):
     """What a record's messages decide from its numbers (with the discrete part, this fixes
     everything in them that is not a number copied from ``record_numbers``)."""
@@ -188,12 +296,18 @@ class MessageFactory:
     """Builds the rosbags message objects of a Sample (shared with the ROS node's bag).
 
     Messages are built from a record's discrete part, its flags and its numbers (values,
-    total effort, head quaternion: ``record_numbers``); every number in them is a copy of one
-    of those numbers or a stamp of one (``RecordEncoder`` relies on it).
+    total effort, head quaternion: ``record_numbers``; for /tf: ``tf_numbers``); every number
+    in them is a copy of one of those numbers or a stamp of one (``RecordEncoder`` relies on
+    it).
+
+    :param typestore: the types (default: ``make_typestore()``).
+    :param robot: the robot whose links /tf places (default: ``load_robot()``, the package
+        URDF's, which the callers record as /robot_description).
     """
 
-    def __init__(self, typestore: Typestore | None = None) -> None:
+    def __init__(self, typestore: Typestore | None = None, robot: Robot | None = None) -> None:
         self.typestore = typestore or make_typestore()
+        self.transforms = LinkTransforms(robot or load_robot())
         types = self.typestore.types
         self._header = types['std_msgs/msg/Header']
         self._clock = types['rosgraph_msgs/msg/Clock']
@@ -205,10 +319,14 @@ class MessageFactory:
         self._gait_state = types['iceskate_interfaces/msg/GaitState']
         self._dynamics = types['iceskate_interfaces/msg/JointDynamics']
         self._string = types['std_msgs/msg/String']
+        self._tf = types['tf2_msgs/msg/TFMessage']
+        self._transform_stamped = types['geometry_msgs/msg/TransformStamped']
+        self._transform = types['geometry_msgs/msg/Transform']
+        self._vector = types['geometry_msgs/msg/Vector3']
         self.names = list(COORDINATE_NAMES)
         self._build = {'/clock': self._clock_message, '/joint_states': self._joint_state_message,
                        '/head_pose': self._pose_message, '/gait_state': self._gait_state_message,
-                       '/joint_dynamics': self._dynamics_message}
+                       '/joint_dynamics': self._dynamics_message, '/tf': self._tf_message}
 
     def header(self, t: float, frame: str = '') -> Any:
         """std_msgs/Header at simulation time t."""
@@ -222,12 +340,21 @@ class MessageFactory:
     def record_messages(self, record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS
                         ) -> dict[str, Any]:
         """Topic -> message of one packed sample (see ``BagRecord``), for ``topics``."""
-        return self.built(record, record_numbers(record, topics), record_flags(record), topics)
+        numbers, flags = record_numbers(record, topics), record_flags(record)
+        return {topic: self._build[topic](record, self.tf_numbers(record) if topic == '/tf'
+                                          else numbers, flags) for topic in topics}
+
+    def tf_numbers(self, record: BagRecord) -> np.ndarray:
+        """The numbers of the record's /tf message: t [s], then the rows of its link poses
+        (``LinkTransforms.rows``, 7 each)."""
+        x = record.values
+        rows = self.transforms.rows(x[_Q], record.side, record.pivot)
+        return np.concatenate([x[:1], rows.ravel()])
 
     def built(self, record: BagRecord, numbers: np.ndarray, flags: RecordFlags,
               topics: tuple[str, ...] = RECORDED_TOPICS) -> dict[str, Any]:
         """Topic -> message of a record's discrete part (``record.values`` unused) with these
-        numbers and flags."""
+        numbers (``tf_numbers`` for /tf) and flags."""
         return {topic: self._build[topic](record, numbers, flags) for topic in topics}
 
     def _clock_message(self, record: BagRecord, n: np.ndarray, flags: RecordFlags) -> Any:
@@ -279,6 +406,17 @@ class MessageFactory:
                               source_names=[*record.sources, PASSIVE],
                               source_efforts=np.concatenate([efforts, n[_PASSIVE]]))
 
+    def _tf_message(self, record: BagRecord, n: np.ndarray, flags: RecordFlags) -> Any:
+        t = float(n[0])
+        rows = n[1:].reshape(-1, 7).tolist()
+        return self._tf(transforms=[
+            self._transform_stamped(
+                header=self.header(t, parent), child_frame_id=child,
+                transform=self._transform(translation=self._vector(x=x, y=y, z=z),
+                                          rotation=self._quaternion(x=qx, y=qy, z=qz, w=qw)))
+            for (parent, child), (x, y, z, qx, qy, qz, qw)
+            in zip(self.transforms.frames, rows, strict=True)])
+
     def description(self, urdf: str) -> Any:
         """std_msgs/String holding the URDF."""
         return self._string(data=urdf)
@@ -290,15 +428,17 @@ class _Layout(NamedTuple):
     template: bytes  # the bytes of a message of this key
     slots: np.ndarray  # float64 slots (8-byte units after the 4-byte CDR header) to write ...
     index: np.ndarray  # ... with these entries of the numbers
-    stamps: tuple[tuple[int, int], ...]  # (byte offset, entry): Time (sec, nanosec) of entry
+    stamps: tuple[tuple[int, tuple[int, ...]], ...]  # (entry, byte offsets): Time of entry
 
     def fill(self, numbers: np.ndarray) -> bytes:
         """The bytes of the message with these numbers."""
         out = bytearray(self.template)
         if self.slots.size:
             np.frombuffer(out, '<f8', (len(out) - 4) // 8, 4)[self.slots] = numbers[self.index]
-        for offset, entry in self.stamps:
-            _TIME.pack_into(out, offset, *stamp_parts(float(numbers[entry])))
+        for entry, offsets in self.stamps:
+            time = _TIME.pack(*stamp_parts(float(numbers[entry])))
+            for offset in offsets:
+                out[offset:offset + _TIME.size] = time
         return bytes(out)
 
 
@@ -320,7 +460,8 @@ class RecordEncoder:
     serialised by rosbags twice: as is, and with every number replaced by a distinct sentinel;
     where each sentinel lands gives the layout, which must reproduce both serialisations
     exactly (else that topic and key keep the plain rosbags path). Later records of the key
-    copy the bytes and write their numbers into them.
+    copy the bytes and write their numbers into them. The /tf message holds only numbers
+    (``tf_numbers``), so one layout of it serves every key.
 
     :param factory: the message factory (and its typestore).
     :param capacity: keys kept (the oldest learned is dropped first).
@@ -330,6 +471,7 @@ class RecordEncoder:
         self.factory = factory
         self.capacity = capacity
         self._layouts: dict[tuple, dict[str, _Layout | None]] = {}
+        self._keyless: dict[str, _Layout | None] = {}  # /tf's layout, the same for every key
 
     def encode(self, record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS
                ) -> dict[str, bytes]:
@@ -344,12 +486,22 @@ class RecordEncoder:
                 del self._layouts[next(iter(self._layouts))]
         out = {}
         for topic in topics:
-            if topic not in layouts:
-                layouts[topic] = self._learn(topic, record, numbers, flags)
-            layout = layouts[topic]
-            out[topic] = (layout.fill(numbers) if layout is not None
-                          else self._serialize(topic, record, numbers, flags))
+            if topic == '/tf':
+                out[topic] = self._bytes(self._keyless, topic, record,
+                                         self.factory.tf_numbers(record), flags)
+            else:
+                out[topic] = self._bytes(layouts, topic, record, numbers, flags)
         return out
+
+    def _bytes(self, layouts: dict[str, _Layout | None], topic: str, record: BagRecord,
+               numbers: np.ndarray, flags: RecordFlags) -> bytes:
+        """The bytes of ``topic``'s message through its layout in ``layouts`` (learned first if
+        missing; rosbags if none fits)."""
+        if topic not in layouts:
+            layouts[topic] = self._learn(topic, record, numbers, flags)
+        layout = layouts[topic]
+        return (layout.fill(numbers) if layout is not None
+                else self._serialize(topic, record, numbers, flags))
 
     def _serialize(self, topic: str, record: BagRecord, numbers: np.ndarray,
                    flags: RecordFlags) -> bytes:
@@ -375,8 +527,12 @@ class RecordEncoder:
                     offset = probe.find(pattern, offset + 1)
         if any((offset - 4) % 8 for offset, _ in slots):
             return None
+        times: dict[int, list[int]] = {}
+        for offset, entry in stamps:
+            times.setdefault(entry, []).append(offset)
         layout = _Layout(actual, np.array([(o - 4) // 8 for o, _ in slots], dtype=np.intp),
-                         np.array([e for _, e in slots], dtype=np.intp), tuple(stamps))
+                         np.array([e for _, e in slots], dtype=np.intp),
+                         tuple((entry, tuple(offsets)) for entry, offsets in times.items()))
         try:
             fits = layout.fill(probe_numbers) == probe and layout.fill(numbers) == actual
         except SimulationError:  # a stamp of a non-finite number: ambiguous sentinels
