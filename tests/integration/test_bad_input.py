@@ -137,7 +137,9 @@ def test_bad_commands_are_rejected_and_never_reach_the_state(
     ('simulator', 'control_timeout: -1.0', "parameter 'control_timeout'"),
     ('simulator', 'lockstep: maybe', "parameter 'lockstep'"),
     ('visual_lifting', 'scene_name: stand', "unknown parameter 'scene_name'"),
-    ('gait_manager', 'scene: no_such_scene', "parameter scene='no_such_scene'"),
+    ('gait_manager', 'posture: {stiffness: -5.0}', 'posture.stiffness'),
+    ('gait_manager', 'enabled: [posture, gait]', 'enabled entries must be one of'),
+    ('visual_lifting', 'kp: [1.0, 2.0]', 'kp must have 3 entries'),
 ])
 def test_bad_parameter_file_exits_non_zero_naming_the_parameter(
         tmp_path, ros_env, node, parameters, expected):

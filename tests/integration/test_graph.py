@@ -21,28 +21,28 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 from rosbags.highlevel import AnyReader  # noqa: E402
 
+from iceskate_bringup import graph  # noqa: E402
 from iceskate_bringup.graph import (  # noqa: E402
     graph_nodes,
     realtime_scheduling,
     ros_environment,
     run_graph,
 )
-from iceskate_bringup.scene import load_scene  # noqa: E402
-from iceskate_sim import graph  # noqa: E402
-from iceskate_sim.lockstep import sources_by_controller  # noqa: E402
+from iceskate_bringup.scene import load_scene, scene_sources  # noqa: E402
 from iceskate_sim.ros_conversions import stamp_to_ns  # noqa: E402
 
 TESTS = Path(__file__).resolve().parent
 TINY = TESTS / 'data' / 'tiny_stand.yaml'
 PERIOD_NS = 1_000_000
 N_PERIODS = 30
-BAG_TOPICS = {'/clock', '/joint_states', '/head_pose', '/gait_state', '/joint_dynamics',
+BAG_TOPICS = {'/clock', '/joint_states', '/head_pose', '/gait_state', '/joint_dynamics', '/tf',
               '/robot_description'}
 
 
 def test_run_leaves_the_headless_files_and_exits_cleanly(graph_run):
-    assert sorted(p.name for p in graph_run.out.iterdir()) == sorted(
-        p.name for p in graph_run.headless.iterdir())
+    # the nodes started by hand: the run's parameter files, and no picture (run_graph draws it)
+    assert {p.name for p in graph_run.out.iterdir()} == (
+        {p.name for p in graph_run.headless.iterdir()} - {'summary.png'} | {'params'})
     assert set(graph_run.exit_codes.values()) == {0}, graph_run.exit_codes
     assert graph_run.stats['periods'] == N_PERIODS and graph_run.stats['rejected'] == 0
 
@@ -97,7 +97,7 @@ def test_live_topics_carry_every_instant_with_matching_stamps(graph_run):
     for topic in ('/gait_state', '/head_pose'):
         assert [stamp_to_ns(msg.header.stamp) for msg in m[topic]][-len(stamps):] == stamps
     assert {msg.header.frame_id for msg in m['/head_pose']} == {'world'}
-    sources = set(sources_by_controller(load_scene(TINY)))  # one command per node
+    sources = set(scene_sources(load_scene(TINY)))  # one command per node
     answers: dict[int, set[str]] = {}
     for cmd in m['/effort_commands']:
         answers.setdefault(stamp_to_ns(cmd.header.stamp), set()).add(cmd.source)
@@ -175,8 +175,10 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
         timeout=120)
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)['failure'] is None
-    assert sorted(p.name for p in out.iterdir()) == sorted(
-        p.name for p in graph_run.headless.iterdir())
+    assert {p.name for p in out.iterdir()} == (
+        {p.name for p in graph_run.headless.iterdir()} | {'params'})
+    assert sorted(p.name for p in (out / 'params').iterdir()) == [
+        'gait_manager.yaml', 'simulator.yaml', 'visual_lifting.yaml']
     assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
 
 
@@ -207,7 +209,7 @@ def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(
     metrics = run_graph(str(TINY), out, domain_id=ros_domain_id, timeout=120.0, rt_priority=10)
     assert metrics['failure'] is None
     assert sorted(name for name, *_ in started) == sorted(
-        ['simulator', *sources_by_controller(load_scene(TINY))])
+        ['simulator', *scene_sources(load_scene(TINY))])
     assert all(policy == os.SCHED_FIFO and param.sched_priority == 10
                for _, policy, param in started)
     assert (os.sched_getscheduler(0), os.sched_getparam(0)) == before  # this thread: restored

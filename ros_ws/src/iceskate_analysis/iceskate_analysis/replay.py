@@ -48,8 +48,14 @@ class ReplayNode(Node):
                 continue
             qos = {'/clock': CLOCK_QOS, '/robot_description': LATCHED_QOS}.get(
                 conn.topic, QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
+            try:
+                msg_class = message_class(conn.msgtype)
+            except ImportError:  # e.g. /tf: no tf2_msgs Python package is installed here
+                self.get_logger().warning(f'{conn.topic} ({conn.msgtype}) is not replayed: '
+                                          'its message package is not installed')
+                continue
             self.publishers_by_topic[conn.topic] = self.create_publisher(
-                message_class(conn.msgtype), conn.topic, qos)
+                msg_class, conn.topic, qos)
         self._clock = None
         if '/clock' not in self.publishers_by_topic:
             self._clock = self.create_publisher(Clock, '/clock', CLOCK_QOS)
@@ -67,7 +73,9 @@ class ReplayNode(Node):
     def play(self, rate: float | None) -> int:
         """Publish every message; pace to ``rate`` x recorded time (None: no pacing)."""
         start_wall, first, last_clock = time.monotonic(), None, None
-        for conn, timestamp, raw in self.reader.messages():
+        topics = list(self.publishers_by_topic)
+        connections = [c for c in self.reader.connections if c.topic in topics]
+        for conn, timestamp, raw in self.reader.messages(connections=connections):
             first = timestamp if first is None else first
             if rate is not None:
                 delay = start_wall + (timestamp - first) / 1e9 / rate - time.monotonic()

@@ -122,14 +122,17 @@ _ARRAY_TYPES = {bool: Parameter.Type.BOOL_ARRAY, int: Parameter.Type.INTEGER_ARR
                 float: Parameter.Type.DOUBLE_ARRAY, str: Parameter.Type.STRING_ARRAY}
 
 
-def _descriptor(name: str, ros_type: Parameter.Type, rules: Rules) -> ParameterDescriptor:
-    """The descriptor of a field: description with unit, range and choices, the type."""
+def _descriptor(name: str, ros_type: Parameter.Type, rules: Rules, optional: bool
+                ) -> ParameterDescriptor:
+    """The descriptor of a field: description with unit, range and choices, the type (no ROS
+    range for an optional number: its NaN means unset; the rules still check it)."""
     text = rules.description + (f' [{rules.unit}]' if rules.unit else '')
     if rules.choices:
         text += f'; one of {list(rules.choices)}'
     descriptor = ParameterDescriptor(name=name, type=ros_type.value, description=text)
     if rules.low is not None or rules.high is not None:
         descriptor.additional_constraints = f'range {rules.bounds_text()}'
+    if not optional and (rules.low is not None or rules.high is not None):
         low = rules.low if rules.low is not None else -sys.float_info.max
         high = rules.high if rules.high is not None else sys.float_info.max
         if ros_type == Parameter.Type.DOUBLE:
@@ -155,7 +158,7 @@ def declare_parameters(node: Node, cls: type[T], error: type[Exception],
     defaults = flatten(cls())
     for name, (tp, rules, _) in leaf_fields(cls).items():
         ros_type = _ros_type(tp)
-        descriptor = _descriptor(name, ros_type, rules)
+        descriptor = _descriptor(name, ros_type, rules, optional_inner(tp) is not tp)
         value = defaults[name]
         try:
             node.declare_parameter(name, value if value != [] else ros_type, descriptor)

@@ -22,6 +22,7 @@ from typing import Any
 
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -70,6 +71,9 @@ class SimulatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **kwargs)
         c = self.config = declare_all(self, PARAMETERS, extra=self._declare_controllers)
+        if not c.scene:
+            raise ConfigError('parameter scene: the path of a scene YAML is needed (run_scene '
+                              'SCENE --ros writes it into DIR/params/simulator.yaml)')
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
@@ -110,7 +114,10 @@ class SimulatorNode(Node):
 
     def _controllers(self, scene: Scene) -> dict[str, tuple[str, ...]]:
         """Each controller node with its sources (parameters, else the scene's inputs)."""
-        names = list(self.get_parameter('controllers').value or []) or list(scene.inputs)
+        try:
+            names = list(self.get_parameter('controllers').value) or list(scene.inputs)
+        except ParameterUninitializedException:  # not given: the scene's controller blocks
+            names = list(scene.inputs)
         out = {}
         for name in names:
             sources = (self.get_parameter(f'sources.{name}').value
