@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
-from iceskate_sim import recording, runner
-from iceskate_sim.control_stack import ControlStack
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import load_scene
+from iceskate_sim import recording
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import BATCH, BagRecorder, Sample
 from iceskate_sim.robot import load_robot
-from iceskate_sim.runner import advance_and_sample, run
-from iceskate_sim.scene import load_scene
+from iceskate_sim.session import Session
 from iceskate_sim.simulation import Simulator
 
 PERIODS = 2 * BATCH + 17  # two full batches and a partial one
@@ -24,11 +25,9 @@ PERIODS = 2 * BATCH + 17  # two full batches and a partial one
 def samples() -> list[Sample]:
     """The first periods of the stand scene (push, visual lifting, posture stabiliser)."""
     scene = replace(load_scene('stand'), duration=PERIODS * 1e-3)
-    robot = load_robot()
-    sim = Simulator(robot, scene.simulator, scene.initial)
-    stack = ControlStack(scene, robot, sim.observation())
-    return [advance_and_sample(sim, scene, stack.commands(sim.observation()))
-            for _ in range(PERIODS)]
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    return [session.step(stack.commands(session.observation())) for _ in range(PERIODS)]
 
 
 def _messages(bag: pathlib.Path) -> list[tuple[str, int, bytes]]:
@@ -66,11 +65,13 @@ def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, sa
 def test_a_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path, monkeypatch):
     failing_at = BATCH + 5
 
-    def advance_until_failure(sim, scene, commands):
+    advance = Simulator.advance
+
+    def advance_until_failure(sim, *args):
         if sim.stats.control_periods == failing_at:
             raise SimulationError('diverged on purpose')
-        return advance_and_sample(sim, scene, commands)
-    monkeypatch.setattr(runner, 'advance_and_sample', advance_until_failure)
+        return advance(sim, *args)
+    monkeypatch.setattr(Simulator, 'advance', advance_until_failure)
     with pytest.raises(SimulationError, match='on purpose'):
         run(replace(load_scene('stand'), duration=0.5), tmp_path, progress=False)
     clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
@@ -82,10 +83,9 @@ def test_a_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path, 
 def skate_records() -> list[recording.BagRecord]:
     """1.5 s of the skate scene: support exchanges, heel strikes, several gait modes."""
     scene = load_scene('skate')
-    robot = load_robot()
-    sim = Simulator(robot, scene.simulator, scene.initial)
-    stack = ControlStack(scene, robot, sim.observation())
-    return [recording.bag_record(advance_and_sample(sim, scene, stack.commands(sim.observation())))
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    return [recording.bag_record(session.step(stack.commands(session.observation())))
             for _ in range(1500)]
 
 
