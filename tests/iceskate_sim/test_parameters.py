@@ -129,7 +129,7 @@ def test_values_are_normalised():
     ({'optional': -1.0}, 'optional must be >= 0, got -1.0'),
     ({'optional': 'high'}, "optional must be a number, got 'high'"),
     ({'colour': 'pink'}, "colour must be one of ['red', 'green', 'blue'], got 'pink'"),
-    ({'colour': 1}, "colour must be text, got 1"),
+    ({'colour': 1}, 'colour must be text, got 1'),
     ({'gains': [1.0, 2.0]}, 'gains must have 3 entries, got 2'),
     ({'gains': 1.0}, 'gains must be a list, got 1.0'),
     ({'gains': '123'}, "gains must be a list, got '123'"),

@@ -237,3 +237,17 @@ def test_every_thread_of_a_node_started_under_rt_priority_is_sched_fifo(needs_fi
         assert {(int(f[37]), int(f[38])) for f in fields.values()} == {(10, os.SCHED_FIFO)}
     finally:
         graph.stop(process)  # maybe still starting up: its exit code is not this test's
+
+
+def test_the_whole_skate_scene_through_the_graph_equals_the_headless_run(
+        tmp_path, ros_domain_id, assert_same_trajectory):
+    """15 s, 40 support exchanges, every law and source: the three processes give the headless
+    trajectory to 1e-12 and the same events (the controllers see the same stamped times)."""
+    from iceskate_bringup.runner import run
+    headless = run(load_scene('skate'), tmp_path / 'headless', progress=False)
+    metrics = run_graph('skate', tmp_path / 'ros', domain_id=ros_domain_id, timeout=600.0)
+    assert metrics['failure'] is None and metrics['steps'] == headless['steps'] >= 30
+    assert_same_trajectory(tmp_path / 'ros' / 'trajectory.npz',
+                           tmp_path / 'headless' / 'trajectory.npz')
+    assert (json.loads((tmp_path / 'ros' / 'events.json').read_text())
+            == json.loads((tmp_path / 'headless' / 'events.json').read_text()))

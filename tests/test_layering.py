@@ -1,0 +1,143 @@
+"""The packages stay layered: every import of another workspace package is declared, and
+neither the packages nor the modules inside one import each other in a cycle.
+
+Every import statement counts, also those inside functions (an import deferred to run time is
+still a dependency). Package dependencies are the ``<depend>``/``<exec_depend>`` entries of each
+``package.xml``; a Python package's import name is its directory under ``ros_ws/src/<pkg>/``
+(``iceskate_interfaces`` is the ``interfaces`` folder's messages).
+"""
+
+import ast
+from pathlib import Path
+import xml.etree.ElementTree as ET
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / 'ros_ws' / 'src'
+
+
+def _packages() -> dict[str, Path]:
+    """ROS package name -> its folder."""
+    return {ET.parse(xml).getroot().findtext('name'): xml.parent
+            for xml in sorted(SRC.glob('*/package.xml'))}
+
+
+PACKAGES = _packages()
+
+
+def _modules(package: str) -> dict[str, Path]:
+    """Dotted module name -> file, of a package's Python modules (none for a message package)."""
+    root = PACKAGES[package] / package
+    if not (root / '__init__.py').is_file():
+        return {}
+    out = {}
+    for path in sorted(root.rglob('*.py')):
+        parts = path.relative_to(PACKAGES[package]).with_suffix('').parts
+        out['.'.join(parts[:-1] if parts[-1] == '__init__' else parts)] = path
+    return out
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """Every module name ``path`` imports (absolute, also inside functions)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                anchor = module.split('.')[:len(module.split('.')) - node.level + (
+                    1 if path.name == '__init__.py' else 0)]
+                base = '.'.join([*anchor, base] if base else anchor)
+            names.add(base)
+            names.update(f'{base}.{alias.name}' for alias in node.names)
+    return names
+
+
+def _declared(package: str) -> set[str]:
+    root = ET.parse(PACKAGES[package] / 'package.xml').getroot()
+    return {e.text for tag in ('depend', 'exec_depend', 'build_depend') for e in root.iter(tag)}
+
+
+def _package_graph() -> dict[str, set[str]]:
+    """Workspace package -> the workspace packages its modules import."""
+    graph: dict[str, set[str]] = {}
+    for package in PACKAGES:
+        used = set()
+        for module, path in _modules(package).items():
+            for name in _imports(path, module):
+                top = name.split('.')[0]
+                if top in PACKAGES and top != package:
+                    used.add(top)
+        graph[package] = used
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A cycle of ``graph`` as a list of nodes (first == last), or None."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)):
+            return found
+    return None
+
+
+def test_the_workspace_has_the_layered_packages():
+    assert {'iceskate_interfaces', 'iceskate_sim', 'visual_lifting', 'gait_manager',
+            'iceskate_bringup', 'iceskate_analysis'} <= set(PACKAGES)
+
+
+@pytest.mark.parametrize('package', sorted(PACKAGES))
+def test_every_workspace_import_is_declared(package):
+    undeclared = _package_graph()[package] - _declared(package)
+    assert not undeclared, f'{package} imports {sorted(undeclared)} without declaring them'
+
+
+def test_no_cycle_between_packages():
+    assert _cycle(_package_graph()) is None
+
+
+def test_the_core_and_the_laws_stay_below_the_bringup():
+    graph = _package_graph()
+    assert graph['iceskate_sim'] <= {'iceskate_interfaces'}
+    for law in ('visual_lifting', 'gait_manager'):
+        assert graph[law] <= {'iceskate_sim', 'iceskate_interfaces'}, law
+
+
+@pytest.mark.parametrize('package', sorted(PACKAGES))
+def test_no_cycle_between_the_modules_of_a_package(package):
+    modules = _modules(package)
+    graph = {}
+    for module, path in modules.items():
+        targets = set()
+        for name in _imports(path, module):
+            while name and name not in modules:  # 'pkg.mod.Name' -> 'pkg.mod'
+                name = name.rpartition('.')[0]
+            if name and name != module and name != package:
+                targets.add(name)
+        graph[module] = targets
+    assert _cycle(graph) is None
+
+
+def test_the_checks_find_a_cycle_and_a_deferred_import(tmp_path):
+    assert _cycle({'a': {'b'}, 'b': {'c'}, 'c': {'a'}}) == ['a', 'b', 'c', 'a']
+    assert _cycle({'a': {'b'}, 'b': set()}) is None
+    probe = tmp_path / 'probe.py'
+    probe.write_text('def f():\n    from gait_manager.law import SOURCES\n'
+                     'from .session import Session\n')
+    names = _imports(probe, 'iceskate_sim.probe')
+    assert {'gait_manager.law', 'iceskate_sim.session.Session'} <= names
