@@ -189,6 +189,7 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
     """
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
+    started = time.time()
     specs = graph_nodes(scene_arg, out, duration, **simulator_parameters)
     env = ros_environment(domain_id)
     print(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}', file=sys.stderr)
@@ -205,10 +206,20 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
             codes = [stop(p) for p in reversed(processes)]
         code = codes[-1]
         if why:
-            _raise(out, env, why)
+            _raise(out, env, why, started)
     if code != 0:
-        _raise(out, env, f'the simulator exited with {code}')
+        _raise(out, env, f'the simulator exited with {code}', started)
+    _write_summary(out)
     return json.loads((out / 'metrics.json').read_text())
+
+
+def _write_summary(out: pathlib.Path, since: float | None = None) -> None:
+    """summary.png from the files the simulator wrote; none if it wrote no trajectory (since
+    ``since``, a time.time() before the run: a failed run may have written nothing)."""
+    trajectory = out / 'trajectory.npz'
+    if trajectory.is_file() and (since is None or trajectory.stat().st_mtime >= since - 0.1):
+        from iceskate_analysis.summary import write_summary
+        write_summary(out)
 
 
 def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: float | None,
@@ -232,7 +243,9 @@ def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: flo
     return ''
 
 
-def _raise(out: pathlib.Path, env: dict[str, str], what: str) -> None:
+def _raise(out: pathlib.Path, env: dict[str, str], what: str, started: float) -> None:
+    with contextlib.suppress(SimulationError):  # the picture of the failed run, if it has one
+        _write_summary(out, started)
     metrics = out / 'metrics.json'
     failure = json.loads(metrics.read_text()).get('failure') if metrics.is_file() else None
     log = pathlib.Path(env['ROS_LOG_DIR']) / 'simulator.log'

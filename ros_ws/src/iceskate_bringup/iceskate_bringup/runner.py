@@ -52,6 +52,9 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict[s
     finally:
         bar.close()
         metrics = session.finish()
+    if out is not None and len(session.trajectory):  # also after a fall or a physics error
+        from iceskate_analysis.summary import write_summary
+        write_summary(out)
     if session.error is not None:
         raise session.error
     return metrics
@@ -105,11 +108,24 @@ def main(argv: list[str] | None = None) -> int:
             metrics = run(scene, args.out, progress=not args.quiet)
     except SimulationError as exc:
         print(f'run_scene: error: {exc}', file=sys.stderr)
+        _print_outputs(args.out)
         return 1
     summary = {k: metrics[k] for k in ('scene', 'sim_time_s', 'steps', 'fell', 'failure',
                                        'forward_distance_m', 'real_time_factor')}
     print(json.dumps(summary, indent=2))
+    _print_outputs(args.out)
     return 0
+
+
+OUTPUTS = ('metrics.json', 'events.json', 'trajectory.npz', 'bag/', 'summary.png')
+
+
+def _print_outputs(out: pathlib.Path) -> None:
+    """Where to look, after the JSON (on stderr: stdout stays the JSON alone)."""
+    present = [name for name in OUTPUTS if (out / name.rstrip('/')).exists()]
+    if present:
+        sys.stdout.flush()  # the JSON first, also when stdout is a pipe
+        print(f'outputs in {out}: {", ".join(present)}', file=sys.stderr)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,223 @@
+"""The picture of a run: ``summary.png`` from the files the runner writes (no bag, no ROS).
+
+``write_summary(out_dir)`` reads ``trajectory.npz`` and ``metrics.json`` of a run folder and
+draws one figure whose panels share the time axis:
+
+1. head height z [m] against the visual-lifting target;
+2. head pitch [deg] against its target;
+3. gait mode (Table 2, 1-20) as a step plot, the support exchanges marked and the spans on the
+   left foot shaded;
+4. shoulder angles q11 (right) and q14 (left) [deg], the 4th step (arm-swing window) marked;
+5. forward speed of the head, d(head y)/dt by ``np.gradient`` [m/s], with the target's.
+
+The title holds the scene, simulated time, steps, forward distance and the fall or failure.
+The support exchanges (dotted) are drawn in every panel. Long runs are decimated for drawing
+(min/max per bucket, so peaks and spikes stay visible); the mode plot uses its change points.
+matplotlib (Agg, no pyplot state) is imported on the first call only.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import textwrap
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from iceskate_sim.errors import SimulationError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = ['SUMMARY_NAME', 'write_summary']
+
+SUMMARY_NAME = 'summary.png'
+ARM_SWING_FROM_STEP = 3  # step_index >= 3: the 4th step, as iceskate_sim.metrics
+MAX_POINTS = 3000  # per drawn series (decimated above)
+_DPI = 100
+_SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # first mode: swing
+_COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
+
+
+def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
+    """Draw ``out_dir/summary.png`` from ``out_dir/trajectory.npz`` and ``metrics.json``.
+
+    :return: the path of the PNG.
+    :raises SimulationError: when a file is missing, lacks a column or holds no sample.
+    """
+    out_dir = pathlib.Path(out_dir)
+    missing = [name for name in ('trajectory.npz', 'metrics.json')
+               if not (out_dir / name).is_file()]
+    if missing:
+        raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
+    metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
+    with np.load(out_dir / 'trajectory.npz') as npz:
+        absent = [key for key in _COLUMNS if key not in npz.files]
+        if absent:
+            raise SimulationError(f'{out_dir / "trajectory.npz"} lacks the column(s) {absent}')
+        a = {key: npz[key] for key in _COLUMNS}
+    if a['t'].size == 0:
+        raise SimulationError(f'{out_dir / "trajectory.npz"} holds no sample')
+    path = out_dir / SUMMARY_NAME
+    _draw(a, metrics, path)
+    return path
+
+
+def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    t, psi, psi_d = a['t'], a['psi'], a['psi_d']
+    steps = a['step_index']
+    exchanges = t[np.flatnonzero(np.diff(steps) != 0) + 1]
+    rms = metrics.get('head_error_rms') or {}
+    fig = Figure(figsize=(10.0, 12.0))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(5, 1, sharex=True, gridspec_kw={'height_ratios': (1, 1, 1.35, 1, 1)})
+    fig.subplots_adjust(left=0.1, right=0.955, top=0.925, bottom=0.05, hspace=0.22)
+    head, failure = _title(metrics, t)
+    fig.text(0.1, 0.982, head, fontsize=11, weight='bold', va='top')
+    fig.text(0.1, 0.960, failure, fontsize=9, va='top',
+             color='firebrick' if metrics.get('fell') else 'darkgreen')
+
+    ax = axes[0]
+    _line(ax, t, psi[:, 1], color='tab:blue', lw=1.1, label='head z' + _rms(rms, 'z', 1e3, 'mm'))
+    _line(ax, t, psi_d[:, 1], color='k', lw=1.0, ls='--', label='target z_d')
+    ax.set_ylabel('head height z [m]')
+    ax.ticklabel_format(axis='y', useOffset=False)
+    _robust_limits(ax, (psi[:, 1], psi_d[:, 1]))
+
+    ax = axes[1]
+    _line(ax, t, np.degrees(psi[:, 2]), color='tab:purple', lw=1.0,
+          label='head pitch' + _rms(rms, 'pitch', np.degrees(1.0), 'deg'))
+    _line(ax, t, np.degrees(psi_d[:, 2]), color='k', lw=1.0, ls='--', label='target')
+    ax.set_ylabel('head pitch [deg]')
+    _robust_limits(ax, (np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2])))
+
+    _mode_panel(axes[2], t, a['mode'], a['side'], exchanges)
+
+    ax = axes[3]
+    q = a['q']
+    _line(ax, t, np.degrees(q[:, 11]), color='tab:red', lw=1.4, label='q11 right shoulder')
+    _line(ax, t, np.degrees(q[:, 14]), color='tab:blue', lw=1.1, label='q14 left shoulder')
+    late = np.flatnonzero(steps >= ARM_SWING_FROM_STEP)
+    if late.size and late[0] > 0:
+        ax.axvline(t[late[0]], color='k', lw=1.0, ls='--', label='4th step (arm-swing window)')
+    ax.set_ylabel('shoulder angle [deg]')
+    _robust_limits(ax, (np.degrees(q[:, 11]), np.degrees(q[:, 14])))
+
+    ax = axes[4]
+    if t.size >= 2:
+        speed = np.gradient(psi[:, 0], t)
+        target = np.gradient(psi_d[:, 0], t)
+        _line(ax, t, speed, color='tab:green', lw=1.0, label='head dy/dt')
+        _line(ax, t, target, color='k', lw=1.0, ls='--', label='target dy_d/dt')
+        if t[-1] > t[0]:
+            mean = (psi[-1, 0] - psi[0, 0]) / (t[-1] - t[0])
+            ax.axhline(mean, color='darkgreen', lw=0.9, ls=':',
+                       label=f'mean {round(mean, 2) + 0.0:.2f} m/s')  # + 0.0: no '-0.00'
+        _robust_limits(ax, (speed, target))
+    ax.set_ylabel('forward speed\nd(head y)/dt [m/s]')
+    ax.set_xlabel('time t [s]')
+
+    for ax in axes:
+        if exchanges.size:
+            ax.vlines(exchanges, 0.0, 1.0, transform=ax.get_xaxis_transform(), colors='0.65',
+                      lw=0.6, linestyles=':', zorder=0)
+        if ax is not axes[2]:
+            ax.grid(True, axis='y', color='0.9', lw=0.6)
+        ax.tick_params(labelsize=8)
+        ax.yaxis.label.set_size(9)
+        ax.legend(loc='lower right', bbox_to_anchor=(1.0, 0.99), ncol=4, fontsize=7.5,
+                  frameon=False, borderaxespad=0.0, handlelength=2.2)
+    axes[-1].set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1e-3)
+    fig.align_ylabels(axes)
+    fig.savefig(path, dpi=_DPI)
+
+
+def _rms(rms: dict[str, float], key: str, scale: float, unit: str) -> str:
+    value = rms.get(key)
+    return f' (error RMS {value * scale:.3g} {unit})' if value is not None else ''
+
+
+def _title(metrics: dict[str, Any], t: np.ndarray) -> tuple[str, str]:
+    """The two title lines: what ran, and how it ended."""
+    duration = metrics.get('sim_time_s', float(t[-1] - t[0]))
+    scene, steps = metrics.get('scene', '?'), metrics.get('steps', '?')
+    head = f'{scene}: {duration:.2f} s simulated, {steps} step{"" if steps == 1 else "s"}'
+    distance = metrics.get('forward_distance_m')
+    if distance is not None:
+        head += f', {round(distance, 2) + 0.0:.2f} m forward (head y)'
+    rtf = metrics.get('real_time_factor')
+    rtf_text = (f' (real-time factor {rtf:.2f})'
+                if isinstance(rtf, int | float) and np.isfinite(rtf) else '')
+    if not metrics.get('fell'):
+        return head, 'no fall, no failure' + rtf_text
+    failure = ' '.join(str(metrics.get('failure') or 'unknown').split())
+    return head, textwrap.shorten(f'FELL / FAILED: {failure}', 170, placeholder=' …')
+
+
+def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """At most ~``max_points`` samples of (t, y): the min and the max of each bucket, in time
+    order (a plot of them looks like the full series at figure resolution)."""
+    n = t.size
+    if n <= max_points:
+        return t, y
+    size = int(np.ceil(2 * n / max_points))
+    m = n // size
+    body = y[:m * size].reshape(m, size)
+    offsets = np.arange(m) * size
+    lo = offsets + np.argmin(body, axis=1)
+    hi = offsets + np.argmax(body, axis=1)
+    keep = np.unique(np.concatenate([lo, hi, np.arange(m * size, n), [0, n - 1]]))  # sorted
+    return t[keep], y[keep]
+
+
+def _line(ax: Axes, t: np.ndarray, y: np.ndarray, **style: Any) -> None:
+    ax.plot(*_decimate(t, np.asarray(y, dtype=float)), **style)
+
+
+def _robust_limits(ax: Axes, series: tuple[np.ndarray, ...]) -> None:
+    """Clip the y range to the bulk of the data (1st-99th percentile, widened by its span)
+    when a few samples (a divergence) reach more than 50 times as far."""
+    values = np.concatenate([np.asarray(x, dtype=float).ravel() for x in series])
+    values = values[np.isfinite(values)]
+    if values.size < 20:
+        return
+    lo, hi = np.percentile(values, [1.0, 99.0])
+    bulk = hi - lo
+    if bulk > 0 and values.max() - values.min() > 50.0 * bulk:
+        ax.set_ylim(lo - bulk, hi + bulk)
+        ax.text(0.005, 0.04, f'y range clipped (data {values.min():.6g} to {values.max():.6g})',
+                transform=ax.transAxes, fontsize=7, color='0.35', va='bottom')
+
+
+def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
+                exchanges: np.ndarray) -> None:
+    """Gait mode as a step plot from its change points; left-support spans shaded, exchanges
+    marked by triangles along the top; the swing-foot state of each band of 4 on the right."""
+    end = t[-1] + (t[-1] - t[-2] if t.size >= 2 else 1e-3)
+    changes = np.flatnonzero(np.diff(mode) != 0) + 1
+    starts = np.concatenate([[0], changes])
+    ax.step(np.append(t[starts], end), np.append(mode[starts], mode[-1]), where='post',
+            color='tab:orange', lw=1.3, label='gait mode')
+    left = (side == 1).astype(np.int8)
+    if left.any():
+        ax.fill_between(np.append(t, end), 0.0, 1.0, where=np.append(left, left[-1]) > 0,
+                        step='post', transform=ax.get_xaxis_transform(), color='tab:blue',
+                        alpha=0.08, lw=0, label='support on the left foot')
+    if exchanges.size:
+        ax.plot(exchanges, np.full(exchanges.size, 20.9), 'v', color='0.3', ms=4,
+                label=f'support exchange ({exchanges.size})')
+    ax.set_ylim(0.4, 21.4)
+    visited = set(mode.tolist()) | {1, 20}
+    ax.set_yticks(range(1, 21), [str(m) if m in visited else '' for m in range(1, 21)])
+    ax.tick_params(axis='y', labelsize=7)
+    for m, code in _SWING_GROUPS:
+        if m > 1:
+            ax.axhline(m - 0.5, color='0.8', lw=0.6, zorder=0)
+        ax.text(1.006, m + 1.5, code, transform=ax.get_yaxis_transform(), fontsize=7.5,
+                color='0.35', va='center', ha='left')
+    ax.set_ylabel('gait mode [no. 1-20]\n(labelled: visited)')
