@@ -45,13 +45,16 @@ def stamp_time(t: float) -> float:
 def observation_of(s: HybridState) -> Observation:
     """The controller's view of a hybrid state (copies of q and v).
 
-    Its times are those a message carries: rounded to whole nanoseconds (the resolution of a
-    ROS stamp), so a controller computes the same torque in-process as from a GaitState.
+    It holds what a GaitState message carries, so a controller computes the same torque
+    in-process as from the message: times rounded to whole nanoseconds (a ROS stamp's
+    resolution), and the pivot 'toe' while the sole is flat (q1 locked: no pivot is sent, and
+    the kinematics rooted at either edge agree up to rounding).
     """
     touchdown = stamp_time(s.t_touchdown) if math.isfinite(s.t_touchdown) else s.t_touchdown
+    pivot = s.contact.pivot if s.mode.q1_active else 'toe'
     return Observation(stamp_time(s.t), s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
-                       s.contact.pivot, s.step_index, stamp_time(s.t_exchange),
-                       s.contact.heel_anchor_y, touchdown)
+                       pivot, s.step_index, stamp_time(s.t_exchange), s.contact.heel_anchor_y,
+                       touchdown)
 
 
 @dataclass(frozen=True)
