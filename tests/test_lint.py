@@ -9,7 +9,8 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BUILD_LOGS = REPO_ROOT / 'ros_ws' / 'log' / 'latest_build'
-OUR_PACKAGES = ('iceskate_interfaces', 'iceskate_sim', 'visual_lifting', 'gait_manager')
+OUR_PACKAGES = ('iceskate_interfaces', 'iceskate_native', 'iceskate_sim', 'visual_lifting',
+                'gait_manager')
 
 
 def _ruff_command() -> list[str]:

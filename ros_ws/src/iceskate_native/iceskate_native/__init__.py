@@ -1,0 +1,32 @@
+"""Native (C++) kernels of the iceskate simulator, with their Python bindings.
+
+The C++ code is the static library ``iceskate_native_core`` (``src/``, ``include/``) on
+Pinocchio's C++ API; ``iceskate_native._kernel`` is its nanobind module. Models cross the
+boundary as Pinocchio's binary archive: the same ``pinocchio.Model`` that Python built (for
+instance ``iceskate_sim.robot.load_robot().support_model('right', 'toe').model``) is
+deserialised once into a ``RobotModel`` on the C++ side::
+
+    native = iceskate_native.load_model(support.model)
+    M = iceskate_native.crba_of(native, q)
+
+Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
+kernel raises ``NativeError`` (a ``RuntimeError``), which the simulator wraps in its own error.
+"""
+
+from ._kernel import NativeError, RobotModel, crba_of
+
+__all__ = ['NativeError', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+
+
+def model_bytes(model) -> bytes:
+    """Return Pinocchio's binary archive of ``model`` (a ``pinocchio.Model``)."""
+    import pinocchio  # deferred: importing the kernel alone does not load Pinocchio's Python side
+
+    buffer = pinocchio.serialization.StreamBuffer()
+    model.saveToBinary(buffer)
+    return bytes(buffer.tobytes())
+
+
+def load_model(model) -> RobotModel:
+    """Return the C++ copy of ``model`` (a ``pinocchio.Model``), to pass to the kernels."""
+    return RobotModel.from_bytes(model_bytes(model))
