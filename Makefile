@@ -54,7 +54,7 @@ clean:
 distclean: clean
 	rm -rf $(ROOT)/.venv
 
-# Benchmarks (issue 8): outputs in runs/bench; BENCH_ARGS=--quick for a ~1-2 min version.
+# Benchmarks (docs/performance.md): outputs in runs/bench; BENCH_ARGS=--quick for a ~1-2 min version.
 BENCH_ARGS ?=
 bench: setup
 	$(IN_ENV) python benchmarks/bench_work_precision.py --out runs/bench $(BENCH_ARGS) && python benchmarks/bench_laziness.py $(BENCH_ARGS)

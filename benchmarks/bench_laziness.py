@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""What skipping saves: the same scene with the skipping on and off (issue 8).
+"""What skipping saves: the same scene with the skipping on and off.
 
 On the ``stand`` scene (visual lifting plus 2 of the 6 gait-manager sources, a chest push at
 2 s), headless, shipped integrator:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Where the headless runner's time goes in one control period (issue 8).
+"""Where the headless runner's time goes in one control period.
 
 Runs the loop of ``run_scene`` (observation, control laws, ``advance_and_sample``, trajectory
 row, bag) on a scene for ``--duration`` s and times each part with ``perf_counter``; also the

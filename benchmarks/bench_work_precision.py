@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Work-precision benchmark of the integrators: wall time against error (issue 8).
+"""Work-precision benchmark of the integrators: wall time against error.
 
 For every integrator (symplectic_euler, implicit_euler, rk4, rk45, dop853) and a sweep of
 fixed steps or tolerances, one closed-loop run (the scene's controllers at every control

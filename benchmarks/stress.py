@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Numerical-stability stress cases of the hybrid simulator (issue 8).
+"""Numerical-stability stress cases of the hybrid simulator.
 
 Every case either behaves (the state stays finite, the constraint residual within the
 simulator's bound) or stops cleanly: ``SimulationError`` with a reason, or ``Simulator.ended``

@@ -125,7 +125,7 @@ def make_obs() -> Callable[..., object]:
              mode: int = 1, side: str = 'right', pivot: str = 'toe', step_index: int = 0,
              t_exchange: float = 0.0, heel_anchor_y: float = 0.0,
              t_touchdown: float = math.nan) -> Observation:
-        bent = standing_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1
+        bent = standing_posture('bent_knees', 0.05, 0.0)[0]  # docs/model.md §12
         return Observation(t, bent if q is None else np.asarray(q, dtype=float),
                            np.zeros(18) if v is None else np.asarray(v, dtype=float), mode,
                            side, pivot, step_index, t_exchange, heel_anchor_y, t_touchdown)

@@ -1,4 +1,4 @@
-"""Feed-forward leg torques (model-spec 7.1, 14.1-2) and weight transfer (14.5)."""
+"""Feed-forward leg torques (docs/model.md §11.4) and weight transfer (§11.5)."""
 
 import math
 
@@ -16,7 +16,7 @@ from gait_manager.feedforward import (
 from iceskate_sim.robot import GRAVITY
 from iceskate_sim.scene import standing_posture
 
-BENT = standing_posture('bent_knees', 0.05, 0.0)[0]  # model-spec 13.1, a = 0.05 rad
+BENT = standing_posture('bent_knees', 0.05, 0.0)[0]  # docs/model.md §12, a = 0.05 rad
 
 
 def test_swing_hip_pulse_only_in_its_window_and_in_the_air(make_obs):

@@ -1,4 +1,4 @@
-"""Heel-first landing input on the swing ankle (model-spec 7.3, 14.3)."""
+"""Heel-first landing input on the swing ankle (docs/model.md §11.6)."""
 
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ def _with_sole_pitch(theta: float, rate: float = 0.0) -> tuple[np.ndarray, np.nd
 def test_toe_down_swing_foot_gets_a_toe_up_torque(make_obs):
     q, v = _with_sole_pitch(-0.2)
     tau = heel_torque(make_obs(t=1.0, q=q, v=v, mode=1), HeelParameters())
-    assert tau[7] > 0.0  # positive pitch lifts the toe (model-spec 1)
+    assert tau[7] > 0.0  # positive pitch lifts the toe (docs/model.md §1.2)
     assert tau[7] == pytest.approx(150.0 * (0.15 + 0.2))
     assert np.all(np.delete(tau, 7) == 0.0)
 

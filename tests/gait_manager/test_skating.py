@@ -1,4 +1,4 @@
-"""Ice-skate walking, the acceptance of the control-laws issue measured on the shipped scenes.
+"""Ice-skate walking: the acceptance criteria of the control laws, measured on the shipped scenes.
 
 One 15 s run of ``skate`` and one of ``skate_no_yaw`` (headless, no bag) per test session.
 """

@@ -51,7 +51,7 @@ def test_eq11_closes_at_every_coordinate_in_every_visited_mode(synthetic):
         assert d.valid.any(), f'joint {joint} never active'
         worst = np.nanmax(d.residual_rel)
         assert worst <= CLOSURE, f'closure residual {worst:.2e} at {d.name}'
-    # the swing constraints act on the legs, never on the upper body (model-spec 8)
+    # the swing constraints act on the legs, never on the upper body (docs/model.md §13)
     assert np.nanmax(np.abs(decompositions[5].constraint)) > 0.0
     for joint in range(8, 18):
         assert np.all(np.nan_to_num(decompositions[joint].constraint) == 0.0)
@@ -115,7 +115,7 @@ def test_decomposition_agrees_with_a_direct_evaluation(which, sim, synthetic):
 
 
 def test_shoulders_couple_to_torso_yaw_with_opposite_signs(synthetic):
-    """Model-spec 8 mechanism check: M_11,8 and M_14,8 have opposite signs."""
+    """docs/model.md §2.5 mechanism check: M_11,8 and M_14,8 have opposite signs."""
     case = analyse_case(synthetic, 'synthetic', 11)
     summary = case.summary()
     right = summary['joints']['q11']['mean_M_i8']

@@ -44,7 +44,7 @@ def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
 
 def test_short_skate_run_visits_the_expected_modes(skate_run):
     """The scene's single-support start (mode 1; the first sample may already be on the toe,
-    2, after the transitions due at t = 0), then the ice cycle of model-spec 5.5: support
+    2, after the transitions due at t = 0), then the ice cycle of docs/model.md §6.6: support
     gliding (F-G: 3), front heel landing and gliding (Hs: 7 or 8), support exchanges (E6/E7)."""
     out, _metrics = skate_run
     events = json.loads((out / 'events.json').read_text())

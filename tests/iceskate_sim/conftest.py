@@ -2,7 +2,7 @@
 
 ``assert_close`` is the one helper for approximate comparisons: every call states its tolerance.
 ``random_state(mode)`` draws a state that respects the mode (locked velocities 0, q1 = 0 when
-q1 is locked) and, by default, stays inside the soft joint stops of model-spec 9.2.
+q1 is locked) and, by default, stays inside the soft joint stops of docs/model.md §2.6.
 """
 
 from collections.abc import Callable
@@ -15,7 +15,7 @@ from iceskate_sim.modes import GaitMode, get_mode
 from iceskate_sim.robot import JOINT_LIMITS, N_COORDINATES, Q1, Y0, Robot, load_robot
 
 SEED = 20190605  # ROBOMECH 2019
-#: The bent-knee double-support posture of model-spec 13.1, q2..q7 = (-a, 2a, -a, a, -2a, a).
+#: The bent-knee double-support posture of docs/model.md §12, q2..q7 = (-a, 2a, -a, a, -2a, a).
 BENT_KNEE_A = 0.05
 
 

@@ -1,4 +1,4 @@
-"""The constrained equations of motion of every Table 2 mode (model-spec 4, 8, 9, 12, 13).
+"""The constrained equations of motion of every Table 2 mode (docs/model.md §2.5, §2.6, §4, §14.2).
 
 Each property is checked against an independent computation: RNEA instead of CRBA, Pinocchio's
 Jacobian time variation (itself checked against finite differences), whole-body momentum
@@ -31,7 +31,7 @@ CONSTRAINED_MODES = [n for n in ALL_MODES if MODES[n].constraints]
 SIDES = ('right', 'left')
 PIVOTS = ('toe', 'heel')
 HEEL_Y, TOE_Y = -0.06, 0.20
-# model-spec 9.2 soft stops in Table-2 coordinates (knee upper bound: the URDF's 2.5 rad)
+# docs/model.md §2.6 soft stops in Table-2 coordinates (knee upper bound: the URDF's 2.5 rad)
 STOPS = {3: (0.0, 2.5), 6: (-2.5, 0.0), 8: (-1.0, 1.0), 9: (-0.8, 0.8), 10: (-0.8, 0.8),
          12: (0.0, 2.5), 13: (-1.0, 1.0), 15: (0.0, 2.5), 16: (-1.0, 1.0), 17: (-0.8, 0.8)}
 DAMPING = np.array([0.0, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 0.03, 1.0, 2.0, 0.03, 1.0,
@@ -72,7 +72,7 @@ def _frame_acceleration(model, data, fid, v, qdd):
 
 
 def _expected_applied(q, v, tau, mode, params: DynamicsParameters) -> np.ndarray:
-    """Inputs + Table 1 damping + model-spec 9.2 stops, written from the spec."""
+    """Inputs + Table 1 damping + soft stops, written from docs/model.md §2.6."""
     applied = np.array(tau, dtype=float)
     applied[0] = 0.0  # y0 is unactuated
     if not mode.q1_active:
@@ -273,7 +273,7 @@ def test_support_reaction_from_momentum_balance(robot, random_state, rng, number
         pin.framesForwardKinematics(model, data, q)
         f_nz, f_ny, tau_n = result.multipliers
         scale = MASS * G
-        # N_s = m (g + zdd_com) - f_nz   (model-spec 4.4)
+        # N_s = m (g + zdd_com) - f_nz   (docs/model.md §4.4)
         expected_normal = MASS * (G + com_acc[2]) - f_nz
         assert result.support_normal == pytest.approx(expected_normal, abs=1e-9 * scale)
         assert result.support_normal == result.support_wrench[2]
@@ -346,7 +346,7 @@ def test_cop_of_a_flat_foot_in_static_balance_is_under_the_com(dynamics, side, l
     assert position == where, (result.cop_y, heel, toe)
 
 
-# ----------------------------------------------------------- (g) shoulder coupling sign (spec 8)
+# --------------------------------------------- (g) shoulder coupling sign (docs/model.md §2.5)
 def _arm_moment(model: pin.Model, first_joint: int) -> float:
     """x_com * sum m l_c of the arm chain q_first..q_first+2, from masses and CoMs at zero."""
     data = model.createData()
@@ -443,7 +443,7 @@ def test_unknown_side_or_pivot_is_rejected(dynamics, rest_state):
 @pytest.mark.parametrize('number', [13, 15, 17, 19])
 def test_straight_double_support_is_rank_deficient(dynamics, number):
     """Legs straight, support sole flat: every joint axis lies above the heel, so the
-    heel-height row is -0.06 x the sole-pitch row (model-spec 13.1) when C_hz and C_fr act."""
+    heel-height row is -0.06 x the sole-pitch row (docs/model.md §4.5) when C_hz and C_fr act."""
     q = np.zeros(N_COORDINATES)
     zero = np.zeros(N_COORDINATES)
     with pytest.raises(SimulationError, match='rank-deficient') as info:

@@ -1,4 +1,4 @@
-"""Energy checks of single support, mode 1 (model-spec 12.1): no input, no stops.
+"""Energy checks of single support, mode 1 (docs/model.md §14.2): no input, no stops.
 
 Without damping the total energy is conserved to integrator accuracy. With Table 1 damping it
 never increases, and what it loses is exactly the work of the damping torques, integrated

@@ -1,4 +1,4 @@
-"""Cross-check (model-spec 12.2): the support-rooted eq. (7) against the free-flyer formulation.
+"""Cross-check (docs/model.md §4.8): the support-rooted eq. (7) against the free-flyer formulation.
 
 Every mode, both support sides, both pivots, both slide directions of the support foot and of
 the swing heel, with mu = 0.3 so that friction matters, with the soft stops off and engaged.

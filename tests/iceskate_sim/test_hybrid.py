@@ -1,9 +1,9 @@
-"""The hybrid gait automaton (model-spec 4.6, 5): re-rooting, impacts, the ice rule, the guards.
+"""The hybrid gait automaton (docs/model.md §5-§7): re-rooting, impacts, the ice rule, the guards.
 
-Expectations are derived here from the spec, not from the code under test: link poses and
+Expectations are derived here from docs/model.md, not from the code under test: link poses and
 velocities come from Pinocchio on the support-rooted models, constraint rows are built from the
 swing-heel Jacobian and the C_fr definition, and the impact is the M-orthogonal projection
-v+ = v- - M^-1 J^T (J M^-1 J^T)^-1 J v- (the Schur-complement form of the KKT system of 5.4).
+v+ = v- - M^-1 J^T (J M^-1 J^T)^-1 J v- (the Schur-complement form of the KKT system of §7.1).
 """
 
 from dataclasses import replace
@@ -37,16 +37,16 @@ GUARD = {g.name: g for g in GUARDS}
 SIDES = ('right', 'left')
 SUPPORT_CODES = ('F-S', 'R-S', 'F-G', 'R-G')
 SWING_CONTACT_CODES = ('Fp', 'Fs', 'Hp', 'Hs')
-# model-spec 5.3: the old swing contact becomes the new support state
+# docs/model.md §7.4: the old swing contact becomes the new support state
 NEW_SUPPORT = {'Fp': 'F-S', 'Fs': 'F-G', 'Hp': 'R-S', 'Hs': 'R-G'}
-# swing constraints of each swing code (model-spec 3.1), in the order (C_hz, C_hy, C_fr)
+# swing constraints of each swing code (docs/model.md §3.2), in the order (C_hz, C_hy, C_fr)
 SWING_ROWS = {'A': (), 'Hs': ('hz',), 'Hp': ('hz', 'hy'), 'Fs': ('hz', 'fr'),
               'Fp': ('hz', 'hy', 'fr')}
 # Table 2 rows by number: q1 present for R-S/R-G, y0 for F-G/R-G; swing code by block of four
 Q1_MODES = {2, 4, 6, 8, 10, 12, 14, 16, 18, 20}
 Y0_MODES = {3, 4, 7, 8, 11, 12, 15, 16, 19, 20}
 SWING_OF_MODE = {n: ('A', 'Hs', 'Hp', 'Fs', 'Fp')[(n - 1) // 4] for n in range(1, 21)}
-KNEE_BENT = np.array([-0.05, 0.1, -0.05, 0.05, -0.1, 0.05])  # q2..q7, model-spec 13.1
+KNEE_BENT = np.array([-0.05, 0.1, -0.05, 0.05, -0.1, 0.05])  # q2..q7, docs/model.md §12
 
 
 # ------------------------------------------------------------------ independent helpers
@@ -73,7 +73,7 @@ def _heel_jacobian(robot, contact: ContactState, q: np.ndarray) -> np.ndarray:
 
 
 def _rows(robot, contact: ContactState, q: np.ndarray, swing: str | None = None) -> np.ndarray:
-    """Constraint rows of a swing code from the spec (C_hz, C_hy, C_fr); locked columns 0."""
+    """Constraint rows of a swing code (C_hz, C_hy, C_fr; docs/model.md §4.2); locked columns 0."""
     mode = contact.mode
     names = SWING_ROWS[mode.swing if swing is None else swing]
     jac = _heel_jacobian(robot, contact, q)
@@ -168,7 +168,7 @@ def test_reroot_keeps_world_pose_and_velocity_of_every_link(robot, dynamics, swi
             new = reroot(dynamics, old)
             oc, nc = old.contact, new.contact
 
-            # bookkeeping of model-spec 5.3
+            # bookkeeping of docs/model.md §7.4
             assert new.mode.swing == 'A'
             assert new.mode.support == NEW_SUPPORT[swing]
             if swing in ('Hp', 'Hs'):
@@ -449,7 +449,7 @@ def _state(mode: int, **contact) -> HybridState:
 
 N_S = 600.0
 # (reaction F_y as a multiple of mu N, due on ice, due on a symmetric Coulomb floor). The guards
-# may carry small dead bands against chattering (model-spec 4.6: hysteresis), so the cases stay
+# may carry small dead bands against chattering (docs/model.md §6.3), so the cases stay
 # clear of the friction limit: mu N = 3 N here, the nearest case is 9 N beyond or 1.5 N inside.
 TANGENTIAL_CASES = [(-20.0, True, True), (-4.0, True, True), (-0.5, False, False),
                     (0.0, False, False), (0.5, False, False), (4.0, False, True),

@@ -1,4 +1,4 @@
-"""The mode table against the paper's Table 2 (model-spec 3.1-3.2), and its error handling."""
+"""The mode table against the paper's Table 2 (docs/model.md §3), and its error handling."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MODES, get_mode, mode_for
 
-# Table 2 as printed (model-spec 3.2): number -> (support, swing, coordinates, multipliers,
+# Table 2 as printed (docs/model.md §3.3): number -> (support, swing, coordinates, multipliers,
 # n, n_c, DOF). 'q2..' stands for q2...q17.
 TABLE_2 = {
     1: ('F-S', 'A', 'q2..', (), 16, 0, 16),

@@ -1,7 +1,7 @@
-"""Table 1 facts and the geometry of the four support-rooted models (model-spec 1-2, 9.1, 13).
+"""Table 1 facts and the geometry of the four support-rooted models (docs/model.md §1, §2).
 
-Expectations are written from the spec's tables (lengths, masses, damping, centres of mass),
-never from numbers the code printed.
+Expectations are written from the tables of docs/model.md §2 (lengths, masses, damping, centres
+of mass), never from numbers the code printed.
 """
 
 import itertools
@@ -26,7 +26,7 @@ SHOULDER_X = 0.20  # s
 HEEL_Y, TOE_Y, SOLE_DEPTH = -0.06, 0.20, 0.07  # sole edges relative to the ankle
 
 # Table 1 per anatomical link: (mass [kg], CoM height at zero configuration [m], CoM y [m]),
-# the height being the joint height of model-spec 2.3 plus the CoM offset of 2.5.
+# the height being the joint height of docs/model.md §2.2 plus the CoM offset of §2.3.
 LINK_TABLE = {
     'foot': (1.3, 0.07 - 0.035, 0.07),
     'shank': (3.4, 0.07 + 0.40 / 2, 0.0),
@@ -42,13 +42,13 @@ LINK_TABLE = {
 }
 LATERAL = {'foot': HIP_X, 'shank': HIP_X, 'thigh': HIP_X, 'upper_arm': SHOULDER_X,
            'forearm': SHOULDER_X, 'hand': SHOULDER_X}
-# Table-2 joint -> link it moves, for a right support foot (model-spec 2.1, 2.3).
+# Table-2 joint -> link it moves, for a right support foot (docs/model.md §2.1, §2.2).
 MOVED_BY_RIGHT_SUPPORT = {
     1: 'right_foot', 2: 'right_shank', 3: 'right_thigh', 4: 'pelvis', 5: 'left_thigh',
     6: 'left_shank', 7: 'left_foot', 8: 'torso_lower', 9: 'torso_middle', 10: 'chest',
     11: 'right_upper_arm', 12: 'right_forearm', 13: 'right_hand', 14: 'left_upper_arm',
     15: 'left_forearm', 16: 'left_hand', 17: 'head'}
-# Damping of model-spec 9.1, index = Table-2 coordinate [y0, q1..q17].
+# Damping of docs/model.md §2.6, index = Table-2 coordinate [y0, q1..q17].
 DAMPING = [0.0, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 0.03, 1.0, 2.0, 0.03, 1.0, 2.0, 0.5]
 
 
@@ -175,7 +175,7 @@ def test_whole_body_com_at_zero_configuration(robot, side, pivot, assert_close):
     total = sum(LINK_TABLE[_kind(link)][0] for link in _all_links())
     expected = sum(LINK_TABLE[_kind(link)][0] * _expected_com(link) for link in _all_links())
     expected = expected / total
-    assert expected[2] == pytest.approx(0.9455, abs=5e-4)  # the value quoted in model-spec 13
+    assert expected[2] == pytest.approx(0.9455, abs=5e-4)  # the value of docs/model.md §2.5
     model = robot.support_model(side, pivot).model
     com = pin.centerOfMass(model, model.createData(), np.zeros(N_COORDINATES))
     assert_close(com, expected, atol=1e-12, what='whole-body CoM')
@@ -230,7 +230,7 @@ def test_sole_edge_frames(robot, side, pivot, assert_close):
     assert_close(p['swing_toe'], [-x_support, y0 + TOE_Y, 0.0], atol=1e-12, what='sw toe')
     assert TOE_Y - HEEL_Y == pytest.approx(0.26)  # Table 1 sole length
     # tipping: the pivot edge stays on the floor, the other edge rises by 0.26 sin|q1|;
-    # toe pivot: q1 < 0 lifts the heel; heel pivot: q1 > 0 lifts the toe (model-spec 3.3)
+    # toe pivot: q1 < 0 lifts the heel; heel pivot: q1 > 0 lifts the toe (docs/model.md §3.4)
     q1 = -0.2 if pivot == 'toe' else 0.2
     q[1] = q1
     tipped = {k: v.translation for k, v in _placements(sm, q).items()}
@@ -248,7 +248,7 @@ def test_sole_edge_frames(robot, side, pivot, assert_close):
 
 
 def test_positive_pitch_tilts_backward(robot, assert_close):
-    """Sign convention of model-spec 1: +q2 (support ankle) tilts the upright body back."""
+    """Sign convention of docs/model.md §1.2: +q2 (support ankle) tilts the upright body back."""
     sm = robot.support_model('right', 'toe')
     q = np.zeros(N_COORDINATES)
     q[2] = 0.1

@@ -1,4 +1,4 @@
-"""The hybrid simulation loop: ice glide and toe pick (model-spec 4.6, 12.4, 12.5), run health.
+"""The hybrid simulation loop: ice glide and toe pick (docs/model.md §5.1, §14.2), run health.
 
 Every simulation of this file goes through the ``runs`` fixture, which records the state after
 each control period and checks at teardown that the support foot never slid backward: y0 never
@@ -94,7 +94,7 @@ KP, KD = 100.0, 20.0  # s^-2, s^-1: joint-space PD of the computed torque
 def _rigid_torque(robot, sim: Simulator, reference: np.ndarray,
                   ankle_acceleration: float | None = None) -> np.ndarray:
     """Computed torque for joint accelerations qdd_j = KP (ref - q) - KD v (about 0: the body
-    moves rigidly), with the support's y0 row (model-spec 4.4) solved for yd0'':
+    moves rigidly), with the support's y0 row (docs/model.md §4.4) solved for yd0'':
 
         m yd0'' + M_0j qdd_j + h_0 = -mu s0 N_s,   N_s = m (g + z_com''),
 

@@ -1,4 +1,4 @@
-"""Numerical-stability stress cases, short versions (issue 8; the long ones: benchmarks/stress.py).
+"""Numerical-stability stress cases, short versions (the long ones: benchmarks/stress.py).
 
 Every case must behave (finite state, constraint residual within the simulator's bound) or stop
 cleanly, with ``SimulationError`` or ``Simulator.ended`` and a reason: never NaN, never a hang

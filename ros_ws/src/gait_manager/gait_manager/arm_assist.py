@@ -1,4 +1,4 @@
-"""Arm auxiliary input of steps 1-3 (seed §5.2; docs/model.md, arm assist), ROS-free.
+"""Arm auxiliary input of steps 1-3 (the paper, Sec. 5.2; docs/model.md §11.7), ROS-free.
 
 Before the 4th step the shoulders get an anti-phase sinusoid, tau_11 = +A sin(Phi) (a = 0) or
 -A sin(Phi) (a = 1) and tau_14 = -tau_11, and the elbows and wrists a PD to 0. From the 4th step

@@ -1,8 +1,8 @@
 """Feed-forward leg torques (joints 1, 2, 3, 5, 6; docs/model.md, feed-forward pulses) and
 weight transfer (docs/model.md, weight transfer), ROS-free.
 
-Feed-forward (seed §5.2: "feed-forward-like" torques on joints 1, 2, 3 for push-off and 5 for
-the swing), event-triggered, measured from the last support exchange t_e:
+Feed-forward (the paper, Sec. 5.2: "feed-forward-like" torques on joints 1, 2, 3 for push-off
+and 5 for the swing), event-triggered, measured from the last support exchange t_e:
 
 * swing hip, while the swing foot is in the air (code 'A'): tau_5 = A5 sin(pi (t - t_e)/D5)
   on [t_e, t_e + D5];

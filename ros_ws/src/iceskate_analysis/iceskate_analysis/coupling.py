@@ -1,6 +1,6 @@
 """The paper's eq. (11) at one joint, evaluated on a recorded run (no re-simulation).
 
-Row i of the equations of motion (model-spec 8; i = 11 is the right shoulder)::
+Row i of the equations of motion (docs/model.md §13; i = 11 is the right shoulder)::
 
     M_ii q̈_i = τ_i + M_total − h_i − g_i − d_i q̇_i + limit_i + constraint_i + friction_i
     M_total := −Σ_{j≠i} M_ij q̈_j

@@ -3,7 +3,8 @@
 * Figs. 5 and 6: both shoulder angles q11 and q14 against time, the 4th step marked (Fig. 5:
   the run without the torso-yaw input τ8, Fig. 6: with it).
 * Figs. 7 and 8: the terms of eq. (11) at the chosen joint against time: M_total and its
-  negative Σ M_ij q̈_j (the sign caveat of model-spec 8), g_i, h_i, d_i q̇_i, τ_i and M_ii q̈_i;
+  negative Σ M_ij q̈_j (the sign caveat of docs/model.md §13, A38), g_i, h_i, d_i q̇_i, τ_i
+  and M_ii q̈_i;
   below, M_total − g_i against h_i (the cancellation claim), and the closure residual.
 * The coupling terms M_ij q̈_j with the largest RMS, to show which joint drives the arm.
 """

@@ -9,10 +9,11 @@ active constraint rows ``J`` it solves
     [ J               0                        ] [ lambda ] = [ -Jdot qd (- Baumgarte)           ]
 
 with Coulomb friction on a sliding swing heel (f_t = mu f_nz against the heel velocity) and on a
-gliding support foot (F_y = -mu sgn(yd0) N_s, N_s from the vertical momentum balance, model-spec
-4.4), which makes the matrix non-symmetric. Everything runs on Pinocchio's C++ algorithms
-(computeAllTerms, which also leaves the velocity-product accelerations, and RNEA for the support
-wrench); per-mode index maps and KKT buffers keep the Python overhead of ``evaluate`` small.
+gliding support foot (F_y = -mu sgn(yd0) N_s, N_s from the vertical momentum balance,
+docs/model.md §4.4), which makes the matrix non-symmetric. Everything runs on Pinocchio's C++
+algorithms (computeAllTerms, which also leaves the velocity-product accelerations, and RNEA for
+the support wrench); per-mode index maps and KKT buffers keep the Python overhead of
+``evaluate`` small.
 
 Units: SI (m, rad, s, kg, N, N m).
 """
@@ -58,7 +59,7 @@ class DynamicsParameters:
 
     :param mu: Coulomb coefficient of a sliding foot (ice: 0.005, forward sliding only).
     :param baumgarte: Baumgarte constant alpha [1/s] of the swing constraints (0: off).
-    :param joint_limits: apply the soft stops of model-spec 9.2.
+    :param joint_limits: apply the soft stops of docs/model.md §2.6.
     :param limit_stiffness: soft-stop stiffness [N m/rad].
     :param limit_damping: soft-stop damping [N m s/rad] (acts only while a stop is penetrated).
     :param damping: apply the joint damping of Table 1.
@@ -570,7 +571,7 @@ class GaitDynamics:
             raise SimulationError(
                 f'mode {contact.mode.number}: swing constraints {contact.mode.constraints} '
                 f'are rank-deficient at this posture (Hadamard ratio {ratio:.2e}); the '
-                'all-straight double-support posture is singular (model-spec 13.1)')
+                'all-straight double-support posture is singular (docs/model.md §4.5)')
 
     def _support_wrench(self, plan: _Plan, heel: np.ndarray, q: np.ndarray, v: np.ndarray,
                         qdd: np.ndarray, multipliers: tuple[float, float, float],

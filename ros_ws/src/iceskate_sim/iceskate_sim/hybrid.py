@@ -1,4 +1,4 @@
-"""The hybrid gait automaton: guards, impacts and the support exchange (model-spec 5).
+"""The hybrid gait automaton: guards, impacts and the support exchange (docs/model.md §6-§7).
 
 The discrete state is a ``HybridState``: Table 2 mode, support side, pivot edge, anchors,
 slide directions, step index and the times t_e (last exchange) and touchdown. Guards are data
@@ -32,7 +32,7 @@ MOMENT_BAND = 0.05  # N m: swing-sole moment below zero before the sole un-flatt
 TOE_SCUFF = 2.0e-3  # m
 _LEG = slice(1, 8)
 _LEG_JOINTS = np.arange(2, 8)
-EPS_V = 1.0e-4  # m/s, velocity dead band of model-spec 4.6 (heel strike: slide vs. pin)
+EPS_V = 1.0e-4  # m/s, velocity dead band of docs/model.md §6.3 (heel strike: slide vs. pin, §7.3)
 
 
 @dataclass(frozen=True)
@@ -219,7 +219,7 @@ NEW_SUPPORT_OF_SWING = {'Fp': 'F-S', 'Fs': 'F-G', 'Hp': 'R-S', 'Hs': 'R-G'}
 
 
 def reroot(dynamics: GaitDynamics, state: HybridState) -> HybridState:
-    """Support exchange E7: re-root the tree at the old swing foot (model-spec 5.3).
+    """Support exchange (E6, swing in contact): re-root at the old swing foot (docs/model.md §7.4).
 
     q1' = phi_7 (old swing-foot pitch), q2'..q7' = -q7..-q2, q8..q17 unchanged (same map for
     the velocities); y0' puts the new support's heel where the old swing heel is, so every

@@ -14,7 +14,7 @@ import numpy as np
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0
 
-# Support-foot states (model-spec 3.1): code -> (y0 present, q1 present, meaning)
+# Support-foot states (docs/model.md §3.1): code -> (y0 present, q1 present, meaning)
 SUPPORT_STATES = {
     'F-S': (False, False, 'sole flat, stuck'),
     'R-S': (False, True, 'tipping about the toe or heel edge, edge stuck'),

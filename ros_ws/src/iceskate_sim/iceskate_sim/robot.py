@@ -31,7 +31,7 @@ Y0 = 0
 Q1 = 1
 SIDES = ('right', 'left')  # support side: a = 0 right, a = 1 left (paper's eq. 10)
 PIVOTS = ('toe', 'heel')
-SOLE_HEEL_Y = -0.06  # m, heel edge relative to the ankle along the foot (model-spec 2.4)
+SOLE_HEEL_Y = -0.06  # m, heel edge relative to the ankle along the foot (docs/model.md §2.4)
 SOLE_TOE_Y = 0.20  # m, toe edge relative to the ankle
 SOLE_Z = -0.07  # m, sole plane below the ankle
 SOLE_HALF_WIDTH = 0.05  # m
@@ -56,7 +56,7 @@ LINK_NAMES = ('pelvis', 'torso_lower', 'torso_middle', 'chest', 'head', 'right_t
               'right_shank', 'right_foot', 'left_thigh', 'left_shank', 'left_foot',
               'right_upper_arm', 'right_forearm', 'right_hand', 'left_upper_arm',
               'left_forearm', 'left_hand')
-# Soft joint stops of model-spec 9.2 in Table-2 coordinates [rad]: (lower, upper).
+# Soft joint stops of docs/model.md §2.6 in Table-2 coordinates [rad]: (lower, upper).
 # The support knee (q3) and swing knee (q6) only flex, with opposite signs.
 JOINT_LIMITS = {3: (0.0, 2.5), 6: (-2.5, 0.0), 8: (-1.0, 1.0), 9: (-0.8, 0.8),
                 10: (-0.8, 0.8), 12: (0.0, 2.5), 13: (-1.0, 1.0), 15: (0.0, 2.5),

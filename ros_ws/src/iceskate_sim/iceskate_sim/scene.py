@@ -127,11 +127,11 @@ def _coordinates(d: Any, path: str) -> dict[int, float]:
 def standing_posture(kind: str, knee_bend: float, stagger: float) -> tuple[np.ndarray, str]:
     """Initial coordinates of a double-support posture and the pivot to use.
 
-    * 'bent_knees' (default, model-spec 13.1): feet side by side, q2..q7 = (-a, 2a, -a, a,
+    * 'bent_knees' (default, docs/model.md §12): feet side by side, q2..q7 = (-a, 2a, -a, a,
       -2a, a): both soles flat, the pelvis level, not singular.
-    * 'staggered' (model-spec 2.6): support (front) foot ``stagger`` m ahead of the swing foot,
+    * 'staggered' (docs/model.md §12): support (front) foot ``stagger`` m ahead of the swing foot,
       straight legs.
-    * 'upright': all zero (singular in double support, model-spec 13.1; single support only).
+    * 'upright': all zero (singular in double support, docs/model.md §4.5; single support only).
     """
     q = np.zeros(N_COORDINATES)
     if kind == 'bent_knees':

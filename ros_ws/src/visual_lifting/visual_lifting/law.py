@@ -1,9 +1,9 @@
-"""Visual-lifting control law, the paper's eqs. (8)-(9) (model-spec §6), ROS-free.
+"""Visual-lifting control law, the paper's eqs. (8)-(9) (docs/model.md §10), ROS-free.
 
 The head-top pose psi = (y_H [m], z_H [m], pitch [rad]) in the world is pulled towards a desired
 pose psi_d by a virtual spring: tau_h = J_H(q)^T K_p (psi_d - psi), applied to the joints on the
-path from the support foot to the head (1, 2, 3, 4, 8, 9, 10, 17; seed §5.2). The vision step is
-skipped as in the seed: psi comes from the kinematics (``GaitDynamics.head_pose``).
+path from the support foot to the head (1, 2, 3, 4, 8, 9, 10, 17; the paper, Sec. 5.2). The vision
+step is skipped as in the paper: psi comes from the kinematics (``GaitDynamics.head_pose``).
 
 Every function here is pure: it depends only on its arguments. Torques are 18-vectors over
 ``[y0, q1, ..., q17]`` in N m (entry i = joint i; the y0 entry is always 0).
@@ -95,7 +95,7 @@ def desired_head_pose(params: VisualLiftingParameters, t: float, psi: np.ndarray
     :param psi: current head pose (used by desired_y = 'follow').
     :param psi_initial: head pose at t = 0 (y_H(0), and z_H(0) when ``params.z_d`` is None).
     :param offset: (dy, dz) [m] added to y_d and z_d, e.g. the gait manager's moving-stance
-        shift (model-spec §14.4). 'follow' ignores dy: its forward error is zero by definition.
+        shift (docs/model.md §11.2). 'follow' ignores dy: its forward error is zero by definition.
     """
     if len(offset) != 2:
         raise VisualLiftingError(f'offset must be (dy, dz), got {offset!r}')
