@@ -82,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('scene', help='shipped scene name (e.g. skate) or path to a YAML file')
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
     parser.add_argument('--duration', type=float, help='override the scene duration [s]')
+    parser.add_argument('--engine', choices=('python', 'native'),
+                        help="where eq. (7) is solved (default: the scene's engine, else "
+                             "'python')")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--ros', action='store_true',
                         help='run through the ROS 2 node graph (iceskate_bringup.graph)')
@@ -99,11 +102,14 @@ def main(argv: list[str] | None = None) -> int:
             if not args.duration > 0:
                 raise SimulationError('--duration must be > 0 s')
             scene = replace(scene, duration=args.duration)
+        if args.engine is not None:
+            scene = replace(scene, simulator=replace(scene.simulator, engine=args.engine))
         if args.ros:
             from iceskate_bringup.graph import run_graph
+            extra = {'engine': args.engine} if args.engine is not None else {}
             metrics = run_graph(args.scene, args.out, duration=args.duration,
                                 single_process=args.single_process,
-                                rt_priority=args.rt_priority)
+                                rt_priority=args.rt_priority, **extra)
         else:
             metrics = run(scene, args.out, progress=not args.quiet)
     except SimulationError as exc:

@@ -9,13 +9,16 @@ deserialised once into a ``RobotModel`` on the C++ side::
     native = iceskate_native.load_model(support.model)
     M = iceskate_native.crba_of(native, q)
 
+``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.native_dynamics``
+wraps it as a ``GaitDynamics``).
+
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
 kernel raises ``NativeError`` (a ``RuntimeError``), which the simulator wraps in its own error.
 """
 
-from ._kernel import NativeError, RobotModel, crba_of
+from ._kernel import Dynamics, NativeError, RobotModel, crba_of
 
-__all__ = ['NativeError', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+__all__ = ['Dynamics', 'NativeError', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
 
 
 def model_bytes(model) -> bytes:

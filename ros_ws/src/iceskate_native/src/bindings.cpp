@@ -5,13 +5,26 @@
 //
 // Errors: see errors.hpp. std::invalid_argument -> ValueError (nanobind's own translation),
 // iceskate_native::NativeError -> iceskate_native.NativeError (a RuntimeError).
+#include <array>
+#include <cmath>
+#include <map>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
+#include <tuple>
+#include <vector>
 
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
+#include <nanobind/stl/map.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
 
+#include "iceskate_native/checks.hpp"
+#include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/errors.hpp"
 #include "iceskate_native/inertia.hpp"
 #include "iceskate_native/model.hpp"
@@ -26,6 +39,119 @@ using iceskate_native::RobotModel;
 using Vector = Eigen::Ref<const Eigen::VectorXd>;
 
 std::string_view view(const nb::bytes & data) { return {data.c_str(), data.size()}; }
+
+using iceskate_native::Constraint;
+using iceskate_native::Dynamics;
+using iceskate_native::DynamicsResult;
+using iceskate_native::Vector18;
+
+/// (number, y0_active, q1_active, swing_sliding, active coordinates, constraint names)
+using ModeRow = std::tuple<int, bool, bool, bool, std::vector<int>, std::vector<std::string>>;
+/// (mu, baumgarte, joint_limits, limit_stiffness, limit_damping, damping)
+using ParameterRow = std::tuple<double, double, bool, double, double, bool>;
+using Frames = std::map<std::string, int>;
+using Optional = std::optional<Eigen::VectorXd>;
+
+Vector18 vector18(const Vector & value, const char * name)
+{
+  iceskate_native::require_finite_vector(value, iceskate_native::kCoordinates, name,
+                                         "[y0, q1..q17]");
+  return value;
+}
+
+iceskate_native::ModeTable mode_table(const std::vector<ModeRow> & rows)
+{
+  if (rows.size() != iceskate_native::kModes) {
+    throw std::invalid_argument("the mode table needs the 20 modes of Table 2, got "
+                                + std::to_string(rows.size()));
+  }
+  iceskate_native::ModeTable table;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    auto & mode = table[k];
+    std::vector<std::string> names;
+    std::tie(mode.number, mode.y0_active, mode.q1_active, mode.swing_sliding, mode.active,
+             names) = rows[k];
+    for (const auto & name : names) {
+      if (name == "hz") {
+        mode.constraints.push_back(Constraint::kHeelZ);
+      } else if (name == "hy") {
+        mode.constraints.push_back(Constraint::kHeelY);
+      } else if (name == "fr") {
+        mode.constraints.push_back(Constraint::kSoleFlat);
+      } else {
+        throw std::invalid_argument("unknown swing constraint '" + name + "' (hz, hy or fr)");
+      }
+    }
+  }
+  return table;
+}
+
+/// Construct a Dynamics in place at `self` from the Python-side description of the robot.
+void construct_dynamics(
+  Dynamics * self, const std::vector<RobotModel> & models, const std::vector<Frames> & frames,
+  const std::vector<ModeRow> & modes, const Vector & damping, double total_mass,
+  const std::vector<std::tuple<int, double, double>> & limits, const ParameterRow & params)
+{
+  if (models.size() != 4 || frames.size() != 4) {
+    throw std::invalid_argument(
+      "four support models (index side * 2 + pivot) and their frames are needed");
+  }
+  if (!(total_mass > 0.0) || !std::isfinite(total_mass)) {
+    throw std::invalid_argument("total_mass must be a finite mass > 0 kg");
+  }
+  std::array<iceskate_native::SupportModel, 4> supports{
+    iceskate_native::SupportModel{models[0], frames[0]},
+    iceskate_native::SupportModel{models[1], frames[1]},
+    iceskate_native::SupportModel{models[2], frames[2]},
+    iceskate_native::SupportModel{models[3], frames[3]}};
+  std::vector<iceskate_native::JointLimit> joint_limits;
+  for (const auto & [index, lower, upper] : limits) {
+    joint_limits.push_back({index, lower, upper});
+  }
+  iceskate_native::DynamicsParameters p;
+  std::tie(p.mu, p.baumgarte, p.joint_limits, p.limit_stiffness, p.limit_damping, p.damping) =
+    params;
+  new (self) Dynamics(
+    std::move(supports), mode_table(modes), vector18(damping, "damping"), total_mass,
+    std::move(joint_limits), p);
+}
+
+iceskate_native::Contact contact_of(
+  int mode, int side, int pivot, double heel_anchor_y, double support_slide_dir,
+  double heel_slide_dir)
+{
+  for (double value : {heel_anchor_y, support_slide_dir, heel_slide_dir}) {
+    if (!std::isfinite(value)) {
+      throw std::invalid_argument("the contact's anchor and slide directions must be finite");
+    }
+  }
+  return {mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir};
+}
+
+iceskate_native::Inputs inputs_of(
+  const Vector & tau, const Optional & stiffness, const Optional & damping,
+  const std::string & push_frame, const Optional & push_force)
+{
+  iceskate_native::Inputs inputs;
+  inputs.tau = vector18(tau, "tau");
+  if (stiffness.has_value() != damping.has_value()) {
+    throw std::invalid_argument("stiffness and damping come together (a joint impedance)");
+  }
+  if (stiffness) {
+    inputs.has_impedance = true;
+    inputs.stiffness = vector18(*stiffness, "stiffness");
+    inputs.damping = vector18(*damping, "damping");
+  }
+  if (!push_frame.empty()) {
+    if (!push_force) {
+      throw std::invalid_argument("a push needs its force");
+    }
+    iceskate_native::require_finite_vector(*push_force, 3, "push_force", "world force [N]");
+    inputs.push_frame = push_frame;
+    inputs.push_force = *push_force;
+  }
+  return inputs;
+}
 
 }  // namespace
 
@@ -65,4 +191,49 @@ NB_MODULE(_kernel, m)
     "model"_a, "q"_a,
     "As crba_of(RobotModel, q), from the model's archive bytes (decoded at every call: load a "
     "RobotModel once instead in a loop).");
+
+  nb::class_<Dynamics>(
+    m, "Dynamics",
+    "Eq. (7) of every Table 2 mode on the four support models (index side * 2 + pivot); keeps "
+    "Pinocchio workspaces, so one instance per thread.")
+    .def(
+      "__init__", &construct_dynamics, "models"_a, "frames"_a, "modes"_a, "damping"_a, "total_mass"_a, "limits"_a, "params"_a)
+    .def(
+      "evaluate",
+      [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
+         double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,
+         const Vector & tau, const Optional & stiffness, const Optional & damping,
+         const std::string & push_frame, const Optional & push_force) {
+        const DynamicsResult r = self.evaluate(
+          contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir),
+          vector18(q, "q"), vector18(v, "v"),
+          inputs_of(tau, stiffness, damping, push_frame, push_force));
+        return std::make_tuple(
+          Eigen::VectorXd(r.qdd), Eigen::VectorXd(r.multipliers),
+          Eigen::VectorXd(r.support_wrench), r.support_normal, r.support_tangential, r.cop_y,
+          r.heel_friction, Eigen::VectorXd(r.applied), Eigen::VectorXd(r.swing_heel),
+          Eigen::VectorXd(r.swing_heel_velocity), r.swing_toe_z, Eigen::VectorXd(r.passive));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
+      "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a = nb::none(),
+      "damping"_a = nb::none(), "push_frame"_a = "", "push_force"_a = nb::none(),
+      "Eq. (7) at (q, v): (qdd, multipliers, support_wrench, support_normal, "
+      "support_tangential, cop_y, heel_friction, applied, swing_heel, swing_heel_velocity, "
+      "swing_toe_z, passive). ValueError for bad input, NativeError for a rank-deficient or "
+      "singular system.")
+    .def(
+      "implicit_acceleration",
+      [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
+         double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,
+         const Vector & tau, const Optional & stiffness, const Optional & damping,
+         const std::string & push_frame, const Optional & push_force, double step) {
+        return Eigen::VectorXd(self.implicit_acceleration(
+          contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir),
+          vector18(q, "q"), vector18(v, "v"),
+          inputs_of(tau, stiffness, damping, push_frame, push_force), step));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
+      "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a, "damping"_a, "push_frame"_a,
+      "push_force"_a, "step"_a,
+      "Accelerations (18,) of an implicit step of size step [s]: (M + h D) a = f - D v.");
 }

@@ -26,9 +26,11 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import FrictionModel, HybridState
 from iceskate_sim.integrators import METHODS, IntegratorConfig
 from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.simulation import SimulatorConfig, initial_state
+from iceskate_sim.simulation import ENGINES, SimulatorConfig, initial_state
 
 POSTURES = ('bent_knees', 'staggered', 'upright')
+#: The longest run [s] a scene (or ``run_scene --duration``) may ask for.
+MAX_DURATION = 3600.0
 _NUMBER = (int, float)
 
 
@@ -145,7 +147,7 @@ def standing_posture(kind: str, knee_bend: float, stagger: float) -> tuple[np.nd
 
 # ----------------------------------------------------------------------- loading
 _TOP = {'scene', 'description', 'duration', 'control_period', 'floor', 'initial', 'integrator',
-        'dynamics', 'inputs', 'disturbances', 'record', 'fall_height'}
+        'dynamics', 'inputs', 'disturbances', 'record', 'fall_height', 'engine'}
 
 
 def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None] | None = None
@@ -163,7 +165,7 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
     description = raw.get('description', '')
     if not isinstance(description, str):
         raise _fail('description', 'must be text')
-    duration = _number(raw, 'duration', 'duration', 0.0, positive=True, high=3600.0)
+    duration = _number(raw, 'duration', 'duration', 0.0, positive=True, high=MAX_DURATION)
     control_period = _number(raw, 'control_period', 'control_period', 0.0, positive=True,
                              high=0.1)
 
@@ -194,10 +196,11 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         limit_damping=_number(dyn, 'limit_damping', 'dynamics.limit_damping', 100.0, low=0.0,
                               high=1e5))
     fall_height = _number(raw, 'fall_height', 'fall_height', 1.2, low=0.0, high=1.7)
+    engine = _choice(raw, 'engine', 'engine', 'python', ENGINES)
     try:
         simulator = SimulatorConfig(control_period=control_period, integrator=integrator,
                                     friction=friction, dynamics=dynamics, projection=projection,
-                                    fall_height=fall_height)
+                                    fall_height=fall_height, engine=engine)
     except SimulationError as exc:
         raise _fail('control_period', str(exc)) from None
 
@@ -217,10 +220,15 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
     for i, value in _coordinates(init.get('v'), 'initial.v').items():
         v[i] = value
     initial = initial_state(q, mode, side, pivot, v)
+    if 1 not in initial.mode.active and q[1] != 0.0:  # the sole is flat: q1 is not free
+        raise _fail('initial.q.q1', f'q1 (the support sole on its edge) is not a coordinate of '
+                    f'mode {mode}, whose support sole is flat; leave it out or start in a mode '
+                    'with the sole on its toe or heel')
     locked = [i for i in (0, 1) if i not in initial.mode.active and v[i] != 0.0]
     if locked:
-        raise _fail('initial.v', f'{COORDINATE_NAMES[locked[0]]} is not a coordinate of mode '
-                    f'{mode}; its velocity must be 0')
+        name = COORDINATE_NAMES[locked[0]]
+        raise _fail(f'initial.v.{name}', f'{name} is not a coordinate of mode {mode}; its '
+                    'velocity must be 0')
 
     if not isinstance(raw['inputs'], dict):
         raise _fail('inputs', f'must be a mapping, got {type(raw["inputs"]).__name__}')

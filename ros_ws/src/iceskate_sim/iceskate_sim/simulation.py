@@ -36,6 +36,9 @@ from iceskate_sim.observation import Observation
 from iceskate_sim.robot import N_COORDINATES, Robot
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
 
+#: Where eq. (7) is solved (``SimulatorConfig.engine``).
+ENGINES = ('python', 'native')
+
 
 def stamp_time(t: float) -> float:
     """Time t [s] at a stamp's resolution (whole nanoseconds)."""
@@ -83,6 +86,8 @@ class SimulatorConfig:
         the same instant (a Zeno cycle of complementary guards, e.g. flat <-> edge in a closed
         double-support chain), it is not applied and its guard is suppressed for this long
         [s]; every such case is counted in ``stats.suppressed_cycles``.
+    :param engine: where eq. (7) is solved: 'python' (the reference, ``GaitDynamics``) or
+        'native' (the C++ kernel, ``NativeGaitDynamics``).
     """
 
     control_period: float = 1.0e-3
@@ -96,9 +101,12 @@ class SimulatorConfig:
     max_instant_transitions: int = 20
     zeno_window: float = 1.0e-6
     chatter_dwell: float = 0.005
+    engine: str = 'python'
 
     def __post_init__(self) -> None:
-        """Check the control period against the integrator step."""
+        """Check the engine, and the control period against the integrator step."""
+        if self.engine not in ENGINES:
+            raise SimulationError(f'engine must be one of {list(ENGINES)}, got {self.engine!r}')
         if not (np.isfinite(self.control_period) and self.control_period > 0.0):
             raise SimulationError(f'control_period must be > 0 s, got {self.control_period!r}')
         if self.integrator.method in FIXED_STEP:
@@ -128,7 +136,11 @@ class Simulator:
         self.robot = robot
         self.config = config
         params = replace(config.dynamics, mu=config.friction.mu)
-        self.dynamics = GaitDynamics(robot, params)
+        if config.engine == 'native':
+            from iceskate_sim.native_dynamics import NativeGaitDynamics  # loads the C++ kernel
+            self.dynamics: GaitDynamics = NativeGaitDynamics(robot, params)
+        else:
+            self.dynamics = GaitDynamics(robot, params)
         self._initial = initial
         self._integrator = Integrator(config.integrator)
         self.reset()
@@ -232,7 +244,9 @@ class Simulator:
             (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
         """
         if self.ended is not None:
-            raise SimulationError(f'the run has ended ({self.ended}); reset() to start again')
+            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
+                                  f'{self.state.mode.number} ({self.ended}); no further '
+                                  'period can be simulated')
         if not isinstance(command, HeldCommand):
             tau = np.asarray(command, dtype=float)
             if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):

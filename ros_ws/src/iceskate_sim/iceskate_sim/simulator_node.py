@@ -52,6 +52,7 @@ PARAMETERS = (
     ('scene', '', 'path of the scene YAML (its simulator part: floor, initial state, '
      'integrator, disturbances, duration, recording)', None),
     ('duration', 0.0, 'run length [s]; 0: the scene duration', (0.0, 3600.0)),
+    ('engine', '', "where eq. (7) is solved: 'python' or 'native' ('': the scene's)", None),
     ('lockstep', True, 'wait for every command stamped t_k (else free-running)', None),
     ('realtime_factor', 1.0, 'free-running pace [simulated s per wall s]', (1e-3, 1e3)),
     ('control_timeout', 5.0, 'a controller silent this long ends the run [s]', (1e-3, 3600.0)),
@@ -77,11 +78,12 @@ class SimulatorNode(Node):
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
+            if c.engine:
+                scene = replace(scene, simulator=replace(scene.simulator, engine=c.engine))
             session = Session(scene, pathlib.Path(c.out_dir) if c.out_dir else None,
                               pathlib.Path(c.record_bag) if c.record_bag else None)
-        except SimulationError as exc:
-            raise ConfigError(f'parameter scene={c.scene!r} (or record_bag, out_dir): {exc}') \
-                from None
+        except SimulationError as exc:  # its message names the scene, bag or folder
+            raise ConfigError(str(exc)) from None
         controllers = self._controllers(scene)
         self.session = LockstepSession(session, controllers, c.lockstep)
         self.loop = LockstepLoop(self.session, self._publish, self._report, c.control_timeout,
@@ -170,9 +172,10 @@ class SimulatorNode(Node):
                                    f'{list(self.session.sources)}, nodes '
                                    f'{sorted(self.session.nodes)}')
 
-    def close(self) -> None:
-        """Close the bag and write the outputs if the run was stopped (SIGTERM)."""
-        self.loop.stop()
+    def close(self, signum: int | None = None, detail: str = '') -> None:
+        """Close the bag and write the outputs if the run was stopped (by the signal
+        ``signum``: the metrics say 'interrupted by SIG... at t=...'; ``detail`` is added)."""
+        self.loop.stop(signum, detail)
 
     def step_callback(self, request: Any, response: Any) -> Any:
         """Queue N periods of a paused simulation; sim_time: the time they will reach."""

@@ -1,0 +1,46 @@
+// The gait modes of the paper's Table 2 as data (docs/model.md §3): which coordinates are
+// active and which swing-foot constraints act. The table is Python's (iceskate_sim.modes); the
+// native core receives it when a kernel is made and keeps no copy of its own.
+#pragma once
+
+#include <array>
+#include <vector>
+
+namespace iceskate_native
+{
+
+constexpr int kCoordinates = 18;  // [y0, q1, ..., q17]
+constexpr int kY0 = 0;
+constexpr int kQ1 = 1;
+constexpr int kModes = 20;
+
+/// A swing-foot constraint: heel height (hz), heel forward position (hy), flat sole (fr).
+enum class Constraint
+{
+  kHeelZ,
+  kHeelY,
+  kSoleFlat
+};
+
+/// One row of Table 2.
+struct Mode
+{
+  int number = 0;              ///< 1..20
+  bool y0_active = false;      ///< the support foot glides
+  bool q1_active = false;      ///< the support foot tips about an edge
+  bool swing_sliding = false;  ///< Coulomb friction on the swing heel
+  std::vector<int> active;     ///< indices of the active coordinates, increasing
+  std::vector<Constraint> constraints;  ///< in the order hz, hy, fr
+
+  /// Index of a constraint's multiplier in the solution (-1: not active).
+  int multiplier_index(Constraint c) const;
+};
+
+/// The 20 modes, indexed by number - 1.
+using ModeTable = std::array<Mode, kModes>;
+
+/// Check a table (numbers 1..20 in order, active indices in range and increasing, constraint
+/// order hz, hy, fr, hz first); throws std::invalid_argument naming the first problem.
+void check_modes(const ModeTable & modes);
+
+}  // namespace iceskate_native

@@ -1,0 +1,402 @@
+#include "iceskate_native/dynamics.hpp"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include <Eigen/LU>
+#include <pinocchio/algorithm/center-of-mass.hpp>
+#include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/multibody.hpp>
+
+#include "iceskate_native/errors.hpp"
+
+namespace iceskate_native
+{
+
+namespace
+{
+
+constexpr double kGravity = 9.81;         // m/s^2
+constexpr double kRankTolerance = 1e-10;  // Hadamard ratio below which the constraints are singular
+constexpr int kMaxSize = kCoordinates + 3;
+constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
+
+using ConstVector = Eigen::Ref<const Eigen::VectorXd>;  // selects Pinocchio's compiled algorithms
+using SystemMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxSize, kMaxSize>;
+using SystemVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxSize, 1>;
+
+// Row of the world-aligned heel Jacobian and acceleration a constraint uses.
+int row_of(Constraint c) { return c == Constraint::kHeelZ ? 2 : 1; }
+
+// Whether coordinate i belongs to the chain q1..q7 whose sum is the swing sole's pitch.
+bool in_leg_chain(int i) { return i >= 1 && i <= 7; }
+
+}  // namespace
+
+struct Dynamics::Workspace
+{
+  std::vector<pinocchio::Data> data;  // one per support model
+  Eigen::VectorXd q, v, a;            // Pinocchio's argument type
+  pinocchio::Data::Matrix6x jacobian;
+  int model = 0;  // side * 2 + pivot of the system assembled
+  int n = 0;      // active coordinates
+  int nc = 0;     // active constraints
+  SystemMatrix A;
+  SystemVector b;
+  SystemVector x;
+  Eigen::PartialPivLU<SystemMatrix> lu;
+  Vector18 applied;
+  Vector18 passive;
+  bool engaged = false;
+  Eigen::Vector3d heel;
+  Eigen::Vector3d heel_velocity;
+  double toe_z = 0.0;
+};
+
+int SupportModel::frame(const std::string & name) const
+{
+  const auto it = frames.find(name);
+  if (it == frames.end()) {
+    throw std::invalid_argument("unknown frame '" + name + "' of the support model");
+  }
+  return it->second;
+}
+
+Dynamics::Dynamics(
+  std::array<SupportModel, 4> models, ModeTable modes, const Vector18 & damping,
+  double total_mass, std::vector<JointLimit> limits, DynamicsParameters params)
+: models_(std::move(models)),
+  modes_(std::move(modes)),
+  damping_(params.damping ? damping : Vector18::Zero()),
+  mass_(total_mass),
+  limits_(std::move(limits)),
+  params_(params),
+  work_(std::make_unique<Workspace>())
+{
+  check_modes(modes_);
+  for (const auto & limit : limits_) {
+    if (limit.index < 0 || limit.index >= kCoordinates || !(limit.lower <= limit.upper)) {
+      throw std::invalid_argument("a joint limit needs an index in 0..17 and lower <= upper");
+    }
+  }
+  for (const auto & support : models_) {
+    if (support.model.nq() != kCoordinates || support.model.nv() != kCoordinates) {
+      throw std::invalid_argument("a support model must have 18 coordinates (nq = nv = 18)");
+    }
+    support.frame("swing_heel");  // both needed: std::invalid_argument if missing
+    support.frame("swing_toe");
+    for (const auto & [name, id] : support.frames) {
+      if (id < 0 || id >= static_cast<int>(support.model.pin().nframes)) {
+        throw std::invalid_argument("frame index of '" + name + "' out of range");
+      }
+    }
+    work_->data.emplace_back(support.model.pin());
+  }
+  work_->q.resize(kCoordinates);
+  work_->v.resize(kCoordinates);
+  work_->a.resize(kCoordinates);
+  work_->jacobian.setZero(6, kCoordinates);
+}
+
+Dynamics::~Dynamics() = default;
+
+const SupportModel & Dynamics::support_model(int side, int pivot) const
+{
+  if (side < 0 || side > 1 || pivot < 0 || pivot > 1) {
+    throw std::invalid_argument("side and pivot must be 0 or 1");
+  }
+  return models_[static_cast<std::size_t>(side * 2 + pivot)];
+}
+
+const Mode & Dynamics::mode(int number) const
+{
+  if (number < 1 || number > kModes) {
+    throw std::invalid_argument(
+      "unknown gait mode " + std::to_string(number) + "; Table 2 has modes 1-20");
+  }
+  return modes_[static_cast<std::size_t>(number - 1)];
+}
+
+bool Dynamics::limits_engaged(const Vector18 & q) const
+{
+  for (const auto & limit : limits_) {
+    if (q[limit.index] < limit.lower || q[limit.index] > limit.upper) {
+      return true;
+    }
+  }
+  return false;
+}
+
+Vector18 Dynamics::passive_forces(const Vector18 & q, const Vector18 & v) const
+{
+  Vector18 force = -damping_.cwiseProduct(v);
+  if (params_.joint_limits) {
+    for (const auto & limit : limits_) {
+      const double penetration = std::min(q[limit.index] - limit.lower, 0.0)
+                                 + std::max(q[limit.index] - limit.upper, 0.0);
+      const double engaged = penetration != 0.0 ? 1.0 : 0.0;
+      force[limit.index] -= params_.limit_stiffness * penetration
+                            + params_.limit_damping * v[limit.index] * engaged;
+    }
+  }
+  return force;
+}
+
+void Dynamics::assemble(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs)
+{
+  const Mode & mode = this->mode(contact.mode);
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  for (int i : {kY0, kQ1}) {
+    const bool locked = i == kY0 ? !mode.y0_active : !mode.q1_active;
+    if (locked && v[i] != 0.0) {
+      std::ostringstream message;
+      message << "mode " << mode.number << " dynamics: locked coordinate " << i
+              << " must have zero velocity, got " << v[i];
+      throw std::invalid_argument(message.str());
+    }
+  }
+  Workspace & w = *work_;
+  w.model = contact.side * 2 + contact.pivot;
+  const pinocchio::Model & model = support.model.pin();
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(w.model)];
+  const auto & act = mode.active;
+  const int n = static_cast<int>(act.size());
+  const int nc = static_cast<int>(mode.constraints.size());
+  w.n = n;
+  w.nc = nc;
+  w.q = q;
+  w.v = v;
+
+  // the input-free terms of the state; computeAllTerms leaves data.a = velocity products
+  pinocchio::computeAllTerms(model, data, ConstVector(w.q), ConstVector(w.v));
+  const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
+  w.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
+  w.engaged = params_.joint_limits && limits_engaged(q);
+  w.passive = w.engaged ? passive_forces(q, v) : Vector18(-damping_.cwiseProduct(v));
+
+  w.applied = w.passive + inputs.tau;
+  if (inputs.has_impedance) {
+    w.applied -= inputs.stiffness.cwiseProduct(q) + inputs.damping.cwiseProduct(v);
+  }
+  if (!mode.q1_active) {
+    w.applied[kQ1] = 0.0;
+  }
+  w.applied[kY0] = 0.0;
+  if (!inputs.push_frame.empty()) {  // J^T f of the push, at this state
+    w.jacobian.setZero();
+    pinocchio::getFrameJacobian(
+      model, data, static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)),
+      kWorldAligned, w.jacobian);
+    w.applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
+  }
+
+  const int size = n + nc;
+  w.A.setZero(size, size);
+  w.b.setZero(size);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const int lo = std::min(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
+      const int hi = std::max(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
+      w.A(i, j) = data.M(lo, hi);  // Pinocchio fills the upper triangle
+    }
+    const int k = act[static_cast<std::size_t>(i)];
+    w.b[i] = w.applied[k] - data.nle[k];
+  }
+  const double mu = params_.mu;
+  if (nc > 0) {
+    w.jacobian.setZero();
+    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
+    const Eigen::Vector3d acc =
+      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
+    double chain = 0.0;
+    for (int i = 1; i <= 7; ++i) {
+      chain += q[i];
+    }
+    for (int k = 0; k < nc; ++k) {
+      const Constraint c = mode.constraints[static_cast<std::size_t>(k)];
+      double rate = 0.0;
+      for (int i = 0; i < n; ++i) {
+        const int j = act[static_cast<std::size_t>(i)];
+        const double entry =
+          c == Constraint::kSoleFlat ? (in_leg_chain(j) ? 1.0 : 0.0) : w.jacobian(row_of(c), j);
+        w.A(n + k, i) = entry;
+        w.A(i, n + k) = -entry;  // the generalized-force direction -J^T
+        rate += entry * v[j];
+      }
+      w.b[n + k] = c == Constraint::kHeelZ ? -acc[2] : c == Constraint::kHeelY ? -acc[1] : -0.0;
+      if (params_.baumgarte != 0.0) {
+        const double alpha = params_.baumgarte;
+        const double position = c == Constraint::kHeelZ   ? w.heel[2]
+                                : c == Constraint::kHeelY ? w.heel[1] - contact.heel_anchor_y
+                                                          : chain;
+        w.b[n + k] -= 2.0 * alpha * rate + alpha * alpha * position;
+      }
+    }
+    if (mode.swing_sliding) {  // friction mu f_nz on the heel, against its velocity
+      for (int i = 0; i < n; ++i) {
+        w.A(i, n) = mu * contact.heel_slide_dir * w.jacobian(1, act[static_cast<std::size_t>(i)])
+                    - w.A(n, i);
+      }
+    }
+  }
+  if (mode.y0_active) {  // Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
+    pinocchio::centerOfMass(model, data, pinocchio::ACCELERATION, false);
+    const double k = mu * contact.support_slide_dir;
+    const double km = k * mass_;
+    for (int i = 0; i < n; ++i) {
+      w.A(0, i) += km * data.Jcom(2, act[static_cast<std::size_t>(i)]);
+    }
+    w.b[0] -= km * (kGravity + data.acom[0][2]);
+    if (nc > 0) {
+      w.A(0, n) -= k;
+    }
+  }
+  w.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
+  const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
+  w.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
+
+  if (nc > 0) {  // the constraint rows must have full rank (Hadamard ratio of their Gram)
+    const Eigen::MatrixXd rows = w.A.block(n, 0, nc, n);
+    const Eigen::MatrixXd gram = rows * rows.transpose();
+    const Eigen::VectorXd diag = gram.diagonal();
+    const double ratio = (diag.array() > 0.0).all() ? gram.determinant() / diag.prod() : 0.0;
+    if (!(ratio >= kRankTolerance)) {
+      std::ostringstream message;
+      message << "mode " << mode.number << ": the swing constraints are rank-deficient at this "
+              << "posture (Hadamard ratio " << ratio << "); the all-straight double-support "
+              << "posture is singular (docs/model.md §4.5)";
+      throw NativeError(message.str());
+    }
+  }
+}
+
+void Dynamics::solve(const Contact & contact, const Vector18 & q, const Vector18 & v)
+{
+  Workspace & w = *work_;
+  w.lu.compute(w.A);
+  const auto & lu = w.lu.matrixLU();
+  for (Eigen::Index i = 0; i < lu.rows(); ++i) {
+    if (lu(i, i) == 0.0) {
+      throw NativeError("mode " + std::to_string(contact.mode) + ": singular dynamics matrix");
+    }
+  }
+  w.x = w.lu.solve(w.b);
+  if (!w.x.allFinite()) {
+    std::ostringstream message;
+    message << "mode " << contact.mode << " dynamics: the solution is not finite (|v|max "
+            << v.cwiseAbs().maxCoeff() << ", |q|max " << q.cwiseAbs().maxCoeff() << ")";
+    throw NativeError(message.str());
+  }
+}
+
+DynamicsResult Dynamics::evaluate(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs)
+{
+  assemble(contact, q, v, inputs);
+  solve(contact, q, v);
+  const Workspace & w = *work_;
+  const Mode & mode = this->mode(contact.mode);
+  DynamicsResult r;
+  for (int i = 0; i < w.n; ++i) {
+    r.qdd[mode.active[static_cast<std::size_t>(i)]] = w.x[i];
+  }
+  const Constraint order[3] = {Constraint::kHeelZ, Constraint::kHeelY, Constraint::kSoleFlat};
+  for (int k = 0; k < 3; ++k) {
+    const int at = mode.multiplier_index(order[k]);
+    r.multipliers[k] = at < 0 ? 0.0 : w.x[w.n + at];
+  }
+  r.heel_friction =
+    mode.swing_sliding ? -params_.mu * contact.heel_slide_dir * r.multipliers[0] : 0.0;
+  r.applied = w.applied;
+  r.passive = w.passive;
+  r.swing_heel = w.heel;
+  r.swing_heel_velocity = w.heel_velocity;
+  r.swing_toe_z = w.toe_z;
+  r.support_wrench = support_wrench(contact, q, v, inputs, r);
+  r.support_normal = r.support_wrench[2];
+  r.support_tangential = r.support_wrench[1];
+  r.cop_y = r.support_normal > 0.0 ? q[kY0] + r.support_wrench[3] / r.support_normal
+                                   : std::numeric_limits<double>::quiet_NaN();
+  return r;
+}
+
+Vector18 Dynamics::implicit_acceleration(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+  double h)
+{
+  if (!(h > 0.0) || !std::isfinite(h)) {
+    throw std::invalid_argument("the implicit step h must be a finite time > 0 s");
+  }
+  assemble(contact, q, v, inputs);
+  Workspace & w = *work_;
+  Vector18 implicit = damping_;
+  if (w.engaged) {
+    for (const auto & limit : limits_) {
+      if (q[limit.index] < limit.lower || q[limit.index] > limit.upper) {
+        implicit[limit.index] += params_.limit_damping;
+      }
+    }
+  }
+  if (inputs.has_impedance) {
+    implicit += inputs.damping;
+  }
+  implicit[kY0] = 0.0;
+  const auto & act = mode(contact.mode).active;
+  for (int i = 0; i < w.n; ++i) {
+    w.A(i, i) += h * implicit[act[static_cast<std::size_t>(i)]];
+  }
+  solve(contact, q, v);
+  Vector18 qdd = Vector18::Zero();
+  for (int i = 0; i < w.n; ++i) {
+    qdd[act[static_cast<std::size_t>(i)]] = w.x[i];
+  }
+  return qdd;
+}
+
+Wrench Dynamics::support_wrench(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+  const DynamicsResult & result)
+{
+  // RNEA gives the wrench the base must supply for the motion; the swing contact and a push
+  // supply part of it, the support foot the rest (world-aligned: the y0 joint does not turn).
+  Workspace & w = *work_;
+  const SupportModel & support = models_[static_cast<std::size_t>(w.model)];
+  const pinocchio::Model & model = support.model.pin();
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(w.model)];
+  w.q = q;
+  w.v = v;
+  w.a = result.qdd;
+  pinocchio::rnea(model, data, ConstVector(w.q), ConstVector(w.v), ConstVector(w.a));
+  Eigen::Vector3d force = data.f[1].linear();
+  Eigen::Vector3d moment = data.f[1].angular();
+  const Eigen::Vector3d origin = data.oMi[1].translation();
+  const auto minus_force_at = [&](const Eigen::Vector3d & r, const Eigen::Vector3d & p) {
+    force -= p;
+    moment -= r.cross(p);
+  };
+  if (w.nc > 0) {
+    const Eigen::Vector3d swing(
+      0.0, result.multipliers[1] + result.heel_friction, result.multipliers[0]);
+    minus_force_at(result.swing_heel - origin, swing);
+    moment[0] -= result.multipliers[2];
+  }
+  if (!inputs.push_frame.empty()) {
+    const auto frame = static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame));
+    const Eigen::Vector3d at = pinocchio::updateFramePlacement(model, data, frame).translation();
+    minus_force_at(at - origin, inputs.push_force);
+  }
+  if (mode(contact.mode).q1_active) {
+    moment[0] -= result.applied[kQ1];  // the input and damping at the floor hinge
+  }
+  Wrench wrench;
+  wrench << force, moment;
+  return wrench;
+}
+
+}  // namespace iceskate_native

@@ -1,0 +1,47 @@
+#include "iceskate_native/modes.hpp"
+
+#include <sstream>
+#include <stdexcept>
+
+namespace iceskate_native
+{
+
+int Mode::multiplier_index(Constraint c) const
+{
+  for (std::size_t k = 0; k < constraints.size(); ++k) {
+    if (constraints[k] == c) {
+      return static_cast<int>(k);
+    }
+  }
+  return -1;
+}
+
+void check_modes(const ModeTable & modes)
+{
+  for (std::size_t k = 0; k < modes.size(); ++k) {
+    const Mode & mode = modes[k];
+    std::ostringstream problem;
+    if (mode.number != static_cast<int>(k) + 1) {
+      problem << "mode table entry " << k << " has number " << mode.number;
+    } else if (mode.active.empty() || mode.active.size() > kCoordinates) {
+      problem << "mode " << mode.number << " has " << mode.active.size() << " coordinates";
+    } else if (mode.constraints.size() > 3) {
+      problem << "mode " << mode.number << " has " << mode.constraints.size() << " constraints";
+    } else if (!mode.constraints.empty() && mode.constraints.front() != Constraint::kHeelZ) {
+      problem << "mode " << mode.number << ": the heel-height constraint must come first";
+    } else if (mode.y0_active != (mode.active.front() == kY0)) {
+      problem << "mode " << mode.number << ": y0 active and the coordinate list disagree";
+    }
+    for (std::size_t i = 0; problem.str().empty() && i < mode.active.size(); ++i) {
+      const int index = mode.active[i];
+      if (index < 0 || index >= kCoordinates || (i > 0 && index <= mode.active[i - 1])) {
+        problem << "mode " << mode.number << ": active coordinates must be increasing in 0..17";
+      }
+    }
+    if (!problem.str().empty()) {
+      throw std::invalid_argument(problem.str());
+    }
+  }
+}
+
+}  // namespace iceskate_native
