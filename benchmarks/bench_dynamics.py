@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
-"""Speed of the dynamics core: one ``GaitDynamics.evaluate`` per Table 2 mode.
+"""Speed of the dynamics core: one ``GaitDynamics.evaluate`` per Table 2 mode, Python and native.
 
 For every mode (grouped by coordinate count 16/17/18) it times one evaluation at a
 representative random state (bent stance plus noise, seeded; a new state every call, so the
 state terms ``evaluate`` keeps are never reused), the same state evaluated again ("kept": what
 a period's second and third evaluations cost), the free-flyer cross-check
 ``FloatingBaseDynamics.evaluate`` at the same state, and the individual Pinocchio calls and
-the linear solve that ``evaluate`` is made of. Figures are the median over ``--repeat`` runs
+the linear solve that ``evaluate`` is made of; and the native engine at the same states:
+``NativeGaitDynamics.evaluate`` (the C++ kernel behind the same Python interface) and the
+kernel's own binding call (``kernel``: argument checks, eq. (7), the result's arrays), with the
+ratio Python / native measured in this run. Figures are the median over ``--repeat`` runs
 of ``--number`` calls each, in microseconds per call. The 18-coordinate modes are compared with
 the 60 us target.
 
@@ -82,10 +85,12 @@ def main(argv: list[str] | None = None) -> int:
     (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
      JOINT_LIMITS, load_robot) = _import_core()
     from iceskate_sim.dynamics import _solve  # the linear solve of evaluate
+    from iceskate_sim.native_dynamics import NativeGaitDynamics
 
     robot = load_robot()
     params = DynamicsParameters(mu=0.005)
     dynamics = GaitDynamics(robot, params)
+    native = NativeGaitDynamics(robot, params)
     floating = FloatingBaseDynamics(robot, params)
     sm = robot.support_model(args.side, args.pivot)
     model = sm.model
@@ -105,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
                                                   for _ in range(2)])
         result = dynamics.evaluate(contact, q, v, tau)
         applied = result.applied
+        kernel_arguments = native._arguments(contact, q, v, tau, None, None, None)
         size = mode.n_coordinates + len(mode.constraints)
         A = np.eye(size) + 0.01 * rng.standard_normal((size, size))
         b = rng.standard_normal(size)
@@ -121,6 +127,10 @@ def main(argv: list[str] | None = None) -> int:
             'floating_base_us': _time_us(lambda c=contact, q=q, v=v, a=applied:
                                          floating.evaluate(c, q, v, a), rep, num),
             'solve_us': _time_us(lambda A=A, b=b: _solve(A, b), rep, num),
+            'native_us': _time_us(lambda c=contact, s=states:
+                                  native.evaluate(c, *next(s)), rep, num),
+            'kernel_us': _time_us(lambda a=kernel_arguments:
+                                  native._kernel.evaluate(*a), rep, num),
         })
 
     # The Pinocchio calls evaluate() makes (same 18-joint model in every mode).
@@ -151,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     header = (f'{"mode":>4} {"support":>7} {"swing":>5} {"n":>3} {"n_c":>3} '
               f'{"evaluate us":>12} {"kept us":>8} {"floating us":>12} {"solve us":>9} '
-              f'{"eval/60us":>9}')
+              f'{"eval/60us":>9} {"native us":>10} {"kernel us":>10} {"py/native":>9}')
     groups = {}
     for row in rows:
         groups.setdefault(row['n'], []).append(row)
@@ -163,9 +173,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f'{row["mode"]:>4} {row["support"]:>7} {row["swing"]:>5} {row["n"]:>3} '
                   f'{row["n_c"]:>3} {row["evaluate_us"]:12.1f} {row["kept_us"]:8.1f} '
                   f'{row["floating_base_us"]:12.1f} '
-                  f'{row["solve_us"]:9.1f} {ratio}')
+                  f'{row["solve_us"]:9.1f} {ratio} {row["native_us"]:10.1f} '
+                  f'{row["kernel_us"]:10.1f} {row["evaluate_us"] / row["native_us"]:9.2f}')
         median = statistics.median(r['evaluate_us'] for r in groups[n])
-        print(f'     median evaluate over the {len(groups[n])} modes: {median:.1f} us')
+        native_median = statistics.median(r['native_us'] for r in groups[n])
+        kernel_median = statistics.median(r['kernel_us'] for r in groups[n])
+        print(f'     median over the {len(groups[n])} modes: evaluate {median:.1f} us, native '
+              f'{native_median:.1f} us (kernel call {kernel_median:.1f} us): Python / native '
+              f'= {median / native_median:.2f}')
         print()
     print('Pinocchio calls (one call each, us):')
     for name, us in pinocchio_us.items():
