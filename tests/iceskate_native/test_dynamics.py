@@ -162,3 +162,93 @@ def test_a_bad_mode_table_is_refused(robot):
     with pytest.raises(ValueError, match='heel-height constraint must come first'):
         iceskate_native.Dynamics(models, frames, rows, robot.damping, robot.total_mass, [],
                                  (0.005, 0.0, True, 1e4, 100.0, True))
+
+
+# ------------------------------------------------------------------ guards and segments
+@pytest.mark.parametrize(('number', 'side', 'pivot'), CASES[::2])
+@pytest.mark.parametrize('rule', ['ice', 'coulomb'])
+def test_guard_values_agree(engines, number, side, pivot, rule):
+    from iceskate_sim.command import HeldCommand
+    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values, guards_of
+    reference, native = engines
+    mode = get_mode(number)
+    rng = np.random.default_rng([SEED, number, 13])
+    q, v = state(mode, rng)
+    contact = ContactState(mode, side, pivot, heel_anchor_y=0.1)
+    command = HeldCommand.torque_only(rng.normal(0.0, 5.0, 18))
+    friction = FrictionModel(0.005, rule)
+    s = HybridState(0.25, q, v, contact)
+    expected = guard_values(s, reference.evaluate(contact, q, v, command.bias), friction)
+    names = [g.name for g in guards_of(mode)]
+    rested = {names[0]: 0.3}  # the first guard rests until after t: reads -1
+    expected[0] = -1.0
+    got = native.guard_values(s, command, None, friction, rested)
+    assert np.max(np.abs(got - expected)) <= TOLERANCE * max(1.0, float(np.max(np.abs(expected))))
+
+
+@pytest.mark.parametrize('method', ['symplectic_euler', 'implicit_euler', 'rk4'])
+def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
+    """From double support (mode 17) a push of the swing foot's hip makes the heel lift: the
+    segment stops at the same guard, at the same time (to the event tolerance), in the same
+    state."""
+    from iceskate_sim.command import HeldCommand
+    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values, guards_of
+    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    params = DynamicsParameters()
+    reference, native = GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
+    mode = get_mode(17)
+    q = np.zeros(18)
+    q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
+    contact = ContactState(mode, 'right', 'toe')
+    contact.heel_anchor_y = float(reference.frame_placement(contact, q, 'swing_heel')
+                                  .translation[1])
+    tau = np.zeros(18)
+    tau[5], tau[6] = 60.0, -40.0  # lift the swing leg: the swing contact force goes to zero
+    command = HeldCommand.torque_only(tau)
+    friction = FrictionModel()
+    config = IntegratorConfig(method=method, step=1e-4, event_tolerance=1e-10)
+
+    def rhs(t, x, implicit_step=0.0):
+        if implicit_step > 0.0:
+            qdd = reference.implicit_acceleration(contact, x[:18], x[18:], tau, None, None,
+                                                  None, implicit_step)
+            return np.concatenate([x[18:], qdd]), None
+        result = reference.evaluate(contact, x[:18], x[18:], tau)
+        return np.concatenate([x[18:], result.qdd]), result
+
+    def guards(t, x, result):
+        return guard_values(HybridState(t, x[:18], x[18:], contact), result, friction)
+
+    x0 = np.concatenate([q, np.zeros(18)])
+    expected = Integrator(config).integrate_segment(rhs, guards, 0.0, x0, 0.2)
+    got = native.integrate_segment(HybridState(0.0, q, np.zeros(18), contact), command, None,
+                                   config, friction, {}, 0.2)
+    assert expected.fired is not None, 'the reference found no event: the test needs one'
+    assert got.fired == expected.fired, guards_of(mode)[expected.fired].name
+    # both locate the zero to the event tolerance (Brent in scipy, TOMS 748 natively)
+    dt = got.t - expected.t
+    assert abs(dt) <= 2 * config.event_tolerance
+    assert got.steps == expected.steps
+    # the states differ by what the motion covers in that time, and rounding
+    rate = np.abs(np.concatenate([expected.x[18:], expected.result.qdd]))
+    assert np.all(np.abs(got.x - expected.x) <= 2.0 * rate * abs(dt) + 1e-11)
+
+
+def test_a_segment_without_event_reaches_the_end(robot):
+    from iceskate_sim.command import HeldCommand
+    from iceskate_sim.hybrid import FrictionModel, HybridState
+    from iceskate_sim.integrators import IntegratorConfig
+    native = NativeGaitDynamics(robot)
+    q = np.zeros(18)
+    q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
+    contact = ContactState(get_mode(17), 'right', 'toe')
+    contact.heel_anchor_y = float(native.frame_placement(contact, q, 'swing_heel')
+                                  .translation[1])
+    segment = native.integrate_segment(
+        HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
+        None, IntegratorConfig(method='implicit_euler', step=1e-3), FrictionModel(), {}, 0.01)
+    assert segment.fired is None and segment.t == 0.01 and segment.steps == 10
+    with pytest.raises(SimulationError, match="no native fixed-step method 'rk45'"):
+        native.integrate_segment(
+            HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
+            None, IntegratorConfig(method='rk45'), FrictionModel(), {}, 0.01)

@@ -26,7 +26,9 @@
 #include "iceskate_native/checks.hpp"
 #include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/errors.hpp"
+#include "iceskate_native/guards.hpp"
 #include "iceskate_native/inertia.hpp"
+#include "iceskate_native/integrators.hpp"
 #include "iceskate_native/model.hpp"
 
 namespace nb = nanobind;
@@ -128,6 +130,38 @@ iceskate_native::Contact contact_of(
   return {mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir};
 }
 
+/// (cop_band, force_band, moment_band, toe_scuff, sole_toe_y, sole_heel_y)
+using ConstantRow = std::tuple<double, double, double, double, double, double>;
+
+iceskate_native::GuardSet guard_set(
+  const std::vector<std::string> & names, const std::vector<double> & rested_until,
+  double mu, bool ice, const ConstantRow & constants, double margin)
+{
+  iceskate_native::GuardSet set;
+  for (const auto & name : names) {
+    set.guards.push_back(iceskate_native::guard_named(name));
+  }
+  if (!rested_until.empty() && rested_until.size() != names.size()) {
+    throw std::invalid_argument("rested_until needs one time per guard (or none)");
+  }
+  set.rested_until = rested_until;
+  set.friction = {mu, ice};
+  auto & c = set.constants;
+  std::tie(c.cop_band, c.force_band, c.moment_band, c.toe_scuff, c.sole_toe_y, c.sole_heel_y) =
+    constants;
+  set.margin = margin;
+  return set;
+}
+
+auto result_tuple(const DynamicsResult & r)
+{
+  return std::make_tuple(
+    Eigen::VectorXd(r.qdd), Eigen::VectorXd(r.multipliers), Eigen::VectorXd(r.support_wrench),
+    r.support_normal, r.support_tangential, r.cop_y, r.heel_friction,
+    Eigen::VectorXd(r.applied), Eigen::VectorXd(r.swing_heel),
+    Eigen::VectorXd(r.swing_heel_velocity), r.swing_toe_z, Eigen::VectorXd(r.passive));
+}
+
 iceskate_native::Inputs inputs_of(
   const Vector & tau, const Optional & stiffness, const Optional & damping,
   const std::string & push_frame, const Optional & push_force)
@@ -204,15 +238,10 @@ NB_MODULE(_kernel, m)
          double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,
          const Vector & tau, const Optional & stiffness, const Optional & damping,
          const std::string & push_frame, const Optional & push_force) {
-        const DynamicsResult r = self.evaluate(
+        return result_tuple(self.evaluate(
           contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir),
           vector18(q, "q"), vector18(v, "v"),
-          inputs_of(tau, stiffness, damping, push_frame, push_force));
-        return std::make_tuple(
-          Eigen::VectorXd(r.qdd), Eigen::VectorXd(r.multipliers),
-          Eigen::VectorXd(r.support_wrench), r.support_normal, r.support_tangential, r.cop_y,
-          r.heel_friction, Eigen::VectorXd(r.applied), Eigen::VectorXd(r.swing_heel),
-          Eigen::VectorXd(r.swing_heel_velocity), r.swing_toe_z, Eigen::VectorXd(r.passive));
+          inputs_of(tau, stiffness, damping, push_frame, push_force)));
       },
       "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
       "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a = nb::none(),
@@ -235,5 +264,62 @@ NB_MODULE(_kernel, m)
       "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
       "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a, "damping"_a, "push_frame"_a,
       "push_force"_a, "step"_a,
-      "Accelerations (18,) of an implicit step of size step [s]: (M + h D) a = f - D v.");
+      "Accelerations (18,) of an implicit step of size step [s]: (M + h D) a = f - D v.")
+    .def(
+      "guard_values",
+      [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
+         double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,
+         const Vector & tau, const Optional & stiffness, const Optional & damping,
+         const std::string & push_frame, const Optional & push_force,
+         const std::vector<std::string> & guards, const std::vector<double> & rested_until,
+         double mu, bool ice, const ConstantRow & constants, double margin, double t) {
+        const auto contact =
+          contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
+        const Vector18 q18 = vector18(q, "q"), v18 = vector18(v, "v");
+        const auto result =
+          self.evaluate(contact, q18, v18, inputs_of(tau, stiffness, damping, push_frame,
+                                                     push_force));
+        iceskate_native::State x;
+        x << q18, v18;
+        return iceskate_native::guard_values(
+          guard_set(guards, rested_until, mu, ice, constants, margin), contact, t, x, result);
+      },
+      "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
+      "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a, "damping"_a, "push_frame"_a,
+      "push_force"_a, "guards"_a, "rested_until"_a, "mu"_a, "ice"_a, "constants"_a, "margin"_a,
+      "t"_a,
+      "The values of the named guards (E1..S7) at (q, v) under the inputs (rested ones -1).")
+    .def(
+      "integrate_segment",
+      [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
+         double support_slide_dir, double heel_slide_dir, const Vector & tau,
+         const Optional & stiffness, const Optional & damping, const std::string & push_frame,
+         const Optional & push_force, const std::string & method, double step,
+         double event_tolerance, const std::vector<std::string> & guards,
+         const std::vector<double> & rested_until, double mu, bool ice,
+         const ConstantRow & constants, double margin, double t0, const Vector & x0,
+         double t_end) {
+        const auto contact =
+          contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
+        iceskate_native::require_finite_vector(x0, 2 * iceskate_native::kCoordinates, "x0",
+                                               "[q, v]");
+        const iceskate_native::State x = x0;
+        const auto inputs = inputs_of(tau, stiffness, damping, push_frame, push_force);
+        const auto start = self.evaluate(
+          contact, x.head<iceskate_native::kCoordinates>(),
+          x.tail<iceskate_native::kCoordinates>(), inputs);
+        const auto segment = iceskate_native::integrate_fixed(
+          self, contact, inputs, iceskate_native::method_named(method), step, event_tolerance,
+          guard_set(guards, rested_until, mu, ice, constants, margin), t0, x, t_end, start);
+        return std::make_tuple(
+          segment.t, Eigen::VectorXd(segment.x), result_tuple(segment.result), segment.fired,
+          segment.steps, segment.evaluations + 1);
+      },
+      "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
+      "heel_slide_dir"_a, "tau"_a, "stiffness"_a, "damping"_a, "push_frame"_a, "push_force"_a,
+      "method"_a, "step"_a, "event_tolerance"_a, "guards"_a, "rested_until"_a, "mu"_a, "ice"_a,
+      "constants"_a, "margin"_a, "t0"_a, "x0"_a, "t_end"_a,
+      "Integrate from (t0, x0) with a fixed-step method to t_end or the first crossing of one "
+      "of the named guards (located to event_tolerance [s]): (t, x, dynamics tuple as "
+      "evaluate's, index of the guard that fired or -1, steps, evaluations).");
 }

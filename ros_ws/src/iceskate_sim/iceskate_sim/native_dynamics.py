@@ -1,5 +1,6 @@
 """Eq. (7) on the native (C++) kernel: ``GaitDynamics`` with ``evaluate`` and
-``implicit_acceleration`` computed by ``iceskate_native.Dynamics``.
+``implicit_acceleration`` computed by ``iceskate_native.Dynamics``, and the fixed-step
+integration of a mode with its guards and event location (``integrate_segment``) too.
 
 The same four support models (sent as Pinocchio archives), the same mode table
 (``iceskate_sim.modes``), damping, soft stops and physical options as the Python routine, which
@@ -14,10 +15,24 @@ from __future__ import annotations
 import numpy as np
 
 import iceskate_native
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import (
+    COP_BAND,
+    FORCE_BAND,
+    MOMENT_BAND,
+    TOE_SCUFF,
+    FrictionModel,
+    HybridState,
+    guards_of,
+)
+from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
 from iceskate_sim.modes import MODES
-from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, Robot
+from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
+
+#: The guards' dead bands and sole geometry, in the kernel's order.
+GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)
 
 
 def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
@@ -86,3 +101,43 @@ class NativeGaitDynamics(GaitDynamics):
                 *self._arguments(contact, q, v, tau, push, stiffness, damping), step)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
+
+    def _guard_arguments(self, mode_number: int, t: float, suppressed: dict[str, float],
+                         friction: FrictionModel) -> tuple:
+        names = [g.name for g in guards_of(MODES[mode_number])]
+        rested = [suppressed.get(name, -np.inf) for name in names]
+        return (names, rested, friction.mu, friction.rule == 'ice', GUARD_CONSTANTS,
+                GUARD_MARGIN)
+
+    def guard_values(self, state: HybridState, command: HeldCommand,
+                     push: tuple[str, np.ndarray] | None, friction: FrictionModel,
+                     suppressed: dict[str, float]) -> np.ndarray:
+        """Values of the guards of ``state.mode`` (rested ones -1), natively."""
+        args = self._arguments(state.contact, state.q, state.v, command.bias, push,
+                               command.stiffness, command.damping)
+        try:
+            return self._kernel.guard_values(
+                *args, *self._guard_arguments(state.mode.number, state.t, suppressed, friction),
+                state.t)
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'mode {state.mode.number} guards: {exc}') from None
+
+    def integrate_segment(self, state: HybridState, command: HeldCommand,
+                          push: tuple[str, np.ndarray] | None, integrator: IntegratorConfig,
+                          friction: FrictionModel, suppressed: dict[str, float],
+                          t_end: float) -> Segment:
+        """Integrate ``state`` with a fixed-step method to ``t_end`` or the first guard
+        crossing (``Integrator.integrate_segment``'s fixed-step path), natively."""
+        (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
+         frame, force) = self._arguments(state.contact, state.q, state.v, command.bias, push,
+                                         command.stiffness, command.damping)
+        try:
+            t, x, result, fired, steps, evaluations = self._kernel.integrate_segment(
+                mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness, damping,
+                frame, force, integrator.method, integrator.step, integrator.event_tolerance,
+                *self._guard_arguments(mode, state.t, suppressed, friction), state.t,
+                np.concatenate([q, v]), t_end)
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'mode {mode} integration: {exc}') from None
+        return Segment(t, x, DynamicsResult(*result), None if fired < 0 else fired, steps,
+                       evaluations)

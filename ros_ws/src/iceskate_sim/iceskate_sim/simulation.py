@@ -141,6 +141,9 @@ class Simulator:
             self.dynamics: GaitDynamics = NativeGaitDynamics(robot, params)
         else:
             self.dynamics = GaitDynamics(robot, params)
+        #: the segments between events run natively too (fixed-step methods)
+        self._native_segments = (config.engine == 'native'
+                                 and config.integrator.method in FIXED_STEP)
         self._initial = initial
         self._integrator = Integrator(config.integrator)
         self.reset()
@@ -269,8 +272,13 @@ class Simulator:
                 x0 = np.concatenate([self.state.q, self.state.v])
                 start = (np.concatenate([self.state.v, self.result.qdd]), self.result)
                 try:
-                    seg = self._integrator.integrate_segment(self._rhs, self._guards,
-                                                             self.state.t, x0, t_end, start)
+                    if self._native_segments:
+                        seg = self.dynamics.integrate_segment(
+                            self.state, self._command, self._push, self.config.integrator,
+                            self.config.friction, self._suppressed, t_end)
+                    else:
+                        seg = self._integrator.integrate_segment(self._rhs, self._guards,
+                                                                 self.state.t, x0, t_end, start)
                 except SimulationError as exc:
                     raise SimulationError(f'{exc} (during the period from '
                                           f'{self.state.summary()})') from exc

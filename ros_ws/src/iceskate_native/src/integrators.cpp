@@ -1,0 +1,176 @@
+#include "iceskate_native/integrators.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+
+#include <boost/math/tools/toms748_solve.hpp>
+
+#include "iceskate_native/errors.hpp"
+
+namespace iceskate_native
+{
+
+namespace
+{
+
+using Velocity = Eigen::Matrix<double, kCoordinates, 1>;
+
+// One step of size h from (t, x) whose accelerations are qdd0; `extra` counts the additional
+// dynamics evaluations the step made.
+State take_step(
+  Dynamics & dynamics, const Contact & contact, const Inputs & inputs, Method method,
+  const State & x, const Vector18 & qdd0, double h, int & extra)
+{
+  const Vector18 q = x.head<kCoordinates>();
+  const Vector18 v = x.tail<kCoordinates>();
+  State out;
+  if (method == Method::kSymplecticEuler) {
+    const Vector18 v1 = v + h * qdd0;
+    out << q + h * v1, v1;
+    return out;
+  }
+  if (method == Method::kImplicitEuler) {
+    const Vector18 v1 = v + h * dynamics.implicit_acceleration(contact, q, v, inputs, h);
+    extra += 1;
+    out << q + h * v1, v1;
+    return out;
+  }
+  const auto rate = [&](const State & y) {
+    State f;
+    f << y.tail<kCoordinates>(),
+      dynamics.evaluate(contact, y.head<kCoordinates>(), y.tail<kCoordinates>(), inputs).qdd;
+    return f;
+  };
+  State k1;
+  k1 << v, qdd0;
+  const State k2 = rate(x + 0.5 * h * k1);
+  const State k3 = rate(x + 0.5 * h * k2);
+  const State k4 = rate(x + h * k3);
+  extra += 3;
+  return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+}
+
+}  // namespace
+
+Method method_named(const std::string & name)
+{
+  if (name == "symplectic_euler") {
+    return Method::kSymplecticEuler;
+  }
+  if (name == "implicit_euler") {
+    return Method::kImplicitEuler;
+  }
+  if (name == "rk4") {
+    return Method::kRk4;
+  }
+  throw std::invalid_argument(
+    "no native fixed-step method '" + name + "' (symplectic_euler, implicit_euler, rk4)");
+}
+
+Eigen::VectorXd guard_values(
+  const GuardSet & guards, const Contact & contact, double t, const State & x,
+  const DynamicsResult & result)
+{
+  const std::size_t count = guards.guards.size();
+  Eigen::VectorXd values(static_cast<Eigen::Index>(count));
+  const Vector18 q = x.head<kCoordinates>();
+  const Vector18 v = x.tail<kCoordinates>();
+  for (std::size_t i = 0; i < count; ++i) {
+    const bool rested = i < guards.rested_until.size() && guards.rested_until[i] > t;
+    values[static_cast<Eigen::Index>(i)] =
+      rested ? -1.0
+             : guard_value(guards.guards[i], contact, q, v, result, guards.friction,
+                           guards.constants);
+  }
+  return values;
+}
+
+Segment integrate_fixed(
+  Dynamics & dynamics, const Contact & contact, const Inputs & inputs, Method method,
+  double step, double event_tolerance, const GuardSet & guards, double t0, const State & x0,
+  double t_end, const DynamicsResult & start)
+{
+  if (!(step > 0.0) || !(event_tolerance > 0.0) || !std::isfinite(t0) || !std::isfinite(t_end)) {
+    throw std::invalid_argument("a segment needs step > 0, event_tolerance > 0 and finite times");
+  }
+  Segment segment;
+  double t = t0;
+  State x = x0;
+  DynamicsResult r0 = start;
+  Eigen::VectorXd g0 = guard_values(guards, contact, t, x, r0);
+  const double margin = guards.margin;
+  while (t_end - t > 1e-12 * std::max(1.0, std::abs(t_end))) {
+    const double h = std::min(step, t_end - t);
+    int extra = 0;
+    const State x1 = take_step(dynamics, contact, inputs, method, x, r0.qdd, h, extra);
+    DynamicsResult r1 = dynamics.evaluate(
+      contact, x1.head<kCoordinates>(), x1.tail<kCoordinates>(), inputs);
+    segment.evaluations += extra + 1;
+    segment.steps += 1;
+    const Eigen::VectorXd g1 = guard_values(guards, contact, t + h, x1, r1);
+
+    double best = std::numeric_limits<double>::infinity();
+    int fired = -1;
+    State best_x;
+    DynamicsResult best_result;
+    for (Eigen::Index i = 0; i < g1.size(); ++i) {
+      if (!(g0[i] <= margin && g1[i] > margin)) {
+        continue;
+      }
+      // phi(s): guard i minus the margin after a step of size s from (t, x)
+      State xs;
+      DynamicsResult rs;
+      const auto at = [&](double s) {
+        int more = 0;
+        xs = s > 0.0 ? take_step(dynamics, contact, inputs, method, x, r0.qdd, s, more) : x;
+        rs = dynamics.evaluate(contact, xs.head<kCoordinates>(), xs.tail<kCoordinates>(), inputs);
+        segment.evaluations += more + 1;
+        return guard_values(guards, contact, t + s, xs, rs)[i] - margin;
+      };
+      const double f0 = g0[i] - margin;
+      double s = 0.0;
+      if (f0 < 0.0) {
+        std::uintmax_t iterations = 100;
+        const auto close = [event_tolerance](double a, double b) {
+          return std::abs(b - a) <= event_tolerance;
+        };
+        const auto bracket = boost::math::tools::toms748_solve(
+          at, 0.0, h, f0, g1[i] - margin, close, iterations);
+        s = bracket.second;  // the due side of the final bracket
+      }
+      double phi = at(s);
+      double nudge = event_tolerance;
+      while (phi <= 0.0 && s < h) {  // move onto the due side of the zero
+        s = std::min(h, s + nudge);
+        nudge *= 2.0;
+        phi = at(s);
+      }
+      if (s < best) {
+        best = s;
+        fired = static_cast<int>(i);
+        best_x = xs;
+        best_result = rs;
+      }
+    }
+    if (fired >= 0) {
+      segment.t = t + best;
+      segment.x = best_x;
+      segment.result = best_result;
+      segment.fired = fired;
+      return segment;
+    }
+    t += h;
+    x = x1;
+    r0 = std::move(r1);
+    g0 = g1;
+  }
+  segment.t = t_end;
+  segment.x = x;
+  segment.result = r0;
+  return segment;
+}
+
+}  // namespace iceskate_native
