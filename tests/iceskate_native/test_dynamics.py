@@ -252,3 +252,27 @@ def test_a_segment_without_event_reaches_the_end(robot):
         native.integrate_segment(
             HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
             None, IntegratorConfig(method='rk45'), FrictionModel(), {}, 0.01)
+
+
+def test_two_seconds_of_skate_on_both_engines(tmp_path):
+    """The whole headless loop (laws, 5 sources, pushes of the support exchange, about 70
+    events) on both engines: the same event sequence, event times and positions agreeing to
+    what the event location's tolerance (1e-10 s, found by different root finders) grows to in
+    this hybrid system: ~1e-9 s and ~5e-9 m over 2-3 s."""
+    from dataclasses import replace
+    import json
+
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene
+    scene = replace(load_scene('skate'), duration=2.0, record_bag=False)
+    for engine in ('python', 'native'):
+        run(replace(scene, simulator=replace(scene.simulator, engine=engine)),
+            tmp_path / engine, progress=False)
+    events = {e: json.loads((tmp_path / e / 'events.json').read_text())
+              for e in ('python', 'native')}
+    assert len(events['python']) > 30
+    assert ([(x['event'], x['from_mode'], x['to_mode']) for x in events['python']]
+            == [(x['event'], x['from_mode'], x['to_mode']) for x in events['native']])
+    assert max(abs(a['t'] - b['t']) for a, b in zip(*events.values(), strict=True)) <= 1e-8
+    a, b = (np.load(tmp_path / e / 'trajectory.npz') for e in ('python', 'native'))
+    assert np.max(np.abs(a['q'] - b['q'])) <= 1e-7

@@ -99,3 +99,21 @@ def random_state(rng: np.random.Generator) -> Callable[..., tuple[np.ndarray, np
     def draw(mode: GaitMode | int, **options) -> tuple[np.ndarray, np.ndarray]:
         return make_random_state(mode, options.pop('rng', rng), **options)
     return draw
+
+
+@pytest.fixture(params=['python', 'native'])
+def engine(request: pytest.FixtureRequest) -> str:
+    """Where eq. (7) is solved: the Python reference, then the native kernel (the physics
+    tests that take this fixture run against both)."""
+    return request.param
+
+
+@pytest.fixture
+def make_dynamics(engine: str, robot: Robot) -> Callable[..., GaitDynamics]:
+    """``make_dynamics(params)`` -> the dynamics routine of the test's engine."""
+    def make(params: DynamicsParameters | None = None) -> GaitDynamics:
+        if engine == 'native':
+            from iceskate_sim.native_dynamics import NativeGaitDynamics
+            return NativeGaitDynamics(robot, params)
+        return GaitDynamics(robot, params)
+    return make

@@ -30,9 +30,12 @@ def _initial_state(rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([q[ACTIVE], v])
 
 
-def _simulate(robot, damping: bool, x0: np.ndarray):
-    """Integrate mode 1 with zero input; the last state entry is the damping work [J]."""
-    dynamics = GaitDynamics(robot, DynamicsParameters(damping=damping, joint_limits=False))
+def _simulate(robot, damping: bool, x0: np.ndarray, make_dynamics):
+    """Integrate mode 1 with zero input; the last state entry is the damping work [J].
+
+    :param make_dynamics: ``make_dynamics(params)`` -> the dynamics routine (an engine's).
+    """
+    dynamics = make_dynamics(DynamicsParameters(damping=damping, joint_limits=False))
     contact = ContactState(MODE, 'right', 'toe')
     d = robot.damping[ACTIVE] if damping else np.zeros(N)
     tau = np.zeros(N_COORDINATES)
@@ -84,10 +87,11 @@ def _check_energy_formula(robot, x0: np.ndarray) -> None:
 
 
 @pytest.mark.slow
-def test_energy_is_conserved_without_damping(robot, rng):
+def test_energy_is_conserved_without_damping(robot, rng, make_dynamics):
     x0 = _initial_state(rng)
     _check_energy_formula(robot, x0)
-    sol, kinetic, potential = _simulate(robot, damping=False, x0=x0)
+    sol, kinetic, potential = _simulate(robot, damping=False, x0=x0,
+                                        make_dynamics=make_dynamics)
     energy = kinetic + potential
     drift = np.max(np.abs(energy - energy[0])) / abs(energy[0])
     assert drift <= 1e-8, f'relative energy drift {drift:.2e} over {DURATION} s'
@@ -98,9 +102,10 @@ def test_energy_is_conserved_without_damping(robot, rng):
 
 
 @pytest.mark.slow
-def test_energy_never_increases_with_damping(robot, rng):
+def test_energy_never_increases_with_damping(robot, rng, make_dynamics):
     x0 = _initial_state(rng)
-    sol, kinetic, potential = _simulate(robot, damping=True, x0=x0)
+    sol, kinetic, potential = _simulate(robot, damping=True, x0=x0,
+                                        make_dynamics=make_dynamics)
     energy = kinetic + potential
     scale = abs(energy[0])
     increase = np.max(np.diff(energy))

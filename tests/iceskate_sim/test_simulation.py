@@ -6,7 +6,7 @@ decreases within a step (y0 is re-based on the new support foot at an exchange),
 support never moves backward.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
@@ -45,12 +45,13 @@ class Run:
 
 
 @pytest.fixture
-def runs(robot):
-    """``start(config, state)`` -> Run; at teardown: no backward slide in any of them."""
+def runs(robot, engine):
+    """``start(config, state)`` -> Run on the test's engine (every test that uses it runs on
+    both); at teardown: no backward slide in any of them."""
     made: list[Run] = []
 
     def start(config: SimulatorConfig, state) -> Run:
-        run = Run(Simulator(robot, config, state))
+        run = Run(Simulator(robot, replace(config, engine=engine), state))
         run.record()
         made.append(run)
         return run
