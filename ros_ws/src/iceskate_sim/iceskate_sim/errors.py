@@ -1,6 +1,8 @@
-"""The one exception type of iceskate_sim."""
+"""The one exception type of iceskate_sim (and its subclass for a run ended by a signal)."""
 
 from __future__ import annotations
+
+import signal
 
 
 class SimulationError(RuntimeError):
@@ -9,3 +11,25 @@ class SimulationError(RuntimeError):
     The message names the problem (the offending key, value, coordinate or event) and, for a
     failure during a run, the simulation time, the gait mode and a summary of the state.
     """
+
+
+class RunInterrupted(SimulationError):
+    """A run ended from outside by a signal (SIGINT, SIGTERM, SIGHUP, ...): not a failure of
+    the physics and not a fall; its outputs hold everything simulated until then.
+
+    :param signum: the signal.
+    :param t: simulation time the run reached [s] (None: it had not started).
+    :param detail: what else to say (e.g. that the launching process is gone).
+    :ivar exit_code: the shell's convention for a process ended by the signal, 128 + signum
+        (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+    """
+
+    def __init__(self, signum: int, t: float | None = None, detail: str = '') -> None:
+        try:
+            name = signal.Signals(signum).name
+        except ValueError:
+            name = f'signal {signum}'
+        when = f'at t={t:.6f} s' if t is not None else 'before the simulation started'
+        super().__init__(f'interrupted by {name} {when}' + (f' ({detail})' if detail else ''))
+        self.signum, self.t, self.signal_name = int(signum), t, name
+        self.exit_code = 128 + int(signum)

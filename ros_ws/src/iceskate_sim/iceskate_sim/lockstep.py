@@ -26,17 +26,19 @@ the run; the node gives it a publish function and a report function and wires th
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
 import json
 import pathlib
+import re
 import time
 from typing import Any
 
 import numpy as np
 
 from iceskate_sim.command import ControllerCommand
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record
 from iceskate_sim.ros_conversions import (
@@ -54,6 +56,11 @@ from iceskate_sim.session import Session, last_event_before
 CONTROL_TOPICS = ('/gait_state', '/clock')
 #: Every live state topic, in publishing order.
 STATE_TOPICS = CONTROL_TOPICS + ('/joint_states', '/head_pose')
+#: Rejected commands kept whole for the run's summary (the rest are only counted).
+FIRST_REJECTED = 5
+#: Lockstep without controllers: periods stepped per timer tick (nothing to wait for).
+UNCONTROLLED_BATCH = 50
+_NUMBERS = re.compile(r'[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?')
 
 
 class LockstepSession:
@@ -200,9 +207,11 @@ class LockstepSession:
         self.session.reset()
         self._restart()
 
-    def finish(self, error: SimulationError | None = None) -> dict[str, Any]:
-        """End the run: close the bag, compute the metrics, write the output files (once)."""
-        return self.session.finish(error)
+    def finish(self, error: SimulationError | None = None,
+               extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """End the run: close the bag, compute the metrics (and ``extra``), write the output
+        files (once)."""
+        return self.session.finish(error, extra)
 
 
 class LoopMonitor:
@@ -222,6 +231,21 @@ class LoopMonitor:
         self.heard = dict.fromkeys(sources, self.started_at)
         self.samples: dict[str, list[float]] = {'round_trip': [], 'physics': []}
         self.rejected = 0
+        self.rejected_by_reason: Counter[str] = Counter()
+        self.rejected_first: list[str] = []
+
+    def reject(self, reason: str) -> None:
+        """A command was refused for ``reason`` (counted by its kind: the reason without its
+        numbers; the first ``FIRST_REJECTED`` kept whole)."""
+        self.rejected += 1
+        self.rejected_by_reason[_NUMBERS.sub('#', reason)] += 1
+        if len(self.rejected_first) < FIRST_REJECTED:
+            self.rejected_first.append(reason)
+
+    def rejected_summary(self) -> dict[str, Any]:
+        """The commands refused: count, count per reason, the first few (metrics.json)."""
+        return {'count': self.rejected, 'by_reason': dict(self.rejected_by_reason.most_common()),
+                'first': list(self.rejected_first)}
 
     def start(self) -> None:
         """The run starts now (origin of the free-running pace)."""
@@ -362,7 +386,7 @@ class LockstepLoop:
             self.session.offer(msg.source, stamp_to_ns(msg.header.stamp),
                                command_from_message(msg))
         except SimulationError as exc:
-            self.monitor.rejected += 1
+            self.monitor.reject(str(exc))
             return f'rejected command: {exc}'
         complete = self.session.lockstep and not self.session.missing()
         self.monitor.command(msg.source, complete)
@@ -382,24 +406,37 @@ class LockstepLoop:
                 f'{", ".join(map(repr, overdue))} within {m.timeout} s'))
         if s.lockstep and s.missing() and m.resend_due():
             self.publish_state(again=True)
-        for _ in range(0 if s.lockstep else m.due(s.periods)):
+        # free-running: keep the pace; lockstep without controllers: nothing to wait for
+        count = (UNCONTROLLED_BATCH if not s.controllers else 0) if s.lockstep else m.due(
+            s.periods)
+        for _ in range(count):
             if self.may_step():
                 self.step()
 
     def finish(self, error: SimulationError | None = None) -> None:
-        """End the run (outputs, bag, report, loop timings)."""
-        metrics = self.session.finish(error)
-        self.phase, self.exit_code = 'finished', int(self.session.error is not None)
+        """End the run (outputs, bag, report, loop timings).
+
+        The exit code: 0, 1 after an error, 128 + signum after a ``RunInterrupted``.
+        """
+        metrics = self.session.finish(error, {'rejected_commands':
+                                              self.monitor.rejected_summary()})
+        failed = self.session.error
+        self.phase = 'finished'
+        self.exit_code = (failed.exit_code if isinstance(failed, RunInterrupted)
+                          else int(failed is not None))
         self._report(f'run over at t={metrics["sim_time_s"]:.6f} s: '
                      f'{metrics["failure"] or "complete"}', bool(self.exit_code))
         if self._stats_file is not None:
             self._stats_file.write_text(json.dumps(self.monitor.stats(
                 self.session.periods, metrics['wall_time_s']), indent=1))
 
-    def stop(self) -> None:
-        """End a run that is not over yet (the node was stopped, e.g. by SIGTERM)."""
+    def stop(self, signum: int | None = None, detail: str = '') -> None:
+        """End a run that is not over yet: the node was stopped, by the signal ``signum``
+        (a ``RunInterrupted``, ``detail`` added to its message) or otherwise."""
         if self.phase != 'finished':
-            self.finish(SimulationError(f'stopped at t={self.session.sim.time:.6f} s'))
+            t = self.session.sim.time
+            self.finish(RunInterrupted(signum, t, detail) if signum is not None
+                        else SimulationError(f'stopped at t={t:.6f} s'))
 
     # ------------------------------------------------------------------------------ services
     def request_steps(self, periods: int) -> tuple[bool, int, str]:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.dynamics import head_psi
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.recording import Sample
 from iceskate_sim.robot import SOLE_HEEL_Y, SOLE_TOE_Y
 
@@ -91,11 +91,12 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     a = trajectory.arrays()
     sim_time = float(sim.time)
     failure = str(error) if error is not None else sim.ended
+    interrupted = isinstance(error, RunInterrupted)  # stopped from outside: not a fall
     metrics: dict[str, Any] = {
         'scene': scene.name, 'sim_time_s': sim_time, 'wall_time_s': wall_time,
         'real_time_factor': sim_time / wall_time if wall_time > 0 else float('nan'),
-        'steps': int(sim.state.step_index), 'fell': failure is not None,
-        'failure': failure, 'transitions': len(sim.events),
+        'steps': int(sim.state.step_index), 'fell': failure is not None and not interrupted,
+        'failure': failure, 'interrupted': interrupted, 'transitions': len(sim.events),
         'max_constraint_residual': float(sim.stats.max_constraint_residual),
         'physics_steps': sim.stats.steps, 'dynamics_evaluations': sim.stats.evaluations,
         'suppressed_cycles': sim.stats.suppressed_cycles,

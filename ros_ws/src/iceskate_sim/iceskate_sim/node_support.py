@@ -12,15 +12,18 @@
   typed parameter, changes at run time checked by the class's own rules;
   ``write_parameter_file``: a ROS 2 parameter file of such values.
 * ``run_node``: rclpy.init, construct, spin an ``EventsExecutor`` with a ``spin_once`` loop
-  (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop on SIGTERM/SIGINT
-  (``ExternalShutdownException``), destroy and shut down; a ``ConfigError`` or
-  ``SimulationError`` while starting exits 1 with one line naming the problem.
+  (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop cleanly on SIGINT, SIGTERM
+  or SIGHUP (``iceskate_sim.shutdown.StopRequest``; the node's ``close`` gets the signal),
+  destroy and shut down; a ``ConfigError`` or ``SimulationError`` while starting (a parameter
+  file that is not UTF-8 YAML among them: ``check_parameter_files``) exits 1 with one line
+  naming the problem.
 """
 
 from __future__ import annotations
 
 import array
 from collections.abc import Callable, Iterable
+import os
 import pathlib
 import sys
 from types import SimpleNamespace
@@ -50,6 +53,8 @@ from iceskate_sim.parameters import (
     optional_inner,
     unflatten,
 )
+from iceskate_sim.scene import read_yaml
+from iceskate_sim.shutdown import StopRequest, process_alive
 
 T = TypeVar('T')
 
@@ -235,37 +240,58 @@ def spin_until(executor: Any, done: Callable[[], bool], context: Any = None,
         executor.spin_once(timeout_sec=period)
 
 
+def check_parameter_files(argv: list[str]) -> None:
+    """Read every ``--params-file`` of ``argv`` as the scenes are read (``read_yaml``: UTF-8
+    text, well-formed YAML), so a binary or malformed file is refused in one sentence naming
+    it before rcl parses it.
+
+    :raises SimulationError: naming the file and the problem.
+    """
+    for option, value in zip(argv, argv[1:], strict=False):
+        if option == '--params-file':
+            read_yaml(value, 'parameter file')
+
+
 def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None) -> int:
     """The Jazzy main(): init, make the node, spin until it is finished or stopped.
 
-    The node may define ``finished`` (property: stop spinning) and ``exit_code`` and
-    ``close()`` (called before destruction, also after SIGTERM).
+    SIGINT, SIGTERM and SIGHUP stop the node cleanly (rclpy's own handlers are not installed:
+    ``StopRequest`` notes the signal and the spin loop ends within 0.1 s). The node may define
+    ``finished`` (property: stop spinning), ``exit_code`` and ``close(signum, detail)`` (called
+    before destruction: after the end of the run, an error or a signal, whose number it gets,
+    with ``detail`` saying if the parent process is gone).
 
-    :returns: the process exit code.
+    :returns: the process exit code (the node's ``exit_code``, 0 without one; 1 if it could not
+        start).
     """
     from rclpy.experimental import EventsExecutor
+    from rclpy.signals import SignalHandlerOptions
     node = None
-    try:
-        rclpy.init(args=args)
-        node = make()
-        executor = EventsExecutor()
-        executor.add_node(node)
-        spin_until(executor, lambda: getattr(node, 'finished', False))
-        return int(getattr(node, 'exit_code', 0))
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return int(getattr(node, 'exit_code', 0) or 0)
-    except (ConfigError, SimulationError) as exc:
-        print(f'{name}: error: {exc}', file=sys.stderr)
-        return 1
-    except Exception as exc:  # e.g. rclpy.init refusing a malformed params file
-        if node is None:
-            print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr)
+    parent = os.getppid()
+    with StopRequest() as stop:
+        try:
+            check_parameter_files(sys.argv if args is None else args)
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            node = make()
+            executor = EventsExecutor()
+            executor.add_node(node)
+            spin_until(executor, lambda: stop.requested or getattr(node, 'finished', False))
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except (ConfigError, SimulationError) as exc:
+            print(f'{name}: error: {exc}', file=sys.stderr)
             return 1
-        raise
-    finally:
-        if node is not None:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        except Exception as exc:  # e.g. rclpy.init refusing a malformed params file
+            if node is None:
+                print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr)
+                return 1
+            raise
+        finally:
+            if node is not None:
+                close = getattr(node, 'close', None)
+                if close is not None:
+                    gone = os.getppid() != parent or not process_alive(parent)
+                    close(stop.signum, f'its parent process {parent} ended' if gone else '')
+                node.destroy_node()
+            rclpy.try_shutdown()
+        return int(getattr(node, 'exit_code', 0) or 0)

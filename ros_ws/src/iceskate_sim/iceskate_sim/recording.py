@@ -34,6 +34,7 @@ nothing.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 import json
 import math
@@ -66,6 +67,7 @@ from iceskate_sim.robot import (
     load_robot,
 )
 from iceskate_sim.ros_conversions import ns_to_sec_nanosec, seconds_to_ns
+from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
 PROJECT_VERSION = '0.1.0'
 TOPICS = {
@@ -580,34 +582,73 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
                     factory: MessageFactory, records: multiprocessing.Queue,
                     status: Connection) -> None:
     """Body of the writer process: write the batches of ``records`` until None, then close the
-    bag and send ('ok', samples) or ('error', message) on ``status``. Closes the bag and stops
-    when the parent process is gone."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent closes the bag
+    bag and send ('ok', samples) or ('error', message) on ``status``.
+
+    SIGINT, SIGTERM and SIGHUP are ignored: sent to the whole process group (Ctrl-C, ``timeout``,
+    a closed terminal), they reach the parent too, which ends the run and closes the bag through
+    this process. When the parent dies (even by SIGKILL) the kernel sends SIGUSR1
+    (``die_with_parent``; it comes when the forking thread ends, so the parent is looked at
+    again a second later, by SIGALRM): this process writes the batches that arrived whole,
+    closes the bag (with its metadata) and exits; a batch the parent was sending when it died is
+    dropped (SIGALRM ends a read that would wait for its missing part forever)."""
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+    reading, orphaned = False, False
+
+    parent = multiprocessing.parent_process()
+
+    def parent_gone(signum: int, frame: Any) -> None:
+        nonlocal orphaned
+        if signum == signal.SIGUSR1:  # the thread that forked this process ended: look again
+            signal.alarm(1)  # in a second, when the rest of the parent is gone too
+            return
+        if parent is not None and parent.is_alive():  # only that thread ended
+            return
+        orphaned = True
+        if reading:  # blocked on the queue: give up the read (else only note it)
+            raise _ParentGone
+
+    signal.signal(signal.SIGUSR1, parent_gone)
+    signal.signal(signal.SIGALRM, parent_gone)
+    die_with_parent(signal.SIGUSR1, parent.pid if parent is not None else None)
     count = 0
     try:
         bag = _BagFile(path, metadata, urdf, factory)
         try:
-            parent = multiprocessing.parent_process()
             while True:
+                if orphaned:
+                    signal.alarm(2)  # what is left in the queue must come within 2 s
+                reading = True
                 try:
                     batch = records.get(timeout=1.0)
                 except queue.Empty:
-                    if parent is not None and not parent.is_alive():
+                    if orphaned or (parent is not None and not parent.is_alive()):
                         break
                     continue
+                except (_ParentGone, EOFError, OSError):
+                    break
+                finally:
+                    reading = False
                 if batch is None:
                     break
                 for record in batch:
                     bag.write_record(record)
                     count += 1
         finally:
+            signal.alarm(0)
             bag.close()
     except BaseException as exc:  # reported to the parent, which raises it
-        status.send(('error', f'{type(exc).__name__}: {exc}'))
+        with contextlib.suppress(OSError):  # unless it is gone
+            status.send(('error', f'{type(exc).__name__}: {exc}'))
     else:
-        status.send(('ok', count))
+        with contextlib.suppress(OSError):
+            status.send(('ok', count))
     finally:
         status.close()
+
+
+class _ParentGone(Exception):
+    """The writer's parent died while the writer waited for a batch."""
 
 
 class BagRecorder:

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import asdict
 import json
 import pathlib
+import tempfile
 import time
 from typing import Any
 
@@ -36,6 +37,43 @@ def scene_metadata(scene: Scene) -> dict[str, str]:
     """Bag custom_data: scene name, its full parameters, the integrator."""
     return {'scene': scene.name, 'scene_parameters': json.dumps(scene.raw, sort_keys=True),
             'integrator': json.dumps(asdict(scene.simulator.integrator), sort_keys=True)}
+
+
+def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> None:
+    """Create the output directory ``out`` (with its parents) and check that a run can write
+    into it, and that the bag path ``bag`` (if any) is free.
+
+    :raises SimulationError: one sentence naming the path and the problem (a file in the way,
+        no permission, a read-only file system, the bag of an earlier run).
+    """
+    out = pathlib.Path(out)
+    for path in (out, *out.parents):
+        if path.exists() or path.is_symlink():
+            if not path.is_dir():
+                where = 'is' if path == out else f'lies under {path}, which is'
+                raise SimulationError(f'output directory {out} {where} an existing file, not '
+                                      'a directory')
+            break
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SimulationError(f'output directory {out} cannot be created: '
+                              f'{_reason(exc)}') from None
+    try:
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise SimulationError(f'output directory {out} is not writable: {_reason(exc)}') \
+            from None
+    if bag is not None and (bag.exists() or bag.is_symlink()):
+        raise SimulationError(f'output directory {out} already holds a recorded run: {bag} '
+                              'already exists; choose a new --out')
+
+
+def _reason(exc: OSError) -> str:
+    """An OSError's reason in words (e.g. 'permission denied')."""
+    text = exc.strerror or str(exc)
+    return text[:1].lower() + text[1:]
 
 
 def last_event_before(sim: Simulator, t: float) -> Transition | None:
@@ -61,9 +99,14 @@ class Session:
         self.out = out
         self.robot = robot or load_robot()
         self.sim = Simulator(self.robot, scene.simulator, scene.initial)
+        if self.sim.ended is not None:  # e.g. a foot below the floor: nothing to simulate
+            raise SimulationError(
+                f'scene {scene.name!r}: the initial state cannot be simulated, it ends the run '
+                f'at once in mode {self.sim.state.mode.number} ({self.sim.ended}); change '
+                'initial.posture, initial.q, initial.v or initial.mode')
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
+            prepare_output(out, bag)
         self.recorder = (BagRecorder(bag, scene_metadata(scene),
                                      self.robot.urdf_path.read_text(encoding='utf-8'),
                                      background=True) if bag is not None else None)
@@ -141,23 +184,31 @@ class Session:
         self.metrics = None
         self._restart()
 
-    def finish(self, error: SimulationError | None = None) -> dict[str, Any]:
+    def finish(self, error: SimulationError | None = None,
+               extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """End the run (once): close the bag, compute the metrics, write the output files.
 
-        :param error: why the run was ended from outside (kept unless the physics failed).
+        :param error: why the run was ended from outside (kept unless the physics failed;
+            a ``RunInterrupted`` for a signal).
+        :param extra: more entries for the metrics (e.g. the rejected commands of a ROS run).
         """
         if self.metrics is not None:
             return self.metrics
         if error is not None and self.error is None:
             self.error = error
         try:
-            self.flush()
-        finally:
-            if self.recorder is not None:
-                self.recorder.close()
+            try:
+                self.flush()
+            finally:
+                if self.recorder is not None:
+                    self.recorder.close()
+        except SimulationError as exc:  # the bag failed: the other outputs are still written
+            if self.error is None:
+                self.error = exc
         start = self._wall_start if self._wall_start is not None else time.perf_counter()
         self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
                                        time.perf_counter() - start, self.error)
+        self.metrics.update(extra or {})
         if self.out is not None:
             (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
             (self.out / 'events.json').write_text(json.dumps(
