@@ -30,11 +30,11 @@ import time
 
 import cma
 import numpy as np
-import yaml
 
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene, scene_dirs
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.scene import read_yaml
 
 # block.key -> (low, high)
 SPACE = {
@@ -164,7 +164,7 @@ def main() -> None:
     args = parser.parse_args()
     path = next(d / f'{args.scene}.yaml' for d in scene_dirs()
                 if (d / f'{args.scene}.yaml').is_file())
-    base = yaml.safe_load(path.read_text())
+    base = read_yaml(path, 'scene')  # YAML 1.2 numbers, as run_scene reads it
     base['duration'] = args.duration
     base['record'] = {'bag': False}
     base['inputs']['gait_manager']['weight_transfer']['rule'] = 'com'

@@ -4,8 +4,11 @@ Starts the simulator and the controller nodes the scene needs (visual_lifting, g
 as separate processes, each in its own process group, on one DDS domain (see
 ``ros_environment``) with LOCALHOST discovery and a per-run ROS_LOG_DIR; waits for the
 simulator to end the run; stops the controllers with SIGTERM (SIGKILL after a grace period).
-DIR then holds what the headless runner writes: metrics.json, events.json, trajectory.npz and
-bag/. ``single_process=True`` runs the three nodes in one process on one EventsExecutor instead.
+The nodes never outlive the launcher: they get SIGTERM when it dies, even by SIGKILL
+(``start``), and a SIGINT, SIGTERM or SIGHUP to the launcher is passed on to the simulator,
+which ends the run cleanly (``run_graph``). DIR then holds what the headless runner writes:
+metrics.json, events.json, trajectory.npz and bag/. ``single_process=True`` runs the three
+nodes in one process on one EventsExecutor instead.
 ``rt_priority=N`` (``--rt-priority N``) runs the nodes under real-time scheduling (SCHED_FIFO
 at priority N, as ``chrt --fifo N`` would; every thread and the bag writer inherit it): the
 processes are started from a thread switched to it for that moment (or, in one process, the
@@ -36,8 +39,11 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.node_support import write_parameter_file
 from iceskate_sim.parameters import flatten
 from iceskate_sim.robot import ament_prefixes
+from iceskate_sim.session import prepare_output
+from iceskate_sim.shutdown import StopRequest, die_with_parent
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
+STOP_GRACE = 30.0  # s the simulator has to end a run it was signalled to end (bag, outputs)
 CONTROLLER_CLASSES = {'visual_lifting': 'VisualLiftingNode', 'gait_manager': 'GaitManagerNode'}
 
 
@@ -126,17 +132,46 @@ def ros_environment(domain_id: int | None = None, log_dir: pathlib.Path | None =
     return env
 
 
-def stop(process: subprocess.Popen, grace: float = GRACE) -> int:
-    """SIGTERM the process group, SIGKILL it after ``grace`` s; return the exit code."""
+def stop(process: subprocess.Popen, grace: float = GRACE, signum: int = signal.SIGTERM
+         ) -> int:
+    """Send ``signum`` (SIGTERM) to the process group, SIGKILL it after ``grace`` s; then wait
+    (``grace`` s more) for what is left of the group (a simulator's bag writer finishing the
+    bag), SIGKILL it after that; return the process's exit code."""
     if process.poll() is None:
         try:
-            os.killpg(process.pid, signal.SIGTERM)
-            return process.wait(timeout=grace)
+            os.killpg(process.pid, signum)
+            process.wait(timeout=grace)
         except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
-    return process.wait()
+    code = process.wait()
+    deadline = time.monotonic() + grace
+    while _group_alive(process.pid):
+        if time.monotonic() > deadline:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    return code
+
+
+def _group_alive(pgid: int) -> bool:
+    """Whether a process of group ``pgid`` is still running (zombies do not count)."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    for entry in pathlib.Path('/proc').iterdir():  # members may be zombies awaiting their reaper
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+                if int(fields[2]) == pgid and fields[0] != 'Z':
+                    return True
+    return False
 
 
 @contextlib.contextmanager
@@ -169,68 +204,205 @@ def realtime_scheduling(priority: int) -> Iterator[None]:
 
 
 def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
-    """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log."""
+    """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log.
+
+    The node dies with this process: the kernel sends it SIGTERM when this process ends, even
+    by SIGKILL (``die_with_parent``), and the node then ends its run cleanly.
+    """
     log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.executable}.log', 'wb')  # noqa: SIM115
+    parent = os.getpid()
     with log:
         return subprocess.Popen(command_of(spec) + spec.ros_args(), env=env, stdout=log,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+                                stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=lambda: die_with_parent(signal.SIGTERM, parent))
 
 
 def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = None,
               single_process: bool = False, domain_id: int | None = None,
               timeout: float | None = None, rt_priority: int = 0,
-              **simulator_parameters: Any) -> dict[str, Any]:
+              stop: StopRequest | None = None, **simulator_parameters: Any) -> dict[str, Any]:
     """Run a scene through the ROS graph; return its metrics (also in ``out/metrics.json``).
+
+    The output folder is checked first (``prepare_output``). A SIGINT, SIGTERM or SIGHUP
+    (``stop``) is passed on to the simulator, which ends the run cleanly (bag closed, outputs
+    written, 'interrupted by ...' in the metrics); then the controllers are stopped. The nodes
+    never outlive this process (``start``). The rejected commands of the run, if any, are
+    summarised on stderr.
 
     :param timeout: wall-clock limit of the whole run [s] (None: none).
     :param rt_priority: SCHED_FIFO priority of the nodes (0: the default scheduling).
+    :param stop: the caller's StopRequest (None: one is installed for the call).
     :param simulator_parameters: extra simulator parameters (e.g. control_timeout=2.0).
-    :raises SimulationError: when the simulator fails; the message holds its error.
+    :raises RunInterrupted: after a signal (the outputs are written).
+    :raises SimulationError: when the run failed; the message is this run's error (the
+        simulator's, or why a node had to be stopped).
     """
-    out = out.resolve()
-    out.mkdir(parents=True, exist_ok=True)
-    started = time.time()
+    with contextlib.ExitStack() as stack:
+        if stop is None:
+            stop = stack.enter_context(StopRequest())
+        return _run_graph(scene_arg, out.resolve(), duration, single_process, domain_id,
+                          timeout, rt_priority, stop, simulator_parameters)
+
+
+def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single_process: bool,
+               domain_id: int | None, timeout: float | None, rt_priority: int,
+               stop: StopRequest, simulator_parameters: dict[str, Any]) -> dict[str, Any]:
+    scene = load_scene(scene_arg)
+    prepare_output(out, out / 'bag' if scene.record_bag else None)
+    before = _file_stamp(out / 'metrics.json')  # an earlier run's file is never reported
     specs = graph_nodes(scene_arg, out, duration, **simulator_parameters)
     env = ros_environment(domain_id)
-    print(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}', file=sys.stderr)
+    say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
+    why, early = '', {}
     if single_process:
         with realtime_scheduling(rt_priority):
-            code = run_single_process(specs, env, timeout)
+            code = run_single_process(specs, env, timeout, stop)
     else:
-        with realtime_scheduling(rt_priority):
-            processes = [start(spec, env) for spec in specs]
+        processes: list[subprocess.Popen] = []
         try:
+            with realtime_scheduling(rt_priority):
+                for spec in specs:
+                    processes.append(start(spec, env))
             why = _wait(processes, specs, timeout,
-                        float(simulator_parameters.get('control_timeout', 5.0)) + GRACE)
+                        float(simulator_parameters.get('control_timeout', 5.0)) + GRACE, stop)
+            early = {s.executable: p.returncode for p, s in zip(processes, specs, strict=True)
+                     if s.executable != 'simulator' and p.poll() is not None}
         finally:
-            codes = [stop(p) for p in reversed(processes)]
-        code = codes[-1]
-        if why:
-            _raise(out, env, why, started)
-    if code != 0:
-        _raise(out, env, f'the simulator exited with {code}', started)
+            codes = stop_graph(processes, stop.signum)
+        code = codes[0] if codes else None
+    metrics = _metrics_since(out / 'metrics.json', before)
+    if metrics is not None:
+        _report_rejected(metrics, env)
+    if stop.requested and (metrics is None or metrics.get('interrupted')):
+        error = stop.error(metrics.get('sim_time_s') if metrics else None)
+        if metrics is None:
+            _write_metrics(out, scene.name, str(error), interrupted=True)
+        raise error
+    if why or code != 0:
+        _fail(out, env, scene.name, why, code, early, metrics)
     _write_summary(out)
-    return json.loads((out / 'metrics.json').read_text())
+    assert metrics is not None
+    return metrics
 
 
-def _write_summary(out: pathlib.Path, since: float | None = None) -> None:
-    """summary.png from the files the simulator wrote; none if it wrote no trajectory (since
-    ``since``, a time.time() before the run: a failed run may have written nothing)."""
-    trajectory = out / 'trajectory.npz'
-    if trajectory.is_file() and (since is None or trajectory.stat().st_mtime >= since - 0.1):
+def say(text: str) -> None:
+    """One line on stderr (nothing if stderr is gone: a closed terminal)."""
+    with contextlib.suppress(OSError, ValueError):
+        print(text, file=sys.stderr, flush=True)
+
+
+def stop_graph(processes: list[subprocess.Popen], signum: int | None = None) -> list[int]:
+    """Stop the graph's processes (the simulator first); return their exit codes in order.
+
+    The simulator gets ``signum`` (the signal that stopped the run; SIGTERM if None) and
+    ``STOP_GRACE`` s to end its run and close its bag; the controllers get SIGTERM.
+    """
+    codes = [stop(p, STOP_GRACE, signum or signal.SIGTERM) for p in processes[:1]]
+    return codes + [stop(p) for p in processes[1:]]
+
+
+def _file_stamp(path: pathlib.Path) -> tuple[int, int, int] | None:
+    """What tells one version of a file from another (None: no file)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_ino, st.st_size
+
+
+def _metrics_since(path: pathlib.Path, before: tuple[int, int, int] | None
+                   ) -> dict[str, Any] | None:
+    """The metrics the run wrote (None: it wrote none; an older file does not count)."""
+    stamp = _file_stamp(path)
+    if stamp is None or stamp == before:
+        return None
+    try:
+        metrics = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return None
+    return metrics if isinstance(metrics, dict) else None
+
+
+def _write_metrics(out: pathlib.Path, scene: str, failure: str, interrupted: bool) -> None:
+    """metrics.json of a run whose simulator wrote none (it was killed or never started)."""
+    metrics = {'scene': scene, 'sim_time_s': None, 'steps': None, 'fell': False,
+               'failure': failure, 'interrupted': interrupted}
+    with contextlib.suppress(OSError):
+        (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n')
+
+
+def exit_text(code: int | None) -> str:
+    """'exited with 1', 'was killed by SIGKILL', ... of a process's exit code."""
+    if code is None:
+        return 'did not start'
+    if code < 0:
+        try:
+            return f'was killed by {signal.Signals(-code).name}'
+        except ValueError:
+            return f'was killed by signal {-code}'
+    return f'exited with {code}'
+
+
+def _node_error(env: dict[str, str], node: str) -> str:
+    """The one-line error a node printed before exiting ('' if none)."""
+    log = pathlib.Path(env['ROS_LOG_DIR']) / f'{node}.log'
+    text = log.read_text(errors='replace') if log.is_file() else ''
+    lines = [line for line in text.splitlines() if line.startswith(f'{node}: error: ')]
+    return lines[-1][len(f'{node}: error: '):] if lines else ''
+
+
+def _fail(out: pathlib.Path, env: dict[str, str], scene: str, why: str, code: int | None,
+          early: dict[str, int], metrics: dict[str, Any] | None) -> None:
+    """Raise the SimulationError of a failed run: this run's reason, in one line where the
+    simulator gave one (the end of its log otherwise)."""
+    if metrics is not None:
+        with contextlib.suppress(SimulationError):  # the picture of the failed run
+            _write_summary(out)
+    what = why or f'the simulator {exit_text(code)}'
+    if early:
+        what += '; ' + ', '.join(f'node {n} {exit_text(c)} first' for n, c in early.items())
+    reason = (metrics or {}).get('failure') or _node_error(env, 'simulator')
+    if not reason and code is not None and code < 0:
+        reason = 'it wrote no metrics (the bag keeps what was recorded)'
+    elif not reason:  # no outputs and no error line: a crash; its log says what happened
+        log = pathlib.Path(env['ROS_LOG_DIR']) / 'simulator.log'
+        tail = log.read_text(errors='replace')[-2000:] if log.is_file() else ''
+        reason = f'no metrics\n--- {log} (end) ---\n{tail}'
+    if metrics is None:
+        _write_metrics(out, scene, f'{what}: {reason.splitlines()[0]}',
+                       interrupted=code is not None and code < 0)
+    raise SimulationError(f'{what}: {reason}')
+
+
+def _report_rejected(metrics: dict[str, Any], env: dict[str, str]) -> None:
+    """The run's rejected commands on stderr: how many, per reason, the first few."""
+    rejected = metrics.get('rejected_commands') or {}
+    if not rejected.get('count'):
+        return
+    log = pathlib.Path(env['ROS_LOG_DIR']) / 'simulator.log'
+    lines = [f'graph: {rejected["count"]} command(s) rejected (each is in {log}):']
+    lines += [f'  {n} x {reason}' for reason, n in rejected.get('by_reason', {}).items()]
+    lines += ['  first: ' + text for text in rejected.get('first', [])]
+    say('\n'.join(lines))
+
+
+def _write_summary(out: pathlib.Path) -> None:
+    """summary.png from the files the simulator wrote (none without a trajectory)."""
+    if (out / 'trajectory.npz').is_file():
         from iceskate_analysis.summary import write_summary
         write_summary(out)
 
 
 def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: float | None,
-          patience: float) -> str:
-    """Wait for the simulator to exit; '' or why it had to be stopped.
+          patience: float, stop: StopRequest | None = None) -> str:
+    """Wait for the simulator to exit; '' or why it had to be stopped ('' for a signal:
+    ``stop`` tells).
 
     A controller that exits first is the simulator's to report (its control timeout names the
     source); only if the simulator is still up ``patience`` s later is the run stopped here.
     """
     start_time, dead_since = time.monotonic(), None
-    while processes[0].poll() is None:
+    while processes[0].poll() is None and not (stop is not None and stop.requested):
         now = time.monotonic()
         if timeout is not None and now - start_time > timeout:
             return f'the run took longer than {timeout} s (stopped)'
@@ -243,23 +415,15 @@ def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: flo
     return ''
 
 
-def _raise(out: pathlib.Path, env: dict[str, str], what: str, started: float) -> None:
-    with contextlib.suppress(SimulationError):  # the picture of the failed run, if it has one
-        _write_summary(out, started)
-    metrics = out / 'metrics.json'
-    failure = json.loads(metrics.read_text()).get('failure') if metrics.is_file() else None
-    log = pathlib.Path(env['ROS_LOG_DIR']) / 'simulator.log'
-    tail = log.read_text(errors='replace')[-2000:] if log.is_file() else ''
-    raise SimulationError(f'{what}: {failure or "no metrics"}\n--- {log} (end) ---\n{tail}')
-
-
 def run_single_process(specs: list[NodeSpec], env: dict[str, str],
-                       timeout: float | None = None) -> int:
-    """All nodes in this process on one EventsExecutor; return the simulator's exit code."""
+                       timeout: float | None = None, stop: StopRequest | None = None) -> int:
+    """All nodes in this process on one EventsExecutor; return the simulator's exit code
+    (after a signal of ``stop``: the run ended cleanly, 128 + its number)."""
     import importlib
 
     import rclpy
     from rclpy.experimental import EventsExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     from iceskate_sim.node_support import ConfigError, spin_until
     keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE')
@@ -268,7 +432,8 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
     context = rclpy.Context()
     nodes: list[Any] = []
     try:
-        rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+        rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']),
+                   signal_handler_options=SignalHandlerOptions.NO)  # ``stop`` has them
         for spec in specs:
             cls = getattr(importlib.import_module(spec.module), spec.node_class)
             try:
@@ -279,11 +444,11 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
         for node in nodes:
             executor.add_node(node)
         deadline = time.monotonic() + (timeout if timeout is not None else float('inf'))
-        spin_until(executor, lambda: nodes[0].finished or time.monotonic() > deadline,
-                   context, period=0.05)
+        signum = (lambda: stop.signum) if stop is not None else (lambda: None)
+        spin_until(executor, lambda: (nodes[0].finished or signum() is not None
+                                      or time.monotonic() > deadline), context, period=0.05)
         if not nodes[0].finished:
-            nodes[0].close()
-            return 1
+            nodes[0].close(signum())
         return nodes[0].exit_code
     finally:
         for node in nodes:

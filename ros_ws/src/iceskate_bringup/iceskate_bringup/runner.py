@@ -16,42 +16,70 @@ runs too). It writes into DIR:
   forward speed over time.
 
 A run that diverges stops with its error after the files are written; a fall ends the run with
-``fell: true`` and the reason in ``failure``.
+``fell: true`` and the reason in ``failure``. SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``)
+and SIGHUP (a closed terminal), to the process or its whole group, end the run between two
+control periods: the bag is closed with its metadata, the files are written with
+``interrupted: true`` and ``failure: "interrupted by SIGTERM at t=... s"``, one line says so and
+the exit status is 128 + the signal's number (130, 143, 129). The output folder is checked
+before anything starts (``prepare_output``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 from dataclasses import replace
 import json
+import math
 import pathlib
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from iceskate_bringup.composition import ControlStack
-from iceskate_bringup.scene import load_scene
-from iceskate_sim.errors import SimulationError
-from iceskate_sim.scene import Scene
-from iceskate_sim.session import Session
+# light imports only at the top: main() installs its signal handlers before the heavy ones
+from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.shutdown import StopRequest
+
+if TYPE_CHECKING:
+    from iceskate_sim.scene import Scene
 
 
-def run(scene: Scene, out: pathlib.Path | None, progress: bool = True) -> dict[str, Any]:
+def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
+        stop: StopRequest | None = None) -> dict[str, Any]:
     """Run ``scene``; write the outputs into ``out`` (if given) and return the metrics.
 
+    A SIGINT, SIGTERM or SIGHUP (``stop``; None: one is installed for the call) ends the run
+    between two control periods: the bag is closed with its metadata and the outputs are
+    written (``interrupted`` in the metrics), then ``RunInterrupted`` is raised.
+
+    :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
-    bag = out / 'bag' if out is not None and scene.record_bag else None
-    session = Session(scene, out, bag)
-    stack = ControlStack(scene, session.robot, session.observation())
-    bar = _progress(session.n_periods, scene.name, progress)
-    try:
-        while not session.done:
-            session.step(stack.commands(session.observation()))
-            session.flush()
-            bar.update(1)
-    finally:
-        bar.close()
-        metrics = session.finish()
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_sim.session import Session
+    with contextlib.ExitStack() as signals:
+        if stop is None:
+            stop = signals.enter_context(StopRequest())
+        bag = out / 'bag' if out is not None and scene.record_bag else None
+        session = Session(scene, out, bag)
+        stack = ControlStack(scene, session.robot, session.observation())
+        bar = _progress(session.n_periods, scene.name, progress)
+        ended: SimulationError | None = None
+        try:
+            while not session.done:
+                if stop.requested:
+                    ended = stop.error(session.sim.time)
+                    break
+                session.step(stack.commands(session.observation()))
+                session.flush()
+                bar.update(1)
+        except BaseException as exc:  # a bug: the outputs still say where the run stopped
+            ended = SimulationError(f'the run stopped on {type(exc).__name__}: {exc}')
+            raise
+        finally:
+            bar.close()
+            metrics = session.finish(ended)
+    if isinstance(ended, RunInterrupted):
+        raise ended
     if out is not None and len(session.trajectory):  # also after a fall or a physics error
         from iceskate_analysis.summary import write_summary
         write_summary(out)
@@ -68,16 +96,43 @@ class _NoBar:
         pass
 
 
+class _Bar:
+    """A tqdm bar on stderr that goes quiet when stderr is gone (a closed terminal)."""
+
+    def __init__(self, bar: Any) -> None:
+        self._bar: Any = bar
+
+    def update(self, n: int) -> None:
+        try:
+            self._bar.update(n)
+        except (OSError, ValueError):
+            self._bar = _NoBar()
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError, ValueError):
+            self._bar.close()
+
+
 def _progress(total: int, name: str, enabled: bool) -> Any:
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
-    return tqdm(total=total, desc=f'scene {name}', unit='period', mininterval=1.0,
-                file=sys.stderr)
+    return _Bar(tqdm(total=total, desc=f'scene {name}', unit='period', mininterval=1.0,
+                     file=sys.stderr))
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point."""
+    """Console entry point.
+
+    Exit status: 0 (the run ended: complete or a fall), 1 (refused or failed, one line on
+    stderr saying why), 130, 143 or 129 after SIGINT, SIGTERM or SIGHUP (the run was ended
+    cleanly: one line on stderr with the time it reached and its outputs).
+    """
+    with StopRequest() as stop:  # first of all: a signal never kills the run half-written
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser = argparse.ArgumentParser(prog='run_scene', description=__doc__.split('\n\n')[0])
     parser.add_argument('scene', help='shipped scene name (e.g. skate) or path to a YAML file')
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
@@ -94,31 +149,40 @@ def main(argv: list[str] | None = None) -> int:
                         help='with --ros: run the nodes under SCHED_FIFO at priority N (1-99; '
                              'needs root, CAP_SYS_NICE or an rtprio limit; default 0: off)')
     args = parser.parse_args(argv)
+    from iceskate_bringup.scene import load_scene
+    from iceskate_sim.scene import MAX_DURATION
+    from iceskate_sim.session import prepare_output
     try:
         if not args.ros and (args.single_process or args.rt_priority):
             raise SimulationError('--single-process and --rt-priority need --ros')
         scene = load_scene(args.scene)
         if args.duration is not None:
-            if not args.duration > 0:
-                raise SimulationError('--duration must be > 0 s')
+            if not (math.isfinite(args.duration) and 0.0 < args.duration <= MAX_DURATION):
+                raise SimulationError(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
+                                      f"limits of a scene's duration), got {args.duration:g}")
             scene = replace(scene, duration=args.duration)
         if args.engine is not None:
             scene = replace(scene, simulator=replace(scene.simulator, engine=args.engine))
+        prepare_output(args.out, args.out / 'bag' if scene.record_bag else None)
         if args.ros:
             from iceskate_bringup.graph import run_graph
             extra = {'engine': args.engine} if args.engine is not None else {}
             metrics = run_graph(args.scene, args.out, duration=args.duration,
                                 single_process=args.single_process,
-                                rt_priority=args.rt_priority, **extra)
+                                rt_priority=args.rt_priority, stop=stop, **extra)
         else:
-            metrics = run(scene, args.out, progress=not args.quiet)
+            metrics = run(scene, args.out, progress=not args.quiet, stop=stop)
+    except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code
+        _say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
+        return exc.exit_code
     except SimulationError as exc:
-        print(f'run_scene: error: {exc}', file=sys.stderr)
+        _say(f'run_scene: error: {exc}')
         _print_outputs(args.out)
         return 1
-    summary = {k: metrics[k] for k in ('scene', 'sim_time_s', 'steps', 'fell', 'failure',
-                                       'forward_distance_m', 'real_time_factor')}
-    print(json.dumps(summary, indent=2))
+    summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'fell', 'failure',
+                                           'forward_distance_m', 'real_time_factor')}
+    with contextlib.suppress(OSError, ValueError):  # stdout gone (a closed terminal)
+        print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)
     return 0
 
@@ -126,12 +190,24 @@ def main(argv: list[str] | None = None) -> int:
 OUTPUTS = ('metrics.json', 'events.json', 'trajectory.npz', 'bag/', 'summary.png')
 
 
+def _outputs(out: pathlib.Path) -> str:
+    """'outputs in DIR: metrics.json, ...' ('' when there are none)."""
+    present = [name for name in OUTPUTS if (out / name.rstrip('/')).exists()]
+    return f'outputs in {out}: {", ".join(present)}' if present else ''
+
+
 def _print_outputs(out: pathlib.Path) -> None:
     """Where to look, after the JSON (on stderr: stdout stays the JSON alone)."""
-    present = [name for name in OUTPUTS if (out / name.rstrip('/')).exists()]
-    if present:
-        sys.stdout.flush()  # the JSON first, also when stdout is a pipe
-        print(f'outputs in {out}: {", ".join(present)}', file=sys.stderr)
+    if text := _outputs(out):
+        with contextlib.suppress(OSError, ValueError):
+            sys.stdout.flush()  # the JSON first, also when stdout is a pipe
+        _say(text)
+
+
+def _say(text: str) -> None:
+    """One line on stderr (nothing if stderr is gone: a closed terminal)."""
+    with contextlib.suppress(OSError, ValueError):
+        print(text, file=sys.stderr, flush=True)
 
 
 if __name__ == '__main__':
