@@ -77,12 +77,17 @@ def test_read_bag_refuses_a_truncated_bag(truncated_bag):
         read_bag(truncated_bag)
 
 
-def test_read_bag_refuses_a_bag_without_metadata(tmp_path, sim_bag):
+def test_read_bag_rebuilds_a_bag_without_metadata_from_its_mcap_file(tmp_path, sim_bag):
+    """A recording never closed (a killed run) has no metadata.yaml: every message of the
+    .mcap file's complete chunks is read, and the notes say so."""
     target = tmp_path / 'no_metadata'
     shutil.copytree(sim_bag, target)
     (target / 'metadata.yaml').unlink()
-    with pytest.raises(SimulationError, match='no metadata.yaml'):
-        read_bag(target)
+    bag, whole = read_bag(target), read_bag(sim_bag)
+    assert bag.n_samples == whole.n_samples and np.array_equal(bag.q, whole.q)
+    assert np.array_equal(bag.efforts['passive'], whole.efforts['passive'])
+    assert 'no metadata.yaml' in bag.notes[0] and 'rebuilt from' in bag.notes[0]
+    assert bag.urdf == whole.urdf and bag.custom_data == {}
 
 
 def test_read_bag_refuses_a_missing_path(tmp_path):

@@ -2,7 +2,11 @@
 
 The bag is opened with ``rosbags``' ``AnyReader``. Message definitions come from the bag itself
 (MCAP stores them); for a bag without definitions our typestore
-(``iceskate_sim.bag_types.make_typestore``) is the fallback. The analysis needs three topics,
+(``iceskate_sim.bag_types.make_typestore``) is the fallback. A bag that was never closed (no
+metadata.yaml: the recording process was killed, or the power went) or whose file was cut is
+rebuilt from its .mcap file: every message of its complete chunks, read with the ``mcap``
+package's stream reader (``open_bag``; ``replay`` reads bags the same way); the data's first
+note says so and how much was read. The analysis needs three topics,
 all stamped with the simulation time of the sample (``header.stamp``):
 
 * ``/joint_states`` (sensor_msgs/JointState): q, q̇ and the total input effort,
@@ -21,7 +25,7 @@ Times are kept in nanoseconds (``t_ns``, int64) and offered in seconds (``t``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import json
 import pathlib
 from typing import TYPE_CHECKING, Any
@@ -35,14 +39,14 @@ from iceskate_sim.modes import MULTIPLIER_NAMES
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Iterable, Iterator
 
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
     from rosbags.typesys.store import Typestore
 
-__all__ = ['BagData', 'OPTIONAL_TOPICS', 'PASSIVE', 'PIVOT_NAMES', 'REQUIRED_TOPICS',
-           'SIDE_NAMES', 'read_bag', 'resolve_bag_path']
+__all__ = ['BagData', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'PIVOT_NAMES',
+           'REQUIRED_TOPICS', 'SIDE_NAMES', 'open_bag', 'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -160,20 +164,274 @@ class BagData:
 
 
 def resolve_bag_path(path: str | pathlib.Path) -> pathlib.Path:
-    """Return the bag directory of ``path``: the path itself, or ``path/bag`` for a run dir.
+    """Return the bag of ``path``: the path itself (a bag directory, or an .mcap file), or
+    ``path/bag`` for a run directory.
+
+    A bag directory is one with a metadata.yaml or, for a recording that was never closed (a
+    killed run, a power cut), an .mcap file alone (``open_bag`` rebuilds what it needs from
+    it).
 
     :raises SimulationError: when the path does not exist or holds no rosbag2 bag.
     """
     p = pathlib.Path(path)
     if not p.exists():
         raise SimulationError(f'bag {p} does not exist')
-    if p.is_dir() and not (p / 'metadata.yaml').is_file():
-        if (p / 'bag' / 'metadata.yaml').is_file():
+    if p.is_dir() and not _is_bag_dir(p):
+        if (p / 'bag').is_dir() and _is_bag_dir(p / 'bag'):
             return p / 'bag'
-        raise SimulationError(
-            f'{p} is not a rosbag2 bag: it has no metadata.yaml (a recording that was not '
-            'closed, e.g. a killed run, has none; `ros2 bag reindex` can rebuild it)')
+        raise SimulationError(f'{p} is not a rosbag2 bag: it holds neither a metadata.yaml '
+                              'nor an .mcap file (nor a bag/ folder with one)')
     return p
+
+
+def _is_bag_dir(p: pathlib.Path) -> bool:
+    return (p / 'metadata.yaml').is_file() or any(p.glob('*.mcap'))
+
+
+@dataclass(frozen=True)
+class BagTopic:
+    """One connection of a bag: topic, message type, message count (``key``: the reader's)."""
+
+    topic: str
+    msgtype: str
+    count: int
+    key: Any = field(compare=False, repr=False)
+
+
+class OpenBag:
+    """A bag open for reading, whichever way it was opened (``open_bag``).
+
+    :ivar path: the bag (directory or .mcap file).
+    :ivar topics: its connections (a topic may have several).
+    :ivar custom_data: the metadata's custom_data ({} when there is no metadata.yaml).
+    :ivar recovered: '' for a closed bag read through its index; else what was wrong with it
+        and what could be read (the bag was rebuilt from its .mcap file).
+    """
+
+    path: pathlib.Path
+    topics: list[BagTopic]
+    custom_data: dict[str, str]
+    recovered: str = ''
+
+    def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
+        """(topic, log time [ns], CDR bytes) of every message of ``topics``, in file order."""
+        raise NotImplementedError
+
+    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        """The message object of CDR bytes."""
+        raise NotImplementedError
+
+    def knows(self, msgtype: str) -> bool:
+        """Whether messages of ``msgtype`` can be decoded."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the files."""
+
+    def __enter__(self) -> OpenBag:
+        """Context manager: closed on exit."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close."""
+        self.close()
+
+
+class _IndexedBag(OpenBag):
+    """A closed bag, read by rosbags' AnyReader through metadata.yaml and the MCAP index."""
+
+    def __init__(self, bag: pathlib.Path) -> None:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        self.path = bag
+        self._reader = AnyReader([bag], default_typestore=_default_typestore())
+        try:
+            self._reader.open()
+        except (AnyReaderError, OSError) as exc:
+            if 'message type' in str(exc).lower():
+                raise SimulationError(f'cannot open bag {bag}: unknown or inconsistent message '
+                                      f'type: the definition stored in the bag does not match '
+                                      f'its type hash ({exc})') from exc
+            raise _Unindexed(str(exc) or type(exc).__name__) from exc
+        self.topics = [BagTopic(c.topic, c.msgtype, c.msgcount, c)
+                       for c in self._reader.connections]
+        self.custom_data = _custom_data(self._reader)
+
+    def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
+        """See ``OpenBag.messages``."""
+        from rosbags.highlevel import AnyReaderError
+        by_key = {_connection_key(t.key): t for t in topics}
+        try:
+            for conn, log_ns, raw in self._reader.messages(
+                    connections=[t.key for t in by_key.values()]):
+                yield by_key[_connection_key(conn)], log_ns, raw
+        except AnyReaderError as exc:
+            raise SimulationError(f'cannot read bag {self.path}: the file is truncated or '
+                                  f'corrupt ({exc})') from exc
+
+    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        """See ``OpenBag.deserialize``."""
+        return self._reader.deserialize(raw, msgtype)
+
+    def knows(self, msgtype: str) -> bool:
+        """See ``OpenBag.knows``."""
+        return msgtype in self._reader.typestore.fielddefs
+
+    def close(self) -> None:
+        """See ``OpenBag.close``."""
+        self._reader.close()
+
+
+def _connection_key(conn: Connection) -> tuple[int, str, str]:
+    return conn.id, conn.topic, conn.msgtype
+
+
+class _Unindexed(Exception):
+    """rosbags could not open the bag's files (no or a broken index, a truncated file)."""
+
+
+class _RecoveredBag(OpenBag):
+    """A bag rebuilt from its .mcap files alone: every message of their complete chunks, read
+    in order with the ``mcap`` package's stream reader (no summary, footer or metadata.yaml
+    needed); decoded with our typestore (``make_typestore``), plus the definitions the file
+    carries for other types."""
+
+    def __init__(self, bag: pathlib.Path, files: list[pathlib.Path], why: str,
+                 custom_data: dict[str, str]) -> None:
+        self.path, self._files, self.custom_data = bag, files, custom_data
+        self._typestore = _default_typestore()
+        self._channels: dict[tuple[int, int], BagTopic] = {}
+        counts: dict[tuple[int, int], int] = {}
+        schemas: dict[tuple[int, int], Any] = {}
+        channels: dict[tuple[int, int], Any] = {}
+        chunks, problems, last = 0, [], 0
+        for index, record, problem in self._scan():
+            kind = type(record).__name__
+            if kind == 'Schema':
+                schemas[(index, record.id)] = record
+            elif kind == 'Channel':
+                channels[(index, record.id)] = record
+            elif kind == 'Message':
+                key = (index, record.channel_id)
+                counts[key] = counts.get(key, 0) + 1
+                last = max(last, record.log_time)
+            elif kind == 'Chunk':
+                chunks += 1
+            if problem:
+                problems.append(problem)
+        for key, channel in channels.items():
+            schema = schemas.get((key[0], channel.schema_id))
+            msgtype = schema.name if schema is not None else ''
+            if schema is not None:
+                self._register(msgtype, schema)
+            self._channels[key] = BagTopic(channel.topic, msgtype, counts.get(key, 0), key)
+        self.topics = list(self._channels.values())
+        total = sum(counts.values())
+        if not total:
+            raise SimulationError(f'cannot read bag {bag}: {why}, and its .mcap file holds no '
+                                  'complete chunk of messages (the file is truncated or '
+                                  f'corrupt: {"; ".join(problems) or "empty"})')
+        end = f'; {"; ".join(problems)}: the rest did not reach the disk' if problems else ''
+        self.recovered = (f'bag {bag}: {why}; rebuilt from {", ".join(f.name for f in files)}: '
+                          f'{total} messages up to log time {last * 1e-9:.6f} s, from {chunks} '
+                          f'complete chunk(s){end}')
+
+    def _scan(self, chunks: bool = True) -> Iterator[tuple[int, Any, str]]:
+        """(file index, record, '') of every record of the files (the records inside each
+        complete chunk after it; with ``chunks``, the Chunk too), then (index, None, what
+        ended the file early) where it did."""
+        from mcap.reader import breakup_chunk
+        from mcap.stream_reader import StreamReader
+        for index, path in enumerate(self._files):
+            with path.open('rb') as stream:
+                reader = StreamReader(stream, emit_chunks=True, validate_crcs=True,
+                                      record_size_limit=1 << 30)
+                records = reader.records
+                while True:
+                    try:
+                        record = next(records)
+                        inside = (breakup_chunk(record, validate_crc=True)
+                                  if type(record).__name__ == 'Chunk' else [])
+                    except StopIteration:
+                        break
+                    except Exception as exc:  # noqa: BLE001 (the mcap package's many kinds)
+                        what = ('it ends inside a record' if type(exc).__name__ == 'EndOfFile'
+                                else f'a broken record ({str(exc) or type(exc).__name__})')
+                        yield index, None, f'{path.name} stops early, {what}'
+                        break
+                    if chunks or type(record).__name__ != 'Chunk':
+                        yield index, record, ''
+                    for item in inside:
+                        yield index, item, ''
+
+    def _register(self, msgtype: str, schema: Any) -> None:
+        """Add the file's definition of ``msgtype`` if our typestore lacks it."""
+        if self._typestore is None or msgtype in self._typestore.fielddefs:
+            return
+        if schema.encoding == 'ros2msg':
+            from rosbags.typesys import get_types_from_msg
+            try:
+                self._typestore.register(get_types_from_msg(schema.data.decode(), msgtype))
+            except Exception:  # noqa: BLE001 (an unreadable definition: the type stays unknown)
+                return
+
+    def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
+        """See ``OpenBag.messages``."""
+        wanted = {t.key: t for t in topics}
+        for index, record, _problem in self._scan(chunks=False):
+            if record is not None and type(record).__name__ == 'Message':
+                topic = wanted.get((index, record.channel_id))
+                if topic is not None:
+                    yield topic, record.log_time, record.data
+
+    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        """See ``OpenBag.deserialize``."""
+        if self._typestore is None:
+            raise SimulationError(f'bag {self.path}: no typestore to decode {msgtype}')
+        return self._typestore.deserialize_cdr(raw, msgtype)
+
+    def knows(self, msgtype: str) -> bool:
+        """See ``OpenBag.knows``."""
+        return self._typestore is not None and msgtype in self._typestore.fielddefs
+
+
+def open_bag(path: str | pathlib.Path) -> OpenBag:
+    """Open a bag (a bag or run directory, or an .mcap file) for reading.
+
+    A closed bag is read through its metadata.yaml and index (rosbags). A bag without
+    metadata.yaml (the recording was never closed: a killed run, a power cut) or whose index
+    cannot be read (a truncated file) is rebuilt from its .mcap files: every message of their
+    complete chunks; ``recovered`` says so and how much was read.
+
+    :raises SimulationError: naming the bag and the problem.
+    """
+    bag = resolve_bag_path(path)
+    if bag.is_file():  # an .mcap file given directly
+        if (bag.parent / 'metadata.yaml').is_file():
+            return open_bag(bag.parent)
+        return _RecoveredBag(bag, [bag], 'it has no metadata.yaml beside it', {})
+    files = sorted(bag.glob('*.mcap'))
+    metadata = bag / 'metadata.yaml'
+    if not metadata.is_file():
+        return _RecoveredBag(bag, files, 'it has no metadata.yaml (the recording was not '
+                             'closed: a killed run or a power cut)', {})
+    try:
+        return _IndexedBag(bag)
+    except _Unindexed as exc:
+        if not files:
+            raise SimulationError(f'cannot open bag {bag}: the file is truncated or corrupt, '
+                                  f'or not a rosbag2 recording ({exc})') from None
+        return _RecoveredBag(bag, files, f'its index cannot be read ({exc})',
+                             _metadata_custom_data(metadata))
+
+
+def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:
+    """custom_data of a rosbag2 metadata.yaml ({} if it cannot be read)."""
+    import yaml
+    try:
+        info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+        return {str(k): str(v) for k, v in (info.get('custom_data') or {}).items()}
+    except (OSError, ValueError, TypeError, KeyError, AttributeError, yaml.YAMLError):
+        return {}
 
 
 def _default_typestore() -> Typestore | None:
@@ -209,12 +467,12 @@ def _vector(values: Any, order: np.ndarray, topic: str, what: str, where: str) -
     return x[order]
 
 
-def _check_connections(reader: AnyReader, path: pathlib.Path) -> dict[str, Connection]:
+def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopic]:
     """Return the connection of each required/optional topic; refuse missing or odd ones."""
-    by_topic: dict[str, list[Connection]] = {}
-    for conn in reader.connections:
+    by_topic: dict[str, list[BagTopic]] = {}
+    for conn in reader.topics:
         by_topic.setdefault(conn.topic, []).append(conn)
-    chosen: dict[str, Connection] = {}
+    chosen: dict[str, BagTopic] = {}
     for topic, expected in {**REQUIRED_TOPICS, **OPTIONAL_TOPICS}.items():
         conns = by_topic.get(topic, [])
         if not conns:
@@ -227,12 +485,12 @@ def _check_connections(reader: AnyReader, path: pathlib.Path) -> dict[str, Conne
         if conn.msgtype != expected:
             raise SimulationError(f'bag {path}: topic {topic} has message type '
                                   f'{conn.msgtype}, expected {expected}')
-        if expected not in reader.typestore.fielddefs:
+        if not reader.knows(expected):
             raise SimulationError(
                 f'bag {path}: message type {expected} of topic {topic} is unknown: the bag '
                 'carries no definition of it and the iceskate_interfaces .msg files were not '
                 'found (build ros_ws or run from the source tree)')
-        if topic in REQUIRED_TOPICS and sum(c.msgcount for c in conns) == 0:
+        if topic in REQUIRED_TOPICS and sum(c.count for c in conns) == 0:
             raise SimulationError(f'bag {path}: topic {topic} has no messages: no '
                                   f'{_WHAT[topic]} were recorded')
         chosen[topic] = conn
@@ -309,20 +567,19 @@ def _read_joint_dynamics(rows: _Rows, msg: Any, where: str) -> None:
     rows.put(rows.dyn, _stamp_ns(msg), (qdd, active, efforts))
 
 
-def _collect(reader: AnyReader, chosen: dict[str, Connection], path: pathlib.Path,
+def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
              progress: bool) -> _Rows:
-    from rosbags.highlevel import AnyReaderError
     rows = _Rows()
-    total = sum(c.msgcount for c in chosen.values())
+    total = sum(c.count for c in chosen.values())
     bar = progress_bar(total, f'reading {path.name}', progress, unit='msg')
     topic = ''
     try:
-        for conn, log_ns, raw in reader.messages(connections=list(chosen.values())):
+        for conn, log_ns, raw in reader.messages(chosen.values()):
             topic = conn.topic
             where = f'log time {log_ns * 1e-9:.6f} s'
             try:
                 msg = reader.deserialize(raw, conn.msgtype)
-            except AnyReaderError as exc:
+            except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
                 raise SimulationError(f'bag {path}: cannot decode a {conn.msgtype} message of '
                                       f'{topic} at {where} ({exc})') from exc
             try:
@@ -342,9 +599,6 @@ def _collect(reader: AnyReader, chosen: dict[str, Connection], path: pathlib.Pat
                                       f'the analysis needs ({exc}); the bag was recorded with '
                                       'an incompatible message definition') from exc
             bar.update(1)
-    except AnyReaderError as exc:
-        raise SimulationError(f'cannot read bag {path} (topic {topic or "?"}): the file is '
-                              f'truncated or corrupt ({exc})') from exc
     finally:
         bar.close()
     return rows
@@ -420,31 +674,25 @@ def _validate(data: BagData) -> None:
 def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
     """Read a recorded run into time-aligned arrays.
 
+    A bag that was never closed (no metadata.yaml: a killed run) or whose file was cut is
+    rebuilt from what reached the disk (``open_bag``); the first note says so.
+
     :param path: rosbag2 directory (or a run directory holding ``bag/``, or an .mcap file).
     :param progress: show a tqdm progress bar on stderr.
     :return: the samples joined on their header stamps.
-    :raises SimulationError: on a missing path or metadata, a missing or empty required topic,
-        a topic of the wrong or an unknown message type, a truncated or corrupt file, or
-        messages that lack the fields the analysis needs; the message names what is wrong.
+    :raises SimulationError: on a missing path, a missing or empty required topic, a topic of
+        the wrong or an unknown message type, a file with no complete chunk, or messages that
+        lack the fields the analysis needs; the message names what is wrong.
     """
-    from rosbags.highlevel import AnyReader, AnyReaderError
-    bag = resolve_bag_path(path)
-    reader = AnyReader([bag], default_typestore=_default_typestore())
-    try:
-        reader.open()
-    except (AnyReaderError, FileNotFoundError) as exc:
-        if 'message type' in str(exc).lower():
-            raise SimulationError(f'cannot open bag {bag}: unknown or inconsistent message '
-                                  f'type: the definition stored in the bag does not match its '
-                                  f'type hash ({exc})') from exc
-        raise SimulationError(f'cannot open bag {bag}: the file is truncated or corrupt, or '
-                              f'not a rosbag2 recording ({exc})') from exc
-    try:
+    with open_bag(path) as reader:
+        bag = reader.path
         chosen = _check_connections(reader, bag)
         rows = _collect(reader, chosen, bag, progress)
-        custom = _custom_data(reader)
-    finally:
-        reader.close()
+        custom = reader.custom_data
+        recovered = reader.recovered
     data = _assemble(rows, bag, custom)
+    if recovered:
+        extra = '' if custom else ' (without metadata: the scene parameters are not known)'
+        data = replace(data, notes=(recovered + extra, *data.notes))
     _validate(data)
     return data

@@ -2,7 +2,9 @@
 
 The paper's eq. (11) analysis of a recorded run (no re-simulation): figures, CSV and
 summary.json (see ``iceskate_analysis.report``). Exit status 0 on success, 1 on a bag or
-argument the analysis refuses (the message names what is wrong).
+argument the analysis refuses (the message names what is wrong). The notes of the reading go to
+stderr (e.g. that a bag without metadata, from a killed run, was rebuilt from its .mcap file
+and how much of it was read).
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     joint = summary['joint']
     for label, case in summary['cases'].items():
+        for note in case.get('notes', []):  # e.g. a bag rebuilt after a killed run
+            print(f'coupling_analysis: {label}: note: {note}', file=sys.stderr)
         arms = case['arms']
         print(f'{label}: {case["samples"]} samples, steps {case["steps"]}, closure residual '
               f'max rel {_fmt(case["closure_residual_max_rel"])}; {joint}: RMS h '

@@ -4,7 +4,9 @@ Every topic of the bag is published under its recorded name with its recorded ty
 bag's CDR bytes as they are (raw publishing, no re-serialization), in log-time order, paced to
 ``rate`` times the recorded time (``--fast``: no pacing). ``/clock`` is republished as recorded
 (our bags carry the simulation clock); a bag without it gets a synthesized ``/clock`` from the
-log times. ``robot_description`` is latched (transient local) as in the live graph.
+log times. ``robot_description`` is latched (transient local) as in the live graph. A bag that
+was never closed (no metadata.yaml: a killed run) or whose file was cut is rebuilt from what
+reached the disk (``iceskate_analysis.bag_io.open_bag``), with a warning saying how much.
 """
 
 from __future__ import annotations
@@ -22,9 +24,10 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
-from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
+from iceskate_analysis.bag_io import open_bag
+from iceskate_sim.errors import SimulationError
 from iceskate_sim.node_support import CLOCK_QOS, LATCHED_QOS
 from iceskate_sim.ros_conversions import set_stamp
 
@@ -40,10 +43,11 @@ class ReplayNode(Node):
 
     def __init__(self, bag: pathlib.Path, depth: int = 1000) -> None:
         super().__init__('replay')
-        self.reader = Reader(bag)
-        self.reader.open()
+        self.reader = open_bag(bag)
+        if self.reader.recovered:
+            self.get_logger().warning(self.reader.recovered)
         self.publishers_by_topic: dict[str, Any] = {}
-        for conn in self.reader.connections:
+        for conn in self.reader.topics:
             if conn.topic in self.publishers_by_topic:
                 continue
             qos = {'/clock': CLOCK_QOS, '/robot_description': LATCHED_QOS}.get(
@@ -74,8 +78,8 @@ class ReplayNode(Node):
         """Publish every message; pace to ``rate`` x recorded time (None: no pacing)."""
         start_wall, first, last_clock = time.monotonic(), None, None
         topics = list(self.publishers_by_topic)
-        connections = [c for c in self.reader.connections if c.topic in topics]
-        for conn, timestamp, raw in self.reader.messages(connections=connections):
+        connections = [c for c in self.reader.topics if c.topic in topics]
+        for conn, timestamp, raw in self.reader.messages(connections):
             first = timestamp if first is None else first
             if rate is not None:
                 delay = start_wall + (timestamp - first) / 1e9 / rate - time.monotonic()
@@ -122,8 +126,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
-    except Exception as exc:  # bag missing or unreadable, unknown message type
-        print(f'replay: error: {type(exc).__name__}: {exc}', file=sys.stderr)
+    except SimulationError as exc:  # bag missing or unreadable (its message names the file)
+        print(f'replay: error: {exc}', file=sys.stderr)
+        return 1
+    except Exception as exc:  # e.g. an unknown message type
+        print(f'replay: error: {args.bag}: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 1
     finally:
         if node is not None:
