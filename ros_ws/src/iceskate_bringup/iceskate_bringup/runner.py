@@ -152,6 +152,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     from iceskate_bringup.scene import load_scene
     from iceskate_sim.scene import MAX_DURATION
     from iceskate_sim.session import prepare_output
+    started = False
     try:
         if not args.ros and (args.single_process or args.rt_priority):
             raise SimulationError('--single-process and --rt-priority need --ros')
@@ -164,6 +165,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         if args.engine is not None:
             scene = replace(scene, simulator=replace(scene.simulator, engine=args.engine))
         prepare_output(args.out, args.out / 'bag' if scene.record_bag else None)
+        started = True  # from here on, what is in --out is this run's
         if args.ros:
             from iceskate_bringup.graph import run_graph
             extra = {'engine': args.engine} if args.engine is not None else {}
@@ -177,7 +179,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         return exc.exit_code
     except SimulationError as exc:
         _say(f'run_scene: error: {exc}')
-        _print_outputs(args.out)
+        if started:
+            _print_outputs(args.out)
         return 1
     summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'fell', 'failure',
                                            'forward_distance_m', 'real_time_factor')}

@@ -289,5 +289,8 @@ def read_yaml(path: str | pathlib.Path, what: str) -> Any:
         raise SimulationError(f'{what} {path} is not UTF-8 text (a binary file?)') from None
     try:
         return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
-    except yaml.YAMLError as exc:
-        raise SimulationError(f'malformed YAML in {what} {path}: {exc}') from None
+    except yaml.YAMLError as exc:  # one line: where, and what the parser expected
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise SimulationError(f'malformed YAML in {what} {path}{where}: {problem}') from None
