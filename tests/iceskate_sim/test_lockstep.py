@@ -144,3 +144,40 @@ def test_free_running_holds_the_latest_command(scene):
     with pytest.raises(SimulationError, match='stale'):  # older than the controller's last
         session.offer('gait_manager', -1, zero(scene, 'gait_manager'))
     assert session.periods == 2
+
+
+def test_rejected_commands_are_summarised_per_reason(capsys):
+    """The run's rejected commands: counted per reason (numbers left out), the first kept whole;
+    run_scene --ros prints them at the end."""
+    from iceskate_bringup.graph import _report_rejected
+    from iceskate_sim.lockstep import FIRST_REJECTED, LoopMonitor
+    monitor = LoopMonitor(('gait_manager',), 5.0, 0.001)
+    reasons = [f"stale command of 'gait_manager' stamped 0.00{k} s (simulation at 0.009 s)"
+               for k in range(7)] + ["command from unknown source 'posture'"]
+    for reason in reasons:
+        monitor.reject(reason)
+    summary = monitor.rejected_summary()
+    assert summary['count'] == 8 and summary['first'] == reasons[:FIRST_REJECTED]
+    assert summary['by_reason'] == {
+        "stale command of 'gait_manager' stamped # s (simulation at # s)": 7,
+        "command from unknown source 'posture'": 1}
+    _report_rejected({'rejected_commands': summary}, {'ROS_LOG_DIR': '/logs'})
+    err = capsys.readouterr().err
+    assert err.startswith('graph: 8 command(s) rejected (each is in /logs/simulator.log):\n')
+    assert "  7 x stale command of 'gait_manager' stamped # s" in err
+    assert err.count('  first: ') == FIRST_REJECTED
+    _report_rejected({'rejected_commands': LoopMonitor((), 5.0, 0.001).rejected_summary()}, {})
+    assert capsys.readouterr().err == ''
+
+
+def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):
+    """Nothing to wait for: the loop steps on its timer (it used to wait forever)."""
+    from iceskate_sim.lockstep import LockstepLoop
+    scene = replace(load_scene(TINY), inputs={}, duration=0.12)
+    loop = LockstepLoop(LockstepSession(Session(scene), {}), lambda *a: None,
+                        lambda *a: None)
+    assert loop.try_begin(set(), 0, 1.0)
+    for _ in range(10):
+        loop.tick()
+    assert loop.phase == 'finished' and loop.session.metrics['failure'] is None
+    assert loop.session.periods == 120

@@ -70,7 +70,8 @@ def test_sigterm_mid_run_closes_the_bag_the_forked_writer_wrote(
     finally:
         graph.stop()
     metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
-    assert metrics['failure'].startswith('stopped at t=')
+    assert metrics['failure'].startswith('interrupted by SIGTERM at t=')
+    assert metrics['interrupted'] and not metrics['fell']
     n = len(np.load(tmp_path / 'out' / 'trajectory.npz')['t'])
     with AnyReader([tmp_path / 'out' / 'bag']) as reader:
         states = [c for c in reader.connections if c.topic == '/joint_states']
@@ -129,6 +130,10 @@ def test_bad_commands_are_rejected_and_never_reach_the_state(
                    "'gait_manager' stamped 1.0 s is in the future", "unknown source 'posture'"):
         assert 'rejected command: ' in log and reason in log, reason
     assert json.loads(stats.read_text())['rejected'] == len(bad)
+    rejected = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['rejected_commands']
+    assert rejected['count'] == len(bad) == sum(rejected['by_reason'].values())
+    assert len(rejected['first']) == 5 and "stale command of 'gait_manager' stamped # s " \
+        '(simulation at # s)' in rejected['by_reason']
     assert_same_trajectory(tmp_path / 'out' / 'trajectory.npz',
                            graph_run.headless / 'trajectory.npz')
 

@@ -183,17 +183,43 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
 
 
 def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
+    """The simulator's own one-line error, not an older run's metrics.json left in --out."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    from iceskate_sim.scene import read_yaml
+    raw = read_yaml(TINY, 'scene')
+    raw['initial'] = {'mode': 1, 'q': {'q5': 0.05, 'q6': -0.3, 'q7': -0.6}}  # toe below floor
+    scene = tmp_path / 'toe_down.yaml'
+    scene.write_text(yaml.safe_dump(raw))
+    out = tmp_path / 'cli'
+    out.mkdir()
+    (out / 'metrics.json').write_text('{"failure": "the failure of an older run"}')
+    result = subprocess.run(
+        [sys.executable, '-m', 'iceskate_bringup.runner', str(scene), '--ros', '--out', str(out)],
+        env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
+        timeout=120)
+    assert result.returncode == 1
+    assert 'run_scene: error: the simulator exited with 1: scene ' in result.stderr
+    assert 'the initial state cannot be simulated' in result.stderr
+    assert 'older run' not in result.stderr and 'Traceback' not in result.stderr
+
+
+def test_run_scene_ros_refuses_an_out_holding_a_run_before_starting_nodes(tmp_path, ros_env):
     import subprocess
     import sys
     out = tmp_path / 'cli'
-    (out / 'bag').mkdir(parents=True)  # the bag may not be overwritten: the simulator refuses
+    (out / 'bag').mkdir(parents=True)  # the bag may not be overwritten
     result = subprocess.run(
         [sys.executable, '-m', 'iceskate_bringup.runner', str(TINY), '--ros', '--out', str(out)],
         env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
         timeout=120)
     assert result.returncode == 1
-    assert 'run_scene: error: the simulator exited with 1' in result.stderr
-    assert 'already exists' in result.stderr
+    assert result.stderr.startswith(f'run_scene: error: output directory {out} already holds a '
+                                    f'recorded run: {out / "bag"} already exists'), result.stderr
+    assert 'graph: domain' not in result.stderr  # no node was started
 
 
 def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(

@@ -1,0 +1,160 @@
+"""Bad paths and bad files are refused before anything starts, in one sentence naming the path or
+key and the problem (never a traceback, never a Python method); YAML 1.2 numbers everywhere."""
+
+import os
+from pathlib import Path
+import re
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from iceskate_bringup.runner import main
+from iceskate_bringup.scene import load_scene
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.scene import read_yaml
+
+TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
+PYTHON_METHOD = re.compile(r'\w\(\)')
+
+
+def _refused(capsys, argv: list[str]) -> str:
+    """run_scene with ``argv`` exits 1 with one error line; that line."""
+    assert main([*argv, '--quiet']) == 1
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('run_scene: error: '), err
+    assert 'Traceback' not in err and not PYTHON_METHOD.search(err), err
+    return lines[0]
+
+
+def _scene(tmp_path: Path, **changes) -> Path:
+    raw = read_yaml(TINY, 'scene') | changes
+    path = tmp_path / 'scene.yaml'
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+# ------------------------------------------------------------------------------ paths
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+@pytest.mark.parametrize('case', ['existing file', 'under a file', 'cannot be created'])
+def test_a_bad_out_is_refused_naming_it(tmp_path, capsys, case, ros):
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('not a folder')
+    out, expected = {
+        'existing file': (blocker, f'output directory {blocker} is an existing file'),
+        'under a file': (blocker / 'run', f'output directory {blocker / "run"} lies under '
+                         f'{blocker}, which is an existing file'),
+        'cannot be created': (Path('/sys/iceskate-test-out'),
+                              'output directory /sys/iceskate-test-out cannot be created: '),
+    }[case]
+    line = _refused(capsys, [str(TINY), '--out', str(out), *(['--ros'] if ros else [])])
+    assert expected in line, line
+    assert blocker.read_text() == 'not a folder'
+
+
+def test_an_out_that_is_not_writable_is_refused(tmp_path, capsys):
+    if os.geteuid() == 0:
+        pytest.skip('root writes into a read-only folder (the /sys case covers it)')
+    locked = tmp_path / 'locked'
+    locked.mkdir(mode=0o500)
+    line = _refused(capsys, [str(TINY), '--out', str(locked / 'run')])
+    assert f'output directory {locked / "run"} cannot be created: permission denied' in line
+
+
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+def test_an_out_holding_a_recorded_run_is_refused(tmp_path, capsys, ros):
+    (tmp_path / 'bag').mkdir()
+    line = _refused(capsys, [str(TINY), '--out', str(tmp_path), *(['--ros'] if ros else [])])
+    assert f'already holds a recorded run: {tmp_path / "bag"} already exists' in line
+
+
+# ------------------------------------------------------------------------------ files
+def test_a_binary_scene_is_refused(tmp_path, capsys):
+    scene = tmp_path / 'binary.yaml'
+    scene.write_bytes(bytes(range(256)) * 4)
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert f'scene {scene} is not UTF-8 text' in line
+    assert not (tmp_path / 'out').exists()
+
+
+def test_scene_numbers_follow_yaml_1_2(tmp_path):
+    """Exponents without a dot or a sign (1e-6, 5E-3) are numbers, as in YAML 1.2."""
+    path = _scene(tmp_path, integrator={'method': 'rk4', 'step': 1e-3, 'rtol': 1e-6,
+                                        'atol': 1e-9})
+    text = path.read_text().replace('1.0e-06', '1e-6').replace('1.0e-09', '1E-9')
+    text = text.replace('0.001', '1e-3')
+    assert '1e-6' in text and '1E-9' in text
+    path.write_text(text)
+    scene = load_scene(path)
+    assert scene.simulator.integrator.rtol == 1e-6 and scene.simulator.integrator.atol == 1e-9
+    assert scene.simulator.integrator.step == 1e-3
+
+
+def test_a_string_where_a_number_belongs_is_still_refused(tmp_path):
+    path = _scene(tmp_path)
+    path.write_text(path.read_text().replace('duration: 0.03', "duration: '1e-6'"))
+    with pytest.raises(SimulationError, match="scene key 'duration': must be a number"):
+        load_scene(path)
+
+
+@pytest.mark.parametrize('value', ['inf', 'nan', '1e9', '3600.5', '-1', '0'])
+def test_duration_obeys_the_scene_limits(tmp_path, capsys, value):
+    line = _refused(capsys, [str(TINY), '--out', str(tmp_path / 'out'), '--duration', value])
+    assert '--duration must be > 0 and <= 3600 s' in line
+    assert not (tmp_path / 'out').exists()
+
+
+def test_a_coordinate_the_initial_mode_lacks_is_refused_naming_the_key(tmp_path, capsys):
+    scene = _scene(tmp_path, initial={'mode': 1, 'q': {'q1': 1.5}})
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert "scene key 'initial.q.q1': q1" in line and 'not a coordinate of mode 1' in line
+    scene = _scene(tmp_path, initial={'mode': 1, 'v': {'q1': 0.5}})
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert "scene key 'initial.v.q1'" in line
+
+
+def test_an_impossible_initial_posture_is_one_sentence(tmp_path, capsys):
+    scene = _scene(tmp_path, initial={'mode': 1, 'q': {'q5': 0.05, 'q6': -0.3, 'q7': -0.6}})
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert line == ("run_scene: error: scene 'tiny_stand': the initial state cannot be "
+                    'simulated, it ends the run at once in mode 1 (toe-first touchdown of the '
+                    "swing foot (not representable in the paper's model)); change "
+                    'initial.posture, initial.q, initial.v or initial.mode')
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('content, expected', [
+    (bytes(range(256)), 'is not UTF-8 text'),
+    (b'simulator:\n  ros__parameters: {control_timeout: [1.0\n', 'malformed YAML'),
+])
+def test_a_bad_node_parameter_file_is_refused_in_one_line(tmp_path, ros_env, content, expected):
+    pytest.importorskip('rclpy')
+    params = tmp_path / 'params.yaml'
+    params.write_bytes(content)
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+                             '--params-file', str(params)], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 1
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith('simulator: error: ') and f'parameter file {params}' in line, line
+    assert expected in line
+
+
+@pytest.mark.ros
+def test_node_parameter_files_take_yaml_1_2_exponents(tmp_path, ros_env):
+    """rcl reads 2e0 as a double like our reader: the node gets past its parameters (and stops
+    at the missing scene, naming it)."""
+    pytest.importorskip('rclpy')
+    params = tmp_path / 'params.yaml'
+    params.write_text('simulator:\n  ros__parameters:\n    control_timeout: 2e0\n'
+                      f'    scene: {tmp_path / "missing.yaml"}\n')
+    assert read_yaml(params, 'parameter file')['simulator']['ros__parameters'][
+        'control_timeout'] == 2.0
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+                             '--params-file', str(params)], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.strip().endswith(f'cannot read scene {tmp_path / "missing.yaml"}: '
+                                          'No such file or directory'), result.stderr
