@@ -102,6 +102,8 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
         'suppressed_cycles': sim.stats.suppressed_cycles,
         'resolved_cycles': sim.stats.resolved_cycles,
         'sources': list(trajectory.sources),
+        # commands the simulator node refused (its LoopMonitor fills it in; none headless)
+        'rejected_commands': {'count': 0, 'by_reason': {}, 'first': []},
     }
     if not len(trajectory):
         return metrics
