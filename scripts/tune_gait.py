@@ -34,7 +34,7 @@ import numpy as np
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene, scene_dirs
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.scene import read_yaml
+from iceskate_sim.yaml_io import read_yaml
 
 # block.key -> (low, high)
 SPACE = {

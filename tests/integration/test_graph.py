@@ -189,7 +189,7 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
 
     import yaml
 
-    from iceskate_sim.scene import read_yaml
+    from iceskate_sim.yaml_io import read_yaml
     raw = read_yaml(TINY, 'scene')
     raw['initial'] = {'mode': 1, 'q': {'q5': 0.05, 'q6': -0.3, 'q7': -0.6}}  # toe below floor
     scene = tmp_path / 'toe_down.yaml'

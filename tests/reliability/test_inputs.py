@@ -13,7 +13,7 @@ import yaml
 from iceskate_bringup.runner import main
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.scene import read_yaml
+from iceskate_sim.yaml_io import read_yaml
 
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 PYTHON_METHOD = re.compile(r'\w\(\)')

@@ -53,8 +53,8 @@ from iceskate_sim.parameters import (
     optional_inner,
     unflatten,
 )
-from iceskate_sim.scene import read_yaml
 from iceskate_sim.shutdown import StopRequest, process_alive
+from iceskate_sim.yaml_io import read_yaml
 
 T = TypeVar('T')
 

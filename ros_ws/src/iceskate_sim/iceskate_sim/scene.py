@@ -15,11 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 import math
 import pathlib
-import re
 from typing import Any
 
 import numpy as np
-import yaml
 
 from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
@@ -27,6 +25,7 @@ from iceskate_sim.hybrid import FrictionModel, HybridState
 from iceskate_sim.integrators import METHODS, IntegratorConfig
 from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.simulation import ENGINES, SimulatorConfig, initial_state
+from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is found here too)
 
 POSTURES = ('bent_knees', 'staggered', 'upright')
 #: The longest run [s] a scene (or ``run_scene --duration``) may ask for.
@@ -265,32 +264,3 @@ def load_scene(path: str | pathlib.Path,
     """Load and validate the scene YAML file at ``path`` (see ``parse_scene``)."""
     return parse_scene(read_yaml(path, 'scene'), validate_inputs)
 
-
-class _Yaml12Loader(yaml.SafeLoader):
-    """PyYAML's safe loader with YAML 1.2's floats: ``1e-6``, ``2.0e7`` and ``1E12`` are numbers
-    (YAML 1.1 wants a dot and a signed exponent and reads them as strings)."""
-
-
-_Yaml12Loader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
-    list('-+0123456789'))
-
-
-def read_yaml(path: str | pathlib.Path, what: str) -> Any:
-    """The YAML document at ``path`` (YAML 1.2 numbers), or SimulationError naming ``what``,
-    the path and the problem (unreadable, not UTF-8 text, malformed)."""
-    path = pathlib.Path(path)
-    try:
-        text = path.read_bytes().decode('utf-8')
-    except OSError as exc:
-        raise SimulationError(f'cannot read {what} {path}: {exc.strerror or exc}') from None
-    except UnicodeDecodeError:
-        raise SimulationError(f'{what} {path} is not UTF-8 text (a binary file?)') from None
-    try:
-        return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
-    except yaml.YAMLError as exc:  # one line: where, and what the parser expected
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
-        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise SimulationError(f'malformed YAML in {what} {path}{where}: {problem}') from None
