@@ -278,10 +278,9 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
         if metrics is None:
             _write_metrics(out, scene.name, str(error), interrupted=True)
         raise error
-    if why or code != 0:
+    if why or code != 0 or metrics is None:
         _fail(out, env, scene.name, why, code, early, metrics)
     _write_summary(out)
-    assert metrics is not None
     return metrics
 
 
