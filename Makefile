@@ -10,7 +10,7 @@ IN_ENV := cd $(ROOT) && . ./env.sh &&
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.
 PYTEST_ARGS ?=
 
-.PHONY: help setup test run lint fix lock clean distclean bench stress
+.PHONY: help setup test run lint fix lock clean distclean bench stress sanitize
 
 help:
 	@echo 'make setup      create .venv from requirements.lock and colcon-build ros_ws (idempotent)'
@@ -18,10 +18,11 @@ help:
 	@echo 'make run        setup, then run a scene headless (SCENE=skate, OUT=runs/<scene>-<time>)'
 	@echo 'make bench      setup, then work-precision and laziness benchmarks into runs/bench (~4-8 min)'
 	@echo 'make stress     setup, then the stress cases and stand for STRESS_DURATION=600 s (long)'
+	@echo 'make sanitize   setup, then the native core under ASan+UBSan: its tests and 2 s of skate'
 	@echo 'make lint       setup, then ruff check of ros_ws/src and tests'
 	@echo 'make fix        setup, then ruff check --fix (safe fixes only, e.g. import order)'
 	@echo 'make lock       re-resolve requirements.in into requirements.lock (uv, Python 3.11)'
-	@echo 'make clean      remove ros_ws/build, install and log'
+	@echo 'make clean      remove ros_ws/build, install and log (and their -sanitize twins)'
 	@echo 'make distclean  clean, and remove .venv'
 
 setup:
@@ -35,6 +36,12 @@ SCENE ?= skate
 OUT ?= runs/$(SCENE)-$(shell date +%Y%m%d-%H%M%S)
 run: setup
 	$(IN_ENV) run_scene $(SCENE) --out $(OUT) $(RUN_ARGS)
+
+# The native core (iceskate_native) built under AddressSanitizer + UndefinedBehaviorSanitizer in
+# ros_ws/build-sanitize and install-sanitize; runs tests/iceskate_native and 2 s of the skate scene
+# on the native engine with it, and fails on any sanitizer report (docs/usage.md, "Tests").
+sanitize: setup
+	bash $(ROOT)/scripts/sanitize.sh
 
 lint: setup
 	$(IN_ENV) ruff check ros_ws/src tests
@@ -50,6 +57,7 @@ lock:
 
 clean:
 	rm -rf $(ROOT)/ros_ws/build $(ROOT)/ros_ws/install $(ROOT)/ros_ws/log
+	rm -rf $(ROOT)/ros_ws/build-sanitize $(ROOT)/ros_ws/install-sanitize $(ROOT)/ros_ws/log-sanitize
 
 distclean: clean
 	rm -rf $(ROOT)/.venv

@@ -79,6 +79,10 @@ Dynamics::Dynamics(
   work_(std::make_unique<Workspace>())
 {
   check_modes(modes_);
+  // Room for the four Data up front: a reallocation would copy every Data built so far (deep
+  // copies, and Eigen's copy of a never-used LLT member reads its uninitialised ComputationInfo,
+  // which UBSan reports), so each Data is constructed in place, once.
+  work_->data.reserve(models_.size());
   for (const auto & limit : limits_) {
     if (limit.index < 0 || limit.index >= kCoordinates || !(limit.lower <= limit.upper)) {
       throw std::invalid_argument("a joint limit needs an index in 0..17 and lower <= upper");
