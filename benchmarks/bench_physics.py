@@ -1,0 +1,368 @@
+#!/usr/bin/env python3
+"""Physics alone, side by side with MuJoCo: one 1 ms control period against ``mj_step``.
+
+Everything is measured in one run, so the ratios hold for one machine and one hour:
+
+* **MuJoCo** (the PyPI ``mujoco`` wheel, a benchmark-only dependency) on our own URDF,
+  ``iceskate_humanoid.urdf``, loaded as it is: the pelvis is the root link, which MuJoCo's URDF
+  import welds to the world (pelvis fixed); the URDF has no geometry, and contacts are disabled
+  on top; no actuator, no controller; the URDF's joint damping and limits carry over. Timestep
+  1 ms. Microseconds per ``mj_step`` with the ``implicitfast`` and the ``RK4`` integrator, from
+  the joint angles and speeds of the states below (our support-rooted coordinates mapped to the
+  URDF joints with ``anatomical_map``), ``--number`` steps per timing run from each state.
+* **Our native engine** at the shipped settings of the ``skate`` scene (implicit Euler, 1 ms
+  step, 1 ms control period, so a period is one step): the scene runs for ``--warmup`` s on the
+  native engine with its controllers, then ``--states`` states are taken one every
+  ``--spacing`` periods, each with the command the controllers held over its period. From each
+  state whose period fires no event: (a) ``NativeGaitDynamics.integrate_segment`` to the period
+  end (the native segment call: one implicit-Euler step, three eq. (7) solves (start, implicit
+  step, end), the guards at both ends) and the kernel's own binding call; (b) the whole
+  ``Simulator.advance`` of the period on the native engine (the segment plus the Python around
+  it: the start evaluation, settle, the end-of-period projection, the health checks) and on
+  the Python engine; one eq. (7) solve (``NativeGaitDynamics.evaluate`` and the kernel's
+  ``evaluate``).
+
+Before each timed ``advance`` the simulator is put back to the state (and the dynamics' kept
+state terms to what the previous period leaves); the advance from every state is checked to
+reproduce the recorded run. The timings take turns, so that a change of the machine's load
+during the run weighs on all of them alike: from each state MuJoCo's two integrators, then the
+native calls; the two engines' advances alternate, state by state. Figures are microseconds per
+call: per state the median over ``--repeat`` timings (after one to warm up), then the median
+over the states (with their range). The ratios are ours / ``mj_step`` implicitfast; the goal
+compared with is physics alone <= 4x MuJoCo's ``mj_step`` at the same step.
+
+Usage (from the repository root, environment sourced):
+    python benchmarks/bench_physics.py [--states 20] [--repeat 25] [--number 200] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, replace
+import json
+import pathlib
+import statistics
+import sys
+import time
+import timeit
+from typing import Any
+
+from bench_work_precision import machine_info
+import numpy as np
+
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
+from iceskate_sim.command import HeldCommand
+from iceskate_sim.dynamics import DynamicsResult
+from iceskate_sim.hybrid import HybridState
+from iceskate_sim.robot import anatomical_map, load_robot
+from iceskate_sim.simulation import Simulator
+
+GOAL_RATIO = 4.0  # physics alone <= 4 x mj_step (implicitfast) at the same step
+
+
+@dataclass
+class Snapshot:
+    """A simulator state at the end of a period, and what the next period holds."""
+
+    state: HybridState
+    result: DynamicsResult
+    previous: HeldCommand  # the command held over the period that ended here
+    command: HeldCommand  # the command the controllers give for the next period
+    suppressed: dict[str, float]
+    instant: tuple[float, set]
+    events: int
+    after: HybridState | None = None  # the state the run reached one period later
+    quiet: bool = False  # no transition in the next period, one integration step
+
+
+def take_snapshot(sim: Simulator, command: HeldCommand) -> Snapshot:
+    """The simulator's period-to-period state, before it advances with ``command``."""
+    return Snapshot(sim.state, sim.result, sim.command, command, dict(sim._suppressed),
+                    (sim._instant[0], set(sim._instant[1])), len(sim.events))
+
+
+def restore(sim: Simulator, snap: Snapshot) -> None:
+    """Put ``sim`` back where the run was at ``snap``, its dynamics' kept state terms as the
+    previous period leaves them (its last solve at this state, under the previous command)."""
+    sim.state, sim.result, sim.ended = snap.state, snap.result, None
+    sim._command, sim._push = snap.previous, None
+    sim._suppressed = dict(snap.suppressed)
+    sim._instant = (snap.instant[0], set(snap.instant[1]))
+    del sim.events[snap.events:]
+    sim._evaluate(snap.state.q, snap.state.v)
+
+
+def collect_states(scene, robot, warmup: float, count: int, spacing: int) -> list[Snapshot]:
+    """Run the scene on the native engine and keep ``count`` states after ``warmup`` s."""
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    stack = ControlStack(scene, robot, sim.observation())
+    period = scene.simulator.control_period
+    first = int(round(warmup / period))
+    snaps: list[Snapshot] = []
+    for k in range(first + count * spacing):
+        command = HeldCommand.of_controllers(stack.commands(sim.observation()).values())
+        snap = None
+        if k >= first and (k - first) % spacing == 0:
+            snap = take_snapshot(sim, command)
+            steps, events, rests = sim.stats.steps, len(sim.events), sim.stats.suppressed_cycles
+        sim.advance(command)
+        if sim.ended is not None:
+            raise SystemExit(f'the skate run ended at t={sim.time:.3f} s ({sim.ended})')
+        if snap is not None:
+            snap.after = sim.state
+            snap.quiet = (sim.stats.steps - steps == 1 and len(sim.events) == events
+                          and sim.stats.suppressed_cycles == rests)
+            snaps.append(snap)
+    return snaps
+
+
+def per_state(values: list[float]) -> dict[str, float]:
+    """Median over the states of their medians, and the range."""
+    return {'median': statistics.median(values), 'min': min(values), 'max': max(values)}
+
+
+def time_calls(func, repeat: int, number: int) -> float:
+    """Median over ``repeat`` runs of the mean time of ``number`` calls [us]."""
+    func()
+    runs = timeit.Timer(func).repeat(repeat=repeat, number=number)
+    return statistics.median(runs) / number * 1e6
+
+
+def time_advance(sims: list[Simulator], snaps: list[Snapshot], repeat: int
+                 ) -> tuple[list[list[float]], list[float]]:
+    """Median wall time [us] of ``advance`` from each state for each simulator (the simulators
+    in turn from each state, the states in turn in each repeat, so no state is kept from one
+    repeat to the next), and for each the largest difference of its end state from the run."""
+    clock = time.perf_counter
+    timings = [[[] for _ in snaps] for _ in sims]
+    deviation = [0.0 for _ in sims]
+    for _ in range(repeat + 1):  # the first round warms up
+        for i, snap in enumerate(snaps):
+            for k, sim in enumerate(sims):
+                restore(sim, snap)
+                t0 = clock()
+                sim.advance(snap.command)
+                timings[k][i].append((clock() - t0) * 1e6)
+                end = sim.state
+                deviation[k] = max(deviation[k], abs(end.t - snap.after.t),
+                                   float(np.max(np.abs(end.q - snap.after.q))),
+                                   float(np.max(np.abs(end.v - snap.after.v))))
+    return [[statistics.median(t[1:]) for t in per_sim] for per_sim in timings], deviation
+
+
+def mujoco_model(urdf: pathlib.Path, robot) -> tuple[Any, Any, dict[str, Any]]:
+    """MuJoCo's model of our URDF (1 ms, contacts off) and what it holds."""
+    import mujoco
+    model = mujoco.MjModel.from_xml_path(str(urdf))
+    model.opt.timestep = 1.0e-3
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(model.njnt)]
+    urdf_model = robot.urdf_model
+    damping_equal = all(
+        model.dof_damping[model.jnt_dofadr[j]]
+        == urdf_model.damping[urdf_model.joints[urdf_model.getJointId(name)].idx_v]
+        for j, name in enumerate(names))
+    bodies = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)]
+    info = {
+        'mujoco': mujoco.__version__, 'nq': int(model.nq), 'nv': int(model.nv),
+        'nbody': int(model.nbody), 'bodies': bodies, 'njnt': int(model.njnt),
+        'hinges': int(np.sum(model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)),
+        'limited': int(np.sum(model.jnt_limited)), 'ngeom': int(model.ngeom),
+        'nu': int(model.nu), 'moving_mass': float(np.sum(model.body_mass)),
+        'total_mass': float(robot.total_mass), 'damping_as_urdf': bool(damping_equal),
+        'damping': {name: float(model.dof_damping[model.jnt_dofadr[j]])
+                    for j, name in enumerate(names)},
+    }
+    return mujoco, model, info
+
+
+def mujoco_states(mujoco, model, snaps: list[Snapshot]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Our states' joint angles and speeds as MuJoCo's qpos, qvel (same joints, pelvis fixed)."""
+    states = []
+    for snap in snaps:
+        qpos, qvel = np.zeros(model.nq), np.zeros(model.nv)
+        for i, joint, sign in anatomical_map(snap.state.contact.side):
+            j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+            qpos[model.jnt_qposadr[j]] = sign * snap.state.q[i]
+            qvel[model.jnt_dofadr[j]] = sign * snap.state.v[i]
+        states.append((qpos, qvel))
+    return states
+
+
+def time_mj_step(mujoco, model, data, state: tuple[np.ndarray, np.ndarray], integrator: str,
+                 repeat: int, number: int) -> tuple[float, float]:
+    """Median us per ``mj_step`` from ``state`` (``number`` steps a timing run, the state set
+    anew before each), and the mean count of active constraints (joint limits) at the runs'
+    ends."""
+    model.opt.integrator = int(getattr(mujoco.mjtIntegrator, integrator))
+    step = mujoco.mj_step
+    clock = time.perf_counter
+    runs, nefc = [], []
+    for _ in range(repeat + 1):  # the first run warms up
+        mujoco.mj_resetData(model, data)
+        data.qpos[:], data.qvel[:] = state
+        mujoco.mj_forward(model, data)
+        t0 = clock()
+        for _ in range(number):
+            step(model, data)
+        runs.append((clock() - t0) / number * 1e6)
+        nefc.append(int(data.nefc))
+    return statistics.median(runs[1:]), statistics.fmean(nefc[1:])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark, print the table, optionally write JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--warmup', type=float, default=1.0,
+                        help='simulated time [s] of skate before the first state')
+    parser.add_argument('--states', type=int, default=20, help='states taken from the run')
+    parser.add_argument('--spacing', type=int, default=10, help='periods between two states')
+    parser.add_argument('--repeat', type=int, default=25, help='timings per state (median)')
+    parser.add_argument('--number', type=int, default=200,
+                        help='calls per timing of a short call (segment, evaluate, mj_step)')
+    parser.add_argument('--json', type=pathlib.Path, metavar='PATH',
+                        help='also write the figures to this JSON file')
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    info = machine_info()
+
+    robot = load_robot()
+    shipped = load_scene('skate')
+    scene = replace(shipped, simulator=replace(shipped.simulator, engine='native'))
+    config = scene.simulator
+    snaps = collect_states(scene, robot, args.warmup, args.states, args.spacing)
+    quiet = [s for s in snaps if s.quiet]
+    if not quiet:
+        raise SystemExit('every state fires an event in its period: change --warmup/--spacing')
+    rep, num = args.repeat, args.number
+
+    # MuJoCo on the same joint states
+    mujoco, model, mj = mujoco_model(robot.urdf_path, robot)
+    data = mujoco.MjData(model)
+    states = mujoco_states(mujoco, model, quiet)
+
+    # per state, in turn: mj_step (both integrators), (a) the native segment call and the
+    # kernel's binding call, one eq. (7) solve
+    native_sim = Simulator(robot, config, scene.initial)
+    native = native_sim.dynamics
+    mj_implicitfast, mj_rk4, nefc_implicitfast, nefc_rk4 = [], [], [], []
+    segment, kernel_segment, evaluate, kernel_evaluate = [], [], [], []
+    for snap, state in zip(quiet, states, strict=True):
+        us, nefc = time_mj_step(mujoco, model, data, state, 'mjINT_IMPLICITFAST', rep, num)
+        mj_implicitfast.append(us)
+        nefc_implicitfast.append(nefc)
+        us, nefc = time_mj_step(mujoco, model, data, state, 'mjINT_RK4', rep, num)
+        mj_rk4.append(us)
+        nefc_rk4.append(nefc)
+        s, c = snap.state, snap.command
+        end = s.t + config.control_period
+        seg = native.integrate_segment(s, c, None, config.integrator, config.friction,
+                                       snap.suppressed, end)
+        if seg.fired is not None or seg.steps != 1:
+            raise SystemExit(f'an event fires in the segment from t={s.t:.4f} s')
+        segment.append(time_calls(
+            lambda s=s, c=c, e=end, sup=snap.suppressed: native.integrate_segment(
+                s, c, None, config.integrator, config.friction, sup, e), rep, num))
+        (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
+         frame, force) = evaluate_args = native._arguments(s.contact, s.q, s.v, c.bias, None,
+                                                           c.stiffness, c.damping)
+        segment_args = (mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness,
+                        damping, frame, force, config.integrator.method,
+                        config.integrator.step, config.integrator.event_tolerance,
+                        *native._guard_arguments(mode, s.t, snap.suppressed, config.friction),
+                        s.t, np.concatenate([s.q, s.v]), end)
+        kernel_segment.append(time_calls(
+            lambda a=segment_args: native._kernel.integrate_segment(*a), rep, num))
+        evaluate.append(time_calls(
+            lambda s=s, c=c: native.evaluate(s.contact, s.q, s.v, c.bias, None, c.stiffness,
+                                             c.damping), rep, num))
+        kernel_evaluate.append(time_calls(
+            lambda a=evaluate_args: native._kernel.evaluate(*a), rep, num))
+    nefc_implicitfast = statistics.fmean(nefc_implicitfast)
+    nefc_rk4 = statistics.fmean(nefc_rk4)
+
+    # (b) the whole period, on both engines, in turn from each state
+    python_sim = Simulator(robot, replace(config, engine='python'), scene.initial)
+    (advance_native, advance_python), (deviation_native, deviation_python) = time_advance(
+        [native_sim, python_sim], quiet, rep)
+
+    rows = {
+        'mj_step implicitfast': per_state(mj_implicitfast),
+        'mj_step RK4': per_state(mj_rk4),
+        '(a) NativeGaitDynamics.integrate_segment': per_state(segment),
+        '    kernel integrate_segment (binding call)': per_state(kernel_segment),
+        '(b) Simulator.advance, native engine': per_state(advance_native),
+        '(b) Simulator.advance, Python engine': per_state(advance_python),
+        'eq. (7): NativeGaitDynamics.evaluate': per_state(evaluate),
+        'eq. (7): kernel evaluate (binding call)': per_state(kernel_evaluate),
+    }
+    base = rows['mj_step implicitfast']['median']
+    elapsed = time.perf_counter() - started
+
+    print('iceskate physics against MuJoCo, measured in one run')
+    print(f'machine: {info["cpu"]}, {info["cpus"]} CPUs, {info["platform"]}; load average at '
+          f'start {info["loadavg_start"]}; {info["date"]}')
+    print(f'Python {info["python"]}, numpy {info["numpy"]}, pinocchio {info["pinocchio"]}, '
+          f'mujoco {mj["mujoco"]}')
+    print()
+    print(f'MuJoCo model of {robot.urdf_path.name}: nq {mj["nq"]}, nv {mj["nv"]}, '
+          f'{mj["nbody"]} bodies (world + {mj["nbody"] - 1} moving links; the pelvis, the '
+          'root link, welded to the world), '
+          f'{mj["hinges"]} hinges ({mj["limited"]} with limits), {mj["ngeom"]} geoms, '
+          f'{mj["nu"]} actuators; moving mass {mj["moving_mass"]:.1f} of '
+          f'{mj["total_mass"]:.1f} kg; joint damping as in the URDF: '
+          f'{"yes" if mj["damping_as_urdf"] else "NO"}; timestep 1 ms, contacts disabled; '
+          f'active constraints (joint limits) per step, mean: implicitfast '
+          f'{nefc_implicitfast:.2f}, RK4 {nefc_rk4:.2f}')
+    print(f'ours: skate scene, {config.integrator.method}, step '
+          f'{config.integrator.step * 1e3:g} ms, control period '
+          f'{config.control_period * 1e3:g} ms, projection {config.projection}; states every '
+          f'{args.spacing} periods from t = {args.warmup:g} s: {len(quiet)} of {len(snaps)} '
+          f'fire no event in their period (modes '
+          f'{sorted({s.state.mode.number for s in quiet})}); the advance from them reproduces '
+          f'the run to {deviation_native:.1e} (native), {deviation_python:.1e} (Python engine)')
+    print(f'timings: per state the median of {rep} runs (short calls: {num} calls per run, '
+          f'advance: one period per run), then the median over the {len(quiet)} states')
+    print()
+    print(f'{"per 1 ms period (one step)":<44} {"median us":>10} {"range over states":>19} '
+          f'{"/ mj_step implicitfast":>23}')
+    for name, row in rows.items():
+        spread = f'{row["min"]:.1f}-{row["max"]:.1f}'
+        print(f'{name:<44} {row["median"]:10.1f} {spread:>19} '
+              f'{row["median"] / base:22.2f}x')
+    print()
+    a = rows['(a) NativeGaitDynamics.integrate_segment']['median'] / base
+    b = rows['(b) Simulator.advance, native engine']['median'] / base
+    b_py = rows['(b) Simulator.advance, Python engine']['median'] / base
+    verdict = {True: 'meets', False: 'misses'}
+    print(f'ratios ours / mj_step implicitfast: (a) native segment {a:.1f}x, (b) native advance '
+          f'{b:.1f}x, Python advance {b_py:.1f}x; goal <= {GOAL_RATIO:g}x: (a) '
+          f'{verdict[a <= GOAL_RATIO]}, (b) {verdict[b <= GOAL_RATIO]}')
+    python_part = (rows['(b) Simulator.advance, native engine']['median']
+                   - rows['(a) NativeGaitDynamics.integrate_segment']['median'])
+    print(f'(b) - (a), the Python around the native segment in a period: {python_part:.1f} us; '
+          f'benchmark wall time {elapsed:.0f} s')
+
+    if args.json:
+        figures = {
+            'machine': info, 'mujoco_model': mj, 'scene': 'skate',
+            'integrator': config.integrator.method, 'step': config.integrator.step,
+            'control_period': config.control_period, 'warmup': args.warmup,
+            'spacing': args.spacing, 'states': len(snaps), 'quiet_states': len(quiet),
+            'repeat': rep, 'number': num, 'nefc_mean': {'implicitfast': nefc_implicitfast,
+                                                        'rk4': nefc_rk4},
+            'deviation': {'native': deviation_native, 'python': deviation_python},
+            'us': {name.strip(): row for name, row in rows.items()},
+            'ratio_to_mj_step_implicitfast': {name.strip(): row['median'] / base
+                                              for name, row in rows.items()},
+            'goal_ratio': GOAL_RATIO, 'wall_s': elapsed,
+        }
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(figures, indent=2) + '\n')
+        print(f'figures written to {args.json}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
