@@ -23,6 +23,7 @@ from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import FrictionModel, HybridState
 from iceskate_sim.integrators import METHODS, IntegratorConfig
+from iceskate_sim.parameters import Rules, check_value
 from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.simulation import ENGINES, SimulatorConfig, initial_state
 from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is found here too)
@@ -87,36 +88,31 @@ def _check_keys(d: Any, key: str, allowed: set[str], required: set[str] = frozen
     return d
 
 
+def _setting(d: dict[str, Any], key: str, path: str, default: Any, kind: type,
+             **rules: Any) -> Any:
+    """``d[key]`` (or ``default``) checked by the parameter schema's rules
+    (``iceskate_sim.parameters``, the rules of every parameter of the project), named ``path``."""
+    try:
+        return check_value(path, d.get(key, default), kind, Rules(path, **rules),
+                           SimulationError)
+    except SimulationError as exc:  # 'path must be ...' -> "scene key 'path': must be ..."
+        raise _fail(path, str(exc).removeprefix(f'{path} ')) from None
+
+
 def _number(d: dict[str, Any], key: str, path: str, default: float, low: float | None = None,
             high: float | None = None, positive: bool = False) -> float:
-    value = d.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, _NUMBER):
-        raise _fail(path, f'must be a number, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise _fail(path, f'must be finite, got {value!r}')
-    if positive and value <= 0.0:
-        raise _fail(path, f'must be > 0, got {value}')
-    if low is not None and value < low:
-        raise _fail(path, f'must be >= {low}, got {value}')
-    if high is not None and value > high:
-        raise _fail(path, f'must be <= {high}, got {value}')
-    return value
+    if positive:
+        return _setting(d, key, path, default, float, low=0.0, high=high, open_low=True)
+    return _setting(d, key, path, default, float, low=low, high=high)
 
 
 def _boolean(d: dict[str, Any], key: str, path: str, default: bool) -> bool:
-    value = d.get(key, default)
-    if not isinstance(value, bool):
-        raise _fail(path, f'must be true or false, got {value!r}')
-    return value
+    return _setting(d, key, path, default, bool)
 
 
 def _choice(d: dict[str, Any], key: str, path: str, default: str, choices: tuple[str, ...]
             ) -> str:
-    value = d.get(key, default)
-    if value not in choices:
-        raise _fail(path, f'must be one of {list(choices)}, got {value!r}')
-    return value
+    return _setting(d, key, path, default, str, choices=choices)
 
 
 def _coordinates(d: Any, path: str) -> dict[int, float]:
