@@ -276,3 +276,33 @@ def test_two_seconds_of_skate_on_both_engines(tmp_path):
     assert max(abs(a['t'] - b['t']) for a, b in zip(*events.values(), strict=True)) <= 1e-8
     a, b = (np.load(tmp_path / e / 'trajectory.npz') for e in ('python', 'native'))
     assert np.max(np.abs(a['q'] - b['q'])) <= 1e-7
+
+
+@pytest.mark.parametrize(('row', 'match'), [
+    (lambda r: (r[0], r[1], not r[2], *r[3:]), 'q1 active and the coordinate list disagree'),
+    (lambda r: (r[0], not r[1], *r[2:]), 'y0 active and the coordinate list disagree'),
+])
+def test_a_mode_table_that_contradicts_itself_is_refused(robot, row, match):
+    import iceskate_native
+    from iceskate_sim.native_dynamics import _native_robot
+    models, frames = _native_robot(robot)
+    rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
+             list(m.constraints)) for m in MODES.values()]
+    rows[3] = row(rows[3])
+    with pytest.raises(ValueError, match=match):
+        iceskate_native.Dynamics(models, frames, rows, robot.damping, robot.total_mass, [],
+                                 (0.005, 0.0, True, 1e4, 100.0, True))
+
+
+def test_non_finite_physical_options_are_refused(robot):
+    import iceskate_native
+    from iceskate_sim.native_dynamics import _native_robot
+    models, frames = _native_robot(robot)
+    rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
+             list(m.constraints)) for m in MODES.values()]
+    with pytest.raises(ValueError, match='must be finite and >= 0'):
+        iceskate_native.Dynamics(models, frames, rows, robot.damping, robot.total_mass, [],
+                                 (float('nan'), 0.0, True, 1e4, 100.0, True))
+    with pytest.raises(ValueError, match='joint limit 3 is not finite'):
+        iceskate_native.Dynamics(models, frames, rows, robot.damping, robot.total_mass,
+                                 [(3, 0.0, float('inf'))], (0.005, 0.0, True, 1e4, 100.0, True))

@@ -49,6 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     except SimulationError as exc:
         print(f'coupling_analysis: error: {exc}', file=sys.stderr)
         return 1
+    except OSError as exc:  # the output folder cannot be made or written
+        where = f' {exc.filename}' if exc.filename else ''
+        print(f'coupling_analysis: error: cannot write{where}: {exc.strerror or exc}',
+              file=sys.stderr)
+        return 1
     joint = summary['joint']
     for label, case in summary['cases'].items():
         for note in case.get('notes', []):  # e.g. a bag rebuilt after a killed run

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import pathlib
 from typing import TYPE_CHECKING
 
@@ -41,19 +42,24 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
-def _robust_limits(ax: Axes, series: list[np.ndarray]) -> None:
-    """Clip the y range to the bulk of the data when a few samples (e.g. a fall) dwarf it."""
+def clip_to_bulk(ax: Axes, series: Sequence[np.ndarray], percentile: float = 2.0,
+                 margin: float = 0.5, reach: float = 0.5, note: str = '') -> None:
+    """Clip the y range of ``ax`` to the bulk of the data when a few samples (a fall, a
+    divergence) dwarf it: the bulk is the ``percentile``..(100 - ``percentile``) range of the
+    finite values; the y range becomes the bulk widened by ``margin`` times its span, if some
+    value lies more than ``reach`` spans beyond it; a note in the corner says so (``note``
+    appended)."""
     values = np.concatenate([np.asarray(x, dtype=float).ravel() for x in series])
     values = values[np.isfinite(values)]
     if values.size < 20:
         return
-    lo, hi = np.percentile(values, [2.0, 98.0])
-    pad = 0.5 * (hi - lo) if hi > lo else max(1e-9, 0.1 * abs(hi))
-    if values.min() < lo - pad or values.max() > hi + pad:
-        ax.set_ylim(lo - pad, hi + pad)
+    lo, hi = np.percentile(values, [percentile, 100.0 - percentile])
+    span = hi - lo if hi > lo else max(1e-9, 0.2 * abs(hi))
+    if values.min() < lo - reach * span or values.max() > hi + reach * span:
+        ax.set_ylim(lo - margin * span, hi + margin * span)
         ax.text(0.01, 0.02, f'y range clipped (data span {values.min():.3g} to '
-                f'{values.max():.3g}; full values in the CSV)', transform=ax.transAxes,
-                fontsize=7, color='0.35', va='bottom')
+                f'{values.max():.3g}{note})', transform=ax.transAxes, fontsize=7,
+                color='0.35', va='bottom')
 
 
 def _index(name: str) -> str:
@@ -134,7 +140,8 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
         ax.plot(t, d.constraint, color='tab:olive', lw=1.0, label='swing constraint')
     ax.set_ylabel('torque [N m]')
     ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}')
-    _robust_limits(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia])
+    clip_to_bulk(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia],
+                 note='; full values in the CSV')
     _mark_steps(ax, case)
     ax.legend(loc='upper right', fontsize=7, ncol=3)
 
@@ -143,7 +150,8 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     ax.plot(t, -d.m_total - d.gravity, color='tab:purple', lw=0.8, ls='--', alpha=0.7,
             label=f'Σ M_{i},j q̈_j − g_{i}')
     ax.plot(t, d.coriolis, color='tab:orange', lw=1.3, label=f'h_{i}')
-    _robust_limits(ax, [d.m_total - d.gravity, -d.m_total - d.gravity, d.coriolis])
+    clip_to_bulk(ax, [d.m_total - d.gravity, -d.m_total - d.gravity, d.coriolis],
+                 note='; full values in the CSV')
     ax.set_ylabel('torque [N m]')
     _mark_steps(ax, case, legend=False)
     ax.legend(loc='upper right', fontsize=7, ncol=3)
@@ -173,7 +181,8 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
         ax.plot(d.t, series[name], lw=1.0, label=f'M_{i},{_index(name)} q̈_{_index(name)} '
                 f'(RMS {value:.3g})')
     ax.plot(d.t, d.m_total, color='k', lw=1.4, label='M_total')
-    _robust_limits(ax, [d.m_total] + [series[name] for name, _ in ranking])
+    clip_to_bulk(ax, [d.m_total] + [series[name] for name, _ in ranking],
+                 note='; full values in the CSV')
     _mark_steps(ax, case)
     ax.set_title(f'{case.label}: largest coupling terms at {d.name} (ranked by RMS)')
     ax.set_xlabel('time [s]')

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from iceskate_analysis.plots import clip_to_bulk
 from iceskate_sim.errors import SimulationError
 
 if TYPE_CHECKING:
@@ -39,6 +40,9 @@ _DPI = 100
 _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # first mode: swing
 _COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
 
+
+#: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
+_DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
 
 def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     """Draw ``out_dir/summary.png`` from ``out_dir/trajectory.npz`` and ``metrics.json``.
@@ -86,14 +90,14 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     _line(ax, t, psi_d[:, 1], color='k', lw=1.0, ls='--', label='target z_d')
     ax.set_ylabel('head height z [m]')
     ax.ticklabel_format(axis='y', useOffset=False)
-    _robust_limits(ax, (psi[:, 1], psi_d[:, 1]))
+    clip_to_bulk(ax, (psi[:, 1], psi_d[:, 1]), **_DIVERGENCE)
 
     ax = axes[1]
     _line(ax, t, np.degrees(psi[:, 2]), color='tab:purple', lw=1.0,
           label='head pitch' + _rms(rms, 'pitch', np.degrees(1.0), 'deg'))
     _line(ax, t, np.degrees(psi_d[:, 2]), color='k', lw=1.0, ls='--', label='target')
     ax.set_ylabel('head pitch [deg]')
-    _robust_limits(ax, (np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2])))
+    clip_to_bulk(ax, (np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2])), **_DIVERGENCE)
 
     _mode_panel(axes[2], t, a['mode'], a['side'], exchanges)
 
@@ -105,7 +109,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     if late.size and late[0] > 0:
         ax.axvline(t[late[0]], color='k', lw=1.0, ls='--', label='4th step (arm-swing window)')
     ax.set_ylabel('shoulder angle [deg]')
-    _robust_limits(ax, (np.degrees(q[:, 11]), np.degrees(q[:, 14])))
+    clip_to_bulk(ax, (np.degrees(q[:, 11]), np.degrees(q[:, 14])), **_DIVERGENCE)
 
     ax = axes[4]
     if t.size >= 2:
@@ -117,7 +121,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
             mean = (psi[-1, 0] - psi[0, 0]) / (t[-1] - t[0])
             ax.axhline(mean, color='darkgreen', lw=0.9, ls=':',
                        label=f'mean {round(mean, 2) + 0.0:.2f} m/s')  # + 0.0: no '-0.00'
-        _robust_limits(ax, (speed, target))
+        clip_to_bulk(ax, (speed, target), **_DIVERGENCE)
     ax.set_ylabel('forward speed\nd(head y)/dt [m/s]')
     ax.set_xlabel('time t [s]')
 
@@ -177,21 +181,6 @@ def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS
 
 def _line(ax: Axes, t: np.ndarray, y: np.ndarray, **style: Any) -> None:
     ax.plot(*_decimate(t, np.asarray(y, dtype=float)), **style)
-
-
-def _robust_limits(ax: Axes, series: tuple[np.ndarray, ...]) -> None:
-    """Clip the y range to the bulk of the data (1st-99th percentile, widened by its span)
-    when a few samples (a divergence) reach more than 50 times as far."""
-    values = np.concatenate([np.asarray(x, dtype=float).ravel() for x in series])
-    values = values[np.isfinite(values)]
-    if values.size < 20:
-        return
-    lo, hi = np.percentile(values, [1.0, 99.0])
-    bulk = hi - lo
-    if bulk > 0 and values.max() - values.min() > 50.0 * bulk:
-        ax.set_ylim(lo - bulk, hi + bulk)
-        ax.text(0.005, 0.04, f'y range clipped (data {values.min():.6g} to {values.max():.6g})',
-                transform=ax.transAxes, fontsize=7, color='0.35', va='bottom')
 
 
 def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,

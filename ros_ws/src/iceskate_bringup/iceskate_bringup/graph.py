@@ -40,7 +40,7 @@ from iceskate_sim.node_support import write_parameter_file
 from iceskate_sim.parameters import flatten
 from iceskate_sim.robot import ament_prefixes
 from iceskate_sim.session import prepare_output
-from iceskate_sim.shutdown import StopRequest, die_with_parent
+from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
 STOP_GRACE = 30.0  # s the simulator has to end a run it was signalled to end (bag, outputs)
@@ -212,9 +212,13 @@ def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
     log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.executable}.log', 'wb')  # noqa: SIM115
     parent = os.getpid()
     with log:
-        return subprocess.Popen(command_of(spec) + spec.ros_args(), env=env, stdout=log,
-                                stderr=subprocess.STDOUT, start_new_session=True,
-                                preexec_fn=lambda: die_with_parent(signal.SIGTERM, parent))
+        try:
+            return subprocess.Popen(command_of(spec) + spec.ros_args(), env=env, stdout=log,
+                                    stderr=subprocess.STDOUT, start_new_session=True,
+                                    preexec_fn=lambda: die_with_parent(signal.SIGTERM, parent))
+        except OSError as exc:  # e.g. a broken install: the executable cannot be run
+            raise SimulationError(f'node {spec.executable} could not be started: '
+                                  f'{exc.strerror or exc}') from None
 
 
 def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = None,
@@ -282,12 +286,6 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
         _fail(out, env, scene.name, why, code, early, metrics)
     _write_summary(out)
     return metrics
-
-
-def say(text: str) -> None:
-    """One line on stderr (nothing if stderr is gone: a closed terminal)."""
-    with contextlib.suppress(OSError, ValueError):
-        print(text, file=sys.stderr, flush=True)
 
 
 def stop_graph(processes: list[subprocess.Popen], signum: int | None = None) -> list[int]:

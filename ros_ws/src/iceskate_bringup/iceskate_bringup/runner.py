@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.shutdown import StopRequest
+from iceskate_sim.shutdown import StopRequest, say
 
 if TYPE_CHECKING:
     from iceskate_sim.scene import Scene
@@ -175,10 +175,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         else:
             metrics = run(scene, args.out, progress=not args.quiet, stop=stop)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code
-        _say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
+        say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
         return exc.exit_code
     except SimulationError as exc:
-        _say(f'run_scene: error: {exc}')
+        say(f'run_scene: error: {exc}')
         if started:
             _print_outputs(args.out)
         return 1
@@ -204,13 +204,7 @@ def _print_outputs(out: pathlib.Path) -> None:
     if text := _outputs(out):
         with contextlib.suppress(OSError, ValueError):
             sys.stdout.flush()  # the JSON first, also when stdout is a pipe
-        _say(text)
-
-
-def _say(text: str) -> None:
-    """One line on stderr (nothing if stderr is gone: a closed terminal)."""
-    with contextlib.suppress(OSError, ValueError):
-        print(text, file=sys.stderr, flush=True)
+        say(text)
 
 
 if __name__ == '__main__':

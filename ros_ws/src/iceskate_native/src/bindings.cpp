@@ -113,6 +113,17 @@ void construct_dynamics(
   iceskate_native::DynamicsParameters p;
   std::tie(p.mu, p.baumgarte, p.joint_limits, p.limit_stiffness, p.limit_damping, p.damping) =
     params;
+  for (double value : {p.mu, p.baumgarte, p.limit_stiffness, p.limit_damping}) {
+    if (!std::isfinite(value) || value < 0.0) {
+      throw std::invalid_argument(
+        "mu, baumgarte, limit_stiffness and limit_damping must be finite and >= 0");
+    }
+  }
+  for (const auto & [index, lower, upper] : limits) {
+    if (!std::isfinite(lower) || !std::isfinite(upper)) {
+      throw std::invalid_argument("joint limit " + std::to_string(index) + " is not finite");
+    }
+  }
   new (self) Dynamics(
     std::move(supports), mode_table(modes), vector18(damping, "damping"), total_mass,
     std::move(joint_limits), p);
@@ -150,6 +161,15 @@ iceskate_native::GuardSet guard_set(
   std::tie(c.cop_band, c.force_band, c.moment_band, c.toe_scuff, c.sole_toe_y, c.sole_heel_y) =
     constants;
   set.margin = margin;
+  for (double value : {mu, margin, c.cop_band, c.force_band, c.moment_band, c.toe_scuff,
+                       c.sole_toe_y, c.sole_heel_y}) {
+    if (!std::isfinite(value)) {
+      throw std::invalid_argument("the friction, margin and guard constants must be finite");
+    }
+  }
+  if (mu < 0.0) {
+    throw std::invalid_argument("the friction coefficient mu must be >= 0");
+  }
   return set;
 }
 

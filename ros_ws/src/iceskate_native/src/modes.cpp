@@ -31,6 +31,10 @@ void check_modes(const ModeTable & modes)
       problem << "mode " << mode.number << ": the heel-height constraint must come first";
     } else if (mode.y0_active != (mode.active.front() == kY0)) {
       problem << "mode " << mode.number << ": y0 active and the coordinate list disagree";
+    } else if (
+      mode.q1_active != (mode.active.size() > (mode.y0_active ? 1U : 0U)
+                         && mode.active[mode.y0_active ? 1 : 0] == kQ1)) {
+      problem << "mode " << mode.number << ": q1 active and the coordinate list disagree";
     }
     for (std::size_t i = 0; problem.str().empty() && i < mode.active.size(); ++i) {
       const int index = mode.active[i];

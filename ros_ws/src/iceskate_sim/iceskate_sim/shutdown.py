@@ -10,6 +10,7 @@
   block changes nothing).
 * ``die_with_parent``: the kernel signals this process when its parent dies (Linux
   ``prctl(PR_SET_PDEATHSIG)``), for the processes a run starts (nodes, the bag writer).
+* ``say``: one line on stderr, also when stderr is gone (a closed terminal).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import contextlib
 import ctypes
 import os
 import signal
+import sys
 import threading
 from types import FrameType
 from typing import Any
@@ -103,3 +105,9 @@ def die_with_parent(signum: int = signal.SIGTERM, parent: int | None = None) -> 
     if parent is not None and os.getppid() != parent:
         os.kill(os.getpid(), signum)
     return True
+
+
+def say(text: str) -> None:
+    """One line on stderr (nothing if stderr is gone: a closed terminal)."""
+    with contextlib.suppress(OSError, ValueError):
+        print(text, file=sys.stderr, flush=True)
