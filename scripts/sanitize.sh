@@ -74,15 +74,10 @@ SAN_FLAGS='-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-re
 SAN_CXX_FLAGS="$SAN_FLAGS -DEIGEN_MALLOC_ALREADY_ALIGNED=1"
 log "colcon build of iceskate_native under ASan+UBSan ($BUILD_TYPE) into ros_ws/install-sanitize"
 (
-  # The environment of scripts/bootstrap.sh's build: the venv's tools first, its prefix in the
-  # ament/CMake search paths, the toolchain fix for the wheels' /opt/python include dirs.
-  export VIRTUAL_ENV=$VENV
-  export PATH=$VENV/bin:$PATH
-  export AMENT_PREFIX_PATH=$VENV
-  export CMAKE_PREFIX_PATH=$VENV
-  export CMAKE_TOOLCHAIN_FILE=$TOOLCHAIN_FILE
-  export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-  unset COLCON_PREFIX_PATH PYTHONPATH
+  # The environment of scripts/bootstrap.sh's build.
+  # shellcheck source=scripts/colcon_env.sh
+  . "$ROOT/scripts/colcon_env.sh"
+  colcon_environment "$VENV" "$TOOLCHAIN_FILE"
   # As the bootstrap: Pinocchio's C++ side under the pin wheel's cmeel.prefix, ccache (the
   # sanitizer flags are part of ccache's hash, so these objects never mix with the normal ones).
   cmake_args=(-DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE="$BUILD_TYPE"
