@@ -10,15 +10,26 @@ deserialised once into a ``RobotModel`` on the C++ side::
     M = iceskate_native.crba_of(native, q)
 
 ``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.native_dynamics``
-wraps it as a ``GaitDynamics``).
+wraps it as a ``GaitDynamics``); ``HybridSimulator`` runs whole control periods on it (events,
+transitions, projection, health checks), wrapped by ``iceskate_sim.native_dynamics.NativePeriods``.
 
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
-kernel raises ``NativeError`` (a ``RuntimeError``), which the simulator wraps in its own error.
+kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
+its kinds for a run that left the physical range), which the simulator wraps in its own error.
 """
 
-from ._kernel import Dynamics, NativeError, RobotModel, crba_of
+from ._kernel import (
+    ChatteringError,
+    DivergenceError,
+    Dynamics,
+    HybridSimulator,
+    NativeError,
+    RobotModel,
+    crba_of,
+)
 
-__all__ = ['Dynamics', 'NativeError', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+__all__ = ['ChatteringError', 'DivergenceError', 'Dynamics', 'HybridSimulator', 'NativeError',
+           'RobotModel', 'crba_of', 'load_model', 'model_bytes']
 
 
 def model_bytes(model) -> bytes:

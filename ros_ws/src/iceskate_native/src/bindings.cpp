@@ -30,6 +30,8 @@
 #include "iceskate_native/inertia.hpp"
 #include "iceskate_native/integrators.hpp"
 #include "iceskate_native/model.hpp"
+#include "iceskate_native/simulator.hpp"
+#include "iceskate_native/transitions.hpp"
 
 namespace nb = nanobind;
 using nb::literals::operator""_a;
@@ -207,13 +209,96 @@ iceskate_native::Inputs inputs_of(
   return inputs;
 }
 
+using iceskate_native::HybridSimulator;
+using iceskate_native::HybridState;
+
+/// (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir, step_index,
+/// t_exchange, t_touchdown)
+using StateRow = std::tuple<double, Eigen::VectorXd, Eigen::VectorXd, int, int, int, double,
+                            double, double, int, double, double>;
+
+HybridState state_of(const StateRow & row)
+{
+  HybridState s;
+  const auto & [t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step, t_e, t_td] = row;
+  if (!std::isfinite(t) || !std::isfinite(t_e) || std::isinf(t_td)) {
+    throw std::invalid_argument("the state's times must be finite (t_touchdown: or NaN)");
+  }
+  if (side < 0 || side > 1 || pivot < 0 || pivot > 1 || step < 0) {
+    throw std::invalid_argument("side and pivot must be 0 or 1, step_index >= 0");
+  }
+  s.t = t;
+  s.q = vector18(q, "q");
+  s.v = vector18(v, "v");
+  s.contact = contact_of(mode, side, pivot, anchor, support_dir, heel_dir);
+  s.step_index = step;
+  s.t_exchange = t_e;
+  s.t_touchdown = t_td;
+  return s;
+}
+
+StateRow state_row(const HybridState & s)
+{
+  const auto & c = s.contact;
+  return {s.t, Eigen::VectorXd(s.q), Eigen::VectorXd(s.v), c.mode, c.side, c.pivot,
+          c.heel_anchor_y, c.support_slide_dir, c.heel_slide_dir, s.step_index, s.t_exchange,
+          s.t_touchdown};
+}
+
+/// Construct a HybridSimulator in place from the Python-side settings (SimulatorConfig).
+void construct_simulator(
+  HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, double control_period,
+  const std::string & method, double step, double event_tolerance, double mu, bool ice,
+  const ConstantRow & constants, double margin,
+  const std::vector<std::vector<std::string>> & guards, bool projection, double residual_bound,
+  double fall_height, double max_speed, int max_instant_transitions, double zeno_window,
+  double chatter_dwell)
+{
+  if (guards.size() != iceskate_native::kModes) {
+    throw std::invalid_argument("the guard table needs the guards of each of the 20 modes");
+  }
+  iceskate_native::SimulatorSettings s;
+  s.control_period = control_period;
+  s.method = iceskate_native::method_named(method);
+  s.step = step;
+  s.event_tolerance = event_tolerance;
+  const auto set = guard_set({}, {}, mu, ice, constants, margin);
+  s.friction = set.friction;
+  s.constants = set.constants;
+  s.margin = margin;
+  for (std::size_t k = 0; k < guards.size(); ++k) {
+    for (const auto & name : guards[k]) {
+      s.guards[k].push_back(iceskate_native::guard_named(name));
+    }
+  }
+  s.projection = projection;
+  s.residual_bound = residual_bound;
+  s.fall_height = fall_height;
+  s.max_speed = max_speed;
+  s.max_instant_transitions = max_instant_transitions;
+  s.zeno_window = zeno_window;
+  s.chatter_dwell = chatter_dwell;
+  new (self) HybridSimulator(dynamics, std::move(s), state_of(initial));
+}
+
+/// (t, from_mode, to_mode, event, guard, impulse, step_index, side)
+auto record_tuple(const iceskate_native::TransitionRecord & r)
+{
+  return std::make_tuple(r.t, r.from_mode, r.to_mode, r.event, r.guard, r.impulse,
+                         r.step_index, r.side);
+}
+
 }  // namespace
 
 NB_MODULE(_kernel, m)
 {
   m.doc() = "Native (C++) kernels of the iceskate simulator on Pinocchio's C++ API.";
 
-  nb::exception<iceskate_native::NativeError>(m, "NativeError", PyExc_RuntimeError);
+  // Translators are tried newest first: the subclasses after their base.
+  const auto native_error =
+    nb::exception<iceskate_native::NativeError>(m, "NativeError", PyExc_RuntimeError);
+  nb::exception<iceskate_native::DivergenceError>(m, "DivergenceError", native_error.ptr());
+  nb::exception<iceskate_native::ChatteringError>(m, "ChatteringError", native_error.ptr());
 
   nb::class_<RobotModel>(
     m, "RobotModel",
@@ -342,4 +427,63 @@ NB_MODULE(_kernel, m)
       "Integrate from (t0, x0) with a fixed-step method to t_end or the first crossing of one "
       "of the named guards (located to event_tolerance [s]): (t, x, dynamics tuple as "
       "evaluate's, index of the guard that fired or -1, steps, evaluations).");
+
+  nb::class_<HybridSimulator>(
+    m, "HybridSimulator",
+    "Whole control periods of the hybrid simulation on a Dynamics kernel (kept alive by it): "
+    "fixed-step integration with event location, transitions, projection and health checks. "
+    "States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
+    "heel_slide_dir, step_index, t_exchange, t_touchdown).")
+    .def(
+      "__init__", &construct_simulator, "dynamics"_a, "initial"_a, "control_period"_a,
+      "method"_a, "step"_a, "event_tolerance"_a, "mu"_a, "ice"_a, "constants"_a, "margin"_a,
+      "guards"_a, "projection"_a, "residual_bound"_a, "fall_height"_a, "max_speed"_a,
+      "max_instant_transitions"_a, "zeno_window"_a, "chatter_dwell"_a, nb::keep_alive<1, 2>())
+    .def("reset", &HybridSimulator::reset, "Back to the initial state; clears log and counters.")
+    .def(
+      "advance",
+      [](HybridSimulator & self, const Vector & tau, const Optional & stiffness,
+         const Optional & damping, const std::string & push_frame, const Optional & push_force) {
+        self.advance(inputs_of(tau, stiffness, damping, push_frame, push_force));
+      },
+      "tau"_a, "stiffness"_a = nb::none(), "damping"_a = nb::none(), "push_frame"_a = "",
+      "push_force"_a = nb::none(),
+      "One control period holding the inputs. ValueError for bad input or an ended run; "
+      "DivergenceError, ChatteringError or NativeError when the physics fails (the state is "
+      "where it failed).")
+    .def_prop_ro("state", [](const HybridSimulator & self) { return state_row(self.state()); })
+    .def_prop_ro(
+      "start_state", [](const HybridSimulator & self) { return state_row(self.start_state()); })
+    .def_prop_ro(
+      "start_result",
+      [](const HybridSimulator & self) { return result_tuple(self.start_result()); })
+    .def_prop_ro("result", [](const HybridSimulator & self) { return result_tuple(self.result()); })
+    .def_prop_ro(
+      "event_count", [](const HybridSimulator & self) { return self.events().size(); })
+    .def(
+      "events_since",
+      [](const HybridSimulator & self, std::size_t first) {
+        const auto & events = self.events();
+        std::vector<decltype(record_tuple(events.front()))> out;
+        for (std::size_t i = first; i < events.size(); ++i) {
+          out.push_back(record_tuple(events[i]));
+        }
+        return out;
+      },
+      "first"_a,
+      "Events from index `first` on: (t, from_mode, to_mode, event, guard, impulse, "
+      "step_index, side).")
+    .def_prop_ro(
+      "statistics",
+      [](const HybridSimulator & self) {
+        const auto & s = self.statistics();
+        return std::make_tuple(s.steps, s.evaluations, s.control_periods,
+                               s.max_constraint_residual, s.suppressed_cycles,
+                               s.resolved_cycles);
+      },
+      "(steps, evaluations, control_periods, max_constraint_residual, suppressed_cycles, "
+      "resolved_cycles)")
+    .def_prop_ro(
+      "ended", [](const HybridSimulator & self) { return static_cast<int>(self.ended()); },
+      "0 running, 1 flight, 2 toe-first touchdown, 3 fall.");
 }

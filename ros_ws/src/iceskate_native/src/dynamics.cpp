@@ -9,7 +9,10 @@
 #include <Eigen/LU>
 #include <pinocchio/algorithm/center-of-mass.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/multibody.hpp>
 
@@ -38,8 +41,28 @@ bool in_leg_chain(int i) { return i >= 1 && i <= 7; }
 
 }  // namespace
 
+// The input-free terms of one state (q, v) of one support model: what eq. (7) needs from
+// Pinocchio before the inputs enter. Kept for the last state, so that solving again at the same
+// state under other inputs (a control period's start, an implicit step) costs no Pinocchio pass.
+struct StateTerms
+{
+  int model = -1;  // side * 2 + pivot; -1: none yet
+  Vector18 q = Vector18::Zero();
+  Vector18 v = Vector18::Zero();
+  Eigen::Matrix<double, kCoordinates, kCoordinates> mass;  // upper triangle
+  Vector18 nle;                                              // h(q, v) + g(q)
+  Eigen::Matrix<double, 6, kCoordinates> heel_jacobian;     // world-aligned
+  Eigen::Vector3d heel;
+  Eigen::Vector3d heel_velocity;
+  Eigen::Vector3d heel_acceleration;  // classical, of the velocity products (Jdot v)
+  double toe_z = 0.0;
+  Vector18 com_jacobian_z;
+  double com_acceleration_z = 0.0;  // of the velocity products
+};
+
 struct Dynamics::Workspace
 {
+  StateTerms terms;
   std::vector<pinocchio::Data> data;  // one per support model
   Eigen::VectorXd q, v, a;            // Pinocchio's argument type
   pinocchio::Data::Matrix6x jacobian;
@@ -177,10 +200,32 @@ void Dynamics::assemble(
   w.q = q;
   w.v = v;
 
-  // the input-free terms of the state; computeAllTerms leaves data.a = velocity products
-  pinocchio::computeAllTerms(model, data, ConstVector(w.q), ConstVector(w.v));
-  const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
-  w.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
+  StateTerms & terms = w.terms;
+  if (terms.model != w.model || terms.q != q || terms.v != v) {
+    // computeAllTerms leaves data.a = the velocity products
+    pinocchio::computeAllTerms(model, data, ConstVector(w.q), ConstVector(w.v));
+    const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
+    const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
+    terms.model = w.model;
+    terms.q = q;
+    terms.v = v;
+    terms.mass = data.M;
+    terms.nle = data.nle;
+    terms.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
+    w.jacobian.setZero();
+    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
+    terms.heel_jacobian = w.jacobian;
+    terms.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
+    terms.heel_acceleration =
+      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
+    terms.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
+    terms.com_jacobian_z = data.Jcom.row(2).transpose();
+    pinocchio::centerOfMass(model, data, pinocchio::ACCELERATION, false);
+    terms.com_acceleration_z = data.acom[0][2];
+  }
+  w.heel = terms.heel;
+  w.heel_velocity = terms.heel_velocity;
+  w.toe_z = terms.toe_z;
   w.engaged = params_.joint_limits && limits_engaged(q);
   w.passive = w.engaged ? passive_forces(q, v) : Vector18(-damping_.cwiseProduct(v));
 
@@ -194,9 +239,10 @@ void Dynamics::assemble(
   w.applied[kY0] = 0.0;
   if (!inputs.push_frame.empty()) {  // J^T f of the push, at this state
     w.jacobian.setZero();
-    pinocchio::getFrameJacobian(
-      model, data, static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)),
-      kWorldAligned, w.jacobian);
+    pinocchio::computeFrameJacobian(
+      model, data, ConstVector(w.q),
+      static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
+      w.jacobian);
     w.applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
   }
 
@@ -207,17 +253,15 @@ void Dynamics::assemble(
     for (int j = 0; j < n; ++j) {
       const int lo = std::min(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
       const int hi = std::max(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
-      w.A(i, j) = data.M(lo, hi);  // Pinocchio fills the upper triangle
+      w.A(i, j) = terms.mass(lo, hi);  // Pinocchio fills the upper triangle
     }
     const int k = act[static_cast<std::size_t>(i)];
-    w.b[i] = w.applied[k] - data.nle[k];
+    w.b[i] = w.applied[k] - terms.nle[k];
   }
   const double mu = params_.mu;
   if (nc > 0) {
-    w.jacobian.setZero();
-    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
-    const Eigen::Vector3d acc =
-      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
+    const auto & jacobian = terms.heel_jacobian;
+    const Eigen::Vector3d & acc = terms.heel_acceleration;
     double chain = 0.0;
     for (int i = 1; i <= 7; ++i) {
       chain += q[i];
@@ -228,7 +272,7 @@ void Dynamics::assemble(
       for (int i = 0; i < n; ++i) {
         const int j = act[static_cast<std::size_t>(i)];
         const double entry =
-          c == Constraint::kSoleFlat ? (in_leg_chain(j) ? 1.0 : 0.0) : w.jacobian(row_of(c), j);
+          c == Constraint::kSoleFlat ? (in_leg_chain(j) ? 1.0 : 0.0) : jacobian(row_of(c), j);
         w.A(n + k, i) = entry;
         w.A(i, n + k) = -entry;  // the generalized-force direction -J^T
         rate += entry * v[j];
@@ -244,26 +288,22 @@ void Dynamics::assemble(
     }
     if (mode.swing_sliding) {  // friction mu f_nz on the heel, against its velocity
       for (int i = 0; i < n; ++i) {
-        w.A(i, n) = mu * contact.heel_slide_dir * w.jacobian(1, act[static_cast<std::size_t>(i)])
+        w.A(i, n) = mu * contact.heel_slide_dir * jacobian(1, act[static_cast<std::size_t>(i)])
                     - w.A(n, i);
       }
     }
   }
   if (mode.y0_active) {  // Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
-    pinocchio::centerOfMass(model, data, pinocchio::ACCELERATION, false);
     const double k = mu * contact.support_slide_dir;
     const double km = k * mass_;
     for (int i = 0; i < n; ++i) {
-      w.A(0, i) += km * data.Jcom(2, act[static_cast<std::size_t>(i)]);
+      w.A(0, i) += km * terms.com_jacobian_z[act[static_cast<std::size_t>(i)]];
     }
-    w.b[0] -= km * (kGravity + data.acom[0][2]);
+    w.b[0] -= km * (kGravity + terms.com_acceleration_z);
     if (nc > 0) {
       w.A(0, n) -= k;
     }
   }
-  w.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
-  const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
-  w.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
 
   if (nc > 0) {  // the constraint rows must have full rank (Hadamard ratio of their Gram)
     const Eigen::MatrixXd rows = w.A.block(n, 0, nc, n);
@@ -361,6 +401,93 @@ Vector18 Dynamics::implicit_acceleration(
     qdd[act[static_cast<std::size_t>(i)]] = w.x[i];
   }
   return qdd;
+}
+
+Eigen::MatrixXd Dynamics::mass_matrix(const Contact & contact, const Vector18 & q)
+{
+  const auto & act = mode(contact.mode).active;
+  const pinocchio::Model & model = support_model(contact.side, contact.pivot).model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::crba(model, data, ConstVector(w.q));
+  const auto n = static_cast<Eigen::Index>(act.size());
+  Eigen::MatrixXd mass(n, n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const int a = act[static_cast<std::size_t>(i)];
+      const int b = act[static_cast<std::size_t>(j)];
+      mass(i, j) = data.M(std::min(a, b), std::max(a, b));  // Pinocchio fills the upper triangle
+    }
+  }
+  return mass;
+}
+
+ConstraintRows Dynamics::constraints(const Contact & contact, const Vector18 & q)
+{
+  const Mode & m = mode(contact.mode);
+  const auto nc = static_cast<Eigen::Index>(m.constraints.size());
+  ConstraintRows out{Eigen::MatrixXd::Zero(nc, kCoordinates), Eigen::VectorXd::Zero(nc)};
+  if (nc == 0) {
+    return out;
+  }
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
+  const Eigen::Vector3d position = pinocchio::updateFramePlacement(model, data, heel).translation();
+  for (Eigen::Index k = 0; k < nc; ++k) {
+    const Constraint c = m.constraints[static_cast<std::size_t>(k)];
+    if (c == Constraint::kSoleFlat) {
+      out.rows.block<1, 7>(k, 1).setOnes();
+      out.position[k] = q.segment<7>(1).sum();
+    } else {
+      out.rows.row(k) = w.jacobian.row(row_of(c));
+      out.position[k] =
+        c == Constraint::kHeelZ ? position[2] : position[1] - contact.heel_anchor_y;
+    }
+  }
+  if (!m.y0_active) {
+    out.rows.col(kY0).setZero();
+  }
+  if (!m.q1_active) {
+    out.rows.col(kQ1).setZero();
+  }
+  return out;
+}
+
+Eigen::Vector3d Dynamics::frame_position(
+  const Contact & contact, const Vector18 & q, const std::string & frame)
+{
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+  return pinocchio::updateFramePlacement(
+           model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)))
+    .translation();
+}
+
+Eigen::Vector3d Dynamics::frame_velocity(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const std::string & frame)
+{
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  w.v = v;
+  pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
+  return pinocchio::getFrameVelocity(
+           model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned)
+    .linear();
 }
 
 Wrench Dynamics::support_wrench(

@@ -111,6 +111,22 @@ class Transition:
     side: str = 'right'
 
 
+#: Why a run ends physically (``RunEnded.reason``), for the ends the transitions detect.
+FLIGHT = ("flight: the support foot left the floor with the swing foot in the air (not "
+          "representable in the paper's model)")
+TOE_FIRST = "toe-first touchdown of the swing foot (not representable in the paper's model)"
+
+
+def fall_reason(fall_height: float) -> str:
+    """Why a run ends when the head top falls below ``fall_height`` [m]."""
+    return f'fall: head top below {fall_height} m'
+
+
+def resolved_cause(guard: str) -> str:
+    """The event log's cause of an 'R' entry: the cycle of ``guard``'s switches it ended."""
+    return f'contact-consistent mode after a cycle of single switches ({guard})'
+
+
 class RunEnded(Exception):
     """A physical situation the paper's model cannot represent; ends a run cleanly."""
 
@@ -340,12 +356,10 @@ def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: Hyb
             c, mode=_swapped(mode, support=_DROP_Y0[mode.support])))
     elif name == 'E6':
         if mode.swing == 'A':
-            raise RunEnded('flight: the support foot left the floor with the swing foot in '
-                           "the air (not representable in the paper's model)", state)
+            raise RunEnded(FLIGHT, state)
         new = reroot(dynamics, state)
     elif name == 'S7':
-        raise RunEnded('toe-first touchdown of the swing foot (not representable in the '
-                       "paper's model)", state)
+        raise RunEnded(TOE_FIRST, state)
     elif name == 'S1':
         new, impulse = _heel_strike(dynamics, friction, state)
     elif name == 'S2':

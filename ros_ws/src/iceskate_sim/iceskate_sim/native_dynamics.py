@@ -1,6 +1,7 @@
 """Eq. (7) on the native (C++) kernel: ``GaitDynamics`` with ``evaluate`` and
-``implicit_acceleration`` computed by ``iceskate_native.Dynamics``, and the fixed-step
-integration of a mode with its guards and event location (``integrate_segment``) too.
+``implicit_acceleration`` computed by ``iceskate_native.Dynamics``, the fixed-step
+integration of a mode with its guards and event location (``integrate_segment``), and whole
+control periods with their transitions, projection and health checks (``NativePeriods``).
 
 The same four support models (sent as Pinocchio archives), the same mode table
 (``iceskate_sim.modes``), damping, soft stops and physical options as the Python routine, which
@@ -20,14 +21,21 @@ from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResu
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
     COP_BAND,
+    FLIGHT,
     FORCE_BAND,
+    GUARDS,
     MOMENT_BAND,
+    TOE_FIRST,
     TOE_SCUFF,
     FrictionModel,
     HybridState,
+    Transition,
+    fall_reason,
     guards_of,
+    resolved_cause,
 )
 from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
+from iceskate_sim.dynamics import ContactState
 from iceskate_sim.modes import MODES
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
 
@@ -141,3 +149,105 @@ class NativeGaitDynamics(GaitDynamics):
             raise SimulationError(f'mode {mode} integration: {exc}') from None
         return Segment(t, x, DynamicsResult(*result), None if fired < 0 else fired, steps,
                        evaluations)
+
+
+#: Guard causes for the event log, by name.
+_CAUSES = {guard.name: guard.cause for guard in GUARDS}
+
+
+def _state_row(state: HybridState) -> tuple:
+    """A HybridState as the kernel's state tuple."""
+    c = state.contact
+    return (state.t, state.q, state.v, c.mode.number, SIDES.index(c.side),
+            PIVOTS.index(c.pivot), c.heel_anchor_y, c.support_slide_dir, c.heel_slide_dir,
+            state.step_index, state.t_exchange, state.t_touchdown)
+
+
+def _hybrid_state(row: tuple) -> HybridState:
+    """The kernel's state tuple as a HybridState."""
+    (t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step_index, t_exchange,
+     t_touchdown) = row
+    contact = ContactState(MODES[mode], SIDES[side], PIVOTS[pivot], anchor, support_dir,
+                           heel_dir)
+    return HybridState(t, q, v, contact, step_index, t_exchange, t_touchdown)
+
+
+class NativePeriods:
+    """Whole control periods in C++ (``iceskate_native.HybridSimulator``): the fixed-step
+    integration, event location, transitions, projection and health checks of
+    ``Simulator.advance``, with no Python in between. ``Simulator`` uses it for the native
+    engine with a fixed-step method and mirrors its state, events and counters.
+
+    :param dynamics: the native kernel it integrates (its workspace is shared: one thread).
+    :param initial: the initial state. The other parameters are ``SimulatorConfig``'s.
+    """
+
+    def __init__(self, dynamics: NativeGaitDynamics, initial: HybridState, *,
+                 control_period: float, integrator: IntegratorConfig, friction: FrictionModel,
+                 projection: bool, residual_bound: float, fall_height: float, max_speed: float,
+                 max_instant_transitions: int, zeno_window: float,
+                 chatter_dwell: float) -> None:
+        self._fall = fall_reason(fall_height)
+        guards = [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]
+        try:
+            self._kernel = iceskate_native.HybridSimulator(
+                dynamics._kernel, _state_row(initial), control_period, integrator.method,
+                integrator.step, integrator.event_tolerance, friction.mu, friction.rule == 'ice',
+                GUARD_CONSTANTS, GUARD_MARGIN, guards, projection, residual_bound, fall_height,
+                max_speed, max_instant_transitions, zeno_window, chatter_dwell)
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'native simulator: {exc}') from None
+
+    def reset(self) -> None:
+        """Back to the initial state (the log and counters cleared)."""
+        self._kernel.reset()
+
+    def advance(self, command: HeldCommand, push: tuple[str, np.ndarray] | None) -> None:
+        """One control period holding ``command`` (and ``push``).
+
+        :raises SimulationError: naming the time, mode and state where the physics failed.
+        """
+        try:
+            self._kernel.advance(command.bias, command.stiffness, command.damping,
+                                 '' if push is None else push[0],
+                                 None if push is None else push[1])
+        except iceskate_native.DivergenceError as exc:
+            raise SimulationError(f'simulation diverged ({exc}) at {self.state().summary()}'
+                                  ) from None
+        except iceskate_native.ChatteringError as exc:
+            raise SimulationError(f'{exc} ({self.state().summary()})') from None
+        except iceskate_native.NativeError as exc:
+            raise SimulationError(f'{exc} (during the period from {self.state().summary()})'
+                                  ) from None
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'native simulator: {exc}') from None
+
+    def state(self) -> HybridState:
+        """The current state."""
+        return _hybrid_state(self._kernel.state)
+
+    def start(self) -> tuple[HybridState, DynamicsResult]:
+        """The state at the start of the last period (after the transitions due then) and its
+        dynamics under the period's input."""
+        return _hybrid_state(self._kernel.start_state), DynamicsResult(*self._kernel.start_result)
+
+    def result(self) -> DynamicsResult:
+        """The dynamics at the current state under the last input."""
+        return DynamicsResult(*self._kernel.result)
+
+    def events_since(self, first: int) -> list[Transition]:
+        """The event log from entry ``first`` on."""
+        return [Transition(t, from_mode, to_mode, event,
+                           resolved_cause(guard) if event == 'R' else _CAUSES[event],
+                           tuple(impulse), step_index, SIDES[side])
+                for t, from_mode, to_mode, event, guard, impulse, step_index, side
+                in self._kernel.events_since(first)]
+
+    def statistics(self) -> tuple[int, int, int, float, int, int]:
+        """(steps, evaluations, control_periods, max_constraint_residual, suppressed_cycles,
+        resolved_cycles)."""
+        return self._kernel.statistics
+
+    def ended(self) -> str | None:
+        """Why the run ended physically (None: it goes on)."""
+        return (None, FLIGHT, TOE_FIRST, self._fall)[self._kernel.ended]

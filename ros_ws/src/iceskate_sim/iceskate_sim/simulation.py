@@ -26,10 +26,12 @@ from iceskate_sim.hybrid import (
     RunEnded,
     Transition,
     apply_transition,
+    fall_reason,
     guard_values,
     guards_of,
     project_positions,
     resolve_contact_mode,
+    resolved_cause,
 )
 from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, IntegratorConfig
 from iceskate_sim.observation import Observation
@@ -136,35 +138,46 @@ class Simulator:
         self.robot = robot
         self.config = config
         params = replace(config.dynamics, mu=config.friction.mu)
+        #: whole periods run natively (native engine, fixed-step method), else in Python
+        self._periods = None
         if config.engine == 'native':
-            from iceskate_sim.native_dynamics import NativeGaitDynamics  # loads the C++ kernel
+            from iceskate_sim.native_dynamics import NativeGaitDynamics, NativePeriods
             self.dynamics: GaitDynamics = NativeGaitDynamics(robot, params)
+            if config.integrator.method in FIXED_STEP:
+                self._periods = NativePeriods(
+                    self.dynamics, initial, control_period=config.control_period,
+                    integrator=config.integrator, friction=config.friction,
+                    projection=config.projection, residual_bound=config.residual_bound,
+                    fall_height=config.fall_height, max_speed=config.max_speed,
+                    max_instant_transitions=config.max_instant_transitions,
+                    zeno_window=config.zeno_window, chatter_dwell=config.chatter_dwell)
         else:
             self.dynamics = GaitDynamics(robot, params)
-        #: the segments between events run natively too (fixed-step methods)
-        self._native_segments = (config.engine == 'native'
-                                 and config.integrator.method in FIXED_STEP)
         self._initial = initial
         self._integrator = Integrator(config.integrator)
         self.reset()
 
     def reset(self) -> None:
         """Return to the initial state; clear the event log and the statistics."""
+        self._command = HeldCommand.torque_only(np.zeros(N_COORDINATES))
+        self._push: tuple[str, np.ndarray] | None = None
+        self._head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
+        self.events: list[Transition] = []
+        self.stats = RunStatistics()
+        if self._periods is not None:
+            self._periods.reset()
+            self._mirror_periods()
+            return
         q, v = self._initial.q.copy(), self._initial.v.copy()
         self.state = replace(self._initial, q=q, v=v)
         if 'hy' in self.state.mode.constraints:  # a pinned heel is held where it stands
             heel = self.dynamics.frame_placement(self.state.contact, q, 'swing_heel')
             self.state = replace(self.state, contact=replace(
                 self.state.contact, heel_anchor_y=float(heel.translation[1])))
-        self.events: list[Transition] = []
-        self.stats = RunStatistics()
         self.ended: str | None = None
-        self._command = HeldCommand.torque_only(np.zeros(N_COORDINATES))
-        self._push: tuple[str, np.ndarray] | None = None
         self._integrator = Integrator(self.config.integrator)
         self._suppressed: dict[str, float] = {}
         self._instant: tuple[float, set[tuple[int, str]]] = (float('nan'), set())
-        self._head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
         self.result = self._evaluate(self.state.q, self.state.v)
         try:
             self._settle()
@@ -258,6 +271,13 @@ class Simulator:
             command = HeldCommand.torque_only(tau)
         self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
+        if self._periods is not None:
+            try:
+                self._periods.advance(command, self._push)
+            finally:
+                self._mirror_periods()
+            self.start_state, self.start_result = self._periods.start()
+            return self.result
         self.start_state = self.state
         self.start_result = self._evaluate(self.state.q, self.state.v)
         t_end = self.state.t + self.config.control_period
@@ -272,13 +292,8 @@ class Simulator:
                 x0 = np.concatenate([self.state.q, self.state.v])
                 start = (np.concatenate([self.state.v, self.result.qdd]), self.result)
                 try:
-                    if self._native_segments:
-                        seg = self.dynamics.integrate_segment(
-                            self.state, self._command, self._push, self.config.integrator,
-                            self.config.friction, self._suppressed, t_end)
-                    else:
-                        seg = self._integrator.integrate_segment(self._rhs, self._guards,
-                                                                 self.state.t, x0, t_end, start)
+                    seg = self._integrator.integrate_segment(self._rhs, self._guards,
+                                                             self.state.t, x0, t_end, start)
                 except SimulationError as exc:
                     raise SimulationError(f'{exc} (during the period from '
                                           f'{self.state.summary()})') from exc
@@ -313,6 +328,17 @@ class Simulator:
         self.stats.control_periods += 1
         return self.result
 
+    def _mirror_periods(self) -> None:
+        """Take the state, dynamics, new events, counters and end of the native periods."""
+        periods = self._periods
+        self.state = periods.state()
+        self.result = periods.result()
+        self.events.extend(periods.events_since(len(self.events)))
+        s = self.stats
+        (s.steps, s.evaluations, s.control_periods, s.max_constraint_residual,
+         s.suppressed_cycles, s.resolved_cycles) = periods.statistics()
+        self.ended = periods.ended()
+
     def _transition(self, guard: object) -> None:
         t = self.state.t
         if not abs(t - self._instant[0]) <= self.config.integrator.event_tolerance * 10:
@@ -342,9 +368,8 @@ class Simulator:
         new, result = found
         self.stats.resolved_cycles += 1
         self.events.append(Transition(self.state.t, self.state.mode.number, new.mode.number,
-                                      'R', 'contact-consistent mode after a cycle of '
-                                      f'single switches ({guard.name})', (),
-                                      new.step_index, new.contact.side))
+                                      'R', resolved_cause(guard.name), (), new.step_index,
+                                      new.contact.side))
         self._instant[1].add((new.mode.number, new.contact.side))
         self.state = new
         self.result = result
@@ -413,7 +438,7 @@ class Simulator:
                 self._diverged(f'constraint residual {worst:.3g} beyond '
                                f'{self.config.residual_bound:g}', s)
         if self.head_height() < self.config.fall_height:
-            raise RunEnded(f'fall: head top below {self.config.fall_height} m', s)
+            raise RunEnded(fall_reason(self.config.fall_height), s)
 
     def _diverged(self, what: str, state: HybridState) -> None:
         raise SimulationError(f'simulation diverged ({what}) at {state.summary()}')

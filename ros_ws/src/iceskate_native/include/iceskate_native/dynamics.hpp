@@ -98,6 +98,13 @@ struct DynamicsResult
   Vector18 passive = Vector18::Zero();     ///< damping and soft stops [N m]
 };
 
+/// The active swing constraints at one posture (Dynamics::constraints).
+struct ConstraintRows
+{
+  Eigen::MatrixXd rows;      ///< nc x 18, columns of locked coordinates 0
+  Eigen::VectorXd position;  ///< C(q) [m, rad]
+};
+
 /// Eq. (7) of every mode on the four support models; keeps one Pinocchio workspace per model,
 /// so an instance is not thread-safe (make one per thread).
 class Dynamics
@@ -126,8 +133,24 @@ public:
   /// Joint damping and soft-stop torques of all coordinates [N m].
   Vector18 passive_forces(const Vector18 & q, const Vector18 & v) const;
 
+  /// M(q) over the active coordinates of contact.mode (n x n, symmetric).
+  Eigen::MatrixXd mass_matrix(const Contact & contact, const Vector18 & q);
+
+  /// The active swing constraints at q: their rows J (nc x 18, locked columns 0) and their
+  /// positions C(q) [m, rad] (heel height, heel y minus its anchor, sole pitch).
+  ConstraintRows constraints(const Contact & contact, const Vector18 & q);
+
+  /// World position of a named frame of the support model of `contact` [m].
+  Eigen::Vector3d frame_position(const Contact & contact, const Vector18 & q,
+                                 const std::string & frame);
+
+  /// World-aligned linear velocity of a named frame [m/s].
+  Eigen::Vector3d frame_velocity(const Contact & contact, const Vector18 & q, const Vector18 & v,
+                                 const std::string & frame);
+
   const SupportModel & support_model(int side, int pivot) const;
   const Mode & mode(int number) const;
+  const ModeTable & modes() const noexcept { return modes_; }
   const DynamicsParameters & parameters() const noexcept { return params_; }
 
 private:

@@ -1,0 +1,140 @@
+// One control period of the hybrid simulation in C++ (docs/model.md §6-§8): the input is held
+// (zero-order hold), the mode's dynamics are integrated with a fixed-step method up to the next
+// located event, its transition applied (a cascade of due transitions settled at once, a cycle
+// of single switches replaced by the contact-consistent mode, a Zeno burst rested), and at the
+// end the state is projected onto the active constraints and its health checked. The native
+// counterpart of iceskate_sim.simulation.Simulator.advance, tested against it.
+#pragma once
+
+#include <map>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "iceskate_native/dynamics.hpp"
+#include "iceskate_native/errors.hpp"
+#include "iceskate_native/guards.hpp"
+#include "iceskate_native/integrators.hpp"
+#include "iceskate_native/transitions.hpp"
+
+namespace iceskate_native
+{
+
+/// The state left the physical range (non-finite, too fast, constraints broken): the message
+/// says what; HybridSimulator::state() is where.
+class DivergenceError : public NativeError
+{
+public:
+  using NativeError::NativeError;
+};
+
+/// More transitions at one instant than allowed (the message lists the last events).
+class ChatteringError : public NativeError
+{
+public:
+  using NativeError::NativeError;
+};
+
+/// Settings of a run (iceskate_sim.simulation.SimulatorConfig with a fixed-step integrator).
+struct SimulatorSettings
+{
+  double control_period = 1.0e-3;  ///< [s], an integer multiple of step
+  Method method = Method::kImplicitEuler;
+  double step = 1.0e-3;             ///< [s]
+  double event_tolerance = 1.0e-9;  ///< [s]
+  Friction friction;
+  GuardConstants constants{};
+  double margin = 1.0e-9;   ///< a guard at most this positive is not due
+  GuardTable guards;        ///< the guards of every mode, in the event log's order
+  bool projection = true;   ///< project onto the swing constraints after every period
+  double residual_bound = 1.0e-3;  ///< [m, rad] beyond which the run has diverged
+  double fall_height = 1.2;        ///< [m] head-top height below which the robot has fallen
+  double max_speed = 200.0;        ///< [m/s, rad/s] beyond which the run has diverged
+  int max_instant_transitions = 20;
+  double zeno_window = 1.0e-6;   ///< [s] transitions this close count as one burst
+  double chatter_dwell = 0.005;  ///< [s] a rested guard stays off this long
+};
+
+/// One entry of the event log: a guard's transition, or "R" (the contact-consistent mode
+/// after a cycle of single switches of guard `guard`).
+struct TransitionRecord
+{
+  double t = 0.0;
+  int from_mode = 0;
+  int to_mode = 0;
+  std::string event;
+  std::string guard;
+  std::vector<double> impulse;  ///< [N s, N m s]
+  int step_index = 0;
+  int side = 0;
+};
+
+/// Counters of a run.
+struct RunStatistics
+{
+  long steps = 0;
+  long evaluations = 0;
+  long control_periods = 0;
+  double max_constraint_residual = 0.0;
+  long suppressed_cycles = 0;
+  long resolved_cycles = 0;
+};
+
+class HybridSimulator
+{
+public:
+  /// A simulation from `initial` on `dynamics` (kept by reference: it must outlive this).
+  HybridSimulator(Dynamics & dynamics, SimulatorSettings settings, HybridState initial);
+
+  /// Back to the initial state; clears the log and the statistics. A state that ends the run
+  /// at once sets ended().
+  void reset();
+
+  /// Integrate one control period holding `inputs`. Throws DivergenceError, ChatteringError or
+  /// NativeError; a physical end (fall, flight, toe-first touchdown) sets ended() instead.
+  void advance(const Inputs & inputs);
+
+  const HybridState & state() const noexcept { return state_; }
+  /// The state at the start of the last period after the transitions due then, and its
+  /// dynamics under the period's inputs.
+  const HybridState & start_state() const noexcept { return start_state_; }
+  const DynamicsResult & start_result() const noexcept { return start_result_; }
+  /// The dynamics at the current state under the last inputs.
+  const DynamicsResult & result() const noexcept { return result_; }
+  const std::vector<TransitionRecord> & events() const noexcept { return events_; }
+  const RunStatistics & statistics() const noexcept { return stats_; }
+  RunEnd ended() const noexcept { return ended_; }
+  const SimulatorSettings & settings() const noexcept { return settings_; }
+
+private:
+  struct Ended;  // a physical end of the run, thrown inside a period
+
+  DynamicsResult evaluate(const HybridState & s);
+  GuardSet guard_set(const HybridState & s) const;
+  void settle();
+  void transition(Guard guard);
+  void resolve(Guard guard);
+  void rest(Guard guard);
+  bool project(Eigen::VectorXd & residual);
+  void check_speed(const HybridState & s);
+  void check_health(const Eigen::VectorXd * residual);
+  [[noreturn]] void diverged(const std::string & what, HybridState s);
+
+  Dynamics & dynamics_;
+  SimulatorSettings settings_;
+  HybridState initial_;
+  HybridState state_;
+  HybridState start_state_;
+  DynamicsResult start_result_;
+  DynamicsResult result_;
+  Inputs inputs_;
+  std::vector<TransitionRecord> events_;
+  RunStatistics stats_;
+  RunEnd ended_ = RunEnd::kNone;
+  std::map<Guard, double> suppressed_;  // guard -> rested until [s]
+  double instant_time_ = 0.0;           // the instant of the current transition cascade
+  std::set<std::pair<int, int>> instant_modes_;  // (mode, side) visited at that instant
+};
+
+}  // namespace iceskate_native
