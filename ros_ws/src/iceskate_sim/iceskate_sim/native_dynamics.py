@@ -35,7 +35,6 @@ from iceskate_sim.hybrid import (
     resolved_cause,
 )
 from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.modes import MODES
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
 
