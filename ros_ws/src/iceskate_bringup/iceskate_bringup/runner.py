@@ -54,6 +54,19 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
+    metrics, error = simulate(scene, out, progress, stop)
+    if error is not None:
+        raise error
+    return metrics
+
+
+def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
+             stop: StopRequest | None = None) -> tuple[dict[str, Any], SimulationError | None]:
+    """``run``, but a failure of the physics is returned beside the metrics (which say where
+    the run stopped) instead of raised.
+
+    :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
+    """
     from iceskate_bringup.composition import ControlStack
     from iceskate_sim.session import Session
     with contextlib.ExitStack() as signals:
@@ -83,9 +96,7 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     if out is not None and len(session.trajectory):  # also after a fall or a physics error
         from iceskate_analysis.summary import write_summary
         write_summary(out)
-    if session.error is not None:
-        raise session.error
-    return metrics
+    return metrics, session.error
 
 
 class _NoBar:

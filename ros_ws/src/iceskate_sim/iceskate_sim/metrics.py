@@ -15,6 +15,16 @@ from iceskate_sim.robot import SOLE_HEEL_Y, SOLE_TOE_Y
 ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs removed
 SIDE_CODE = {'right': 0, 'left': 1}
 PIVOT_CODE = {'toe': 1, 'heel': 2}
+#: The top-level entries of ``metrics.json`` (``compute_metrics``): from ``head_error_rms`` on
+#: only for a run with samples, ``head_error_final_max`` only for a scene with pushes.
+METRIC_NAMES = (
+    'scene', 'sim_time_s', 'wall_time_s', 'real_time_factor', 'steps', 'fell', 'failure',
+    'interrupted', 'transitions', 'max_constraint_residual', 'physics_steps',
+    'dynamics_evaluations', 'suppressed_cycles', 'resolved_cycles', 'sources',
+    'rejected_commands', 'head_error_rms', 'forward_distance_m', 'head_error_final_max',
+    'mode_time_fraction', 'zmp_outside_support_fraction', 'edge_mode_fraction',
+    'support_positions_m', 'mode_sequence_per_step', 'arm_swing', 'arm_swing_steady',
+    'yaw_range_rad')
 
 
 class Trajectory:

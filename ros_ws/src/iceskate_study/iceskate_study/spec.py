@@ -1,0 +1,564 @@
+"""SPEC files of parameter studies: a base scene, overrides, axes; the runs they generate.
+
+A SPEC (YAML) names a base scene (a shipped name or a path, relative to the SPEC's folder),
+optional ``overrides`` (dotted scene key -> value, for every run) and ``axes`` (dotted scene
+key -> the values it takes). A key is any scene key in dotted form, with ``[i]`` for an entry of
+a list: ``floor.mu``, ``inputs.gait_manager.yaw.amplitude``, ``inputs.visual_lifting.kp[1]``,
+``disturbances[0].force[1]``. An axis is
+
+* a list of values, ``{linspace: [start, stop, count]}`` or ``{logspace: [start, stop, count]}``
+  (``count`` values evenly spaced on a linear or a logarithmic scale, both ends included) with
+  ``sampling: grid`` (the default: every combination of the axes' values); or
+* ``{range: [low, high]}`` (``scale: log`` to sample on a logarithmic scale) with
+  ``sampling: random`` or ``latin_hypercube`` (``samples`` points drawn with ``seed``).
+
+Each point runs ``repeats`` times. ``metrics`` names what the table keeps of each run's
+``metrics.json`` (dotted; a block such as ``arm_swing_steady`` keeps all its entries); ``bags``
+(``all`` or a list of axis values to match) selects the points recorded with a bag; ``ratios``
+defines derived metrics (a metric over its value at a baseline value of one axis, the other axes
+and the repeat equal); ``maps`` names the heat maps drawn at the end (``x``, ``y``,
+``metrics``).
+
+Every generated scene is validated (``iceskate_bringup.scene.parse_scene``) before any run
+starts; anything wrong is a ``StudyError`` naming the SPEC key (``SPEC key 'axes.floor.mu':
+...``), with the scene's own message when a value makes a bad scene. Each run is keyed by a
+hash of its whole scene mapping and its repeat index, so the same run has the same key in
+every sweep.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+import hashlib
+import itertools
+import json
+import math
+import numbers
+import pathlib
+import re
+from typing import Any
+
+import numpy as np
+
+from iceskate_bringup.scene import parse_scene, scene_path
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.metrics import METRIC_NAMES
+from iceskate_sim.robot import ament_prefixes
+from iceskate_sim.yaml_io import read_yaml
+from iceskate_study.errors import StudyError
+
+SAMPLINGS = ('grid', 'random', 'latin_hypercube')
+#: What the table keeps of each run's metrics when the SPEC does not say.
+DEFAULT_METRICS = ('steps', 'fell', 'forward_distance_m', 'sim_time_s', 'wall_time_s',
+                   'real_time_factor', 'transitions', 'head_error_rms', 'arm_swing',
+                   'arm_swing_steady')
+#: The heat maps drawn when a SPEC's ``maps`` gives no metrics (and its ratios).
+DEFAULT_MAP_METRICS = ('steps', 'fell', 'forward_distance_m', 'arm_swing_steady.corr_q11_q14')
+#: Columns of every row besides the axes and the metrics.
+RUN_COLUMNS = ('key', 'point', 'repeat', 'status', 'failure', 'run_dir', 'worker_time_s')
+#: The most runs a SPEC may generate.
+MAX_RUNS = 1_000_000
+
+_TOP = {'study', 'description', 'scene', 'overrides', 'axes', 'sampling', 'samples', 'seed',
+        'repeats', 'metrics', 'bags', 'ratios', 'maps'}
+_NAME = r'[A-Za-z_][A-Za-z0-9_]*'
+_KEY = re.compile(rf'{_NAME}(?:\[\d+\])*(?:\.{_NAME}(?:\[\d+\])*)*')
+_TOKEN = re.compile(rf'({_NAME})|\[(\d+)\]')
+_METRIC = re.compile(r'[A-Za-z0-9_]+(?:\.[A-Za-z0-9_]+)*')
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One axis: grid ``values``, or a range [``low``, ``high``] to sample (``log`` scale)."""
+
+    key: str
+    values: tuple[Any, ...] | None = None
+    low: float | None = None
+    high: float | None = None
+    log: bool = False
+
+
+@dataclass(frozen=True)
+class Ratio:
+    """A derived metric: the mean of ``metrics`` over its value at the run whose axis
+    ``baseline_key`` is ``baseline_value`` (the other axes and the repeat equal)."""
+
+    name: str
+    metrics: tuple[str, ...]
+    baseline_key: str
+    baseline_value: Any
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """The heat maps drawn at the end of a sweep: ``metrics`` over axes ``x`` and ``y``."""
+
+    x: str
+    y: str
+    metrics: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of a sweep.
+
+    :param index: the parameter point (0-based, in the SPEC's order; repeats share it).
+    :param repeat: the repeat index (0-based).
+    :param values: the axes' values, by key.
+    :param raw: the whole scene mapping of the run (validated).
+    :param key: hash of ``raw`` and ``repeat``: the run's row key.
+    :param bag: the run is recorded with a bag (into the sweep's ``runs/<key>/``).
+    """
+
+    index: int
+    repeat: int
+    values: dict[str, Any]
+    raw: dict[str, Any]
+    key: str
+    bag: bool
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A validated SPEC (see the module's docstring)."""
+
+    study: str
+    description: str
+    path: pathlib.Path
+    scene: pathlib.Path
+    base: dict[str, Any]  # the base scene mapping with the overrides applied
+    axes: tuple[Axis, ...]
+    sampling: str
+    samples: int
+    seed: int
+    repeats: int
+    metrics: tuple[str, ...]
+    bags: tuple[dict[str, Any], ...] | None  # None: every point
+    ratios: tuple[Ratio, ...]
+    maps: MapSpec | None
+
+    @property
+    def axis_keys(self) -> tuple[str, ...]:
+        """The axes' keys, in the SPEC's order."""
+        return tuple(axis.key for axis in self.axes)
+
+    def description_for_table(self) -> dict[str, Any]:
+        """What the results table records of the SPEC (plain JSON types)."""
+        return {'study': self.study, 'description': self.description,
+                'scene': str(self.scene), 'sampling': self.sampling,
+                'axes': {a.key: {'log': a.log, 'values': list(a.values)} if a.values is not None
+                         else {'log': a.log, 'range': [a.low, a.high]} for a in self.axes},
+                'repeats': self.repeats, 'metrics': list(self.metrics),
+                'ratios': {r.name: {'metrics': list(r.metrics),
+                                    'baseline': {r.baseline_key: r.baseline_value}}
+                           for r in self.ratios},
+                'maps': ({'x': self.maps.x, 'y': self.maps.y, 'metrics': list(self.maps.metrics)}
+                         if self.maps is not None else None)}
+
+
+def _fail(key: str, message: str) -> StudyError:
+    return StudyError(f'SPEC key {key!r}: {message}')
+
+
+def _is_number(value: Any) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(float(value)))
+
+
+# ------------------------------------------------------------------ dotted scene keys
+def key_tokens(key: str, where: str) -> list[str | int]:
+    """The names and list indices of a dotted scene key (``a.b[2].c`` -> a, b, 2, c)."""
+    if not isinstance(key, str) or not _KEY.fullmatch(key):
+        raise _fail(where, f'{key!r} is not a dotted scene key (e.g. floor.mu, '
+                           'inputs.visual_lifting.kp[1], disturbances[0].force[1])')
+    return [name if name else int(index) for name, index in _TOKEN.findall(key)]
+
+
+def set_key(raw: dict[str, Any], key: str, value: Any, where: str) -> None:
+    """Set scene key ``key`` of mapping ``raw`` to ``value``; a missing mapping on the way is
+    made (the scene's validation judges the key), a list entry must exist."""
+    tokens = key_tokens(key, where)
+    node: Any = raw
+    for depth, token in enumerate(tokens):
+        last = depth == len(tokens) - 1
+        done = ''.join(f'[{t}]' if isinstance(t, int) else f'.{t}' for t in tokens[:depth])
+        done = done.lstrip('.')
+        if isinstance(token, int):
+            if not isinstance(node, list):
+                raise _fail(where, f'{done} is not a list in the scene; give it whole in '
+                                   'overrides first')
+            if token >= len(node):
+                raise _fail(where, f'{done} has {len(node)} entries in the scene, no [{token}]')
+            if last:
+                node[token] = value
+            else:
+                node = node[token]
+            continue
+        if not isinstance(node, dict):
+            raise _fail(where, f'{done} is not a mapping in the scene')
+        if last:
+            node[token] = value
+        else:
+            if node.get(token) is None:
+                if isinstance(tokens[depth + 1], int):
+                    raise _fail(where, f'{done + "." if done else ""}{token} is not in the '
+                                       'scene; give the whole list in overrides first')
+                node[token] = {}
+            node = node[token]
+
+
+def run_key(raw: dict[str, Any], repeat: int) -> str:
+    """The key of a run: a hash of its whole scene mapping and its repeat index."""
+    text = json.dumps({'scene': raw, 'repeat': repeat}, sort_keys=True, default=str,
+                      separators=(',', ':'))
+    return hashlib.sha256(text.encode('utf-8')).hexdigest()[:16]
+
+
+# ------------------------------------------------------------------------- axes
+def _count(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise _fail(where, f'the count of values must be an integer >= 1, got {value!r}')
+    return int(value)
+
+
+def _axis(key: str, raw: Any, sampling: str) -> Axis:
+    where = f'axes.{key}'
+    key_tokens(key, where)
+    if isinstance(raw, list):
+        if sampling != 'grid':
+            raise _fail(where, f'sampling {sampling!r} draws from a range: give '
+                               '{range: [low, high]}')
+        if not raw:
+            raise _fail(where, 'an axis needs at least one value, got []')
+        texts = [json.dumps(v, sort_keys=True, default=str) for v in raw]
+        if len(set(texts)) != len(texts):
+            raise _fail(where, f'an axis must not repeat a value, got {raw}')
+        return Axis(key, tuple(raw))
+    if not isinstance(raw, dict) or len(raw.keys() & {'linspace', 'logspace', 'range'}) != 1:
+        raise _fail(where, 'an axis is a list of values, {linspace: [start, stop, count]}, '
+                           f'{{logspace: [start, stop, count]}} or {{range: [low, high]}}, got '
+                           f'{raw!r}')
+    (kind,) = raw.keys() & {'linspace', 'logspace', 'range'}
+    unknown = set(raw) - {kind} - ({'scale'} if kind == 'range' else set())
+    if unknown:
+        raise _fail(f'{where}.{sorted(unknown)[0]}', f'unknown key; allowed with {kind}: '
+                                                    f'{[kind] + (["scale"] * (kind == "range"))}')
+    args = raw[kind]
+    size = 2 if kind == 'range' else 3
+    if not isinstance(args, list) or len(args) != size or not all(
+            _is_number(a) for a in args[:2]):
+        form = '[low, high]' if kind == 'range' else '[start, stop, count]'
+        raise _fail(f'{where}.{kind}', f'must be {form} (finite numbers), got {args!r}')
+    low, high = float(args[0]), float(args[1])
+    if kind == 'range':
+        if sampling == 'grid':
+            raise _fail(where, "a range is sampled: set sampling to 'random' or "
+                               "'latin_hypercube', or give the values (a list, linspace, "
+                               'logspace)')
+        scale = raw.get('scale', 'linear')
+        if scale not in ('linear', 'log'):
+            raise _fail(f'{where}.scale', f"must be 'linear' or 'log', got {scale!r}")
+        if not low < high:
+            raise _fail(f'{where}.range', f'low must be below high, got [{low:g}, {high:g}]')
+        if scale == 'log' and low <= 0.0:
+            raise _fail(f'{where}.range', f'a log scale needs low > 0, got {low:g}')
+        return Axis(key, low=low, high=high, log=scale == 'log')
+    if sampling != 'grid':
+        raise _fail(where, f'sampling {sampling!r} draws from a range: give {{range: [low, '
+                           'high]}')
+    count = _count(args[2], f'{where}.{kind}')
+    if count > 1 and low == high:
+        raise _fail(f'{where}.{kind}', f'start and stop are equal ({low:g}): {count} equal values')
+    if kind == 'logspace':
+        if low <= 0.0 or high <= 0.0:
+            raise _fail(f'{where}.logspace', f'start and stop must be > 0, got [{low:g}, '
+                                             f'{high:g}]')
+        values = np.geomspace(low, high, count)
+    else:
+        values = np.linspace(low, high, count)
+    return Axis(key, tuple(float(v) for v in values), log=kind == 'logspace')
+
+
+def sample_points(axes: tuple[Axis, ...], sampling: str, samples: int, seed: int
+                  ) -> list[tuple[Any, ...]]:
+    """The axes' values of every point: the grid's combinations (first axis slowest), or
+    ``samples`` random or Latin-hypercube points (``seed``) mapped onto the ranges."""
+    if sampling == 'grid':
+        return list(itertools.product(*(axis.values or () for axis in axes)))
+    rng = np.random.default_rng(seed)
+    if sampling == 'random':
+        unit = rng.random((samples, len(axes)))
+    else:
+        from scipy.stats import qmc
+        unit = qmc.LatinHypercube(d=len(axes), rng=rng).random(samples)
+    columns = []
+    for j, axis in enumerate(axes):
+        low, high = float(axis.low or 0.0), float(axis.high or 0.0)
+        if axis.log:
+            columns.append(np.exp(np.log(low) + unit[:, j] * (np.log(high) - np.log(low))))
+        else:
+            columns.append(low + unit[:, j] * (high - low))
+    return [tuple(float(c[i]) for c in columns) for i in range(samples)]
+
+
+def _match(value: Any, wanted: Any) -> bool:
+    if _is_number(value) and _is_number(wanted):
+        return bool(np.isclose(float(value), float(wanted), rtol=1e-9, atol=0.0))
+    return bool(value == wanted)
+
+
+# ------------------------------------------------------------------------ metrics
+def _metric_name(name: Any, where: str) -> str:
+    if not isinstance(name, str) or not _METRIC.fullmatch(name):
+        raise _fail(where, f'{name!r} is not a metric name (dotted, e.g. '
+                           'arm_swing_steady.corr_q11_q14)')
+    if name.split('.')[0] not in METRIC_NAMES:
+        raise _fail(where, f'{name!r} is not in metrics.json; its entries: '
+                           f'{list(METRIC_NAMES)}')
+    return name
+
+
+def kept(name: str, metrics: tuple[str, ...]) -> bool:
+    """Whether column ``name`` is among the kept ``metrics`` (itself, or inside a kept block)."""
+    return any(name == m or name.startswith(f'{m}.') for m in metrics)
+
+
+# ------------------------------------------------------------------------ the SPEC
+def study_dirs() -> list[pathlib.Path]:
+    """Directories searched for shipped studies (installed share dir, then the source tree)."""
+    dirs = [p / 'share' / 'iceskate_study' / 'studies' for p in ament_prefixes()]
+    dirs.append(pathlib.Path(__file__).resolve().parents[1] / 'studies')
+    return [d for d in dirs if d.is_dir()]
+
+
+def shipped_studies() -> list[str]:
+    """Names of the shipped studies."""
+    return sorted({p.stem for d in study_dirs() for p in d.glob('*.yaml')})
+
+
+def spec_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
+    """The YAML file of a shipped study name (e.g. 'arm_swing'), or the path itself."""
+    path = pathlib.Path(name_or_path)
+    if path.suffix:
+        return path
+    for d in study_dirs():
+        if (d / f'{path.name}.yaml').is_file():
+            return d / f'{path.name}.yaml'
+    raise StudyError(f'unknown study {str(name_or_path)!r}; shipped studies: '
+                     f'{shipped_studies()} (or give the path of a SPEC file)')
+
+
+def load_spec(name_or_path: str | pathlib.Path) -> Spec:
+    """Read and validate a SPEC file (a path, or a shipped study's name)."""
+    path = spec_path(name_or_path)
+    try:
+        raw = read_yaml(path, 'SPEC')
+    except SimulationError as exc:
+        raise StudyError(str(exc)) from None
+    return parse_spec(raw, path)
+
+
+def _base_scene(raw: Any, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, Any]]:
+    if not isinstance(raw, str) or not raw:
+        raise _fail('scene', f'must be a shipped scene name or the path of a scene file, got '
+                             f'{raw!r}')
+    candidate = pathlib.Path(raw)
+    if candidate.suffix and not candidate.is_absolute() and (path.parent / candidate).is_file():
+        candidate = path.parent / candidate
+    try:
+        scene_file = scene_path(candidate if candidate.suffix else raw)
+        base = read_yaml(scene_file, 'scene')
+    except SimulationError as exc:
+        raise _fail('scene', str(exc)) from None
+    if not isinstance(base, dict):
+        raise _fail('scene', f'{scene_file} is not a scene mapping')
+    return scene_file.resolve(), base
+
+
+def _check_scene(raw: dict[str, Any], where: str, what: str) -> None:
+    try:
+        parse_scene(raw)
+    except SimulationError as exc:
+        raise _fail(where, f'{what} gives a bad scene: {exc}') from None
+
+
+def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
+    """Validate a SPEC mapping read from ``path`` (StudyError naming the key)."""
+    if not isinstance(raw, dict):
+        raise StudyError(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
+    for k in raw:
+        if k not in _TOP:
+            raise _fail(str(k), f'unknown key; allowed: {sorted(_TOP)}')
+    for k in ('study', 'scene', 'axes'):
+        if k not in raw:
+            raise _fail(k, 'missing')
+    study = raw['study']
+    if not isinstance(study, str) or not re.fullmatch(r'[A-Za-z0-9_.-]+', study):
+        raise _fail('study', f'must be a name (letters, digits, _ . -), got {study!r}')
+    description = raw.get('description', '')
+    if not isinstance(description, str):
+        raise _fail('description', 'must be text')
+    scene_file, base = _base_scene(raw['scene'], path)
+
+    overrides = raw.get('overrides') or {}
+    if not isinstance(overrides, dict):
+        raise _fail('overrides', f'must be a mapping of scene keys, got {overrides!r}')
+    for key, value in overrides.items():
+        set_key(base, key, value, f'overrides.{key}')
+    _check_scene(base, 'overrides', 'the base scene with the overrides')
+
+    sampling = raw.get('sampling', 'grid')
+    if sampling not in SAMPLINGS:
+        raise _fail('sampling', f'must be one of {list(SAMPLINGS)}, got {sampling!r}')
+    samples, seed = raw.get('samples'), raw.get('seed', 0)
+    if sampling == 'grid':
+        for k in ('samples', 'seed'):
+            if k in raw:
+                raise _fail(k, "is for sampling 'random' or 'latin_hypercube'")
+        samples = 0
+    else:
+        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+            raise _fail('samples', f'must be an integer >= 1 (the points to draw), got '
+                                   f'{samples!r}')
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise _fail('seed', f'must be an integer >= 0, got {seed!r}')
+    repeats = raw.get('repeats', 1)
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise _fail('repeats', f'must be an integer >= 1, got {repeats!r}')
+
+    if not isinstance(raw['axes'], dict) or not raw['axes']:
+        raise _fail('axes', f'must map at least one scene key to its values, got '
+                            f'{raw["axes"]!r}')
+    axes = tuple(_axis(str(key), value, sampling) for key, value in raw['axes'].items())
+    for axis in axes:  # each axis alone, at each value (or both ends of its range)
+        for value in axis.values if axis.values is not None else (axis.low, axis.high):
+            scene = copy.deepcopy(base)
+            set_key(scene, axis.key, value, f'axes.{axis.key}')
+            _check_scene(scene, f'axes.{axis.key}', f'the value {value!r}')
+
+    metrics = raw.get('metrics', list(DEFAULT_METRICS))
+    if not isinstance(metrics, list) or not metrics:
+        raise _fail('metrics', f'must be a list of metric names, got {metrics!r}')
+    metrics = tuple(dict.fromkeys(_metric_name(m, 'metrics') for m in metrics))
+    keys = tuple(axis.key for axis in axes)
+    ratios = _ratios(raw.get('ratios'), axes, metrics, sampling)
+    spec = Spec(study, description, path, scene_file, base, axes, sampling, int(samples),
+                int(seed), repeats, metrics, _bags(raw.get('bags'), keys), ratios,
+                _maps(raw.get('maps'), keys, metrics, ratios))
+    if len(points_values(spec)) * repeats > MAX_RUNS:
+        raise _fail('axes', f'the SPEC generates more than {MAX_RUNS} runs')
+    return spec
+
+
+def _bags(raw: Any, keys: tuple[str, ...]) -> tuple[dict[str, Any], ...] | None:
+    if raw is None:
+        return ()
+    if raw == 'all':
+        return None
+    if not isinstance(raw, list):
+        raise _fail('bags', f"must be 'all' or a list of axis values to match, got {raw!r}")
+    for i, selector in enumerate(raw):
+        if not isinstance(selector, dict) or not selector:
+            raise _fail(f'bags[{i}]', f'must map axis keys to values, got {selector!r}')
+        for key in selector:
+            if key not in keys:
+                raise _fail(f'bags[{i}].{key}', f'not an axis; the axes: {list(keys)}')
+    return tuple(raw)
+
+
+def _ratios(raw: Any, axes: tuple[Axis, ...], metrics: tuple[str, ...], sampling: str
+            ) -> tuple[Ratio, ...]:
+    if raw is None:
+        return ()
+    if not isinstance(raw, dict):
+        raise _fail('ratios', f'must map names to {{metric: ..., baseline: {{axis: value}}}}, '
+                              f'got {raw!r}')
+    if raw and sampling != 'grid':
+        raise _fail('ratios', 'a ratio needs grid axes (a baseline value on one axis)')
+    out = []
+    for name, body in raw.items():
+        where = f'ratios.{name}'
+        if not isinstance(name, str) or not re.fullmatch(r'[A-Za-z0-9_]+', name):
+            raise _fail(where, 'a ratio name is letters, digits and _')
+        if kept(name, metrics) or name in RUN_COLUMNS:
+            raise _fail(where, 'the name is already a column of the table')
+        if not isinstance(body, dict) or set(body) != {'metric', 'baseline'}:
+            raise _fail(where, f'must be {{metric: NAME or [NAMES], baseline: {{axis: value}}}}, '
+                               f'got {body!r}')
+        names = body['metric'] if isinstance(body['metric'], list) else [body['metric']]
+        if not names:
+            raise _fail(f'{where}.metric', 'names no metric')
+        for m in names:
+            _metric_name(m, f'{where}.metric')
+            if not kept(m, metrics):
+                raise _fail(f'{where}.metric', f'{m!r} is not among the metrics kept (add it '
+                                               'to metrics)')
+        baseline = body['baseline']
+        if not isinstance(baseline, dict) or len(baseline) != 1:
+            raise _fail(f'{where}.baseline', f'must be {{axis key: value}}, got {baseline!r}')
+        ((key, value),) = baseline.items()
+        axis = next((a for a in axes if a.key == key), None)
+        if axis is None or axis.values is None:
+            raise _fail(f'{where}.baseline', f'{key!r} is not an axis')
+        exact = next((v for v in axis.values if _match(v, value)), None)
+        if exact is None:
+            raise _fail(f'{where}.baseline', f'{value!r} is not a value of axis {key!r}: '
+                                             f'{list(axis.values)}')
+        out.append(Ratio(name, tuple(names), key, exact))
+    return tuple(out)
+
+
+def _maps(raw: Any, keys: tuple[str, ...], metrics: tuple[str, ...],
+          ratios: tuple[Ratio, ...]) -> MapSpec | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or not {'x', 'y'} <= set(raw) or set(raw) - {'x', 'y',
+                                                                             'metrics'}:
+        raise _fail('maps', f'must be {{x: AXIS, y: AXIS, metrics: [NAMES]}}, got {raw!r}')
+    for k in ('x', 'y'):
+        if raw[k] not in keys:
+            raise _fail(f'maps.{k}', f'{raw[k]!r} is not an axis; the axes: {list(keys)}')
+    if raw['x'] == raw['y']:
+        raise _fail('maps.y', 'must be another axis than x')
+    names = raw.get('metrics', [*DEFAULT_MAP_METRICS, *(r.name for r in ratios)])
+    if not isinstance(names, list) or not names:
+        raise _fail('maps.metrics', f'must be a list of metric names, got {names!r}')
+    for name in names:
+        if not (name in {r.name for r in ratios} or name in ('status',) or kept(name, metrics)):
+            raise _fail('maps.metrics', f'{name!r} is neither a metric kept nor a ratio')
+    return MapSpec(raw['x'], raw['y'], tuple(names))
+
+
+# ---------------------------------------------------------------------- the runs
+def points_values(spec: Spec) -> list[tuple[Any, ...]]:
+    """The axes' values of every parameter point of ``spec``."""
+    return sample_points(spec.axes, spec.sampling, spec.samples, spec.seed)
+
+
+def expand(spec: Spec) -> list[Point]:
+    """Every run of ``spec`` (parameter points in order, each ``repeats`` times), each scene
+    validated; StudyError naming the point whose scene is refused."""
+    keys = spec.axis_keys
+    combos = points_values(spec)
+    selected = [False] * len(combos)
+    for i, selector in enumerate(spec.bags or ()):
+        hits = [j for j, combo in enumerate(combos)
+                if all(_match(combo[keys.index(k)], v) for k, v in selector.items())]
+        if not hits:
+            raise _fail(f'bags[{i}]', f'selects no point of the sweep: {selector}')
+        for j in hits:
+            selected[j] = True
+    points = []
+    for index, combo in enumerate(combos):
+        raw = copy.deepcopy(spec.base)
+        for key, value in zip(keys, combo, strict=True):
+            set_key(raw, key, value, f'axes.{key}')
+        bag = spec.bags is None or selected[index]
+        set_key(raw, 'record.bag', bag, 'bags')
+        where = ', '.join(f'{k}={v!r}' for k, v in zip(keys, combo, strict=True))
+        _check_scene(raw, 'axes', f'the point {where}')
+        for repeat in range(spec.repeats):
+            points.append(Point(index, repeat, dict(zip(keys, combo, strict=True)), raw,
+                                run_key(raw, repeat), bag))
+    return points
