@@ -17,19 +17,21 @@ Everything is measured in one run, so the ratios hold for one machine and one ho
   state whose period fires no event: (a) ``NativeGaitDynamics.integrate_segment`` to the period
   end (the native segment call: one implicit-Euler step, three eq. (7) solves (start, implicit
   step, end), the guards at both ends) and the kernel's own binding call; (b) the whole
-  ``Simulator.advance`` of the period on the native engine (the segment plus the Python around
-  it: the start evaluation, settle, the end-of-period projection, the health checks) and on
-  the Python engine; one eq. (7) solve (``NativeGaitDynamics.evaluate`` and the kernel's
-  ``evaluate``).
+  control period: the kernel's ``HybridSimulator.advance`` (the period in C++: the start
+  evaluation, settle, the segment, the end-of-period projection, the health checks; the
+  binding call alone), ``Simulator.advance`` on the native engine (that call plus the Python
+  that mirrors the state, events and counters) and on the Python engine; one eq. (7) solve
+  (``NativeGaitDynamics.evaluate`` and the kernel's ``evaluate``).
 
-Before each timed ``advance`` the simulator is put back to the state (and the dynamics' kept
-state terms to what the previous period leaves); the advance from every state is checked to
-reproduce the recorded run. The timings take turns, so that a change of the machine's load
-during the run weighs on all of them alike: from each state MuJoCo's two integrators, then the
-native calls; the two engines' advances alternate, state by state. Figures are microseconds per
-call: per state the median over ``--repeat`` timings (after one to warm up), then the median
-over the states (with their range). The ratios are ours / ``mj_step`` implicitfast; the goal
-compared with is physics alone <= 4x MuJoCo's ``mj_step`` at the same step.
+Before each timed ``advance`` the simulator is put back to the state (``Simulator.set_state``;
+the dynamics' kept state terms as the previous period leaves them); the advance from every
+state is checked to reproduce the recorded run. The timings take turns, so that a change of
+the machine's load during the run weighs on all of them alike: from each state MuJoCo's two
+integrators, then the native calls; the three advances alternate, state by state. Figures
+are microseconds per call: per state the median over ``--repeat`` timings (after one to warm
+up), then the median over the states (with their range). The ratios are ours / ``mj_step``
+implicitfast; the goal compared with is physics alone <= 4x MuJoCo's ``mj_step`` at the same
+step.
 
 Usage (from the repository root, environment sourced):
     python benchmarks/bench_physics.py [--states 20] [--repeat 25] [--number 200] [--json PATH]
@@ -69,8 +71,6 @@ class Snapshot:
     result: DynamicsResult
     previous: HeldCommand  # the command held over the period that ended here
     command: HeldCommand  # the command the controllers give for the next period
-    suppressed: dict[str, float]
-    instant: tuple[float, set]
     events: int
     after: HybridState | None = None  # the state the run reached one period later
     quiet: bool = False  # no transition in the next period, one integration step
@@ -78,19 +78,15 @@ class Snapshot:
 
 def take_snapshot(sim: Simulator, command: HeldCommand) -> Snapshot:
     """The simulator's period-to-period state, before it advances with ``command``."""
-    return Snapshot(sim.state, sim.result, sim.command, command, dict(sim._suppressed),
-                    (sim._instant[0], set(sim._instant[1])), len(sim.events))
+    return Snapshot(sim.state, sim.result, sim.command, command, len(sim.events))
 
 
 def restore(sim: Simulator, snap: Snapshot) -> None:
     """Put ``sim`` back where the run was at ``snap``, its dynamics' kept state terms as the
     previous period leaves them (its last solve at this state, under the previous command)."""
-    sim.state, sim.result, sim.ended = snap.state, snap.result, None
     sim._command, sim._push = snap.previous, None
-    sim._suppressed = dict(snap.suppressed)
-    sim._instant = (snap.instant[0], set(snap.instant[1]))
     del sim.events[snap.events:]
-    sim._evaluate(snap.state.q, snap.state.v)
+    sim.set_state(snap.state)
 
 
 def collect_states(scene, robot, warmup: float, count: int, spacing: int) -> list[Snapshot]:
@@ -129,21 +125,33 @@ def time_calls(func, repeat: int, number: int) -> float:
     return statistics.median(runs) / number * 1e6
 
 
-def time_advance(sims: list[Simulator], snaps: list[Snapshot], repeat: int
+def kernel_advance(sim: Simulator) -> Any:
+    """The native period's binding call alone (``HybridSimulator.advance``), for ``sim`` on the
+    native engine; ``sim.state`` is mirrored after the timing."""
+    kernel = sim._periods._kernel
+
+    def advance(command: HeldCommand) -> None:
+        kernel.advance(command.bias, command.stiffness, command.damping, '', None)
+    return advance
+
+
+def time_advance(advances: list[tuple[Simulator, Any]], snaps: list[Snapshot], repeat: int
                  ) -> tuple[list[list[float]], list[float]]:
-    """Median wall time [us] of ``advance`` from each state for each simulator (the simulators
-    in turn from each state, the states in turn in each repeat, so no state is kept from one
-    repeat to the next), and for each the largest difference of its end state from the run."""
+    """Median wall time [us] of each ``(simulator, advance)`` call from each state (the calls in
+    turn from each state, the states in turn in each repeat, so no state is kept from one repeat
+    to the next), and for each the largest difference of its end state from the run."""
     clock = time.perf_counter
-    timings = [[[] for _ in snaps] for _ in sims]
-    deviation = [0.0 for _ in sims]
+    timings = [[[] for _ in snaps] for _ in advances]
+    deviation = [0.0 for _ in advances]
     for _ in range(repeat + 1):  # the first round warms up
         for i, snap in enumerate(snaps):
-            for k, sim in enumerate(sims):
+            for k, (sim, advance) in enumerate(advances):
                 restore(sim, snap)
                 t0 = clock()
-                sim.advance(snap.command)
+                advance(snap.command)
                 timings[k][i].append((clock() - t0) * 1e6)
+                if sim._periods is not None:
+                    sim._mirror_periods()
                 end = sim.state
                 deviation[k] = max(deviation[k], abs(end.t - snap.after.t),
                                    float(np.max(np.abs(end.q - snap.after.q))),
@@ -257,20 +265,19 @@ def main(argv: list[str] | None = None) -> int:
         nefc_rk4.append(nefc)
         s, c = snap.state, snap.command
         end = s.t + config.control_period
-        seg = native.integrate_segment(s, c, None, config.integrator, config.friction,
-                                       snap.suppressed, end)
+        seg = native.integrate_segment(s, c, None, config.integrator, config.friction, {}, end)
         if seg.fired is not None or seg.steps != 1:
             raise SystemExit(f'an event fires in the segment from t={s.t:.4f} s')
         segment.append(time_calls(
-            lambda s=s, c=c, e=end, sup=snap.suppressed: native.integrate_segment(
-                s, c, None, config.integrator, config.friction, sup, e), rep, num))
+            lambda s=s, c=c, e=end: native.integrate_segment(
+                s, c, None, config.integrator, config.friction, {}, e), rep, num))
         (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
          frame, force) = evaluate_args = native._arguments(s.contact, s.q, s.v, c.bias, None,
                                                            c.stiffness, c.damping)
         segment_args = (mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness,
                         damping, frame, force, config.integrator.method,
                         config.integrator.step, config.integrator.event_tolerance,
-                        *native._guard_arguments(mode, s.t, snap.suppressed, config.friction),
+                        *native._guard_arguments(mode, s.t, {}, config.friction),
                         s.t, np.concatenate([s.q, s.v]), end)
         kernel_segment.append(time_calls(
             lambda a=segment_args: native._kernel.integrate_segment(*a), rep, num))
@@ -284,14 +291,18 @@ def main(argv: list[str] | None = None) -> int:
 
     # (b) the whole period, on both engines, in turn from each state
     python_sim = Simulator(robot, replace(config, engine='python'), scene.initial)
-    (advance_native, advance_python), (deviation_native, deviation_python) = time_advance(
-        [native_sim, python_sim], quiet, rep)
+    kernel_sim = Simulator(robot, config, scene.initial)
+    (advance_kernel, advance_native, advance_python), deviations = time_advance(
+        [(kernel_sim, kernel_advance(kernel_sim)), (native_sim, native_sim.advance),
+         (python_sim, python_sim.advance)], quiet, rep)
+    deviation_kernel, deviation_native, deviation_python = deviations
 
     rows = {
         'mj_step implicitfast': per_state(mj_implicitfast),
         'mj_step RK4': per_state(mj_rk4),
         '(a) NativeGaitDynamics.integrate_segment': per_state(segment),
         '    kernel integrate_segment (binding call)': per_state(kernel_segment),
+        '(b) kernel HybridSimulator.advance': per_state(advance_kernel),
         '(b) Simulator.advance, native engine': per_state(advance_native),
         '(b) Simulator.advance, Python engine': per_state(advance_python),
         'eq. (7): NativeGaitDynamics.evaluate': per_state(evaluate),
@@ -321,7 +332,8 @@ def main(argv: list[str] | None = None) -> int:
           f'{args.spacing} periods from t = {args.warmup:g} s: {len(quiet)} of {len(snaps)} '
           f'fire no event in their period (modes '
           f'{sorted({s.state.mode.number for s in quiet})}); the advance from them reproduces '
-          f'the run to {deviation_native:.1e} (native), {deviation_python:.1e} (Python engine)')
+          f'the run to {deviation_kernel:.1e} (kernel), {deviation_native:.1e} (native), '
+          f'{deviation_python:.1e} (Python engine)')
     print(f'timings: per state the median of {rep} runs (short calls: {num} calls per run, '
           f'advance: one period per run), then the median over the {len(quiet)} states')
     print()
@@ -333,16 +345,18 @@ def main(argv: list[str] | None = None) -> int:
               f'{row["median"] / base:22.2f}x')
     print()
     a = rows['(a) NativeGaitDynamics.integrate_segment']['median'] / base
+    b_kernel = rows['(b) kernel HybridSimulator.advance']['median'] / base
     b = rows['(b) Simulator.advance, native engine']['median'] / base
     b_py = rows['(b) Simulator.advance, Python engine']['median'] / base
     verdict = {True: 'meets', False: 'misses'}
-    print(f'ratios ours / mj_step implicitfast: (a) native segment {a:.1f}x, (b) native advance '
-          f'{b:.1f}x, Python advance {b_py:.1f}x; goal <= {GOAL_RATIO:g}x: (a) '
-          f'{verdict[a <= GOAL_RATIO]}, (b) {verdict[b <= GOAL_RATIO]}')
+    print(f'ratios ours / mj_step implicitfast: (a) native segment {a:.1f}x, (b) native period '
+          f'{b_kernel:.1f}x (kernel call), {b:.1f}x (Simulator.advance), Python advance '
+          f'{b_py:.1f}x; goal <= {GOAL_RATIO:g}x: the native period '
+          f'{verdict[b_kernel <= GOAL_RATIO]}')
     python_part = (rows['(b) Simulator.advance, native engine']['median']
-                   - rows['(a) NativeGaitDynamics.integrate_segment']['median'])
-    print(f'(b) - (a), the Python around the native segment in a period: {python_part:.1f} us; '
-          f'benchmark wall time {elapsed:.0f} s')
+                   - rows['(b) kernel HybridSimulator.advance']['median'])
+    print(f'Simulator.advance - kernel advance, the Python mirror of a native period: '
+          f'{python_part:.1f} us; benchmark wall time {elapsed:.0f} s')
 
     if args.json:
         figures = {
@@ -352,7 +366,8 @@ def main(argv: list[str] | None = None) -> int:
             'spacing': args.spacing, 'states': len(snaps), 'quiet_states': len(quiet),
             'repeat': rep, 'number': num, 'nefc_mean': {'implicitfast': nefc_implicitfast,
                                                         'rk4': nefc_rk4},
-            'deviation': {'native': deviation_native, 'python': deviation_python},
+            'deviation': {'kernel': deviation_kernel, 'native': deviation_native,
+                          'python': deviation_python},
             'us': {name.strip(): row for name, row in rows.items()},
             'ratio_to_mj_step_implicitfast': {name.strip(): row['median'] / base
                                               for name, row in rows.items()},

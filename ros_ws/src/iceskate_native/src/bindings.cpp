@@ -441,6 +441,12 @@ NB_MODULE(_kernel, m)
       "max_instant_transitions"_a, "zeno_window"_a, "chatter_dwell"_a, nb::keep_alive<1, 2>())
     .def("reset", &HybridSimulator::reset, "Back to the initial state; clears log and counters.")
     .def(
+      "set_state",
+      [](HybridSimulator & self, const StateRow & state) { self.set_state(state_of(state)); },
+      "state"_a,
+      "Continue from `state` (the event log, counters and rested guards kept; an ended run goes "
+      "on).")
+    .def(
       "advance",
       [](HybridSimulator & self, const Vector & tau, const Optional & stiffness,
          const Optional & damping, const std::string & push_frame, const Optional & push_force) {

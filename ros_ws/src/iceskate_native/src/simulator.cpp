@@ -86,6 +86,14 @@ void HybridSimulator::reset()
   }
 }
 
+void HybridSimulator::set_state(const HybridState & s)
+{
+  dynamics_.mode(s.contact.mode);  // std::invalid_argument for an unknown mode
+  state_ = s;
+  ended_ = RunEnd::kNone;
+  result_ = evaluate(state_);
+}
+
 DynamicsResult HybridSimulator::evaluate(const HybridState & s)
 {
   return dynamics_.evaluate(s.contact, s.q, s.v, inputs_);

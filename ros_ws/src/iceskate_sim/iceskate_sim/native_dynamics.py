@@ -201,6 +201,13 @@ class NativePeriods:
         """Back to the initial state (the log and counters cleared)."""
         self._kernel.reset()
 
+    def set_state(self, state: HybridState) -> None:
+        """Continue from ``state`` (the event log, counters and rested guards kept)."""
+        try:
+            self._kernel.set_state(_state_row(state))
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'native simulator: {exc}') from None
+
     def advance(self, command: HeldCommand, push: tuple[str, np.ndarray] | None) -> None:
         """One control period holding ``command`` (and ``push``).
 

@@ -185,6 +185,16 @@ class Simulator:
             self.ended = end.reason
             self.state = end.state
 
+    def set_state(self, state: HybridState) -> None:
+        """Continue from ``state`` (the event log, counters and rested guards kept; a run that
+        had ended goes on), as after a period that ended there under the current command."""
+        if self._periods is not None:
+            self._periods.set_state(state)
+            self._mirror_periods()
+            return
+        self.state, self.ended = state, None
+        self.result = self._evaluate(state.q, state.v)
+
     # -------------------------------------------------------------- accessors
     @property
     def command(self) -> HeldCommand:

@@ -91,6 +91,9 @@ public:
   /// at once sets ended().
   void reset();
 
+  /// Continue from `s` (the event log, counters and rested guards kept; an ended run goes on).
+  void set_state(const HybridState & s);
+
   /// Integrate one control period holding `inputs`. Throws DivergenceError, ChatteringError or
   /// NativeError; a physical end (fall, flight, toe-first touchdown) sets ended() instead.
   void advance(const Inputs & inputs);
