@@ -2,10 +2,11 @@
 
 Columns: the run's ``key`` (hash of its scene and repeat), ``point`` and ``repeat``, one column
 per axis (its dotted key), ``status`` (ok, fell, failed), ``failure`` (the reason, or null),
-``run_dir`` (the run's folder when it was recorded with a bag), ``worker_time_s`` (the run's
-time in its worker [s]), the kept metrics (dotted names, e.g. ``arm_swing_steady.corr_q11_q14``)
-and the SPEC's ratios. Rows are in the order of the SPEC's points. The SPEC's description (axes,
-ratios, maps) is in the file's metadata (``iceskate_study``, JSON).
+``run_dir`` (the run's folder, relative to the table's, when it was recorded with a bag),
+``worker_time_s`` (the run's time in its worker [s]), the kept metrics (dotted names, e.g.
+``arm_swing_steady.corr_q11_q14``) and the SPEC's ratios. Rows are in the order of the SPEC's
+points. The SPEC's description (axes, ratios, maps) is in the file's metadata
+(``iceskate_study``, JSON).
 
 The file is rewritten whole as rows arrive (into a temporary file renamed over it), so it is
 always complete and readable, also after a crash: it holds every row up to the last write.
@@ -89,9 +90,11 @@ class ResultTable:
     def add(self, row: dict[str, Any]) -> None:
         """Record the row of a finished run."""
         point = self._points[row['key']]
+        row = {k: v for k, v in row.items() if v is not None}
+        if 'run_dir' in row:  # relative to the sweep's folder
+            row['run_dir'] = os.path.relpath(row['run_dir'], self.path.parent)
         self.rows[row['key']] = {'key': point.key, 'point': point.index,
-                                 'repeat': point.repeat, **point.values,
-                                 **{k: v for k, v in row.items() if v is not None}}
+                                 'repeat': point.repeat, **point.values, **row}
         self.dirty = True
 
     def _ratios(self, rows: list[dict[str, Any]]) -> None:

@@ -1,0 +1,164 @@
+"""SPEC files: validation (each refusal names its key), axes, sampling, keys of runs."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from iceskate_bringup.runner import simulate
+from iceskate_bringup.scene import load_scene, parse_scene
+from iceskate_sim.metrics import METRIC_NAMES
+from iceskate_study.errors import StudyError
+from iceskate_study.spec import expand, load_spec, parse_spec, run_key, set_key, shipped_studies
+
+
+@pytest.fixture
+def make(tmp_path, grid):
+    """``make(**changes)``: the grid SPEC with top-level keys changed (None: removed)."""
+
+    def spec(**changes):
+        raw = copy.deepcopy(grid)
+        for key, value in changes.items():
+            if value is None:
+                raw.pop(key, None)
+            else:
+                raw[key] = value
+        return parse_spec(raw, tmp_path / 'spec.yaml')
+
+    return spec
+
+
+@pytest.mark.parametrize(('axes', 'message'), [
+    ({'floor.muu': [0.01]}, r"SPEC key 'axes.floor.muu': the value 0.01 gives a bad scene: "
+                            r"scene key 'floor.muu': unknown key"),
+    ({'floor..mu': [0.01]}, r"SPEC key 'axes.floor..mu': 'floor..mu' is not a dotted scene key"),
+    ({'inputs.gait_manager.yaw.amplitud': [1.0]}, r"axes.inputs.gait_manager.yaw.amplitud'.*"
+                                                  r'unknown key yaw.amplitud'),
+    ({'disturbances[0].force[1]': [10.0]}, r'disturbances is not in the scene; give the whole '
+                                           r'list in overrides first'),
+])
+def test_a_bad_key_is_refused_naming_it(make, axes, message):
+    with pytest.raises(StudyError, match=message):
+        make(axes=axes)
+
+
+@pytest.mark.parametrize(('axis', 'message'), [
+    ({'linspace': [0.001, 0.01, 0]}, r"'axes.floor.mu.linspace': the count of values must be an "
+                                     r'integer >= 1, got 0'),
+    ({'linspace': [0.001, 0.01]}, r"'axes.floor.mu.linspace': must be \[start, stop, count\]"),
+    ({'logspace': [0.0, 0.01, 3]}, r"'axes.floor.mu.logspace': start and stop must be > 0"),
+    ({'linspace': [0.01, 0.01, 3]}, r'start and stop are equal'),
+    ({'linspace': [0.0, 5.0, 3]}, r"'axes.floor.mu': the value 2.5 gives a bad scene: scene key "
+                                  r"'floor.mu': must be in \[0, 2\], got 2.5"),
+    ({'range': [0.0, 0.01]}, r"'axes.floor.mu': a range is sampled"),
+    ({'steps': 3}, r"'axes.floor.mu': an axis is a list of values"),
+])
+def test_a_bad_range_is_refused_naming_the_axis(make, axis, message):
+    with pytest.raises(StudyError, match=message):
+        make(axes={'floor.mu': axis})
+
+
+def test_an_empty_axis_is_refused(make):
+    with pytest.raises(StudyError, match=r"SPEC key 'axes.floor.mu': an axis needs at least one "
+                                         r'value, got \[\]'):
+        make(axes={'floor.mu': []})
+    with pytest.raises(StudyError, match=r"SPEC key 'axes': must map at least one scene key"):
+        make(axes={})
+
+
+@pytest.mark.parametrize(('changes', 'message'), [
+    ({'scene': 'rink'}, r"SPEC key 'scene': unknown scene 'rink'"),
+    ({'study': None}, r"SPEC key 'study': missing"),
+    ({'repeat': 2}, r"SPEC key 'repeat': unknown key"),
+    ({'repeats': 0}, r"SPEC key 'repeats': must be an integer >= 1"),
+    ({'overrides': {'duration': -1.0}}, r"SPEC key 'overrides': the base scene with the "
+                                        r"overrides gives a bad scene: scene key 'duration'"),
+    ({'metrics': ['arm_swings']}, r"SPEC key 'metrics': 'arm_swings' is not in metrics.json"),
+    ({'sampling': 'sobol'}, r"SPEC key 'sampling': must be one of"),
+    ({'seed': 3}, r"SPEC key 'seed': is for sampling 'random' or 'latin_hypercube'"),
+    ({'maps': {'x': 'floor.mu', 'y': 'duration'}}, r"SPEC key 'maps.y': 'duration' is not an "
+                                                   r'axis'),
+    ({'ratios': {'r': {'metric': 'steps', 'baseline': {'floor.mu': 0.02}}}},
+     r"SPEC key 'ratios.r.baseline': 0.02 is not a value of axis 'floor.mu'"),
+    ({'ratios': {'r': {'metric': 'arm_swing.corr_q11_q14', 'baseline': {'floor.mu': 0.01}}}},
+     r"'arm_swing.corr_q11_q14' is not among the metrics kept"),
+    ({'bags': [{'floor.mu': 0.3}]}, r"SPEC key 'bags\[0\]': selects no point"),
+    ({'bags': [{'duration': 1.0}]}, r"SPEC key 'bags\[0\].duration': not an axis"),
+])
+def test_a_bad_spec_is_refused_naming_the_key(make, changes, message):
+    with pytest.raises(StudyError, match=message):
+        expand(make(**changes))
+
+
+def test_a_grid_makes_every_combination_first_axis_slowest(make):
+    points = expand(make(repeats=2))
+    assert [(p.index, p.repeat) for p in points] == [(i, r) for i in range(4) for r in range(2)]
+    assert [tuple(p.values.values()) for p in points[::2]] == [
+        (0.005, 0.0), (0.005, 30.0), (0.01, 0.0), (0.01, 30.0)]
+    first = points[2].raw
+    assert first['floor']['mu'] == 0.005 and first['floor']['rule'] == 'ice'
+    assert first['inputs']['gait_manager']['yaw'] == {'amplitude': 30.0}
+    assert first['duration'] == 0.5 and first['record'] == {'bag': False}
+    assert len({p.key for p in points}) == len(points)  # repeats have keys of their own
+
+
+def test_the_key_is_a_hash_of_the_scene_and_the_repeat(make):
+    a, b = expand(make()), expand(make())
+    assert [p.key for p in a] == [p.key for p in b]
+    assert a[0].key == run_key(a[0].raw, 0) != run_key(a[0].raw, 1)
+    other = copy.deepcopy(a[0].raw)
+    other['duration'] = 0.6
+    assert run_key(other, 0) != a[0].key
+
+
+@pytest.mark.parametrize('sampling', ['random', 'latin_hypercube'])
+def test_sampling_draws_in_the_ranges_with_its_seed(make, sampling):
+    axes = {'floor.mu': {'range': [0.002, 0.02], 'scale': 'log'},
+            'inputs.gait_manager.yaw.amplitude': {'range': [0.0, 40.0]}}
+    spec = make(axes=axes, sampling=sampling, samples=8, seed=4)
+    values = np.array([list(p.values.values()) for p in expand(spec)])
+    assert values.shape == (8, 2)
+    assert np.all((values[:, 0] >= 0.002) & (values[:, 0] <= 0.02))
+    assert np.all((values[:, 1] >= 0.0) & (values[:, 1] <= 40.0))
+    again = np.array([list(p.values.values()) for p in expand(spec)])
+    assert np.array_equal(values, again)
+    other = make(axes=axes, sampling=sampling, samples=8, seed=5)
+    assert not np.array_equal(values, [list(p.values.values()) for p in expand(other)])
+    if sampling == 'latin_hypercube':  # one sample in each eighth of each (log) range
+        for column, (low, high) in ((np.log(values[:, 0]), np.log([0.002, 0.02])),
+                                    (values[:, 1], (0.0, 40.0))):
+            bins = np.floor((column - low) / (high - low) * 8).astype(int)
+            assert sorted(bins) == list(range(8))
+
+
+def test_logspace_and_indexed_keys(tmp_path):
+    spec = parse_spec({'study': 'push', 'scene': 'stand', 'overrides': {'duration': 0.2},
+                       'axes': {'disturbances[0].force[1]': {'logspace': [10.0, 1000.0, 3]},
+                                'inputs.visual_lifting.kp': [[30.0, 290.0, 1100.0]]}},
+                      tmp_path / 'spec.yaml')
+    points = expand(spec)
+    assert [p.raw['disturbances'][0]['force'] for p in points] == [
+        [0.0, 10.0, 0.0], [0.0, pytest.approx(100.0), 0.0], [0.0, 1000.0, 0.0]]
+    with pytest.raises(StudyError, match=r"'axes.x': x is not in the scene; give the whole list"):
+        set_key({}, 'x[0]', 1.0, 'axes.x')
+
+
+def test_the_shipped_study_is_valid():
+    assert 'arm_swing' in shipped_studies()
+    spec = load_spec('arm_swing')
+    points = expand(spec)
+    assert len(points) == 99
+    amplitudes = sorted({p.values['inputs.gait_manager.yaw.amplitude'] for p in points})
+    frictions = sorted({p.values['floor.mu'] for p in points})
+    assert amplitudes[0] == 0.0 and amplitudes[-1] == 40.0
+    assert frictions[0] == pytest.approx(0.002) and frictions[-1] == pytest.approx(0.02)
+    assert all(p.raw['engine'] == 'native' and p.raw['duration'] == 15.0 for p in points)
+
+
+def test_metric_names_are_the_entries_of_metrics_json():
+    scene = parse_scene({**load_scene('stand').raw, 'duration': 0.05, 'record': {'bag': False},
+                         'disturbances': [{'start': 0.0, 'duration': 0.01, 'frame': 'chest',
+                                           'force': [0.0, 1.0, 0.0]}]})
+    metrics, error = simulate(scene, None, progress=False)
+    assert error is None
+    assert set(metrics) == set(METRIC_NAMES)
