@@ -10,12 +10,13 @@ IN_ENV := cd $(ROOT) && . ./env.sh &&
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.
 PYTEST_ARGS ?=
 
-.PHONY: help setup test run lint fix lock clean distclean bench stress sanitize
+.PHONY: help setup test run study lint fix lock clean distclean bench stress sanitize
 
 help:
 	@echo 'make setup      create .venv from requirements.lock and colcon-build ros_ws (idempotent)'
 	@echo 'make test       setup, then the whole pytest suite (what CI runs)'
 	@echo 'make run        setup, then run a scene headless (SCENE=skate, OUT=runs/<scene>-<time>)'
+	@echo 'make study      setup, then the shipped arm_swing study into runs/arm_swing (~3-6 min)'
 	@echo 'make bench      setup, then work-precision and laziness benchmarks into runs/bench (~4-8 min)'
 	@echo 'make stress     setup, then the stress cases and stand for STRESS_DURATION=600 s (long)'
 	@echo 'make sanitize   setup, then the native core under ASan+UBSan: its tests and 2 s of skate'
@@ -36,6 +37,12 @@ SCENE ?= skate
 OUT ?= runs/$(SCENE)-$(shell date +%Y%m%d-%H%M%S)
 run: setup
 	$(IN_ENV) run_scene $(SCENE) --out $(OUT) $(RUN_ARGS)
+
+# The shipped parameter study (iceskate_study/studies/arm_swing.yaml): table and heat maps into
+# runs/arm_swing (a second call resumes; STUDY=... for another study or a SPEC path).
+STUDY ?= arm_swing
+study: setup
+	$(IN_ENV) sweep $(STUDY) --out runs/$(notdir $(basename $(STUDY)))
 
 # The native core (iceskate_native) built under AddressSanitizer + UndefinedBehaviorSanitizer in
 # ros_ws/build-sanitize and install-sanitize; runs tests/iceskate_native and 2 s of the skate scene

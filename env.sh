@@ -36,6 +36,8 @@ esac
 
 # DDS discovery never leaves the machine (mandatory here).
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# Ray (sweep --ray) never reports usage statistics.
+export RAY_USAGE_STATS_ENABLED=0
 
 # One ROS log directory per shell (every ROS process writes a log file; rclpy.init fails when the
 # directory cannot be created).
