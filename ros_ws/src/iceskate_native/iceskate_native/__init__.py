@@ -13,6 +13,11 @@ deserialised once into a ``RobotModel`` on the C++ side::
 wraps it as a ``GaitDynamics``); ``HybridSimulator`` runs whole control periods on it (events,
 transitions, projection, health checks), wrapped by ``iceskate_sim.native_dynamics.NativePeriods``.
 
+The controller interface: a ``Controller`` (the control laws of visual_lifting and
+gait_manager implement it in C++) answers an ``Observation``, reading the robot through a
+``Kinematics``; ``ModelKinematics`` is that kinematics on the four support models
+(``iceskate_sim.native_control`` makes it from a ``Robot``).
+
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
 kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
 its kinds for a run that left the physical range), which the simulator wraps in its own error.
@@ -20,16 +25,21 @@ its kinds for a run that left the physical range), which the simulator wraps in 
 
 from ._kernel import (
     ChatteringError,
+    Controller,
     DivergenceError,
     Dynamics,
     HybridSimulator,
+    Kinematics,
+    ModelKinematics,
     NativeError,
+    Observation,
     RobotModel,
     crba_of,
 )
 
-__all__ = ['ChatteringError', 'DivergenceError', 'Dynamics', 'HybridSimulator', 'NativeError',
-           'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+__all__ = ['ChatteringError', 'Controller', 'DivergenceError', 'Dynamics', 'HybridSimulator',
+           'Kinematics', 'ModelKinematics', 'NativeError', 'Observation', 'RobotModel', 'crba_of',
+           'load_model', 'model_bytes']
 
 
 def model_bytes(model) -> bytes:

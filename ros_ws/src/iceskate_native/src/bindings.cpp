@@ -23,6 +23,7 @@
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
+#include "bindings.hpp"
 #include "iceskate_native/checks.hpp"
 #include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/errors.hpp"
@@ -44,16 +45,15 @@ using Vector = Eigen::Ref<const Eigen::VectorXd>;
 
 std::string_view view(const nb::bytes & data) { return {data.c_str(), data.size()}; }
 
-using iceskate_native::Constraint;
 using iceskate_native::Dynamics;
 using iceskate_native::DynamicsResult;
 using iceskate_native::Vector18;
 
-/// (number, y0_active, q1_active, swing_sliding, active coordinates, constraint names)
-using ModeRow = std::tuple<int, bool, bool, bool, std::vector<int>, std::vector<std::string>>;
+using iceskate_native::bindings::mode_table;
+using iceskate_native::bindings::ModeRow;
 /// (mu, baumgarte, joint_limits, limit_stiffness, limit_damping, damping)
 using ParameterRow = std::tuple<double, double, bool, double, double, bool>;
-using Frames = std::map<std::string, int>;
+using iceskate_native::bindings::Frames;
 using Optional = std::optional<Eigen::VectorXd>;
 
 Vector18 vector18(const Vector & value, const char * name)
@@ -61,33 +61,6 @@ Vector18 vector18(const Vector & value, const char * name)
   iceskate_native::require_finite_vector(value, iceskate_native::kCoordinates, name,
                                          "[y0, q1..q17]");
   return value;
-}
-
-iceskate_native::ModeTable mode_table(const std::vector<ModeRow> & rows)
-{
-  if (rows.size() != iceskate_native::kModes) {
-    throw std::invalid_argument("the mode table needs the 20 modes of Table 2, got "
-                                + std::to_string(rows.size()));
-  }
-  iceskate_native::ModeTable table;
-  for (std::size_t k = 0; k < rows.size(); ++k) {
-    auto & mode = table[k];
-    std::vector<std::string> names;
-    std::tie(mode.number, mode.y0_active, mode.q1_active, mode.swing_sliding, mode.active,
-             names) = rows[k];
-    for (const auto & name : names) {
-      if (name == "hz") {
-        mode.constraints.push_back(Constraint::kHeelZ);
-      } else if (name == "hy") {
-        mode.constraints.push_back(Constraint::kHeelY);
-      } else if (name == "fr") {
-        mode.constraints.push_back(Constraint::kSoleFlat);
-      } else {
-        throw std::invalid_argument("unknown swing constraint '" + name + "' (hz, hy or fr)");
-      }
-    }
-  }
-  return table;
 }
 
 /// Construct a Dynamics in place at `self` from the Python-side description of the robot.
@@ -492,4 +465,6 @@ NB_MODULE(_kernel, m)
     .def_prop_ro(
       "ended", [](const HybridSimulator & self) { return static_cast<int>(self.ended()); },
       "0 running, 1 flight, 2 toe-first touchdown, 3 fall.");
+
+  iceskate_native::bindings::bind_controller(m);
 }

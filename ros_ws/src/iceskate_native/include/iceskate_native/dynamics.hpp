@@ -24,7 +24,6 @@
 namespace iceskate_native
 {
 
-using Vector18 = Eigen::Matrix<double, kCoordinates, 1>;
 using Wrench = Eigen::Matrix<double, 6, 1>;
 
 /// A model rooted at one support foot with one pivot edge (Table-2 coordinates, nq = nv = 18)

@@ -6,12 +6,11 @@
 #include <array>
 #include <vector>
 
+#include "iceskate_native/coordinates.hpp"
+
 namespace iceskate_native
 {
 
-constexpr int kCoordinates = 18;  // [y0, q1, ..., q17]
-constexpr int kY0 = 0;
-constexpr int kQ1 = 1;
 constexpr int kModes = 20;
 
 /// A swing-foot constraint: heel height (hz), heel forward position (hy), flat sole (fr).

@@ -1,0 +1,54 @@
+// ModelKinematics: the Kinematics interface (kinematics.hpp) on Pinocchio, over the same four
+// support models and mode table the Dynamics kernel gets, with a pinocchio::Data of its own per
+// model (the laws never disturb the dynamics' workspaces). The native counterpart of what the
+// Python laws read from iceskate_sim.dynamics.GaitDynamics and its Pinocchio models.
+#pragma once
+
+#include <array>
+#include <memory>
+
+#include "iceskate_native/dynamics.hpp"
+#include "iceskate_native/kinematics.hpp"
+
+namespace iceskate_native
+{
+
+class ModelKinematics final : public Kinematics
+{
+public:
+  /// models: indexed side * 2 + pivot, each with the frames head_top, swing_heel, support_toe
+  /// and pelvis_centre and the joints y0, q1..q17; total_mass [kg]. std::invalid_argument for
+  /// a missing frame or joint or a bad mode table.
+  ModelKinematics(std::array<SupportModel, 4> models, ModeTable modes, double total_mass);
+  ~ModelKinematics() override;
+  ModelKinematics(const ModelKinematics &) = delete;
+  ModelKinematics & operator=(const ModelKinematics &) = delete;
+
+  const Mode & mode(int number) const override;
+  double total_mass() const override { return mass_; }
+  Eigen::Vector3d joint_placement(int side, int pivot, int joint) const override;
+  Eigen::Vector3d frame_offset(int side, int pivot, Frame frame) const override;
+  HeadPose head_pose(const SupportState & state, const Vector18 & q) override;
+  Vector18 gravity(const SupportState & state, const Vector18 & q) override;
+  Vector18 swing_heel_z_row(const SupportState & state, const Vector18 & q) override;
+  CentreOfMass centre_of_mass(const SupportState & state, const Vector18 & q,
+                              const Vector18 & v) override;
+  Eigen::Vector3d frame_position(const SupportState & state, const Vector18 & q,
+                                 Frame frame) override;
+  Eigen::Vector3d joint_position(const SupportState & state, const Vector18 & q,
+                                 int joint) override;
+  Eigen::Vector3d joint_velocity(const SupportState & state, const Vector18 & q,
+                                 const Vector18 & v, int joint) override;
+
+private:
+  struct Workspace;  // Pinocchio data and argument buffers (in model_kinematics.cpp)
+
+  int model_index(int side, int pivot) const;
+
+  std::array<SupportModel, 4> models_;
+  ModeTable modes_;
+  double mass_;
+  std::unique_ptr<Workspace> work_;
+};
+
+}  // namespace iceskate_native

@@ -1,0 +1,245 @@
+// Bindings of the controller interface (controller.hpp, kinematics.hpp) and ModelKinematics,
+// part of iceskate_native._kernel: the base types Kinematics and Controller, which the
+// controller packages' modules (visual_lifting._law, gait_manager._law) derive from and receive
+// (nanobind shares registered types between modules built with the same nanobind), the
+// Observation a law answers, and the queries of a Kinematics (tested against the Python model).
+#include <array>
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include <nanobind/eigen/dense.h>
+#include <nanobind/nanobind.h>
+#include <nanobind/stl/map.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include "bindings.hpp"
+#include "iceskate_native/checks.hpp"
+#include "iceskate_native/controller.hpp"
+#include "iceskate_native/kinematics.hpp"
+#include "iceskate_native/model.hpp"
+#include "iceskate_native/model_kinematics.hpp"
+
+namespace nb = nanobind;
+using nb::literals::operator""_a;
+
+namespace iceskate_native::bindings
+{
+
+namespace
+{
+
+using Vector = Eigen::Ref<const Eigen::VectorXd>;
+using Optional = std::optional<Eigen::VectorXd>;
+/// (source, effort, stiffness, damping, reference); the last three None without an impedance.
+using SourceRow = std::tuple<std::string, Eigen::VectorXd, Optional, Optional, Optional>;
+
+Vector18 vector18(const Vector & value, const char * name)
+{
+  require_finite_vector(value, kCoordinates, name, "[y0, q1..q17]");
+  return value;
+}
+
+Frame frame_named(const std::string & name)
+{
+  static const std::array<std::pair<const char *, Frame>, 4> frames{{
+    {"head_top", Frame::kHeadTop},
+    {"swing_heel", Frame::kSwingHeel},
+    {"support_toe", Frame::kSupportToe},
+    {"pelvis_centre", Frame::kPelvisCentre}}};
+  for (const auto & [known, frame] : frames) {
+    if (name == known) {
+      return frame;
+    }
+  }
+  throw std::invalid_argument(
+    "unknown frame '" + name + "' (head_top, swing_heel, support_toe or pelvis_centre)");
+}
+
+void construct_kinematics(
+  ModelKinematics * self, const std::vector<RobotModel> & models,
+  const std::vector<Frames> & frames, const std::vector<ModeRow> & modes, double total_mass)
+{
+  if (models.size() != 4 || frames.size() != 4) {
+    throw std::invalid_argument(
+      "four support models (index side * 2 + pivot) and their frames are needed");
+  }
+  new (self) ModelKinematics(
+    {SupportModel{models[0], frames[0]}, SupportModel{models[1], frames[1]},
+     SupportModel{models[2], frames[2]}, SupportModel{models[3], frames[3]}},
+    mode_table(modes), total_mass);
+}
+
+void construct_observation(
+  Observation * self, double t, const Vector & q, const Vector & v, int mode, int side,
+  int pivot, int step_index, double t_exchange, double heel_anchor_y, double t_touchdown)
+{
+  if (!std::isfinite(t) || !std::isfinite(t_exchange) || !std::isfinite(heel_anchor_y)) {
+    throw std::invalid_argument("the observation's t, t_exchange and heel_anchor_y must be "
+                                "finite");
+  }
+  if (std::isinf(t_touchdown)) {
+    throw std::invalid_argument("the observation's t_touchdown must be finite or NaN (none)");
+  }
+  if (mode < 1 || mode > kModes) {
+    throw std::invalid_argument(
+      "observation mode " + std::to_string(mode) + " is not a Table 2 mode (1-20)");
+  }
+  if (side < 0 || side > 1 || pivot < 0 || pivot > 1 || step_index < 0) {
+    throw std::invalid_argument(
+      "observation side and pivot must be 0 or 1, and step_index >= 0");
+  }
+  new (self) Observation{
+    t, vector18(q, "q"), vector18(v, "v"), mode, side, pivot, step_index, t_exchange,
+    heel_anchor_y, t_touchdown};
+}
+
+SupportState support_state(int mode, int side, int pivot)
+{
+  if (side < 0 || side > 1 || pivot < 0 || pivot > 1) {
+    throw std::invalid_argument("side and pivot must be 0 or 1");
+  }
+  return {mode, side, pivot};
+}
+
+Optional optional(bool given, const Vector18 & value)
+{
+  return given ? Optional(Eigen::VectorXd(value)) : std::nullopt;
+}
+
+}  // namespace
+
+void bind_controller(nb::module_ & m)
+{
+  nb::class_<Kinematics>(
+    m, "Kinematics",
+    "The robot model as the control laws read it (abstract; ModelKinematics implements it). "
+    "Joints are numbered by coordinate (0: y0, i: q_i); states by (mode, side 0 right / 1 "
+    "left, pivot 0 toe / 1 heel).")
+    .def_prop_ro("total_mass", &Kinematics::total_mass, "Total mass [kg].")
+    .def(
+      "head_pose",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q) {
+        const auto pose = self.head_pose(support_state(mode, side, pivot), vector18(q, "q"));
+        return std::make_tuple(Eigen::VectorXd(pose.psi), Eigen::MatrixXd(pose.jacobian));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a,
+      "(psi (3,), J_H (3, 18)): head-top (y [m], z [m], pitch [rad]) and d psi / d q.")
+    .def(
+      "gravity",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q) {
+        return Eigen::VectorXd(self.gravity(support_state(mode, side, pivot), vector18(q, "q")));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "g(q) (18,) [N m, N]; locked entries 0.")
+    .def(
+      "swing_heel_z_row",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q) {
+        return Eigen::VectorXd(
+          self.swing_heel_z_row(support_state(mode, side, pivot), vector18(q, "q")));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "d z_heel / d q of the swing heel (18,).")
+    .def(
+      "centre_of_mass",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q, const Vector & v) {
+        const auto com =
+          self.centre_of_mass(support_state(mode, side, pivot), vector18(q, "q"),
+                              vector18(v, "v"));
+        return std::make_tuple(Eigen::VectorXd(com.position), Eigen::VectorXd(com.velocity),
+                               Eigen::VectorXd(com.jacobian_y));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "v"_a,
+      "(position [m], velocity [m/s], d y_com / d q (18,)) of the centre of mass.")
+    .def(
+      "frame_position",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q,
+         const std::string & frame) {
+        return Eigen::VectorXd(self.frame_position(
+          support_state(mode, side, pivot), vector18(q, "q"), frame_named(frame)));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "frame"_a, "World position [m] of a frame.")
+    .def(
+      "joint_position",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q, int joint) {
+        return Eigen::VectorXd(
+          self.joint_position(support_state(mode, side, pivot), vector18(q, "q"), joint));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "joint"_a, "World position [m] of a joint.")
+    .def(
+      "joint_velocity",
+      [](Kinematics & self, int mode, int side, int pivot, const Vector & q, const Vector & v,
+         int joint) {
+        return Eigen::VectorXd(self.joint_velocity(
+          support_state(mode, side, pivot), vector18(q, "q"), vector18(v, "v"), joint));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "q"_a, "v"_a, "joint"_a,
+      "World-aligned linear velocity [m/s] of a joint's origin.")
+    .def(
+      "joint_placement",
+      [](const Kinematics & self, int side, int pivot, int joint) {
+        return Eigen::VectorXd(self.joint_placement(side, pivot, joint));
+      },
+      "side"_a, "pivot"_a, "joint"_a, "A joint's placement in its parent joint [m].")
+    .def(
+      "frame_offset",
+      [](const Kinematics & self, int side, int pivot, const std::string & frame) {
+        return Eigen::VectorXd(self.frame_offset(side, pivot, frame_named(frame)));
+      },
+      "side"_a, "pivot"_a, "frame"_a, "A frame's position in its parent joint [m].");
+
+  nb::class_<ModelKinematics, Kinematics>(
+    m, "ModelKinematics",
+    "Kinematics on Pinocchio over the four support models (index side * 2 + pivot, as "
+    "Dynamics takes them), with its own workspaces: one instance per thread.")
+    .def("__init__", &construct_kinematics, "models"_a, "frames"_a, "modes"_a, "total_mass"_a);
+
+  nb::class_<Observation>(
+    m, "Observation",
+    "The state a control law answers (iceskate_sim.observation.Observation with side 0 right / "
+    "1 left, pivot 0 toe / 1 heel; t_touchdown NaN: none). ValueError for a bad field.")
+    .def(
+      "__init__", &construct_observation, "t"_a, "q"_a, "v"_a, "mode"_a, "side"_a, "pivot"_a,
+      "step_index"_a, "t_exchange"_a, "heel_anchor_y"_a, "t_touchdown"_a)
+    .def_ro("t", &Observation::t)
+    .def_prop_ro("q", [](const Observation & o) { return Eigen::VectorXd(o.q); })
+    .def_prop_ro("v", [](const Observation & o) { return Eigen::VectorXd(o.v); })
+    .def_ro("mode", &Observation::mode)
+    .def_ro("side", &Observation::side)
+    .def_ro("pivot", &Observation::pivot)
+    .def_ro("step_index", &Observation::step_index)
+    .def_ro("t_exchange", &Observation::t_exchange)
+    .def_ro("heel_anchor_y", &Observation::heel_anchor_y)
+    .def_ro("t_touchdown", &Observation::t_touchdown);
+
+  nb::class_<Controller>(
+    m, "Controller",
+    "A control law (abstract; the controller packages implement it in C++).")
+    .def(
+      "compute",
+      [](Controller & self, const Observation & obs, Kinematics & kinematics) {
+        ControllerOutput out;
+        self.compute(obs, kinematics, out);
+        std::vector<SourceRow> sources;
+        for (const auto & [source, c] : out.sources) {
+          sources.emplace_back(source, Eigen::VectorXd(c.effort),
+                               optional(c.has_impedance, c.stiffness),
+                               optional(c.has_impedance, c.damping),
+                               optional(c.has_impedance, c.reference));
+        }
+        return std::make_tuple(
+          std::move(sources),
+          out.has_head_target ? Optional(Eigen::VectorXd(out.head_target)) : std::nullopt);
+      },
+      "obs"_a, "kinematics"_a,
+      "The command at obs: ([(source, effort, stiffness, damping, reference)], head_target); "
+      "stiffness, damping and reference are None for a plain torque, head_target None when "
+      "the law steers no head target.");
+}
+
+}  // namespace iceskate_native::bindings

@@ -1,0 +1,263 @@
+#include "iceskate_native/model_kinematics.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <pinocchio/algorithm/center-of-mass.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/multibody.hpp>
+
+namespace iceskate_native
+{
+
+namespace
+{
+
+constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
+constexpr int kFrames = 4;
+
+using ConstVector = Eigen::Ref<const Eigen::VectorXd>;  // selects Pinocchio's compiled algorithms
+
+const char * frame_name(Frame frame)
+{
+  switch (frame) {
+    case Frame::kHeadTop:
+      return "head_top";
+    case Frame::kSwingHeel:
+      return "swing_heel";
+    case Frame::kSupportToe:
+      return "support_toe";
+    case Frame::kPelvisCentre:
+      return "pelvis_centre";
+  }
+  throw std::invalid_argument("unknown frame");
+}
+
+std::string joint_name(int joint) { return joint == kY0 ? "y0" : "q" + std::to_string(joint); }
+
+void check_joint(int joint)
+{
+  if (joint < 0 || joint >= kCoordinates) {
+    throw std::invalid_argument(
+      "joint " + std::to_string(joint) + " out of range: joints are numbered 0 (y0) to 17");
+  }
+}
+
+}  // namespace
+
+struct ModelKinematics::Workspace
+{
+  std::vector<pinocchio::Data> data;  // one per support model
+  // Pinocchio indices per model: joint of coordinate i, and the frames in Frame's order
+  std::array<std::array<pinocchio::JointIndex, kCoordinates>, 4> joints{};
+  std::array<std::array<pinocchio::FrameIndex, kFrames>, 4> frames{};
+  Eigen::VectorXd q, v;  // Pinocchio's argument type
+  pinocchio::Data::Matrix6x jacobian;
+};
+
+ModelKinematics::ModelKinematics(
+  std::array<SupportModel, 4> models, ModeTable modes, double total_mass)
+: models_(std::move(models)),
+  modes_(std::move(modes)),
+  mass_(total_mass),
+  work_(std::make_unique<Workspace>())
+{
+  check_modes(modes_);
+  if (!(total_mass > 0.0) || !std::isfinite(total_mass)) {
+    throw std::invalid_argument("total_mass must be a finite mass > 0 kg");
+  }
+  Workspace & w = *work_;
+  w.data.reserve(models_.size());  // each Data built in place once (see Dynamics)
+  for (std::size_t k = 0; k < models_.size(); ++k) {
+    const SupportModel & support = models_[k];
+    const pinocchio::Model & model = support.model.pin();
+    if (support.model.nq() != kCoordinates || support.model.nv() != kCoordinates) {
+      throw std::invalid_argument("a support model must have 18 coordinates (nq = nv = 18)");
+    }
+    for (int i = 0; i < kCoordinates; ++i) {
+      const std::string name = joint_name(i);
+      if (!model.existJointName(name)) {
+        throw std::invalid_argument("support model '" + model.name + "' has no joint " + name);
+      }
+      w.joints[k][static_cast<std::size_t>(i)] = model.getJointId(name);
+    }
+    for (int f = 0; f < kFrames; ++f) {
+      const int id = support.frame(frame_name(static_cast<Frame>(f)));
+      if (id < 0 || id >= static_cast<int>(model.nframes)) {
+        throw std::invalid_argument(
+          std::string("frame index of '") + frame_name(static_cast<Frame>(f)) + "' out of range");
+      }
+      w.frames[k][static_cast<std::size_t>(f)] = static_cast<pinocchio::FrameIndex>(id);
+    }
+    w.data.emplace_back(model);
+  }
+  w.q.resize(kCoordinates);
+  w.v.resize(kCoordinates);
+  w.jacobian.setZero(6, kCoordinates);
+}
+
+ModelKinematics::~ModelKinematics() = default;
+
+int ModelKinematics::model_index(int side, int pivot) const
+{
+  if (side < 0 || side > 1 || pivot < 0 || pivot > 1) {
+    throw std::invalid_argument("side and pivot must be 0 or 1");
+  }
+  return side * 2 + pivot;
+}
+
+const Mode & ModelKinematics::mode(int number) const
+{
+  if (number < 1 || number > kModes) {
+    throw std::invalid_argument(
+      "unknown gait mode " + std::to_string(number) + "; Table 2 has modes 1-20");
+  }
+  return modes_[static_cast<std::size_t>(number - 1)];
+}
+
+Eigen::Vector3d ModelKinematics::joint_placement(int side, int pivot, int joint) const
+{
+  check_joint(joint);
+  const auto k = static_cast<std::size_t>(model_index(side, pivot));
+  return models_[k].model.pin().jointPlacements[work_->joints[k][static_cast<std::size_t>(joint)]]
+    .translation();
+}
+
+Eigen::Vector3d ModelKinematics::frame_offset(int side, int pivot, Frame frame) const
+{
+  const auto k = static_cast<std::size_t>(model_index(side, pivot));
+  return models_[k].model.pin().frames[work_->frames[k][static_cast<std::size_t>(frame)]]
+    .placement.translation();
+}
+
+HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)
+{
+  const Mode & m = mode(state.mode);
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[k];
+  const auto head = w.frames[k][static_cast<std::size_t>(Frame::kHeadTop)];
+  w.q = q;
+  pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(model, data, head);
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(model, data, head, kWorldAligned, w.jacobian);
+  const Eigen::Matrix3d & rotation = placement.rotation();
+  const double zx = rotation(0, 2), zy = rotation(1, 2), zz = rotation(2, 2);
+  const double denom = zy * zy + zz * zz;
+  const Eigen::RowVector3d pitch(1.0, -zx * zy / denom, -zx * zz / denom);
+  HeadPose pose;
+  pose.psi << placement.translation()[1], placement.translation()[2],
+    std::atan2(-rotation(1, 2), rotation(2, 2));
+  pose.jacobian.row(0) = w.jacobian.row(1);
+  pose.jacobian.row(1) = w.jacobian.row(2);
+  pose.jacobian.row(2) = pitch * w.jacobian.bottomRows<3>();
+  if (!m.y0_active) {
+    pose.jacobian.col(kY0).setZero();
+  }
+  if (!m.q1_active) {
+    pose.jacobian.col(kQ1).setZero();
+  }
+  return pose;
+}
+
+Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q)
+{
+  const Mode & m = mode(state.mode);
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  Workspace & w = *work_;
+  w.q = q;
+  const Vector18 g =
+    pinocchio::computeGeneralizedGravity(models_[k].model.pin(), w.data[k], ConstVector(w.q));
+  Vector18 out = Vector18::Zero();
+  for (int i : m.active) {
+    out[i] = g[i];
+  }
+  return out;
+}
+
+Vector18 ModelKinematics::swing_heel_z_row(const SupportState & state, const Vector18 & q)
+{
+  const Mode & m = mode(state.mode);
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  w.q = q;
+  pinocchio::computeJointJacobians(model, w.data[k], ConstVector(w.q));
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(model, w.data[k], w.frames[k][static_cast<std::size_t>(
+                                Frame::kSwingHeel)], kWorldAligned, w.jacobian);
+  Vector18 row = w.jacobian.row(2).transpose();
+  if (!m.y0_active) {
+    row[kY0] = 0.0;
+  }
+  if (!m.q1_active) {
+    row[kQ1] = 0.0;
+  }
+  return row;
+}
+
+CentreOfMass ModelKinematics::centre_of_mass(
+  const SupportState & state, const Vector18 & q, const Vector18 & v)
+{
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[k];
+  w.q = q;
+  w.v = v;
+  CentreOfMass com;
+  pinocchio::centerOfMass(model, data, ConstVector(w.q), ConstVector(w.v));
+  com.position = data.com[0];
+  com.velocity = data.vcom[0];
+  com.jacobian_y = pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
+  return com;
+}
+
+Eigen::Vector3d ModelKinematics::frame_position(
+  const SupportState & state, const Vector18 & q, Frame frame)
+{
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  w.q = q;
+  pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q));
+  return pinocchio::updateFramePlacement(
+           model, w.data[k], w.frames[k][static_cast<std::size_t>(frame)])
+    .translation();
+}
+
+Eigen::Vector3d ModelKinematics::joint_position(
+  const SupportState & state, const Vector18 & q, int joint)
+{
+  check_joint(joint);
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  Workspace & w = *work_;
+  w.q = q;
+  pinocchio::forwardKinematics(models_[k].model.pin(), w.data[k], ConstVector(w.q));
+  return w.data[k].oMi[w.joints[k][static_cast<std::size_t>(joint)]].translation();
+}
+
+Eigen::Vector3d ModelKinematics::joint_velocity(
+  const SupportState & state, const Vector18 & q, const Vector18 & v, int joint)
+{
+  check_joint(joint);
+  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  w.q = q;
+  w.v = v;
+  pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q), ConstVector(w.v));
+  return pinocchio::getVelocity(
+           model, w.data[k], w.joints[k][static_cast<std::size_t>(joint)], kWorldAligned)
+    .linear();
+}
+
+}  // namespace iceskate_native

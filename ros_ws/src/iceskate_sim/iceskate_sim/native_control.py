@@ -1,0 +1,44 @@
+"""The native control laws seen from Python: their robot model, their input, their answer.
+
+The laws of visual_lifting and gait_manager run in C++ (``iceskate_native.Controller``
+subclasses of their packages' ``_law`` modules) and read the robot through an
+``iceskate_native.ModelKinematics`` over the same four support models the dynamics use. This
+module makes that kinematics from a ``Robot``, turns an ``Observation`` into the native one
+(side 0 right / 1 left, pivot 0 toe / 1 heel) and a law's answer into the ``ControllerCommand``
+a controller sends, so that the headless composition and the ROS nodes share this one path.
+"""
+
+from __future__ import annotations
+
+import iceskate_native
+from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_sim.modes import MODES
+from iceskate_sim.observation import Observation
+from iceskate_sim.robot import PIVOTS, SIDES, Robot
+
+
+def native_kinematics(robot: Robot) -> iceskate_native.ModelKinematics:
+    """The laws' view of ``robot`` (its own Pinocchio workspaces: one per thread)."""
+    keys = [(side, pivot) for side in SIDES for pivot in PIVOTS]  # index side * 2 + pivot
+    models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
+    frames = [dict(robot.models[key].frame_ids) for key in keys]
+    modes = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
+              list(m.constraints)) for m in MODES.values()]
+    return iceskate_native.ModelKinematics(models, frames, modes, robot.total_mass)
+
+
+def native_observation(obs: Observation) -> iceskate_native.Observation:
+    """``obs`` as the native laws take it."""
+    return iceskate_native.Observation(
+        obs.t, obs.q, obs.v, obs.mode, obs.a, PIVOTS.index(obs.pivot), obs.step_index,
+        obs.t_exchange, obs.heel_anchor_y, obs.t_touchdown)
+
+
+def native_command(controller: iceskate_native.Controller, obs: Observation,
+                   kinematics: iceskate_native.Kinematics) -> ControllerCommand:
+    """What ``controller`` sends at ``obs``: its sources' commands summed, each source's
+    generalized force at (q, v), and its head target (if it steers one)."""
+    sources, head_target = controller.compute(native_observation(obs), kinematics)
+    commands = {source: JointCommand(effort, stiffness, damping, reference)
+                for source, effort, stiffness, damping, reference in sources}
+    return ControllerCommand.of(commands, obs.q, obs.v, head_target)
