@@ -23,7 +23,8 @@ Every generated scene is validated (``iceskate_bringup.scene.parse_scene``) befo
 starts; anything wrong is a ``StudyError`` naming the SPEC key (``SPEC key 'axes.floor.mu':
 ...``), with the scene's own message when a value makes a bad scene. Each run is keyed by a
 hash of its whole scene mapping and its repeat index, so the same run has the same key in
-every sweep.
+every sweep (a scene without ``engine`` gets the default one written in, so it is in the key
+too).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from iceskate_bringup.scene import parse_scene, scene_path
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.metrics import METRIC_NAMES
 from iceskate_sim.robot import ament_prefixes
+from iceskate_sim.scene import Scene
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
 
@@ -376,9 +378,9 @@ def _base_scene(raw: Any, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, A
     return scene_file.resolve(), base
 
 
-def _check_scene(raw: dict[str, Any], where: str, what: str) -> None:
+def _check_scene(raw: dict[str, Any], where: str, what: str) -> Scene:
     try:
-        parse_scene(raw)
+        return parse_scene(raw)
     except SimulationError as exc:
         raise _fail(where, f'{what} gives a bad scene: {exc}') from None
 
@@ -557,7 +559,8 @@ def expand(spec: Spec) -> list[Point]:
         bag = spec.bags is None or selected[index]
         set_key(raw, 'record.bag', bag, 'bags')
         where = ', '.join(f'{k}={v!r}' for k, v in zip(keys, combo, strict=True))
-        _check_scene(raw, 'axes', f'the point {where}')
+        scene = _check_scene(raw, 'axes', f'the point {where}')
+        raw.setdefault('engine', scene.simulator.engine)  # the default engine is in the key
         for repeat in range(spec.repeats):
             points.append(Point(index, repeat, dict(zip(keys, combo, strict=True)), raw,
                                 run_key(raw, repeat), bag))
