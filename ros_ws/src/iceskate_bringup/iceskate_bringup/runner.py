@@ -149,8 +149,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
     parser.add_argument('--duration', type=float, help='override the scene duration [s]')
     parser.add_argument('--engine', choices=('python', 'native'),
-                        help="where eq. (7) is solved (default: the scene's engine, else "
-                             "'python')")
+                        help="where the physics runs (default: the scene's engine, else "
+                             "'native'; 'python' is the reference implementation)")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--ros', action='store_true',
                         help='run through the ROS 2 node graph (iceskate_bringup.graph)')

@@ -457,11 +457,11 @@ NB_MODULE(_kernel, m)
       [](const HybridSimulator & self) {
         const auto & s = self.statistics();
         return std::make_tuple(s.steps, s.evaluations, s.control_periods,
-                               s.max_constraint_residual, s.suppressed_cycles,
-                               s.resolved_cycles);
+                               s.max_constraint_residual, s.max_constraint_drift,
+                               s.suppressed_cycles, s.resolved_cycles);
       },
-      "(steps, evaluations, control_periods, max_constraint_residual, suppressed_cycles, "
-      "resolved_cycles)")
+      "(steps, evaluations, control_periods, max_constraint_residual, max_constraint_drift, "
+      "suppressed_cycles, resolved_cycles)")
     .def_prop_ro(
       "ended", [](const HybridSimulator & self) { return static_cast<int>(self.ended()); },
       "0 running, 1 flight, 2 toe-first touchdown, 3 fall.");

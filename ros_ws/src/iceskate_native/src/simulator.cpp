@@ -264,7 +264,7 @@ bool HybridSimulator::project(Eigen::VectorXd & residual)
   const HybridState & s = state_;
   const ConstraintRows c = dynamics_.constraints(s.contact, s.q);
   const double worst = c.position.cwiseAbs().maxCoeff();
-  stats_.max_constraint_residual = std::max(stats_.max_constraint_residual, worst);
+  stats_.max_constraint_drift = std::max(stats_.max_constraint_drift, worst);
   if (worst < 1e-12 && (c.rows * s.v).cwiseAbs().maxCoeff() < 1e-12) {
     residual = c.position;  // nothing to correct
     return true;
@@ -310,6 +310,7 @@ void HybridSimulator::check_health(const Eigen::VectorXd * residual)
                            ? residual->cwiseAbs().maxCoeff()
                            : dynamics_.constraints(s.contact, s.q).position.cwiseAbs().maxCoeff();
     stats_.max_constraint_residual = std::max(stats_.max_constraint_residual, worst);
+    stats_.max_constraint_drift = std::max(stats_.max_constraint_drift, worst);
     if (worst > settings_.residual_bound) {
       diverged(format("constraint residual %.3g beyond %g", worst, settings_.residual_bound), s);
     }

@@ -19,8 +19,8 @@ PIVOT_CODE = {'toe': 1, 'heel': 2}
 #: only for a run with samples, ``head_error_final_max`` only for a scene with pushes.
 METRIC_NAMES = (
     'scene', 'sim_time_s', 'wall_time_s', 'real_time_factor', 'steps', 'fell', 'failure',
-    'interrupted', 'transitions', 'max_constraint_residual', 'physics_steps',
-    'dynamics_evaluations', 'suppressed_cycles', 'resolved_cycles', 'sources',
+    'interrupted', 'transitions', 'max_constraint_residual', 'max_constraint_drift',
+    'physics_steps', 'dynamics_evaluations', 'suppressed_cycles', 'resolved_cycles', 'sources',
     'rejected_commands', 'head_error_rms', 'forward_distance_m', 'head_error_final_max',
     'mode_time_fraction', 'zmp_outside_support_fraction', 'edge_mode_fraction',
     'support_positions_m', 'mode_sequence_per_step', 'arm_swing', 'arm_swing_steady',
@@ -108,6 +108,7 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
         'steps': int(sim.state.step_index), 'fell': failure is not None and not interrupted,
         'failure': failure, 'interrupted': interrupted, 'transitions': len(sim.events),
         'max_constraint_residual': float(sim.stats.max_constraint_residual),
+        'max_constraint_drift': float(sim.stats.max_constraint_drift),
         'physics_steps': sim.stats.steps, 'dynamics_evaluations': sim.stats.evaluations,
         'suppressed_cycles': sim.stats.suppressed_cycles,
         'resolved_cycles': sim.stats.resolved_cycles,

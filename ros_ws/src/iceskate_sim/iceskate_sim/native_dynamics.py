@@ -194,19 +194,23 @@ class NativePeriods:
                 integrator.step, integrator.event_tolerance, friction.mu, friction.rule == 'ice',
                 GUARD_CONSTANTS, GUARD_MARGIN, guards, projection, residual_bound, fall_height,
                 max_speed, max_instant_transitions, zeno_window, chatter_dwell)
-        except (ValueError, TypeError) as exc:
-            raise SimulationError(f'native simulator: {exc}') from None
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'native simulator: {exc} (initial state: '
+                                  f'{initial.summary()})') from None
 
     def reset(self) -> None:
         """Back to the initial state (the log and counters cleared)."""
-        self._kernel.reset()
+        try:
+            self._kernel.reset()
+        except iceskate_native.NativeError as exc:
+            raise SimulationError(f'native simulator: {exc} (initial state)') from None
 
     def set_state(self, state: HybridState) -> None:
         """Continue from ``state`` (the event log, counters and rested guards kept)."""
         try:
             self._kernel.set_state(_state_row(state))
-        except (ValueError, TypeError) as exc:
-            raise SimulationError(f'native simulator: {exc}') from None
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'native simulator: {exc} ({state.summary()})') from None
 
     def advance(self, command: HeldCommand, push: tuple[str, np.ndarray] | None) -> None:
         """One control period holding ``command`` (and ``push``).
@@ -249,9 +253,9 @@ class NativePeriods:
                 for t, from_mode, to_mode, event, guard, impulse, step_index, side
                 in self._kernel.events_since(first)]
 
-    def statistics(self) -> tuple[int, int, int, float, int, int]:
-        """(steps, evaluations, control_periods, max_constraint_residual, suppressed_cycles,
-        resolved_cycles)."""
+    def statistics(self) -> tuple[int, int, int, float, float, int, int]:
+        """(steps, evaluations, control_periods, max_constraint_residual,
+        max_constraint_drift, suppressed_cycles, resolved_cycles)."""
         return self._kernel.statistics
 
     def ended(self) -> str | None:

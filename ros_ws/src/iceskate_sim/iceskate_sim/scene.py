@@ -191,7 +191,7 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         limit_damping=_number(dyn, 'limit_damping', 'dynamics.limit_damping', 100.0, low=0.0,
                               high=1e5))
     fall_height = _number(raw, 'fall_height', 'fall_height', 1.2, low=0.0, high=1.7)
-    engine = _choice(raw, 'engine', 'engine', 'python', ENGINES)
+    engine = _choice(raw, 'engine', 'engine', 'native', ENGINES)
     try:
         simulator = SimulatorConfig(control_period=control_period, integrator=integrator,
                                     friction=friction, dynamics=dynamics, projection=projection,

@@ -52,7 +52,7 @@ PARAMETERS = (
     ('scene', '', 'path of the scene YAML (its simulator part: floor, initial state, '
      'integrator, disturbances, duration, recording)', None),
     ('duration', 0.0, 'run length [s]; 0: the scene duration', (0.0, 3600.0)),
-    ('engine', '', "where eq. (7) is solved: 'python' or 'native' ('': the scene's)", None),
+    ('engine', '', "where the physics runs: 'native' or 'python' ('': the scene's)", None),
     ('lockstep', True, 'wait for every command stamped t_k (else free-running)', None),
     ('realtime_factor', 1.0, 'free-running pace [simulated s per wall s]', (1e-3, 1e3)),
     ('control_timeout', 5.0, 'a controller silent this long ends the run [s]', (1e-3, 3600.0)),

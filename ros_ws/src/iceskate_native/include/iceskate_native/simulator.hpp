@@ -76,7 +76,8 @@ struct RunStatistics
   long steps = 0;
   long evaluations = 0;
   long control_periods = 0;
-  double max_constraint_residual = 0.0;
+  double max_constraint_residual = 0.0;  ///< of the states a period ends in [m, rad]
+  double max_constraint_drift = 0.0;     ///< a period leaves before its projection [m, rad]
   long suppressed_cycles = 0;
   long resolved_cycles = 0;
 };
