@@ -12,8 +12,11 @@ rows for the same tasks.
 * ``RayExecutor``: ``ray.init(address=...)`` joins a running cluster, ``'local'`` starts an
   instance on this machine bound to the loopback address (no dashboard). Ray's usage-statistics
   reporting is switched off (``RAY_USAGE_STATS_ENABLED=0``) unless the environment says
-  otherwise. Each run is one task of one CPU; Ray keeps its worker processes, and with them
-  the loaded model, between tasks.
+  otherwise. A local instance's processes start with a private ``HOME`` holding an empty
+  ``ray_bootstrap_config.yaml``: without that file Ray's head asks the cloud metadata address
+  (169.254.169.254) what machine it runs on, even with the reporting off, and nothing may
+  leave this machine (the tasks see that ``HOME`` too). Each run is one task of one CPU;
+  Ray keeps its worker processes, and with them the loaded model, between tasks.
 """
 
 from __future__ import annotations
@@ -148,8 +151,13 @@ class RayExecutor:
         sigterm = signal.getsignal(signal.SIGTERM)  # ray.init installs its own handler
         options: dict[str, Any] = {'include_dashboard': False, 'log_to_driver': False,
                                    'logging_level': 'ERROR'}
+        self._home: tempfile.TemporaryDirectory[str] | None = None
+        home = os.environ.get('HOME')
         try:
             if address == 'local':
+                self._home = tempfile.TemporaryDirectory(prefix='iceskate-ray-home-')
+                (pathlib.Path(self._home.name) / 'ray_bootstrap_config.yaml').write_text('{}\n')
+                os.environ['HOME'] = self._home.name  # for the processes ray.init starts
                 ray.init(num_cpus=workers or cpu_count(), _node_ip_address='127.0.0.1',
                          **options)
             else:
@@ -159,6 +167,8 @@ class RayExecutor:
                              f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
                              ) from None
         finally:
+            if home is not None:
+                os.environ['HOME'] = home
             if sigterm is not None:
                 signal.signal(signal.SIGTERM, sigterm)
         self.address = address
@@ -219,3 +229,5 @@ class RayExecutor:
     def close(self) -> None:
         """Leave the cluster (a local instance is stopped)."""
         self._ray.shutdown()
+        if self._home is not None:
+            self._home.cleanup()
