@@ -143,3 +143,38 @@ def needs_fifo() -> None:
             pass
     except SimulationError as exc:
         pytest.skip(str(exc))
+
+
+# ---------------------------------------------------------------- observations of real runs
+# Shared by the native-law tests of tests/visual_lifting and tests/gait_manager.
+
+#: (scene, seconds simulated, every how many control periods an observation is kept)
+SCENE_RUNS = (('skate', 6.0, 7), ('skate_no_yaw', 2.0, 11), ('walk', 6.0, 7), ('stand', 3.0, 9))
+
+
+@pytest.fixture(scope='session')
+def scene_observations() -> dict[str, list[object]]:
+    """Observations of the shipped scenes' runs (headless, their own controllers), per scene:
+    every n-th control instant and every instant whose mode, side, pivot or step just changed,
+    so that each mode a scene passes through is in it."""
+    from dataclasses import replace
+
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_bringup.scene import load_scene
+    from iceskate_sim.session import Session
+
+    out: dict[str, list[object]] = {}
+    for name, seconds, every in SCENE_RUNS:
+        scene = replace(load_scene(name), duration=seconds)
+        session = Session(scene)
+        stack = ControlStack(scene, session.robot, session.observation())
+        kept, last = [], None
+        while not session.done:
+            obs = session.observation()
+            key = (obs.mode, obs.side, obs.pivot, obs.step_index)
+            if session.periods % every == 0 or key != last:
+                kept.append(obs)
+            last = key
+            session.step(stack.commands(obs))
+        out[name] = kept
+    return out

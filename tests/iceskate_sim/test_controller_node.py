@@ -8,11 +8,11 @@ pytestmark = [pytest.mark.ros]
 
 
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
-from gait_manager.law import gait_manager_commands  # noqa: E402
+from gait_manager.native import GaitManagerController  # noqa: E402
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
 from iceskate_sim.command import ControllerCommand, JointCommand  # noqa: E402
-from iceskate_sim.dynamics import GaitDynamics  # noqa: E402
 from iceskate_sim.lockstep import LockstepSession  # noqa: E402
+from iceskate_sim.native_control import native_command, native_kinematics  # noqa: E402
 from iceskate_sim.node_support import write_parameter_file  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.robot import load_robot  # noqa: E402
@@ -50,12 +50,12 @@ def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_m
     session = skate_session()
     params = node_parameters(session.scene)['gait_manager']
     assert node.params == params
-    dynamics = GaitDynamics(load_robot())
+    kinematics = native_kinematics(load_robot())
+    law = GaitManagerController(params)
     for _ in range(3):  # t = 0 and two later states (the held command moves the robot)
         obs = session.sim.observation()
         node.on_gait_state(_state_bytes(session))
-        expected = ControllerCommand.of(gait_manager_commands(obs, dynamics, params),
-                                        obs.q, obs.v)
+        expected = native_command(law, obs, kinematics)
         ns, got = sent[-1]
         assert ns == session.t_ns
         for field in ('effort', 'stiffness', 'damping', 'reference'):

@@ -6,21 +6,24 @@ enabled sources ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assis
 posture command carries the joint impedance) and each source's share (``source_names``).
 Its parameters are the fields of ``GaitManagerParameters`` as typed ROS parameters, one per
 field of each block (``posture.stiffness``, ``yaw.amplitude``, ..., ``enabled``); a scene's
-``inputs.gait_manager`` block becomes a parameter file at launch.
+``inputs.gait_manager`` block becomes a parameter file at launch. The sources run natively
+(``gait_manager.native``; ``law`` and its modules are their readable reference).
 """
 
 from __future__ import annotations
 
 from gait_manager.errors import GaitManagerError
-from gait_manager.law import GaitManagerParameters, gait_manager_commands
+from gait_manager.law import GaitManagerParameters
+from gait_manager.native import GaitManagerController
 from iceskate_sim.command import ControllerCommand
 from iceskate_sim.controller_node import ControllerNode
+from iceskate_sim.native_control import native_command
 from iceskate_sim.node_support import run_node
 from iceskate_sim.observation import Observation
 
 
 class GaitManagerNode(ControllerNode[GaitManagerParameters]):
-    """The enabled gait-manager sources as a node."""
+    """The enabled gait-manager sources as a node (the native sources)."""
 
     parameter_class = GaitManagerParameters
     parameter_error = GaitManagerError
@@ -28,8 +31,14 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('gait_manager', **kwargs)
+        self.controller = GaitManagerController(self.params)
         if not self.params.enabled:
             self.get_logger().warning('no source enabled: the node stays idle')
+
+    def _on_parameters(self, params: GaitManagerParameters) -> None:
+        """New parameters from the next state on."""
+        super()._on_parameters(params)
+        self.controller.set_parameters(params)
 
     @property
     def active(self) -> bool:
@@ -38,8 +47,7 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
 
     def compute(self, obs: Observation) -> ControllerCommand:
         """The sum of the enabled sources at ``obs``, with each source's share."""
-        return ControllerCommand.of(gait_manager_commands(obs, self.dynamics, self.params),
-                                    obs.q, obs.v)
+        return native_command(self.controller, obs, self.kinematics)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -38,8 +38,6 @@ namespace
 
 using Vector = Eigen::Ref<const Eigen::VectorXd>;
 using Optional = std::optional<Eigen::VectorXd>;
-/// (source, effort, stiffness, damping, reference); the last three None without an impedance.
-using SourceRow = std::tuple<std::string, Eigen::VectorXd, Optional, Optional, Optional>;
 
 Vector18 vector18(const Vector & value, const char * name)
 {
@@ -225,21 +223,23 @@ void bind_controller(nb::module_ & m)
       [](Controller & self, const Observation & obs, Kinematics & kinematics) {
         ControllerOutput out;
         self.compute(obs, kinematics, out);
-        std::vector<SourceRow> sources;
-        for (const auto & [source, c] : out.sources) {
-          sources.emplace_back(source, Eigen::VectorXd(c.effort),
-                               optional(c.has_impedance, c.stiffness),
-                               optional(c.has_impedance, c.damping),
-                               optional(c.has_impedance, c.reference));
+        std::vector<std::tuple<std::string, Eigen::VectorXd>> efforts;
+        for (const auto & [source, command] : out.sources) {
+          efforts.emplace_back(source, Eigen::VectorXd(command.torque(obs.q, obs.v)));
         }
+        const JointCommand total = out.total();
         return std::make_tuple(
-          std::move(sources),
+          std::move(efforts),
+          std::make_tuple(Eigen::VectorXd(total.effort),
+                          optional(total.has_impedance, total.stiffness),
+                          optional(total.has_impedance, total.damping),
+                          optional(total.has_impedance, total.reference)),
           out.has_head_target ? Optional(Eigen::VectorXd(out.head_target)) : std::nullopt);
       },
       "obs"_a, "kinematics"_a,
-      "The command at obs: ([(source, effort, stiffness, damping, reference)], head_target); "
-      "stiffness, damping and reference are None for a plain torque, head_target None when "
-      "the law steers no head target.");
+      "The answer at obs: ([(source, its generalized force at (q, v))], the sum of the sources' "
+      "commands (effort, stiffness, damping, reference; the last three None without an "
+      "impedance), head_target or None).");
 }
 
 }  // namespace iceskate_native::bindings

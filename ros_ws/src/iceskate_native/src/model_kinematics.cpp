@@ -217,7 +217,8 @@ CentreOfMass ModelKinematics::centre_of_mass(
   pinocchio::centerOfMass(model, data, ConstVector(w.q), ConstVector(w.v));
   com.position = data.com[0];
   com.velocity = data.vcom[0];
-  com.jacobian_y = pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
+  com.jacobian_y =
+    pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
   return com;
 }
 

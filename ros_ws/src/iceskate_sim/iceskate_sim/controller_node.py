@@ -5,7 +5,8 @@ law's parameter class (``declare_parameters``: ``ros2 param list/describe/get/se
 change them, a change is checked by the class's own rules), subscribes ``gait_state`` (the whole
 hybrid state of an instant: one message in per instant, best effort), taken as CDR bytes and
 decoded with the bag's typestore (rosbags: 8 us, where rclpy's message classes take 19 us),
-rebuilds the ``Observation``, asks the subclass's law (``compute``) for its command and
+rebuilds the ``Observation``, asks the subclass's law (``compute``: a native law, reading the
+robot through ``kinematics``) for its command and
 publishes it, with the per-source breakdown, as one ``EffortCommand`` (source: the node's name)
 on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
 instant and node. The message object is made once and refilled. ``use_sim_time`` is true unless
@@ -23,8 +24,8 @@ from rclpy.parameter import Parameter
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.command import ControllerCommand
-from iceskate_sim.dynamics import GaitDynamics
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.native_control import native_kinematics
 from iceskate_sim.node_support import (
     LOCKSTEP_READER_QOS,
     STATE_QOS,
@@ -60,7 +61,7 @@ class ControllerNode(Node, Generic[P]):
         self.params: P = declare_parameters(self, self.parameter_class, self.parameter_error,
                                             self._on_parameters)
         check_unknown(self)
-        self.dynamics = GaitDynamics(load_robot())  # own model data, default physics
+        self.kinematics = native_kinematics(load_robot())  # the laws' own model data
         self._message = EffortCommand(source=node_name)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self._typestore = make_typestore()

@@ -36,9 +36,10 @@ def native_observation(obs: Observation) -> iceskate_native.Observation:
 
 def native_command(controller: iceskate_native.Controller, obs: Observation,
                    kinematics: iceskate_native.Kinematics) -> ControllerCommand:
-    """What ``controller`` sends at ``obs``: its sources' commands summed, each source's
-    generalized force at (q, v), and its head target (if it steers one)."""
-    sources, head_target = controller.compute(native_observation(obs), kinematics)
-    commands = {source: JointCommand(effort, stiffness, damping, reference)
-                for source, effort, stiffness, damping, reference in sources}
-    return ControllerCommand.of(commands, obs.q, obs.v, head_target)
+    """What ``controller`` sends at ``obs``: the sum of its sources' commands
+    (``JointCommand.total``, summed natively), each source's generalized force at (q, v) and its
+    head target (if it steers one)."""
+    efforts, (effort, stiffness, damping, reference), head_target = controller.compute(
+        native_observation(obs), kinematics)
+    return ControllerCommand(JointCommand(effort, stiffness, damping, reference), dict(efforts),
+                             head_target)

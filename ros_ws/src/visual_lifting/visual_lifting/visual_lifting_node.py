@@ -6,42 +6,43 @@ head target psi_d it steers to (``head_target``, recorded beside the head pose).
 are the fields of ``VisualLiftingParameters`` as typed ROS parameters (``ros2 param list
 /visual_lifting``; a scene's ``inputs.visual_lifting`` block becomes a parameter file at launch).
 The target's origin psi(0) is the head pose of the state at t = 0 (latched again after a reset).
+The law runs natively (``visual_lifting.native``; ``law`` is its readable reference).
 """
 
 from __future__ import annotations
 
-import numpy as np
-
-from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_sim.command import ControllerCommand
 from iceskate_sim.controller_node import ControllerNode
+from iceskate_sim.native_control import native_command
 from iceskate_sim.node_support import run_node
 from iceskate_sim.observation import Observation
 from visual_lifting.errors import VisualLiftingError
-from visual_lifting.law import VisualLiftingParameters, head_origin, visual_lifting
-
-SOURCE = 'visual_lifting'
+from visual_lifting.law import VisualLiftingParameters
+from visual_lifting.native import VisualLiftingController
 
 
 class VisualLiftingNode(ControllerNode[VisualLiftingParameters]):
-    """Visual lifting as a node."""
+    """Visual lifting as a node (the native law)."""
 
     parameter_class = VisualLiftingParameters
     parameter_error = VisualLiftingError
     law_errors = (VisualLiftingError,)
 
     def __init__(self, **kwargs) -> None:
-        self.psi_initial: np.ndarray | None = None
         super().__init__('visual_lifting', **kwargs)
+        self.controller = VisualLiftingController(self.params)
+
+    def _on_parameters(self, params: VisualLiftingParameters) -> None:
+        """New parameters from the next state on; psi(0) stays."""
+        super()._on_parameters(params)
+        self.controller.set_parameters(params)
 
     def compute(self, obs: Observation) -> ControllerCommand:
         """tau_h = J_H^T K_p (psi_d - psi) at ``obs``, with its target psi_d."""
-        if obs.t == 0.0 or self.psi_initial is None:
-            if obs.t != 0.0:
-                self.get_logger().warning(f'first state seen at t={obs.t} s, not 0: its head '
-                                          'pose is taken as psi(0)')
-            self.psi_initial = head_origin(obs, self.dynamics)
-        task = visual_lifting(obs, self.dynamics, self.params, self.psi_initial)
-        return ControllerCommand.of({SOURCE: JointCommand(task.tau)}, obs.q, obs.v, task.psi_d)
+        if self.controller.origin is None and obs.t != 0.0:
+            self.get_logger().warning(f'first state seen at t={obs.t} s, not 0: its head pose '
+                                      'is taken as psi(0)')
+        return native_command(self.controller, obs, self.kinematics)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -114,6 +114,39 @@ struct ControllerOutput
     sources.back().source = source;
     return sources.back().command;
   }
+
+  /// One command applying the sum of the sources' (iceskate_sim.command.JointCommand.total,
+  /// operation for operation): efforts, stiffnesses and dampings add up in order; the reference
+  /// is the stiffness-weighted mean (0 where no stiffness acts), or the reference of the one
+  /// source with an impedance.
+  JointCommand total() const
+  {
+    JointCommand sum;
+    const JointCommand * only = nullptr;
+    int impedances = 0;
+    Vector18 pull = Vector18::Zero();
+    for (const auto & [source, c] : sources) {
+      sum.effort += c.effort;
+      if (c.has_impedance) {
+        only = &c;
+        ++impedances;
+        sum.stiffness += c.stiffness;
+        sum.damping += c.damping;
+        pull += c.stiffness.cwiseProduct(c.reference);
+      }
+    }
+    if (impedances == 1) {
+      sum.stiffness = only->stiffness;
+      sum.damping = only->damping;
+      sum.reference = only->reference;
+    } else if (impedances > 1) {
+      for (int i = 0; i < kCoordinates; ++i) {
+        sum.reference[i] = sum.stiffness[i] > 0.0 ? pull[i] / sum.stiffness[i] : 0.0;
+      }
+    }
+    sum.has_impedance = impedances > 0;
+    return sum;
+  }
 };
 
 /// A control law: compute() answers one observation, reading the robot model through

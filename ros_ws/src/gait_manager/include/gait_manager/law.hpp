@@ -1,0 +1,70 @@
+// Every gait-manager torque source behind iceskate_native's controller interface (docs/model.md
+// §11): the enabled sources only, in the order posture, feedforward, weight_transfer, heel,
+// arm_assist, yaw; the posture source is the walking stabiliser when its reference is 'balance'.
+// The counterpart of gait_manager/law.py (gait_manager_commands).
+#pragma once
+
+#include <array>
+
+#include "gait_manager/arm_assist.hpp"
+#include "gait_manager/balance.hpp"
+#include "gait_manager/feedforward.hpp"
+#include "gait_manager/heel.hpp"
+#include "gait_manager/posture.hpp"
+#include "gait_manager/yaw.hpp"
+#include "iceskate_native/controller.hpp"
+
+namespace gait_manager
+{
+
+/// The sources, in the order they are computed and sent.
+enum class Source
+{
+  kPosture,
+  kFeedforward,
+  kWeightTransfer,
+  kHeel,
+  kArmAssist,
+  kYaw
+};
+constexpr int kSources = 6;
+constexpr std::array<const char *, kSources> kSourceNames = {
+  "posture", "feedforward", "weight_transfer", "heel", "arm_assist", "yaw"};
+
+/// GaitManagerParameters (gait_manager/law.py, the one schema): every block and the enabled
+/// sources (indexed by Source).
+struct Parameters
+{
+  PostureParameters posture;
+  BalanceParameters balance;
+  FeedforwardParameters feedforward;
+  WeightTransferParameters weight_transfer;
+  HeelParameters heel;
+  ArmAssistParameters arm_assist;
+  YawParameters yaw;
+  std::array<bool, kSources> enabled{};
+};
+
+/// The enabled sources as a controller: posture a joint command with an impedance, the others
+/// torques held over the control period. GaitManagerError when a command is not finite.
+class GaitManagerController final : public iceskate_native::Controller
+{
+public:
+  explicit GaitManagerController(Parameters params);
+
+  void compute(
+    const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+    iceskate_native::ControllerOutput & out) override;
+
+  /// New parameters from the next call on.
+  void set_parameters(Parameters params);
+
+  const Parameters & parameters() const noexcept { return params_; }
+
+private:
+  bool enabled(Source source) const { return params_.enabled[static_cast<std::size_t>(source)]; }
+
+  Parameters params_;
+};
+
+}  // namespace gait_manager

@@ -1,0 +1,82 @@
+// Posture stabiliser (docs/model.md §11.2): a PD of the driven joints to a reference posture,
+// gravity compensation and the torso-yaw centring spring, optionally projected into the null
+// space of the head Jacobian. The reference is the bent-knee standing posture, or the moving
+// stance: the pelvis centre follows the stance schedule, reached by a planar 2-link IK of the
+// support leg. The counterpart of gait_manager/posture.py.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "iceskate_native/controller.hpp"
+#include "iceskate_native/kinematics.hpp"
+#include "iceskate_native/stance.hpp"
+
+namespace gait_manager
+{
+
+/// The reference posture: the moving stance, the fixed standing posture, or 'balance' (the
+/// walking stabiliser, balance.hpp; only the yaw spring of this block is used then).
+enum class PostureReference
+{
+  kMoving,
+  kStanding,
+  kBalance
+};
+
+/// PostureParameters (gait_manager/posture.py, the one schema).
+struct PostureParameters
+{
+  PostureReference reference = PostureReference::kMoving;
+  std::vector<int> joints;           ///< driven by the PD (2-17)
+  double stiffness = 0.0;            ///< K_q [N m/rad]
+  double damping = 0.0;              ///< B_q [N m s/rad]
+  bool gravity_compensation = false;
+  std::vector<int> gravity_joints;   ///< joints that get g(q) (2-17)
+  double yaw_stiffness = 0.0;        ///< K_8 [N m/rad]
+  double yaw_damping = 0.0;          ///< B_8 [N m s/rad]
+  bool null_space = false;           ///< project the PD into the null space of J_H
+  double bend = 0.0;                 ///< knee bend a of the standing posture [rad]
+  double pelvis_pitch = 0.0;         ///< phi_4 kept by the moving reference [rad]
+  iceskate_native::StanceSchedule stance;  ///< the shift_* fields
+};
+
+/// q_ref (18 entries [m, rad]) and the head offset (dy, dz) [m] for visual lifting.
+struct StanceReference
+{
+  iceskate_native::Vector18 q_ref = iceskate_native::Vector18::Zero();
+  Eigen::Vector2d head_offset = Eigen::Vector2d::Zero();
+};
+
+/// The bent-knee standing posture q2..q7 = (-a, 2a, -a, a, -2a, a).
+iceskate_native::Vector18 standing_posture(double bend);
+
+/// World (y, z) [m] of the pelvis-centre target of the moving stance.
+Eigen::Vector2d hip_target(
+  const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+  const PostureParameters & params);
+
+/// (q2, q3, q4) [rad] putting the pelvis centre on `target` (world y, z) with the knee forward
+/// and phi_4 = pelvis_pitch; an unreachable target gives the straight (or folded) leg.
+Eigen::Vector3d support_leg_ik(
+  const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+  const PostureParameters & params, const Eigen::Vector2d & target);
+
+StanceReference stance_reference(
+  const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+  const PostureParameters & params);
+
+/// The stabiliser as a joint command: g(q) as effort, the PD and yaw spring as an impedance; with
+/// null_space a torque held over the period (the PD depends on J_H). GaitManagerError when not
+/// finite.
+void posture_command(
+  const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+  const PostureParameters & params, iceskate_native::JointCommand & out);
+
+/// tau_post [N m]: the whole stabiliser as a torque at the observed state.
+iceskate_native::Vector18 posture_torque(
+  const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
+  const PostureParameters & params);
+
+}  // namespace gait_manager
