@@ -58,7 +58,7 @@ def test_a_failing_point_is_a_row_and_selected_points_get_a_bag(tmp_path, grid):
 
 def test_sigint_mid_sweep_keeps_the_finished_rows_and_the_same_command_resumes(
         tmp_path, grid, write_spec):
-    grid['axes'] = {'floor.mu': {'linspace': [0.004, 0.013, 10]}}
+    grid['axes'] = {'floor.mu': {'linspace': [0.004, 0.0155, 24]}}  # ~0.2 s each
     spec, out = write_spec(grid), tmp_path / 'out'
     command = [sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out', str(out),
                '--workers', '1', '--quiet']
@@ -75,14 +75,14 @@ def test_sigint_mid_sweep_keeps_the_finished_rows_and_the_same_command_resumes(
     assert proc.returncode == 130, err
     assert err.count('\n') == 1 and err.startswith('sweep: interrupted by SIGINT: '), err
     before = _rows(out)
-    assert 1 <= len(before) < 10
-    assert 'the same command resumes' in err and f'{len(before)} of 10' in err
+    assert 1 <= len(before) < 24
+    assert 'the same command resumes' in err and f'{len(before)} of 24' in err
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    assert f'({10 - len(before)} done now in' in done.stderr
-    assert f'{len(before)} before): 10 ok' in done.stderr
+    assert f'({24 - len(before)} done now in' in done.stderr
+    assert f'{len(before)} before): 24 ok' in done.stderr
     after = _rows(out)
-    assert [r['point'] for r in after] == list(range(10))
+    assert [r['point'] for r in after] == list(range(24))
     assert [r for r in after if r['key'] in {b['key'] for b in before}] == before
 
 
