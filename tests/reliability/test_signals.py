@@ -52,7 +52,7 @@ def _check_interrupted(run, code: int, stderr: str, name: str) -> None:
 
 @pytest.mark.parametrize('name, group', CASES)
 def test_headless_run_ends_cleanly_on_a_signal(launch, proc, name, group):
-    run = launch(str(proc.TINY), '--duration', '6')
+    run = launch(str(proc.TINY), '--duration', '30')  # still running when the signal comes
     run.wait_running()
     time.sleep(_delay('headless', name, group))
     run.signal(SIGNALS[name], group)
