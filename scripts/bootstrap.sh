@@ -93,6 +93,20 @@ if [ "${ICESKATE_FORCE_BUILD:-0}" = 1 ] || [ ! -d "$WS/build" ] \
     fi
   done
 
+  # A package that changed its build type (ament_python <-> ament_cmake) cannot reuse its old
+  # build and install folders: drop them, so an existing workspace builds as a fresh clone does.
+  for manifest in "$WS"/src/*/package.xml; do
+    package=$(sed -n 's:.*<name>\(.*\)</name>.*:\1:p' "$manifest" | head -n 1)
+    [ -d "$WS/build/$package" ] || continue
+    is_cmake=no built_cmake=no
+    [ -f "$(dirname "$manifest")/CMakeLists.txt" ] && is_cmake=yes
+    [ -f "$WS/build/$package/CMakeCache.txt" ] && built_cmake=yes
+    if [ "$is_cmake" != "$built_cmake" ]; then
+      log "removing the build and install of $package: its build type changed"
+      rm -rf "${WS:?}/build/$package" "${WS:?}/install/$package"
+    fi
+  done
+
   log "colcon build of ros_ws"
   rm -f "$BUILD_STAMP"
   (
