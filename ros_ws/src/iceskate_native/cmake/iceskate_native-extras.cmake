@@ -1,0 +1,61 @@
+# CMake helpers of the iceskate C++ packages: loaded by find_package(iceskate_native) (ament's
+# CONFIG_EXTRAS) in the controller packages, and included by iceskate_native's own CMakeLists.
+
+# Release by default (-O3 -DNDEBUG), C++17 without compiler extensions.
+macro(iceskate_cxx_defaults)
+  if(NOT CMAKE_BUILD_TYPE AND NOT CMAKE_CONFIGURATION_TYPES)
+    set(CMAKE_BUILD_TYPE Release CACHE STRING "Build type (default Release: -O3 -DNDEBUG)" FORCE)
+  endif()
+  set(CMAKE_CXX_STANDARD 17)
+  set(CMAKE_CXX_STANDARD_REQUIRED ON)
+  set(CMAKE_CXX_EXTENSIONS OFF)
+endmacro()
+
+# The Python 3.11 interpreter and module development files, and nanobind's CMake package from
+# that interpreter's nanobind wheel.
+macro(iceskate_find_nanobind)
+  find_package(Python 3.11 REQUIRED COMPONENTS Interpreter Development.Module)
+  execute_process(
+    COMMAND "${Python_EXECUTABLE}" -m nanobind --cmake_dir
+    OUTPUT_VARIABLE nanobind_ROOT OUTPUT_STRIP_TRAILING_WHITESPACE
+    COMMAND_ERROR_IS_FATAL ANY)
+  find_package(nanobind CONFIG REQUIRED)
+endmacro()
+
+# A controller package (after project() and find_package(iceskate_native)):
+#   <project>_law   static library of SOURCES against iceskate_native's Eigen-only headers and
+#                   include/ (no Pinocchio), warnings are errors
+#   _law            nanobind module <project>._law from src/bindings.cpp (-O3, not -Os)
+# and installs the Python package <project>/, config/, and the executable lib/<project>/<project>
+# (`ros2 run <project> <project>`) that runs <project>.<project>_node:main with this interpreter.
+macro(iceskate_controller_package)
+  cmake_parse_arguments(_controller "" "" "SOURCES" ${ARGN})
+  iceskate_cxx_defaults()
+  find_package(ament_cmake_python REQUIRED)
+  find_package(Eigen3 REQUIRED NO_MODULE)
+  iceskate_find_nanobind()
+  set(_controller_warnings -Wall -Wextra -Wpedantic -Werror)
+
+  add_library(${PROJECT_NAME}_law STATIC ${_controller_SOURCES})
+  target_include_directories(${PROJECT_NAME}_law PUBLIC
+    "$<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>" ${iceskate_native_INCLUDE_DIRS})
+  target_link_libraries(${PROJECT_NAME}_law PUBLIC Eigen3::Eigen)
+  target_compile_options(${PROJECT_NAME}_law PRIVATE ${_controller_warnings})
+  set_target_properties(${PROJECT_NAME}_law PROPERTIES
+    POSITION_INDEPENDENT_CODE ON CXX_VISIBILITY_PRESET hidden VISIBILITY_INLINES_HIDDEN ON)
+
+  nanobind_add_module(_law NOMINSIZE src/bindings.cpp)
+  target_link_libraries(_law PRIVATE ${PROJECT_NAME}_law)
+  target_compile_options(_law PRIVATE ${_controller_warnings})
+
+  ament_python_install_package(${PROJECT_NAME})
+  install(TARGETS _law LIBRARY DESTINATION "${PYTHON_INSTALL_DIR}/${PROJECT_NAME}")
+  install(DIRECTORY config DESTINATION share/${PROJECT_NAME})
+  set(_controller_script "${CMAKE_CURRENT_BINARY_DIR}/scripts/${PROJECT_NAME}")
+  file(GENERATE OUTPUT "${_controller_script}"
+    CONTENT "#!${Python_EXECUTABLE}\nimport sys\n\nfrom ${PROJECT_NAME}.${PROJECT_NAME}_node import main\n
+sys.exit(main())\n"
+    FILE_PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE GROUP_READ GROUP_EXECUTE WORLD_READ
+                     WORLD_EXECUTE)
+  install(PROGRAMS "${_controller_script}" DESTINATION lib/${PROJECT_NAME})
+endmacro()
