@@ -42,6 +42,10 @@ from iceskate_sim.shutdown import StopRequest, say
 if TYPE_CHECKING:
     from iceskate_sim.scene import Scene
 
+#: Control periods run per call of ``Session.run_periods`` (one native call on the native
+#: engine): a signal is answered, and the progress shown, between two such blocks.
+BLOCK_PERIODS = 250
+
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         stop: StopRequest | None = None) -> dict[str, Any]:
@@ -82,9 +86,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                 if stop.requested:
                     ended = stop.error(session.sim.time)
                     break
-                session.step(stack.commands(session.observation()))
-                session.flush()
-                bar.update(1)
+                bar.update(session.run_periods(stack, BLOCK_PERIODS))
         except BaseException as exc:  # a bug: the outputs still say where the run stopped
             ended = SimulationError(f'the run stopped on {type(exc).__name__}: {exc}')
             raise

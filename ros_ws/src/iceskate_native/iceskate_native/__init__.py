@@ -16,7 +16,9 @@ transitions, projection, health checks), wrapped by ``iceskate_sim.native_dynami
 The controller interface: a ``Controller`` (the control laws of visual_lifting and
 gait_manager implement it in C++) answers an ``Observation``, reading the robot through a
 ``Kinematics``; ``ModelKinematics`` is that kinematics on the four support models
-(``iceskate_sim.native_control`` makes it from a ``Robot``).
+(``iceskate_sim.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
+control periods in one call: controllers, zero-order hold, pushes and ``HybridSimulator``
+periods, returning the samples as arrays (``iceskate_sim.native_dynamics.NativeControlLoop``).
 
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
 kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
@@ -25,6 +27,7 @@ its kinds for a run that left the physical range), which the simulator wraps in 
 
 from ._kernel import (
     ChatteringError,
+    ControlLoop,
     Controller,
     DivergenceError,
     Dynamics,
@@ -37,7 +40,7 @@ from ._kernel import (
     crba_of,
 )
 
-__all__ = ['ChatteringError', 'Controller', 'DivergenceError', 'Dynamics', 'HybridSimulator',
+__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'DivergenceError', 'Dynamics', 'HybridSimulator',
            'Kinematics', 'ModelKinematics', 'NativeError', 'Observation', 'RobotModel', 'crba_of',
            'load_model', 'model_bytes']
 

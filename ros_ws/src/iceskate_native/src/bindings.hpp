@@ -1,6 +1,7 @@
 // What the translation units of the module iceskate_native._kernel share (private: not
 // installed): the Python-side description of the mode table, and the entry point of the
-// controller interface's bindings (bindings_controller.cpp), called from bindings.cpp.
+// controller interface's bindings (bindings_controller.cpp) and of the control loop
+// (bindings_loop.cpp), called from bindings.cpp.
 #pragma once
 
 #include <map>
@@ -51,5 +52,8 @@ inline ModeTable mode_table(const std::vector<ModeRow> & rows)
 
 /// Kinematics, ModelKinematics, Observation and Controller in module `m`.
 void bind_controller(nanobind::module_ & m);
+
+/// ControlLoop in module `m` (after HybridSimulator, Kinematics and Controller).
+void bind_control_loop(nanobind::module_ & m);
 
 }  // namespace iceskate_native::bindings

@@ -475,6 +475,45 @@ Eigen::Vector3d Dynamics::frame_position(
     .translation();
 }
 
+Placement Dynamics::frame_placement(
+  const Contact & contact, const Vector18 & q, const std::string & frame)
+{
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+  const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(
+    model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)));
+  return {placement.translation(), placement.rotation()};
+}
+
+Vector18 Dynamics::push_force(
+  const Contact & contact, const Vector18 & q, const std::string & frame,
+  const Eigen::Vector3d & force)
+{
+  const Mode & m = mode(contact.mode);
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(
+    model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned,
+    w.jacobian);
+  Vector18 out = w.jacobian.topRows<3>().transpose() * force;
+  if (!m.y0_active) {
+    out[kY0] = 0.0;
+  }
+  if (!m.q1_active) {
+    out[kQ1] = 0.0;
+  }
+  return out;
+}
+
 Eigen::Vector3d Dynamics::frame_velocity(
   const Contact & contact, const Vector18 & q, const Vector18 & v, const std::string & frame)
 {

@@ -28,10 +28,13 @@ METRIC_NAMES = (
 
 
 class Trajectory:
-    """Columns of per-control-instant samples, grown by ``append``."""
+    """Columns of per-control-instant samples, grown one sample at a time (``append``) or by
+    whole blocks of samples (``extend``)."""
 
     def __init__(self) -> None:
-        self._rows: dict[str, list[Any]] = {}
+        self._blocks: dict[str, list[np.ndarray]] = {}  # arrays of whole blocks, in order
+        self._rows: dict[str, list[Any]] = {}  # single samples since the last block
+        self._count = 0
         self.sources: list[str] = []
 
     def append(self, sample: Sample, psi_d: np.ndarray) -> None:
@@ -47,27 +50,55 @@ class Trajectory:
             'psi': head_psi(sample.head_position, sample.head_rotation),
             'psi_d': np.asarray(psi_d, dtype=float), 'applied': r.applied,
         }
-        for source, tau in sample.efforts.items():
-            if source not in self.sources:
-                self.sources.append(source)
-                self._rows[f'tau_{source}'] = [np.zeros(18)] * len(self._rows.get('t', []))
-            row[f'tau_{source}'] = tau
+        self._add_sources(sample.efforts)
         for source in self.sources:
-            row.setdefault(f'tau_{source}', np.zeros(18))
+            row[f'tau_{source}'] = sample.efforts.get(source, _NO_EFFORT)
         for key, value in row.items():
             self._rows.setdefault(key, []).append(value)
+        self._count += 1
+
+    def extend(self, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray]) -> None:
+        """Add a block of samples: ``columns`` holds every column of ``append``'s rows but the
+        efforts (first axis: sample), ``efforts`` each source's (n, 18) generalized forces (0
+        where it did not act)."""
+        self._add_sources(efforts)
+        n = len(columns['t'])
+        for source in self.sources:
+            columns = {**columns, f'tau_{source}': efforts.get(source, np.zeros((n, 18)))}
+        for key, values in columns.items():
+            self._close_rows(key)
+            self._blocks.setdefault(key, []).append(np.asarray(values))
+        self._count += n
+
+    def _add_sources(self, efforts: dict[str, np.ndarray]) -> None:
+        """New source columns, 0 for the samples before."""
+        for source in efforts:
+            if source not in self.sources:
+                self.sources.append(source)
+                self._blocks[f'tau_{source}'] = [np.zeros((self._count, 18))]
+
+    def _close_rows(self, key: str) -> None:
+        """Turn the single samples of column ``key`` into a block."""
+        rows = self._rows.pop(key, None)
+        if rows:
+            self._blocks.setdefault(key, []).append(np.array(rows))
 
     def __len__(self) -> int:
         """Number of samples."""
-        return len(self._rows.get('t', []))
+        return self._count
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every column as a numpy array (first axis: sample)."""
-        return {key: np.array(values) for key, values in self._rows.items()}
+        for key in list(self._rows):
+            self._close_rows(key)
+        return {key: np.concatenate(blocks) for key, blocks in self._blocks.items()}
 
     def save(self, path: pathlib.Path) -> None:
         """Write the columns to an ``.npz`` file."""
         np.savez_compressed(path, **self.arrays())
+
+
+_NO_EFFORT = np.zeros(18)  # a source's column where it did not act (never written to)
 
 
 def _rms(x: np.ndarray) -> float:

@@ -221,16 +221,20 @@ class NativePeriods:
             self._kernel.advance(command.bias, command.stiffness, command.damping,
                                  '' if push is None else push[0],
                                  None if push is None else push[1])
-        except iceskate_native.DivergenceError as exc:
-            raise SimulationError(f'simulation diverged ({exc}) at {self.state().summary()}'
-                                  ) from None
-        except iceskate_native.ChatteringError as exc:
-            raise SimulationError(f'{exc} ({self.state().summary()})') from None
-        except iceskate_native.NativeError as exc:
-            raise SimulationError(f'{exc} (during the period from {self.state().summary()})'
-                                  ) from None
-        except (ValueError, TypeError) as exc:
-            raise SimulationError(f'native simulator: {exc}') from None
+        except (iceskate_native.NativeError, ValueError, TypeError) as exc:
+            raise self.failure(exc) from None
+
+    def failure(self, exc: Exception) -> SimulationError:
+        """The SimulationError of a period that raised ``exc`` (the kernel's state is where it
+        failed): divergence and chattering with the state, a kernel failure with the period's
+        start, bad input as the kernel said it."""
+        if isinstance(exc, iceskate_native.DivergenceError):
+            return SimulationError(f'simulation diverged ({exc}) at {self.state().summary()}')
+        if isinstance(exc, iceskate_native.ChatteringError):
+            return SimulationError(f'{exc} ({self.state().summary()})')
+        if isinstance(exc, iceskate_native.NativeError):
+            return SimulationError(f'{exc} (during the period from {self.state().summary()})')
+        return SimulationError(f'native simulator: {exc}')
 
     def state(self) -> HybridState:
         """The current state."""
@@ -261,3 +265,46 @@ class NativePeriods:
     def ended(self) -> str | None:
         """Why the run ended physically (None: it goes on)."""
         return (None, FLIGHT, TOE_FIRST, self._fall)[self._kernel.ended]
+
+
+class NativeControlLoop:
+    """Many control periods in one C++ call (``iceskate_native.ControlLoop``): at each control
+    instant the native ``controllers`` answer the observation through ``kinematics``, the sum of
+    their commands and the active push are held over the period, and ``periods`` advances; the
+    samples come back as arrays. It is what ``Session.step`` does for each period when the
+    headless runner's ``ControlStack`` answers, without Python in between.
+
+    :param periods: the native periods it advances (a ``Simulator``'s, which mirrors them after
+        each block).
+    :param kinematics: the controllers' view of the robot (``native_control.native_kinematics``).
+    :param controllers: the native laws, in summing order.
+    :param pushes: the scene's pushes (``start``, ``duration``, ``frame``, ``force``).
+    :param head_origin: psi at t = 0, the head target recorded while no controller steers one.
+    :raises SimulationError: for an unknown push frame or a non-finite value.
+    """
+
+    def __init__(self, periods: NativePeriods, kinematics: iceskate_native.Kinematics,
+                 controllers: list[iceskate_native.Controller], pushes: tuple,
+                 head_origin: np.ndarray) -> None:
+        self._periods = periods
+        rows = [(p.start, p.duration, p.frame, np.asarray(p.force, dtype=float)) for p in pushes]
+        try:
+            self._kernel = iceskate_native.ControlLoop(
+                periods._kernel, kinematics, list(controllers), rows,
+                np.asarray(head_origin, dtype=float))
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'native control loop: {exc}') from None
+
+    def run(self, periods: int) -> tuple[dict, Exception | None]:
+        """Up to ``periods`` control periods: (their samples as ``iceskate_native.ControlLoop.run``
+        returns them, what stopped the block early or None). A failure of the physics comes as
+        the ``SimulationError`` that ``NativePeriods.advance`` raises; a controller's own error
+        (e.g. a non-finite command) as it was raised."""
+        block = self._kernel.run(periods)
+        error: Exception | None = None
+        if self._kernel.failed:
+            try:
+                self._kernel.raise_error()
+            except Exception as exc:  # noqa: BLE001 - handed back beside the samples taken
+                error = self._periods.failure(exc) if self._kernel.physics_failed else exc
+        return block, error

@@ -59,6 +59,7 @@ from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import (
     COORDINATE_NAMES,
     N_COORDINATES,
+    PIVOTS,
     SIDES,
     SOLE_HEEL_Y,
     SOLE_TOE_Y,
@@ -144,6 +145,43 @@ def bag_record(sample: Sample) -> BagRecord:
                              *sample.efforts.values()], dtype=np.float64)
     return BagRecord(values, s.mode.number, s.contact.side, s.contact.pivot, s.step_index,
                      tuple(sample.efforts), last.cause if last else None)
+
+
+def block_records(columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray],
+                  present: np.ndarray, events: list[Transition]) -> list[BagRecord]:
+    """The BagRecords of a block of samples (``bag_record`` of each, the same values).
+
+    :param columns: the block's columns as ``iceskate_native.ControlLoop.run`` returns them (t,
+        t_exchange, t_touchdown, heel_anchor_y, support_normal, support_tangential, cop_y, q, v,
+        qdd, passive, multipliers, head_position, head_rotation (n, 3, 3), mode, side and pivot
+        codes, step_index, last_event: index in ``events``, -1 for none).
+    :param efforts: each source's (n, 18) generalized forces, in the order they first acted.
+    :param present: per sample, bit i set if the i-th source of ``efforts`` acted then.
+    :param events: the run's event log.
+    """
+    n = len(columns['t'])
+    last = columns['last_event'].tolist()
+    last_t = np.array([events[i].t if i >= 0 else 0.0 for i in last])
+    base = np.hstack([
+        np.column_stack([columns[key] for key in (
+            't', 't_exchange', 't_touchdown', 'heel_anchor_y', 'support_normal',
+            'support_tangential', 'cop_y')] + [last_t]),
+        columns['q'], columns['v'], columns['qdd'], columns['passive'], columns['multipliers'],
+        columns['head_position'], columns['head_rotation'].reshape(n, 9)])
+    names = list(efforts)
+    values: list[np.ndarray] = [base[0]] * n
+    sources: list[tuple[str, ...]] = [()] * n
+    for mask in np.unique(present).tolist():
+        rows = np.flatnonzero(present == mask)
+        acting = tuple(name for i, name in enumerate(names) if mask >> i & 1)
+        block = np.hstack([base[rows], *(efforts[name][rows] for name in acting)])
+        for k, row in enumerate(rows.tolist()):
+            values[row], sources[row] = block[k], acting
+    return [BagRecord(values[k], mode, SIDES[side], PIVOTS[pivot], step, sources[k],
+                      events[i].cause if i >= 0 else None)
+            for k, (mode, side, pivot, step, i) in enumerate(zip(
+                columns['mode'].tolist(), columns['side'].tolist(), columns['pivot'].tolist(),
+                columns['step_index'].tolist(), last, strict=True))]
 
 
 def record_numbers(record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS) -> np.ndarray:
@@ -686,16 +724,21 @@ class BagRecorder:
 
     def write(self, sample: Sample) -> None:
         """Record one control instant."""
+        self.write_records([bag_record(sample)])
+
+    def write_records(self, records: list[BagRecord]) -> None:
+        """Record control instants packed as BagRecords (``bag_record``, ``block_records``)."""
         if self._bag is not None:
-            self._bag.write_record(bag_record(sample))
+            for record in records:
+                self._bag.write_record(record)
         elif self._process is not None:
-            self._batch.append(bag_record(sample))
-            if len(self._batch) >= BATCH:
-                batch, self._batch = self._batch, []
+            self._batch.extend(records)
+            while len(self._batch) >= BATCH:
+                batch, self._batch = self._batch[:BATCH], self._batch[BATCH:]
                 self._hand_over(batch)
         else:
             raise SimulationError(f'bag {self.path} is closed')
-        self.count += 1
+        self.count += len(records)
 
     def _hand_over(self, item: list[BagRecord] | None) -> None:
         """Queue a batch (None: the end) for the writer process, waiting while it is busy."""

@@ -18,7 +18,7 @@ import json
 import pathlib
 import tempfile
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -27,10 +27,30 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import Transition
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.observation import Observation
-from iceskate_sim.recording import BagRecorder, Sample
+from iceskate_sim.modes import MODES
+from iceskate_sim.recording import BagRecorder, Sample, block_records
 from iceskate_sim.robot import Robot, load_robot
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
+
+if TYPE_CHECKING:
+    from iceskate_native import Controller, Kinematics
+    from iceskate_sim.native_dynamics import NativeControlLoop
+
+#: q1_active of each mode number (index 0 unused)
+_Q1_ACTIVE = np.array([False] + [MODES[k].q1_active for k in range(1, len(MODES) + 1)])
+
+
+class Controllers(Protocol):
+    """The controllers of a run in one process (``iceskate_bringup.composition.ControlStack``):
+    the native laws by node name in summing order, their kinematics, and their commands at an
+    observation (what each node would send)."""
+
+    controllers: Mapping[str, Controller]
+    kinematics: Kinematics
+
+    def commands(self, obs: Observation) -> Mapping[str, ControllerCommand]:
+        """What each controller node sends at ``obs``, by node name."""
 
 
 def scene_metadata(scene: Scene) -> dict[str, str]:
@@ -122,6 +142,8 @@ class Session:
         self.error: SimulationError | None = None
         self._unrecorded: list[tuple[Sample, np.ndarray]] = []  # (sample, head target)
         self._wall_start: float | None = None
+        #: the native loop of ``run_periods`` (None: not made yet; False: none for this engine)
+        self._loop: NativeControlLoop | bool | None = None
 
     @property
     def done(self) -> bool:
@@ -167,6 +189,59 @@ class Session:
         self._unrecorded.append((sample, target))
         self.periods += 1
         return sample
+
+    def run_periods(self, stack: Controllers, count: int) -> int:
+        """Advance up to ``count`` control periods with ``stack`` answering each observation
+        in-process (the headless runner), recording every sample; return how many were taken.
+
+        On the native engine with a fixed-step method the whole block runs in C++
+        (``Simulator.control_loop``: the same laws, sums, hold and periods as ``step``, with no
+        Python in between); otherwise period by period through ``step``. A failure of the
+        physics ends the run (``error``) as in ``step``; a controller's own error is raised once
+        the samples before it are recorded.
+        """
+        if self.done:
+            return 0
+        if self._wall_start is None:
+            self._wall_start = time.perf_counter()
+        if self._loop is None:
+            self._loop = self.sim.control_loop(stack.kinematics, list(stack.controllers.values()),
+                                               self.scene.pushes, self.psi_initial) or False
+        if self._loop is False:  # period by period
+            taken = 0
+            while taken < count and not self.done:
+                taken += self.step(stack.commands(self.observation())) is not None
+                self.flush()
+            return taken
+        block, error = self.sim.run_loop(self._loop, min(count, self.n_periods - self.periods))
+        taken = len(block['t'])
+        if taken:
+            self._record_block(block)
+        if isinstance(error, SimulationError):
+            self.error = error
+        elif error is not None:
+            raise error
+        return taken
+
+    def _record_block(self, block: dict[str, Any]) -> None:
+        """Append a native block of samples to the trajectory and the bag."""
+        efforts = dict(zip(block['sources'], block['efforts'], strict=True))
+        pivot = np.where(_Q1_ACTIVE[block['mode']], block['pivot'] + 1, 0)  # toe 1, heel 2
+        rotation = block['head_rotation']
+        psi = np.column_stack([block['head_position'][:, 1:],
+                               np.arctan2(-rotation[:, 1, 2], rotation[:, 2, 2])])
+        columns = {
+            't': block['t'], 'q': block['q'], 'v': block['v'], 'qdd': block['qdd'],
+            'mode': block['mode'].astype(np.int64), 'side': block['side'].astype(np.int64),
+            'pivot': pivot.astype(np.int64), 'step_index': block['step_index'].astype(np.int64),
+            'multipliers': block['multipliers'], 'support_normal': block['support_normal'],
+            'support_tangential': block['support_tangential'], 'cop_y': block['cop_y'],
+            'psi': psi, 'psi_d': block['head_target'], 'applied': block['applied']}
+        self.trajectory.extend(columns, efforts)
+        if self.recorder is not None:
+            self.recorder.write_records(block_records(block, efforts, block['present'],
+                                                      self.sim.events))
+        self.periods += len(block['t'])
 
     def flush(self) -> None:
         """Append the samples stepped since the last flush to the trajectory and the bag."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -37,6 +38,9 @@ from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, Integ
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import N_COORDINATES, Robot
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
+
+if TYPE_CHECKING:
+    from iceskate_sim.native_dynamics import NativeControlLoop
 
 #: Where the physics runs (``SimulatorConfig.engine``).
 ENGINES = ('python', 'native')
@@ -339,6 +343,32 @@ class Simulator:
             self.state = end.state
         self.stats.control_periods += 1
         return self.result
+
+    def control_loop(self, kinematics: object, controllers: list, pushes: tuple,
+                     head_origin: np.ndarray) -> NativeControlLoop | None:
+        """The native loop of many control periods on this simulator (see
+        ``NativeControlLoop``; advance it with ``run_loop``), or None where periods do not run
+        natively (the Python engine, an adaptive method)."""
+        if self._periods is None:
+            return None
+        from iceskate_sim.native_dynamics import NativeControlLoop
+        return NativeControlLoop(self._periods, kinematics, controllers, pushes, head_origin)
+
+    def run_loop(self, loop: NativeControlLoop, periods: int) -> tuple[dict, Exception | None]:
+        """Up to ``periods`` control periods of ``loop`` (``NativeControlLoop.run``: the samples
+        and what stopped the block early), then this simulator mirrors the native state, events,
+        counters and end."""
+        if self.ended is not None:
+            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
+                                  f'{self.state.mode.number} ({self.ended}); no further '
+                                  'period can be simulated')
+        try:
+            block, error = loop.run(periods)
+        finally:
+            self._mirror_periods()
+        if len(block['t']):
+            self.start_state, self.start_result = self._periods.start()
+        return block, error
 
     def _mirror_periods(self) -> None:
         """Take the state, dynamics, new events, counters and end of the native periods."""

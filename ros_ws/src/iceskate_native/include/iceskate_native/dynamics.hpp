@@ -97,6 +97,13 @@ struct DynamicsResult
   Vector18 passive = Vector18::Zero();     ///< damping and soft stops [N m]
 };
 
+/// The world placement of a frame: position [m] and rotation (frame axes in world columns).
+struct Placement
+{
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+};
+
 /// The active swing constraints at one posture (Dynamics::constraints).
 struct ConstraintRows
 {
@@ -142,6 +149,15 @@ public:
   /// World position of a named frame of the support model of `contact` [m].
   Eigen::Vector3d frame_position(const Contact & contact, const Vector18 & q,
                                  const std::string & frame);
+
+  /// World placement of a named frame of the support model of `contact`.
+  Placement frame_placement(const Contact & contact, const Vector18 & q,
+                            const std::string & frame);
+
+  /// J^T f: the generalized force of a world force `force` [N] at a named frame's origin
+  /// [N m, N]; entries of locked coordinates 0.
+  Vector18 push_force(const Contact & contact, const Vector18 & q, const std::string & frame,
+                      const Eigen::Vector3d & force);
 
   /// World-aligned linear velocity of a named frame [m/s].
   Eigen::Vector3d frame_velocity(const Contact & contact, const Vector18 & q, const Vector18 & v,

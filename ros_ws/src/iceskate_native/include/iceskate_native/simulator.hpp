@@ -110,6 +110,8 @@ public:
   const RunStatistics & statistics() const noexcept { return stats_; }
   RunEnd ended() const noexcept { return ended_; }
   const SimulatorSettings & settings() const noexcept { return settings_; }
+  /// The dynamics it integrates.
+  Dynamics & dynamics() noexcept { return dynamics_; }
 
 private:
   struct Ended;  // a physical end of the run, thrown inside a period

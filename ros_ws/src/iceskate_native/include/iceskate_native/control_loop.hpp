@@ -1,0 +1,98 @@
+// Many control periods in one call (docs/architecture.md, "One run"): at every control instant
+// t_k the controllers answer the observation of the current state (reading the robot through a
+// Kinematics), the sum of their commands and the scene's push are held over [t_k, t_k+1]
+// (zero-order hold) while HybridSimulator::advance integrates the period, and the sample of
+// t_k goes into a SampleBlock. The native counterpart of iceskate_sim.session.Session.step
+// driven by the headless composition of the controllers, tested against it.
+#pragma once
+
+#include <cstdint>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "iceskate_native/controller.hpp"
+#include "iceskate_native/kinematics.hpp"
+#include "iceskate_native/simulator.hpp"
+
+namespace iceskate_native
+{
+
+/// An external force held over [start, start + duration) [s] at a frame's origin (a scene's
+/// push): world force [N].
+struct Push
+{
+  double start = 0.0;
+  double duration = 0.0;
+  std::string frame;
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();
+
+  bool active(double t) const { return start <= t && t < start + duration; }
+};
+
+/// The samples of consecutive control instants, column by column (row-major per sample). A
+/// sample holds the state at t_k after the transitions due then, its dynamics under the
+/// commands held over the period, each source's generalized force at the observed state, the
+/// head-top placement observed at t_k and the head target steered to.
+struct SampleBlock
+{
+  int count = 0;
+  std::vector<double> t, t_exchange, t_touchdown, heel_anchor_y;  ///< [s, s, s (NaN: none), m]
+  std::vector<int> mode, side, pivot, step_index;  ///< side 0 right / 1 left, pivot 0 toe / 1 heel
+  std::vector<double> q, v, qdd, passive, applied;  ///< 18 per sample
+  std::vector<double> multipliers;                  ///< f_nz [N], f_ny [N], tau_n [N m]
+  std::vector<double> support_normal, support_tangential, cop_y;  ///< [N, N, m]
+  std::vector<double> head_position;  ///< 3 per sample [m]
+  std::vector<double> head_rotation;  ///< 9 per sample, row-major
+  std::vector<double> head_target;    ///< psi_d: y [m], z [m], pitch [rad]
+  /// Index in the simulator's event log of the latest transition at or before t_k; -1: none.
+  std::vector<long> last_event;
+  /// The sources in the order they first answered; efforts[i]: 18 per sample, 0 where source i
+  /// did not answer, present[k] bit i: it answered at sample k ("push" while a push acts).
+  std::vector<std::string> sources;
+  std::vector<std::vector<double>> efforts;
+  std::vector<std::uint64_t> present;
+
+  /// Empty, the source list kept.
+  void clear();
+};
+
+/// The loop of control periods over a simulator, its controllers (in summing order) and the
+/// scene's pushes. It holds references: the simulator, the kinematics and the controllers
+/// must outlive it. Not thread-safe.
+class ControlLoop
+{
+public:
+  /// head_origin: the head target recorded while no controller steers one (psi at t = 0).
+  ControlLoop(
+    HybridSimulator & simulator, Kinematics & kinematics, std::vector<Controller *> controllers,
+    std::vector<Push> pushes, const Eigen::Vector3d & head_origin);
+
+  /// Up to `periods` control periods into `block` (cleared first); returns the samples taken.
+  /// It stops after a period in which the run ended physically (HybridSimulator::ended), and
+  /// before recording a period whose physics or controller threw: error() then holds that
+  /// exception and the simulator is where it failed.
+  int run(int periods, SampleBlock & block);
+
+  /// What stopped the last run() early (null: nothing).
+  std::exception_ptr error() const noexcept { return error_; }
+  /// Whether that came from the simulator's period (else from a controller or the sample).
+  bool physics_failed() const noexcept { return physics_failed_; }
+
+private:
+  void step(SampleBlock & block);
+  std::size_t source_index(SampleBlock & block, const std::string & name);
+
+  HybridSimulator & simulator_;
+  Kinematics & kinematics_;
+  std::vector<Controller *> controllers_;
+  std::vector<Push> pushes_;
+  Eigen::Vector3d head_origin_;
+  std::vector<ControllerOutput> outputs_;  // one per controller, reused
+  std::exception_ptr error_;
+  bool physics_failed_ = false;
+};
+
+}  // namespace iceskate_native

@@ -1,0 +1,221 @@
+#include "iceskate_native/control_loop.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+namespace iceskate_native
+{
+
+namespace
+{
+
+constexpr int kMaxSources = 64;  // SampleBlock::present has one bit per source
+
+/// t [s] at a ROS stamp's resolution (whole nanoseconds, ties to even), as a message carries it.
+double stamp_time(double t) { return std::nearbyint(t * 1e9) / 1e9; }
+
+/// The controllers' view of a hybrid state (iceskate_sim.simulation.observation_of): times at
+/// a stamp's resolution, and the pivot 'toe' while the sole is flat (q1 locked).
+Observation observation_of(const HybridState & s, const Mode & mode)
+{
+  Observation obs;
+  obs.t = stamp_time(s.t);
+  obs.q = s.q;
+  obs.v = s.v;
+  obs.mode = s.contact.mode;
+  obs.side = s.contact.side;
+  obs.pivot = mode.q1_active ? s.contact.pivot : 0;
+  obs.step_index = s.step_index;
+  obs.t_exchange = stamp_time(s.t_exchange);
+  obs.heel_anchor_y = s.contact.heel_anchor_y;
+  obs.t_touchdown = std::isfinite(s.t_touchdown) ? stamp_time(s.t_touchdown) : s.t_touchdown;
+  return obs;
+}
+
+template <typename Derived>
+void append(std::vector<double> & column, const Eigen::DenseBase<Derived> & values)
+{
+  for (Eigen::Index i = 0; i < values.size(); ++i) {
+    column.push_back(values(i));
+  }
+}
+
+}  // namespace
+
+void SampleBlock::clear()
+{
+  count = 0;
+  for (auto * column : {&t, &t_exchange, &t_touchdown, &heel_anchor_y, &q, &v, &qdd, &passive,
+                        &applied, &multipliers, &support_normal, &support_tangential, &cop_y,
+                        &head_position, &head_rotation, &head_target}) {
+    column->clear();
+  }
+  for (auto * column : {&mode, &side, &pivot, &step_index}) {
+    column->clear();
+  }
+  last_event.clear();
+  for (auto & column : efforts) {
+    column.clear();
+  }
+  present.clear();
+}
+
+ControlLoop::ControlLoop(
+  HybridSimulator & simulator, Kinematics & kinematics, std::vector<Controller *> controllers,
+  std::vector<Push> pushes, const Eigen::Vector3d & head_origin)
+: simulator_(simulator),
+  kinematics_(kinematics),
+  controllers_(std::move(controllers)),
+  pushes_(std::move(pushes)),
+  head_origin_(head_origin),
+  outputs_(controllers_.size())
+{
+  for (const Controller * controller : controllers_) {
+    if (controller == nullptr) {
+      throw std::invalid_argument("a control loop's controller is missing (null)");
+    }
+  }
+  for (const Push & push : pushes_) {
+    simulator_.dynamics().support_model(0, 0).frame(push.frame);  // invalid_argument if unknown
+    if (!std::isfinite(push.start) || !std::isfinite(push.duration) || !push.force.allFinite()) {
+      throw std::invalid_argument("a push needs a finite start, duration and force");
+    }
+  }
+  if (!head_origin_.allFinite()) {
+    throw std::invalid_argument("the head origin must be finite");
+  }
+}
+
+int ControlLoop::run(int periods, SampleBlock & block)
+{
+  block.clear();
+  error_ = nullptr;
+  physics_failed_ = false;
+  while (block.count < periods && simulator_.ended() == RunEnd::kNone) {
+    try {
+      step(block);
+    } catch (...) {
+      error_ = std::current_exception();
+      break;
+    }
+  }
+  return block.count;
+}
+
+std::size_t ControlLoop::source_index(SampleBlock & block, const std::string & name)
+{
+  for (std::size_t i = 0; i < block.sources.size(); ++i) {
+    if (block.sources[i] == name) {
+      return i;
+    }
+  }
+  if (block.sources.size() >= kMaxSources) {
+    throw std::invalid_argument("a control loop records at most 64 sources");
+  }
+  block.sources.push_back(name);
+  block.efforts.emplace_back(static_cast<std::size_t>(block.count) * kCoordinates, 0.0);
+  return block.sources.size() - 1;
+}
+
+void ControlLoop::step(SampleBlock & block)
+{
+  Dynamics & dynamics = simulator_.dynamics();
+  const HybridState & now = simulator_.state();
+  const Placement head = dynamics.frame_placement(now.contact, now.q, "head_top");
+  const Observation obs = observation_of(now, dynamics.mode(now.contact.mode));
+
+  // the commands of t_k, and the held sum (iceskate_sim.command.HeldCommand.of_controllers)
+  Inputs inputs;
+  inputs.has_impedance = true;
+  const Eigen::Vector3d * target = &head_origin_;
+  for (std::size_t k = 0; k < controllers_.size(); ++k) {
+    ControllerOutput & out = outputs_[k];
+    out.clear();
+    controllers_[k]->compute(obs, kinematics_, out);
+    const JointCommand total = out.total();
+    inputs.tau += total.effort;
+    if (total.has_impedance) {
+      inputs.tau += total.stiffness.cwiseProduct(total.reference);
+      inputs.stiffness += total.stiffness;
+      inputs.damping += total.damping;
+    }
+    if (out.has_head_target && target == &head_origin_) {
+      target = &out.head_target;
+    }
+  }
+  const double t = now.t;
+  for (const Push & push : pushes_) {
+    if (push.active(t)) {
+      inputs.push_frame = push.frame;
+      inputs.push_force = push.force;
+      break;
+    }
+  }
+
+  try {
+    simulator_.advance(inputs);
+  } catch (...) {
+    physics_failed_ = true;
+    throw;
+  }
+
+  // the sample of t_k
+  const HybridState & s = simulator_.start_state();
+  const DynamicsResult & r = simulator_.start_result();
+  const std::size_t row = static_cast<std::size_t>(block.count);
+  std::uint64_t present = 0;
+  const auto effort = [&](const std::string & source, const Vector18 & tau) {
+    const std::size_t i = source_index(block, source);
+    std::vector<double> & column = block.efforts[i];
+    column.resize((row + 1) * kCoordinates, 0.0);
+    for (int j = 0; j < kCoordinates; ++j) {
+      column[row * kCoordinates + static_cast<std::size_t>(j)] = tau[j];
+    }
+    present |= std::uint64_t{1} << i;
+  };
+  for (const ControllerOutput & out : outputs_) {
+    for (const auto & [source, command] : out.sources) {
+      effort(source, command.torque(obs.q, obs.v));
+    }
+  }
+  if (!inputs.push_frame.empty()) {
+    effort("push", dynamics.push_force(s.contact, s.q, inputs.push_frame, inputs.push_force));
+  }
+  for (auto & column : block.efforts) {  // sources that did not answer: 0
+    column.resize((row + 1) * kCoordinates, 0.0);
+  }
+  block.present.push_back(present);
+
+  block.t.push_back(s.t);
+  block.t_exchange.push_back(s.t_exchange);
+  block.t_touchdown.push_back(s.t_touchdown);
+  block.heel_anchor_y.push_back(s.contact.heel_anchor_y);
+  block.mode.push_back(s.contact.mode);
+  block.side.push_back(s.contact.side);
+  block.pivot.push_back(s.contact.pivot);
+  block.step_index.push_back(s.step_index);
+  append(block.q, s.q);
+  append(block.v, s.v);
+  append(block.qdd, r.qdd);
+  append(block.passive, r.passive);
+  append(block.applied, r.applied);
+  append(block.multipliers, r.multipliers);
+  block.support_normal.push_back(r.support_normal);
+  block.support_tangential.push_back(r.support_tangential);
+  block.cop_y.push_back(r.cop_y);
+  append(block.head_position, head.translation);
+  for (int i = 0; i < 3; ++i) {  // row-major
+    append(block.head_rotation, head.rotation.row(i));
+  }
+  append(block.head_target, *target);
+  const auto & events = simulator_.events();
+  long last = static_cast<long>(events.size()) - 1;
+  while (last >= 0 && !(events[static_cast<std::size_t>(last)].t <= s.t)) {
+    --last;
+  }
+  block.last_event.push_back(last);
+  ++block.count;
+}
+
+}  // namespace iceskate_native
