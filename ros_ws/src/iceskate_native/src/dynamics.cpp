@@ -7,8 +7,6 @@
 #include <utility>
 
 #include <Eigen/LU>
-#include <pinocchio/algorithm/center-of-mass.hpp>
-#include <pinocchio/algorithm/compute-all-terms.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
@@ -24,7 +22,6 @@ namespace iceskate_native
 namespace
 {
 
-constexpr double kGravity = 9.81;         // m/s^2
 constexpr double kRankTolerance = 1e-10;  // Hadamard ratio below which the constraints are singular
 constexpr int kMaxSize = kCoordinates + 3;
 constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
@@ -41,9 +38,12 @@ bool in_leg_chain(int i) { return i >= 1 && i <= 7; }
 
 }  // namespace
 
-// The input-free terms of one state (q, v) of one support model: what eq. (7) needs from
-// Pinocchio before the inputs enter. Kept for the last state, so that solving again at the same
-// state under other inputs (a control period's start, an implicit step) costs no Pinocchio pass.
+// The input-free terms of one state (q, v) of one support model: what eq. (7) and the support
+// wrench need from Pinocchio before the inputs enter. Kept for the last state, so that solving
+// again at the same state under other inputs (a control period's start, an implicit step) costs
+// no Pinocchio pass. Two passes make them: CRBA (world convention: M, the joint Jacobians, the
+// centroidal momentum matrix) and the non-linear effects (RNEA at zero acceleration: h + g, the
+// velocities, the bias wrench at the root).
 struct StateTerms
 {
   int model = -1;  // side * 2 + pivot; -1: none yet
@@ -56,15 +56,20 @@ struct StateTerms
   Eigen::Vector3d heel_velocity;
   Eigen::Vector3d heel_acceleration;  // classical, of the velocity products (Jdot v)
   double toe_z = 0.0;
-  Vector18 com_jacobian_z;
-  double com_acceleration_z = 0.0;  // of the velocity products
+  // The root joint's wrench on the tree is bias + A_g qdd: bias (at zero acceleration, with
+  // gravity; root frame), A_g the centroidal momentum matrix (world, moments about the com).
+  pinocchio::Force bias = pinocchio::Force::Zero();
+  Eigen::Matrix<double, 6, kCoordinates> momentum;
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();  // world [m]
+  pinocchio::SE3 root = pinocchio::SE3::Identity();  // world placement of the root joint
+  double vertical_bias = 0.0;  // world z of the bias force: m (g + zdd_com at qdd = 0) [N]
 };
 
 struct Dynamics::Workspace
 {
   StateTerms terms;
   std::vector<pinocchio::Data> data;  // one per support model
-  Eigen::VectorXd q, v, a;            // Pinocchio's argument type
+  Eigen::VectorXd q, v;               // Pinocchio's argument type
   pinocchio::Data::Matrix6x jacobian;
   int model = 0;  // side * 2 + pivot of the system assembled
   int n = 0;      // active coordinates
@@ -126,7 +131,6 @@ Dynamics::Dynamics(
   }
   work_->q.resize(kCoordinates);
   work_->v.resize(kCoordinates);
-  work_->a.resize(kCoordinates);
   work_->jacobian.setZero(6, kCoordinates);
 }
 
@@ -202,8 +206,8 @@ void Dynamics::assemble(
 
   StateTerms & terms = w.terms;
   if (terms.model != w.model || terms.q != q || terms.v != v) {
-    // computeAllTerms leaves data.a = the velocity products
-    pinocchio::computeAllTerms(model, data, ConstVector(w.q), ConstVector(w.v));
+    pinocchio::crba(model, data, ConstVector(w.q), pinocchio::Convention::WORLD);
+    pinocchio::nonLinearEffects(model, data, ConstVector(w.q), ConstVector(w.v));
     const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
     const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
     terms.model = w.model;
@@ -216,12 +220,18 @@ void Dynamics::assemble(
     pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
     terms.heel_jacobian = w.jacobian;
     terms.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
+    // the heel joint's acceleration of the velocity products: the non-linear effects' one less
+    // the (uniform) gravity acceleration they start from at the root
+    const pinocchio::JointIndex joint = model.frames[heel].parentJoint;
+    data.a[joint] = data.a_gf[joint] - data.oMi[joint].actInv(data.a_gf[0]);
     terms.heel_acceleration =
       pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
     terms.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
-    terms.com_jacobian_z = data.Jcom.row(2).transpose();
-    pinocchio::centerOfMass(model, data, pinocchio::ACCELERATION, false);
-    terms.com_acceleration_z = data.acom[0][2];
+    terms.bias = data.f[1];
+    terms.momentum = data.Ag;
+    terms.com = data.com[0];
+    terms.root = data.oMi[1];
+    terms.vertical_bias = terms.root.act(terms.bias).linear()[2];
   }
   w.heel = terms.heel;
   w.heel_velocity = terms.heel_velocity;
@@ -295,11 +305,10 @@ void Dynamics::assemble(
   }
   if (mode.y0_active) {  // Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
     const double k = mu * contact.support_slide_dir;
-    const double km = k * mass_;
-    for (int i = 0; i < n; ++i) {
-      w.A(0, i) += km * terms.com_jacobian_z[act[static_cast<std::size_t>(i)]];
+    for (int i = 0; i < n; ++i) {  // m zdd_com = row z of A_g qdd + its velocity products
+      w.A(0, i) += k * terms.momentum(2, act[static_cast<std::size_t>(i)]);
     }
-    w.b[0] -= km * (kGravity + terms.com_acceleration_z);
+    w.b[0] -= k * terms.vertical_bias;
     if (nc > 0) {
       w.A(0, n) -= k;
     }
@@ -362,7 +371,7 @@ DynamicsResult Dynamics::evaluate(
   r.swing_heel = w.heel;
   r.swing_heel_velocity = w.heel_velocity;
   r.swing_toe_z = w.toe_z;
-  r.support_wrench = support_wrench(contact, q, v, inputs, r);
+  r.support_wrench = support_wrench(contact, q, inputs, r);
   r.support_normal = r.support_wrench[2];
   r.support_tangential = r.support_wrench[1];
   r.cop_y = r.support_normal > 0.0 ? q[kY0] + r.support_wrench[3] / r.support_normal
@@ -530,22 +539,24 @@ Eigen::Vector3d Dynamics::frame_velocity(
 }
 
 Wrench Dynamics::support_wrench(
-  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+  const Contact & contact, const Vector18 & q, const Inputs & inputs,
   const DynamicsResult & result)
 {
-  // RNEA gives the wrench the base must supply for the motion; the swing contact and a push
-  // supply part of it, the support foot the rest (world-aligned: the y0 joint does not turn).
+  // The wrench the root joint supplies for the motion (RNEA's, affine in qdd: the bias of the
+  // state plus the momentum rate A_g qdd); the swing contact and a push supply part of it, the
+  // support foot the rest (world-aligned: the y0 joint does not turn).
   Workspace & w = *work_;
+  const StateTerms & terms = w.terms;
   const SupportModel & support = models_[static_cast<std::size_t>(w.model)];
   const pinocchio::Model & model = support.model.pin();
   pinocchio::Data & data = w.data[static_cast<std::size_t>(w.model)];
-  w.q = q;
-  w.v = v;
-  w.a = result.qdd;
-  pinocchio::rnea(model, data, ConstVector(w.q), ConstVector(w.v), ConstVector(w.a));
-  Eigen::Vector3d force = data.f[1].linear();
-  Eigen::Vector3d moment = data.f[1].angular();
-  const Eigen::Vector3d origin = data.oMi[1].translation();
+  const Wrench rate = terms.momentum * result.qdd;  // (force, moment about the com), world
+  const Eigen::Vector3d rate_force = rate.head<3>();
+  const pinocchio::Force at_origin(rate_force, rate.tail<3>() + terms.com.cross(rate_force));
+  const pinocchio::Force root = terms.bias + terms.root.actInv(at_origin);
+  Eigen::Vector3d force = root.linear();
+  Eigen::Vector3d moment = root.angular();
+  const Eigen::Vector3d origin = terms.root.translation();
   const auto minus_force_at = [&](const Eigen::Vector3d & r, const Eigen::Vector3d & p) {
     force -= p;
     moment -= r.cross(p);
@@ -556,7 +567,9 @@ Wrench Dynamics::support_wrench(
     minus_force_at(result.swing_heel - origin, swing);
     moment[0] -= result.multipliers[2];
   }
-  if (!inputs.push_frame.empty()) {
+  if (!inputs.push_frame.empty()) {  // (other queries may have moved data since the terms)
+    w.q = q;
+    pinocchio::forwardKinematics(model, data, ConstVector(w.q));
     const auto frame = static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame));
     const Eigen::Vector3d at = pinocchio::updateFramePlacement(model, data, frame).translation();
     minus_force_at(at - origin, inputs.push_force);

@@ -1,5 +1,6 @@
 #include "iceskate_native/model_kinematics.hpp"
 
+#include <array>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -51,9 +52,32 @@ void check_joint(int joint)
 
 }  // namespace
 
+// One support model's answers at the last posture (and velocity) asked: the laws of one control
+// instant ask the same state many times (the head pose twice, the centre of mass twice, a frame
+// or joint position four times), so each Pinocchio pass runs once per state and model.
+struct StateCache
+{
+  Vector18 q = Vector18::Zero();
+  Vector18 v = Vector18::Zero();
+  bool has_q = false;  // q holds the posture of the answers below
+  bool has_v = false;  // v holds the velocity of the velocity-level answers
+  bool positions = false;  // joints, frames, head, heel_z_row
+  std::array<Eigen::Vector3d, kCoordinates> joints;  // world positions [m]
+  std::array<Eigen::Vector3d, kFrames> frames;       // world positions [m], Frame's order
+  HeadPose head;                                     // columns of locked coordinates kept
+  Vector18 heel_z_row = Vector18::Zero();            // idem
+  bool gravity = false;
+  Vector18 g = Vector18::Zero();  // every coordinate
+  bool com = false;
+  CentreOfMass centre;
+  bool velocities = false;
+  std::array<Eigen::Vector3d, kCoordinates> joint_velocities;  // world-aligned [m/s]
+};
+
 struct ModelKinematics::Workspace
 {
   std::vector<pinocchio::Data> data;  // one per support model
+  std::array<StateCache, 4> cache;    // one per support model
   // Pinocchio indices per model: joint of coordinate i, and the frames in Frame's order
   std::array<std::array<pinocchio::JointIndex, kCoordinates>, 4> joints{};
   std::array<std::array<pinocchio::FrameIndex, kFrames>, 4> frames{};
@@ -136,29 +160,72 @@ Eigen::Vector3d ModelKinematics::frame_offset(int side, int pivot, Frame frame) 
     .placement.translation();
 }
 
-HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)
+StateCache & ModelKinematics::at(std::size_t k, const Vector18 & q)
 {
-  const Mode & m = mode(state.mode);
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  StateCache & c = work_->cache[k];
+  if (!c.has_q || c.q != q) {
+    c = StateCache{};
+    c.q = q;
+    c.has_q = true;
+  }
+  return c;
+}
+
+StateCache & ModelKinematics::at(std::size_t k, const Vector18 & q, const Vector18 & v)
+{
+  StateCache & c = at(k, q);
+  if (!c.has_v || c.v != v) {
+    c.v = v;
+    c.has_v = true;
+    c.com = false;
+    c.velocities = false;
+  }
+  return c;
+}
+
+const StateCache & ModelKinematics::positions(std::size_t k, const Vector18 & q)
+{
+  StateCache & c = at(k, q);
+  if (c.positions) {
+    return c;
+  }
   const pinocchio::Model & model = models_[k].model.pin();
   Workspace & w = *work_;
   pinocchio::Data & data = w.data[k];
-  const auto head = w.frames[k][static_cast<std::size_t>(Frame::kHeadTop)];
   w.q = q;
   pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
-  const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(model, data, head);
+  for (std::size_t i = 0; i < kCoordinates; ++i) {
+    c.joints[i] = data.oMi[w.joints[k][i]].translation();
+  }
+  for (std::size_t f = 0; f < kFrames; ++f) {
+    c.frames[f] = pinocchio::updateFramePlacement(model, data, w.frames[k][f]).translation();
+  }
+  const auto head = w.frames[k][static_cast<std::size_t>(Frame::kHeadTop)];
+  const pinocchio::SE3 & placement = data.oMf[head];
   w.jacobian.setZero();
   pinocchio::getFrameJacobian(model, data, head, kWorldAligned, w.jacobian);
   const Eigen::Matrix3d & rotation = placement.rotation();
   const double zx = rotation(0, 2), zy = rotation(1, 2), zz = rotation(2, 2);
   const double denom = zy * zy + zz * zz;
   const Eigen::RowVector3d pitch(1.0, -zx * zy / denom, -zx * zz / denom);
-  HeadPose pose;
-  pose.psi << placement.translation()[1], placement.translation()[2],
+  c.head.psi << placement.translation()[1], placement.translation()[2],
     std::atan2(-rotation(1, 2), rotation(2, 2));
-  pose.jacobian.row(0) = w.jacobian.row(1);
-  pose.jacobian.row(1) = w.jacobian.row(2);
-  pose.jacobian.row(2) = pitch * w.jacobian.bottomRows<3>();
+  c.head.jacobian.row(0) = w.jacobian.row(1);
+  c.head.jacobian.row(1) = w.jacobian.row(2);
+  c.head.jacobian.row(2) = pitch * w.jacobian.bottomRows<3>();
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(model, data, w.frames[k][static_cast<std::size_t>(
+                                Frame::kSwingHeel)], kWorldAligned, w.jacobian);
+  c.heel_z_row = w.jacobian.row(2).transpose();
+  c.positions = true;
+  return c;
+}
+
+HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)
+{
+  const Mode & m = mode(state.mode);
+  HeadPose pose = positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
+                    .head;
   if (!m.y0_active) {
     pose.jacobian.col(kY0).setZero();
   }
@@ -172,13 +239,17 @@ Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q
 {
   const Mode & m = mode(state.mode);
   const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  Workspace & w = *work_;
-  w.q = q;
-  const Vector18 g =
-    pinocchio::computeGeneralizedGravity(models_[k].model.pin(), w.data[k], ConstVector(w.q));
+  StateCache & c = at(k, q);
+  if (!c.gravity) {
+    Workspace & w = *work_;
+    w.q = q;
+    c.g = pinocchio::computeGeneralizedGravity(models_[k].model.pin(), w.data[k],
+                                               ConstVector(w.q));
+    c.gravity = true;
+  }
   Vector18 out = Vector18::Zero();
   for (int i : m.active) {
-    out[i] = g[i];
+    out[i] = c.g[i];
   }
   return out;
 }
@@ -186,15 +257,8 @@ Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q
 Vector18 ModelKinematics::swing_heel_z_row(const SupportState & state, const Vector18 & q)
 {
   const Mode & m = mode(state.mode);
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  const pinocchio::Model & model = models_[k].model.pin();
-  Workspace & w = *work_;
-  w.q = q;
-  pinocchio::computeJointJacobians(model, w.data[k], ConstVector(w.q));
-  w.jacobian.setZero();
-  pinocchio::getFrameJacobian(model, w.data[k], w.frames[k][static_cast<std::size_t>(
-                                Frame::kSwingHeel)], kWorldAligned, w.jacobian);
-  Vector18 row = w.jacobian.row(2).transpose();
+  Vector18 row =
+    positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q).heel_z_row;
   if (!m.y0_active) {
     row[kY0] = 0.0;
   }
@@ -208,42 +272,36 @@ CentreOfMass ModelKinematics::centre_of_mass(
   const SupportState & state, const Vector18 & q, const Vector18 & v)
 {
   const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  const pinocchio::Model & model = models_[k].model.pin();
-  Workspace & w = *work_;
-  pinocchio::Data & data = w.data[k];
-  w.q = q;
-  w.v = v;
-  CentreOfMass com;
-  pinocchio::centerOfMass(model, data, ConstVector(w.q), ConstVector(w.v));
-  com.position = data.com[0];
-  com.velocity = data.vcom[0];
-  com.jacobian_y =
-    pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
-  return com;
+  StateCache & c = at(k, q, v);
+  if (!c.com) {
+    const pinocchio::Model & model = models_[k].model.pin();
+    Workspace & w = *work_;
+    pinocchio::Data & data = w.data[k];
+    w.q = q;
+    w.v = v;
+    pinocchio::centerOfMass(model, data, ConstVector(w.q), ConstVector(w.v));
+    c.centre.position = data.com[0];
+    c.centre.velocity = data.vcom[0];
+    c.centre.jacobian_y =
+      pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
+    c.com = true;
+  }
+  return c.centre;
 }
 
 Eigen::Vector3d ModelKinematics::frame_position(
   const SupportState & state, const Vector18 & q, Frame frame)
 {
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  const pinocchio::Model & model = models_[k].model.pin();
-  Workspace & w = *work_;
-  w.q = q;
-  pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q));
-  return pinocchio::updateFramePlacement(
-           model, w.data[k], w.frames[k][static_cast<std::size_t>(frame)])
-    .translation();
+  return positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
+    .frames[static_cast<std::size_t>(frame)];
 }
 
 Eigen::Vector3d ModelKinematics::joint_position(
   const SupportState & state, const Vector18 & q, int joint)
 {
   check_joint(joint);
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  Workspace & w = *work_;
-  w.q = q;
-  pinocchio::forwardKinematics(models_[k].model.pin(), w.data[k], ConstVector(w.q));
-  return w.data[k].oMi[w.joints[k][static_cast<std::size_t>(joint)]].translation();
+  return positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
+    .joints[static_cast<std::size_t>(joint)];
 }
 
 Eigen::Vector3d ModelKinematics::joint_velocity(
@@ -251,14 +309,20 @@ Eigen::Vector3d ModelKinematics::joint_velocity(
 {
   check_joint(joint);
   const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
-  const pinocchio::Model & model = models_[k].model.pin();
-  Workspace & w = *work_;
-  w.q = q;
-  w.v = v;
-  pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q), ConstVector(w.v));
-  return pinocchio::getVelocity(
-           model, w.data[k], w.joints[k][static_cast<std::size_t>(joint)], kWorldAligned)
-    .linear();
+  StateCache & c = at(k, q, v);
+  if (!c.velocities) {
+    const pinocchio::Model & model = models_[k].model.pin();
+    Workspace & w = *work_;
+    w.q = q;
+    w.v = v;
+    pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q), ConstVector(w.v));
+    for (std::size_t i = 0; i < kCoordinates; ++i) {
+      c.joint_velocities[i] =
+        pinocchio::getVelocity(model, w.data[k], w.joints[k][i], kWorldAligned).linear();
+    }
+    c.velocities = true;
+  }
+  return c.joint_velocities[static_cast<std::size_t>(joint)];
 }
 
 }  // namespace iceskate_native

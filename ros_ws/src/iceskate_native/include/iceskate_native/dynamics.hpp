@@ -175,7 +175,7 @@ private:
     const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs);
   void solve(const Contact & contact, const Vector18 & q, const Vector18 & v);
   Wrench support_wrench(
-    const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+    const Contact & contact, const Vector18 & q, const Inputs & inputs,
     const DynamicsResult & result);
   bool limits_engaged(const Vector18 & q) const;
 

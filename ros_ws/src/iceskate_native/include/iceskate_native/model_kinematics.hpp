@@ -1,7 +1,9 @@
 // ModelKinematics: the Kinematics interface (kinematics.hpp) on Pinocchio, over the same four
 // support models and mode table the Dynamics kernel gets, with a pinocchio::Data of its own per
 // model (the laws never disturb the dynamics' workspaces). The native counterpart of what the
-// Python laws read from iceskate_sim.dynamics.GaitDynamics and its Pinocchio models.
+// Python laws read from iceskate_sim.dynamics.GaitDynamics and its Pinocchio models. It keeps
+// each support model's answers at the last state asked, so the many queries of one control
+// instant cost one Pinocchio pass of each kind.
 #pragma once
 
 #include <array>
@@ -12,6 +14,8 @@
 
 namespace iceskate_native
 {
+
+struct StateCache;  // one support model's answers at one state (in model_kinematics.cpp)
 
 class ModelKinematics final : public Kinematics
 {
@@ -41,9 +45,14 @@ public:
                                  const Vector18 & v, int joint) override;
 
 private:
-  struct Workspace;  // Pinocchio data and argument buffers (in model_kinematics.cpp)
+  struct Workspace;  // Pinocchio data, answers and argument buffers (in model_kinematics.cpp)
 
   int model_index(int side, int pivot) const;
+  /// Model k's answers, emptied unless they are at q (and v).
+  StateCache & at(std::size_t k, const Vector18 & q);
+  StateCache & at(std::size_t k, const Vector18 & q, const Vector18 & v);
+  /// Model k's answers at q with the position-level ones computed (one joint-Jacobian pass).
+  const StateCache & positions(std::size_t k, const Vector18 & q);
 
   std::array<SupportModel, 4> models_;
   ModeTable modes_;
