@@ -75,6 +75,7 @@ struct Dynamics::Workspace
   int n = 0;      // active coordinates
   int nc = 0;     // active constraints
   SystemMatrix A;
+  SystemMatrix factored;  // the matrix `lu` holds the factors of (none: empty)
   SystemVector b;
   SystemVector x;
   Eigen::PartialPivLU<SystemMatrix> lu;
@@ -332,7 +333,10 @@ void Dynamics::assemble(
 void Dynamics::solve(const Contact & contact, const Vector18 & q, const Vector18 & v)
 {
   Workspace & w = *work_;
-  w.lu.compute(w.A);
+  if (w.factored.rows() != w.A.rows() || w.factored != w.A) {  // e.g. the same state again
+    w.lu.compute(w.A);
+    w.factored = w.A;
+  }
   const auto & lu = w.lu.matrixLU();
   for (Eigen::Index i = 0; i < lu.rows(); ++i) {
     if (lu(i, i) == 0.0) {
