@@ -1,14 +1,20 @@
 #!/usr/bin/env python3
-"""Where the headless runner's time goes in one control period, on both engines.
+"""Where the headless runner's time goes in one control period: the native loop and both engines
+period by period.
 
-Runs the loop of ``run_scene`` on a scene for ``--duration`` s (``Session`` and
-``ControlStack``: the observation, the control laws, ``step`` = hold the commands, advance one
-period and make its sample, ``flush`` = trajectory row and bag), once on each engine, and times
-each part with ``perf_counter``; also the main process's CPU time per period (``process_time``:
-the forked bag writer is not in it, and other jobs on the machine do not inflate it as they
-inflate wall time). The engines take turns ``--rounds`` times; the figures are the medians.
-It prints microseconds per period and part, the real-time factor of each engine and their
-ratio, all measured in this one run. ``--no-bag`` writes no bag.
+Runs ``--duration`` s of a scene three ways, in turn, ``--rounds`` times (medians):
+
+* ``native loop``: what ``run_scene`` does (``Session.run_periods`` in blocks of
+  ``BLOCK_PERIODS``): observation, control laws, zero-order hold, period and sample in one C++
+  call per block (``iceskate_native.ControlLoop``), then the block recorded (trajectory, bag);
+* ``native, per period`` and ``python, per period``: the loop the ROS simulator node runs
+  (``Session.step`` with the commands of ``ControlStack``), on each engine: the observation,
+  the control laws, ``step`` (hold the commands, advance one period, make its sample) and
+  ``flush`` (trajectory row, bag) timed apart.
+
+It prints microseconds per period and part, the CPU time of this process per period (the forked
+bag writer is not in it), the real-time factors and their ratios, all measured in this one run.
+``--no-bag`` writes no bag.
 
 Usage (from the repository root, environment sourced):
     python benchmarks/bench_period.py [skate] [--duration 15] [--rounds 1] [--no-bag]
@@ -27,24 +33,42 @@ import time
 from bench_work_precision import machine_info
 
 from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.runner import BLOCK_PERIODS
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.robot import Robot, load_robot
 from iceskate_sim.scene import Scene
 from iceskate_sim.session import Session
 
 PARTS = ('observation', 'control laws', 'step (advance, sample)', 'flush (row, bag)',
-         'finish')
-ENGINES = ('native', 'python')
+         'native block (laws, periods, samples)', 'block recorded (trajectory, bag)', 'finish')
+VARIANTS = ('native loop', 'native, per period', 'python, per period')
 
 
-def measure(scene: Scene, robot: Robot, bag: bool, directory: pathlib.Path) -> dict[str, float]:
-    """Run the loop once; return us per period of each part, the RTF and CPU us per period."""
+def measure(scene: Scene, robot: Robot, bag: bool, directory: pathlib.Path,
+            blocks: bool) -> dict[str, float]:
+    """Run the loop once (``blocks``: the runner's native blocks, else period by period); return
+    us per period of each part, the total, the CPU of this process and the RTF."""
     out = directory if bag else None
     session = Session(scene, out, out / 'bag' if bag else None, robot)
     stack = ControlStack(scene, session.robot, session.observation())
     spent = dict.fromkeys(PARTS, 0.0)
     clock = time.perf_counter
     cpu_start, wall_start = time.process_time(), clock()
+    if blocks:
+        run_loop = session.sim.run_loop
+
+        def timed_loop(*args: object) -> object:
+            start = clock()
+            try:
+                return run_loop(*args)
+            finally:
+                spent['native block (laws, periods, samples)'] += clock() - start
+
+        session.sim.run_loop = timed_loop  # type: ignore[method-assign]
+        while not session.done:
+            session.run_periods(stack, BLOCK_PERIODS)
+        spent['block recorded (trajectory, bag)'] = (
+            clock() - wall_start - spent['native block (laws, periods, samples)'])
     while not session.done:
         t0 = clock()
         obs = session.observation()
@@ -69,7 +93,7 @@ def measure(scene: Scene, robot: Robot, bag: bool, directory: pathlib.Path) -> d
                          f' ({session.error or session.sim.ended})')
     periods = session.periods
     figures = {part: seconds / periods * 1e6 for part, seconds in spent.items()}
-    figures['total'] = loop / periods * 1e6
+    figures['total'] = (loop + spent['finish']) / periods * 1e6
     figures['cpu'] = cpu / periods * 1e6
     figures['rtf'] = scene.duration / (loop + spent['finish'])
     return figures
@@ -86,29 +110,33 @@ def main(argv: list[str] | None = None) -> int:
     info = machine_info()
     robot = load_robot()
     shipped = replace(load_scene(args.scene), duration=args.duration)
-    runs: dict[str, list[dict[str, float]]] = {engine: [] for engine in ENGINES}
+    runs: dict[str, list[dict[str, float]]] = {variant: [] for variant in VARIANTS}
     for _ in range(args.rounds):
-        for engine in ENGINES:
+        for variant in VARIANTS:
+            engine = variant.split(',')[0].split()[0]
             scene = replace(shipped, simulator=replace(shipped.simulator, engine=engine))
             with tempfile.TemporaryDirectory() as directory:
-                runs[engine].append(measure(scene, robot, not args.no_bag,
-                                            pathlib.Path(directory)))
-    median = {engine: {key: statistics.median(run[key] for run in results)
-                       for key in results[0]} for engine, results in runs.items()}
+                runs[variant].append(measure(scene, robot, not args.no_bag,
+                                             pathlib.Path(directory), variant == 'native loop'))
+    median = {variant: {key: statistics.median(run[key] for run in results)
+                        for key in results[0]} for variant, results in runs.items()}
     config = shipped.simulator
     print(f'{args.scene}, {args.duration:g} s, {config.integrator.method} '
           f'{config.integrator.step * 1e3:g} ms, control period {config.control_period * 1e3:g}'
           f' ms, {"no bag" if args.no_bag else "with bag"}; median of {args.rounds} run(s) per '
-          f'engine, engines in turn')
+          f'variant, variants in turn')
     print(f'machine: {info["cpu"]}, {info["cpus"]} CPUs; load average at start '
           f'{info["loadavg_start"]}; {info["date"]}')
-    print(f'{"us per control period":<28}' + ''.join(f'{e:>12}' for e in ENGINES))
+    print(f'{"us per control period":<38}' + ''.join(f'{v:>20}' for v in VARIANTS))
     for part in (*PARTS, 'total', 'cpu'):
         label = 'CPU of this process' if part == 'cpu' else part
-        print(f'{label:<28}' + ''.join(f'{median[e][part]:12.1f}' for e in ENGINES))
-    rtf = {engine: median[engine]['rtf'] for engine in ENGINES}
-    print(f'real-time factor: native {rtf["native"]:.2f}x, python {rtf["python"]:.2f}x; '
-          f'native / python {rtf["native"] / rtf["python"]:.2f}')
+        print(f'{label:<38}' + ''.join(
+            f'{median[v][part]:20.1f}' if median[v][part] else f'{"-":>20}' for v in VARIANTS))
+    rtf = {variant: median[variant]['rtf'] for variant in VARIANTS}
+    print('real-time factor: ' + ', '.join(f'{v} {rtf[v]:.2f}x' for v in VARIANTS))
+    base = rtf['python, per period']
+    print('ratios to python, per period: ' + ', '.join(
+        f'{v} {rtf[v] / base:.2f}' for v in VARIANTS[:2]))
     return 0
 
 

@@ -27,8 +27,8 @@ its kinds for a run that left the physical range), which the simulator wraps in 
 
 from ._kernel import (
     ChatteringError,
-    ControlLoop,
     Controller,
+    ControlLoop,
     DivergenceError,
     Dynamics,
     HybridSimulator,
@@ -40,9 +40,9 @@ from ._kernel import (
     crba_of,
 )
 
-__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'DivergenceError', 'Dynamics', 'HybridSimulator',
-           'Kinematics', 'ModelKinematics', 'NativeError', 'Observation', 'RobotModel', 'crba_of',
-           'load_model', 'model_bytes']
+__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'DivergenceError', 'Dynamics',
+           'HybridSimulator', 'Kinematics', 'ModelKinematics', 'NativeError', 'Observation',
+           'RobotModel', 'crba_of', 'load_model', 'model_bytes']
 
 
 def model_bytes(model) -> bytes:

@@ -41,6 +41,19 @@ struct BoundControlLoop
   SampleBlock block;
 };
 
+/// The C++ object behind `object`; std::invalid_argument naming `what` if it is no T.
+template <typename T>
+T & native_object(const nb::object & object, const char * what)
+{
+  T * native = nullptr;
+  if (!nb::try_cast<T *>(object, native) || native == nullptr) {
+    throw std::invalid_argument(
+      std::string(what) + " is a " + nb::type_name(object.type()).c_str() + ", not an "
+      + "iceskate_native." + nb::type_name(nb::type<T>()).c_str());
+  }
+  return *native;
+}
+
 /// (start [s], duration [s], frame, world force [N])
 using PushRow = std::tuple<double, double, std::string, Eigen::VectorXd>;
 
@@ -49,11 +62,12 @@ void construct_loop(
   std::vector<nb::object> controllers, const std::vector<PushRow> & pushes,
   const Eigen::Ref<const Eigen::VectorXd> & head_origin)
 {
-  auto & sim = nb::cast<HybridSimulator &>(simulator);
-  auto & kin = nb::cast<Kinematics &>(kinematics);
+  HybridSimulator & sim = native_object<HybridSimulator>(simulator, "the simulator");
+  Kinematics & kin = native_object<Kinematics>(kinematics, "the kinematics");
   std::vector<Controller *> laws;
-  for (const nb::object & controller : controllers) {
-    laws.push_back(&nb::cast<Controller &>(controller));
+  for (std::size_t k = 0; k < controllers.size(); ++k) {
+    laws.push_back(
+      &native_object<Controller>(controllers[k], ("controller " + std::to_string(k)).c_str()));
   }
   std::vector<Push> rows;
   for (const auto & [start, duration, frame, force] : pushes) {

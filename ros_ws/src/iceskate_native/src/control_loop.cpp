@@ -4,6 +4,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "iceskate_native/checks.hpp"
+
 namespace iceskate_native
 {
 
@@ -153,7 +155,10 @@ void ControlLoop::step(SampleBlock & block)
     }
   }
 
-  try {
+  try {  // the checks the binding of HybridSimulator::advance makes, with its words
+    require_finite_vector(inputs.tau, kCoordinates, "tau", "[y0, q1..q17]");
+    require_finite_vector(inputs.stiffness, kCoordinates, "stiffness", "[y0, q1..q17]");
+    require_finite_vector(inputs.damping, kCoordinates, "damping", "[y0, q1..q17]");
     simulator_.advance(inputs);
   } catch (...) {
     physics_failed_ = true;

@@ -26,8 +26,8 @@ from iceskate_sim.command import ControllerCommand, HeldCommand
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import Transition
 from iceskate_sim.metrics import Trajectory, compute_metrics
-from iceskate_sim.observation import Observation
 from iceskate_sim.modes import MODES
+from iceskate_sim.observation import Observation
 from iceskate_sim.recording import BagRecorder, Sample, block_records
 from iceskate_sim.robot import Robot, load_robot
 from iceskate_sim.scene import Scene

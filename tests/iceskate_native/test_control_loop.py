@@ -1,0 +1,154 @@
+"""Many control periods in one native call (``iceskate_native.ControlLoop``, through
+``Session.run_periods``) against the same session stepped period by period (``Session.step``
+with ``ControlStack.commands``, the path of the ROS simulator node).
+
+Both run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
+bit: every trajectory column, the event log, the counters, the bag's messages and the way a run
+stops on a failure of the physics or of a controller.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+import pathlib
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader
+
+from gait_manager.errors import GaitManagerError
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
+import iceskate_native
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.scene import Push, Scene
+from iceskate_sim.session import Session
+
+
+def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -> Scene:
+    scene = load_scene(name)
+    return replace(scene, duration=duration, record_bag=bag,
+                   simulator=replace(scene.simulator, **simulator))
+
+
+def _stepped(scene: Scene, out: pathlib.Path | None = None) -> Session:
+    session = Session(scene, out, out / 'bag' if out is not None and scene.record_bag else None)
+    stack = ControlStack(scene, session.robot, session.observation())
+    while not session.done:
+        session.step(stack.commands(session.observation()))
+        session.flush()
+    session.finish()
+    return session
+
+
+def _blocks(scene: Scene, block: int, out: pathlib.Path | None = None) -> Session:
+    session = Session(scene, out, out / 'bag' if out is not None and scene.record_bag else None)
+    stack = ControlStack(scene, session.robot, session.observation())
+    while not session.done:
+        assert session.run_periods(stack, block) > 0 or session.done
+    session.finish()
+    return session
+
+
+def _assert_identical(a: Session, b: Session) -> None:
+    x, y = a.trajectory.arrays(), b.trajectory.arrays()
+    assert x.keys() == y.keys() and len(a.trajectory) == len(b.trajectory) > 0
+    for key in x:
+        assert x[key].dtype == y[key].dtype, key
+        assert np.array_equal(x[key], y[key], equal_nan=True), key
+    assert a.sim.events == b.sim.events
+    assert a.sim.stats == b.sim.stats
+    assert (a.sim.ended, a.periods, a.trajectory.sources) == (
+        b.sim.ended, b.periods, b.trajectory.sources)
+    skip = {'wall_time_s', 'real_time_factor'}
+    assert ({k: v for k, v in a.metrics.items() if k not in skip}
+            == {k: v for k, v in b.metrics.items() if k not in skip})
+
+
+@pytest.mark.parametrize(('name', 'duration'), [
+    ('skate', 2.0), ('skate_no_yaw', 1.0), ('walk', 1.5), ('stand', 2.5)])
+def test_blocks_equal_the_session_stepped_period_by_period(name: str, duration: float) -> None:
+    scene = _scene(name, duration)
+    _assert_identical(_stepped(scene), _blocks(scene, 250))
+
+
+def test_a_push_and_any_block_size_give_the_same_run() -> None:
+    # stand pushes the chest at 2.0 s for 0.1 s: the 'push' source appears mid-run
+    scene = _scene('stand', 2.2)
+    reference = _stepped(scene)
+    assert 'push' in reference.trajectory.sources
+    for block in (1, 7, 1000):
+        _assert_identical(reference, _blocks(scene, block))
+
+
+def test_the_bag_of_blocks_holds_the_same_messages(tmp_path: pathlib.Path) -> None:
+    scene = _scene('stand', 2.15, bag=True)  # the push acts over the last 0.15 s
+    _stepped(scene, tmp_path / 'stepped')
+    _blocks(scene, 333, tmp_path / 'blocks')
+
+    def messages(bag: pathlib.Path) -> list[tuple[str, int, bytes]]:
+        with Reader(bag) as reader:
+            return [(c.topic, t, bytes(data)) for c, t, data in reader.messages()]
+
+    stepped, blocks = messages(tmp_path / 'stepped' / 'bag'), messages(tmp_path / 'blocks' / 'bag')
+    assert len(blocks) == 1 + 6 * 2150 and blocks == stepped
+
+
+def test_the_python_engine_runs_the_blocks_period_by_period() -> None:
+    scene = _scene('walk', 0.3, engine='python')
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    assert session.run_periods(stack, 120) == 120
+    assert session._loop is False  # no native loop on the Python engine
+    _assert_identical(_stepped(scene), _blocks(scene, 120))
+
+
+def test_a_physics_failure_ends_both_paths_alike() -> None:
+    # a residual bound below the projection's round-off: the first constrained period fails
+    scene = _scene('walk', 1.5, residual_bound=1e-18)
+    stepped, blocks = _stepped(scene), _blocks(scene, 250)
+    assert stepped.error is not None and 'constraint residual' in str(stepped.error)
+    assert str(blocks.error) == str(stepped.error)
+    _assert_identical(stepped, blocks)
+
+
+def test_a_controller_error_comes_after_the_samples_before_it() -> None:
+    # knee and ankle at 1e308 rad (soft stops off): the balance law's sum overflows
+    scene = _scene('skate', 1.0, dynamics=replace(load_scene('skate').simulator.dynamics,
+                                                    joint_limits=False))
+    for run in ('stepped', 'blocks'):
+        session = Session(scene)
+        stack = ControlStack(scene, session.robot, session.observation())
+        q = session.sim.state.q.copy()
+        q[2:4] = 1e308
+        session.sim.set_state(replace(session.sim.state, q=q))
+        with pytest.raises(GaitManagerError, match='balance command is not finite'):
+            if run == 'stepped':
+                session.step(stack.commands(session.observation()))
+            else:
+                session.run_periods(stack, 10)
+        assert len(session.trajectory) == 0 and session.sim.stats.control_periods == 0
+
+
+def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
+    scene = _scene('skate', 0.1)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    controllers = list(stack.controllers.values())
+    sim = session.sim
+    with pytest.raises(SimulationError, match="native control loop: unknown frame 'nose'"):
+        sim.control_loop(stack.kinematics, controllers, (Push(0.0, 1.0, 'nose', (1, 0, 0)),),
+                         session.psi_initial)
+    with pytest.raises(SimulationError, match=r'native control loop: push force\[0\] is nan'):
+        sim.control_loop(stack.kinematics, controllers,
+                         (Push(0.0, 1.0, 'chest', (math.nan, 0, 0)),), session.psi_initial)
+    with pytest.raises(SimulationError, match='head_origin has 2 entries, expected 3'):
+        sim.control_loop(stack.kinematics, controllers, (), np.zeros(2))
+    with pytest.raises(SimulationError, match='native control loop: controller 1 is a object, '
+                       'not an iceskate_native.*Controller'):
+        sim.control_loop(stack.kinematics, [controllers[0], object()], (), session.psi_initial)
+    loop = sim.control_loop(stack.kinematics, controllers, (), session.psi_initial)
+    with pytest.raises(ValueError, match='number of periods must be >= 0'):
+        loop._kernel.run(-1)
+    assert isinstance(loop._kernel, iceskate_native.ControlLoop)
