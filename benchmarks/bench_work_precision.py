@@ -71,11 +71,14 @@ def import_core() -> None:
 import_core()
 
 from iceskate_bringup.composition import ControlStack  # noqa: E402
-from iceskate_bringup.scene import load_scene, parse_scene
+from iceskate_bringup.runner import BLOCK_PERIODS  # noqa: E402
+from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
 from iceskate_sim.command import HeldCommand  # noqa: E402
+from iceskate_sim.dynamics import ContactState  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.integrators import IntegratorConfig  # noqa: E402
-from iceskate_sim.robot import load_robot  # noqa: E402
+from iceskate_sim.modes import MODES  # noqa: E402
+from iceskate_sim.robot import PIVOTS, SIDES, load_robot  # noqa: E402
 from iceskate_sim.scene import Scene  # noqa: E402
 from iceskate_sim.simulation import Simulator  # noqa: E402
 
@@ -133,7 +136,8 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
              energy: bool = False, stack_class: type = ControlStack,
              **config_changes: Any) -> Run:
     """Run ``scene`` for ``duration`` [s] the way ``run_scene`` does (same control stack,
-    pushes, zero-order hold), without recording; stop after ``max_wall`` s of wall time.
+    pushes, zero-order hold; on the native engine the same native blocks of periods), without
+    recording; stop after ``max_wall`` s of wall time.
 
     :param integrator: replaces the scene's integrator (None: keep it).
     :param stack_class: the controllers (``ControlStack`` or a variant with its signature).
@@ -150,25 +154,39 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
     n_periods = int(round(duration / cfg.control_period))
     samples = [(sim.state.t, sim.state.q.copy(), sim.state.v.copy(), sim.state.contact,
                 sim.state.step_index)]
-    error = None
+    obs = sim.observation()
+    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
+                            sim.dynamics.head_pose(obs.contact(), obs.q)[0])
     start = time.perf_counter()
-    try:
-        for _ in range(n_periods):
-            t = sim.state.t
-            commands = stack.commands(sim.observation())
-            push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)),
-                        None)
-            sim.advance(HeldCommand.of_controllers(commands.values()), push)
-            samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(),
-                            sim.state.contact, sim.state.step_index))
-            if sim.ended is not None:
-                break
-            if time.perf_counter() - start > max_wall:
-                error = f'wall-time limit {max_wall:g} s reached at t={sim.state.t:.4f} s'
-                break
-    except SimulationError as exc:
-        error = str(exc).splitlines()[0][:200]
-    wall = time.perf_counter() - start
+    if loop is not None:
+        blocks, error = _native_blocks(sim, loop, n_periods, start, max_wall)
+        wall = time.perf_counter() - start
+        # the state each period started from (after the transitions due then), then the last
+        samples = [(t, q, v, ContactState(MODES[mode], SIDES[side], PIVOTS[pivot]), step)
+                   for b in blocks for t, q, v, mode, side, pivot, step in zip(
+                       b['t'], b['q'], b['v'], b['mode'].tolist(), b['side'].tolist(),
+                       b['pivot'].tolist(), b['step_index'].tolist(), strict=True)]
+        samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(), sim.state.contact,
+                        sim.state.step_index))
+    else:
+        error = None
+        try:
+            for _ in range(n_periods):
+                t = sim.state.t
+                commands = stack.commands(sim.observation())
+                push = next(((p.frame, np.array(p.force)) for p in scene.pushes
+                             if p.active(t)), None)
+                sim.advance(HeldCommand.of_controllers(commands.values()), push)
+                samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(),
+                                sim.state.contact, sim.state.step_index))
+                if sim.ended is not None:
+                    break
+                if time.perf_counter() - start > max_wall:
+                    error = f'wall-time limit {max_wall:g} s reached at t={sim.state.t:.4f} s'
+                    break
+        except SimulationError as exc:
+            error = str(exc).splitlines()[0][:200]
+        wall = time.perf_counter() - start
     dyn = sim.dynamics
     head = np.array([dyn.frame_placement(c, q, 'head_top').translation[1:3]
                      for _, q, _, c, _ in samples])
@@ -183,6 +201,22 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
                sim.stats.evaluations,
                sim.stats.steps, sim.stats.control_periods, sim.stats.max_constraint_residual,
                len(sim.events), [e.event for e in sim.events], sim.ended, error)
+
+
+def _native_blocks(sim: Simulator, loop: Any, n_periods: int, start: float,
+                   max_wall: float) -> tuple[list[dict[str, Any]], str | None]:
+    """Blocks of ``BLOCK_PERIODS`` native periods until ``n_periods`` are done, the run ends,
+    fails (its error, first line) or passes ``max_wall`` s of wall time since ``start``."""
+    blocks = []
+    while sim.stats.control_periods < n_periods and sim.ended is None:
+        block, failure = sim.run_loop(loop, min(BLOCK_PERIODS,
+                                                n_periods - sim.stats.control_periods))
+        blocks.append(block)
+        if failure is not None:
+            return blocks, str(failure).splitlines()[0][:200]
+        if time.perf_counter() - start > max_wall:
+            return blocks, f'wall-time limit {max_wall:g} s reached at t={sim.state.t:.4f} s'
+    return blocks, None
 
 
 def compare(run: Run, ref: Run) -> dict[str, float]:

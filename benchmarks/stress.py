@@ -57,7 +57,7 @@ for _package in ('iceskate_sim', 'visual_lifting', 'gait_manager'):
         sys.path.insert(0, str(REPO_ROOT / 'ros_ws' / 'src' / _package))
 
 from iceskate_bringup.composition import ControlStack  # noqa: E402
-from iceskate_bringup.scene import load_scene, parse_scene
+from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
 from iceskate_sim.command import HeldCommand, JointCommand  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.hybrid import FrictionModel, RunEnded  # noqa: E402

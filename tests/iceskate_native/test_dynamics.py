@@ -186,27 +186,22 @@ def test_guard_values_agree(engines, number, side, pivot, rule):
     assert np.max(np.abs(got - expected)) <= TOLERANCE * max(1.0, float(np.max(np.abs(expected))))
 
 
-@pytest.mark.parametrize('method', ['symplectic_euler', 'implicit_euler', 'rk4'])
-def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
-    """From double support (mode 17) a push of the swing foot's hip makes the heel lift: the
-    segment stops at the same guard, at the same time (to the event tolerance), in the same
-    state."""
+def _heel_lift(robot):
+    """Mode 17 (double support) with the swing hip pushed so that the heel lifts (guard S5 or
+    the like fires about 2 ms in): the engines, the start state, the held command and the
+    Python right-hand side and guards for ``Integrator.integrate_segment``."""
     from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values, guards_of
-    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values
     params = DynamicsParameters()
     reference, native = GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
-    mode = get_mode(17)
     q = np.zeros(18)
     q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
-    contact = ContactState(mode, 'right', 'toe')
+    contact = ContactState(get_mode(17), 'right', 'toe')
     contact.heel_anchor_y = float(reference.frame_placement(contact, q, 'swing_heel')
                                   .translation[1])
     tau = np.zeros(18)
-    tau[5], tau[6] = 60.0, -40.0  # lift the swing leg: the swing contact force goes to zero
-    command = HeldCommand.torque_only(tau)
+    tau[5], tau[6] = 60.0, -40.0
     friction = FrictionModel()
-    config = IntegratorConfig(method=method, step=1e-4, event_tolerance=1e-10)
 
     def rhs(t, x, implicit_step=0.0):
         if implicit_step > 0.0:
@@ -219,12 +214,23 @@ def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
     def guards(t, x, result):
         return guard_values(HybridState(t, x[:18], x[18:], contact), result, friction)
 
-    x0 = np.concatenate([q, np.zeros(18)])
+    start = HybridState(0.0, q, np.zeros(18), contact)
+    return native, start, HeldCommand.torque_only(tau), friction, rhs, guards
+
+
+@pytest.mark.parametrize('method', ['symplectic_euler', 'implicit_euler', 'rk4'])
+def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
+    """The segment stops at the same guard, at the same time (to the event tolerance), in the
+    same state."""
+    from iceskate_sim.hybrid import guards_of
+    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    native, start, command, friction, rhs, guards = _heel_lift(robot)
+    config = IntegratorConfig(method=method, step=1e-4, event_tolerance=1e-10)
+    x0 = np.concatenate([start.q, start.v])
     expected = Integrator(config).integrate_segment(rhs, guards, 0.0, x0, 0.2)
-    got = native.integrate_segment(HybridState(0.0, q, np.zeros(18), contact), command, None,
-                                   config, friction, {}, 0.2)
+    got = native.integrate_segment(start, command, None, config, friction, {}, 0.2)
     assert expected.fired is not None, 'the reference found no event: the test needs one'
-    assert got.fired == expected.fired, guards_of(mode)[expected.fired].name
+    assert got.fired == expected.fired, guards_of(start.mode)[expected.fired].name
     # both locate the zero to the event tolerance (Brent in scipy, TOMS 748 natively)
     dt = got.t - expected.t
     assert abs(dt) <= 2 * config.event_tolerance
@@ -232,6 +238,50 @@ def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
     # the states differ by what the motion covers in that time, and rounding
     rate = np.abs(np.concatenate([expected.x[18:], expected.result.qdd]))
     assert np.all(np.abs(got.x - expected.x) <= 2.0 * rate * abs(dt) + 1e-11)
+
+
+def test_native_rk45_locates_the_event_of_a_tight_reference(robot):
+    """Dormand-Prince 5(4) natively (Boost.Odeint's stepper and step-size control, the event
+    on its dense output) against DOP853 at 1e-12 in Python: the same guard, its time and the
+    state there to what the tolerance leaves (measured: 1.3e-13 s, 3.4e-13 at rtol 1e-9)."""
+    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    native, start, command, friction, rhs, guards = _heel_lift(robot)
+    x0 = np.concatenate([start.q, start.v])
+    tight = IntegratorConfig('dop853', step=1.0, rtol=1e-12, atol=1e-12, event_tolerance=1e-13)
+    expected = Integrator(tight).integrate_segment(rhs, guards, 0.0, x0, 0.2)
+    assert expected.fired is not None and expected.t < 0.01
+    for rtol, bound in ((1e-6, 1e-9), (1e-9, 2e-12)):
+        config = IntegratorConfig('rk45', step=1.0, rtol=rtol, atol=rtol, event_tolerance=1e-13)
+        got = native.integrate_segment(start, command, None, config, friction, {}, 0.2)
+        assert got.fired == expected.fired
+        assert abs(got.t - expected.t) <= bound, (rtol, got.t - expected.t)
+        assert np.max(np.abs(got.x[:18] - expected.x[:18])) <= 3.0 * bound
+
+
+def test_native_rk45_error_follows_its_tolerance(robot):
+    """On a smooth stretch (stopping before the event) the global error of the native rk45 is
+    proportional to the tolerance (log-log slope 1) and the step count grows as tol^(-1/5), the
+    signature of an error estimate of local order 5."""
+    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    native, start, command, friction, rhs, guards = _heel_lift(robot)
+    x0 = np.concatenate([start.q, start.v])
+    t_end = 1.9e-3  # the heel lifts at about 2.15 ms
+    tight = IntegratorConfig('dop853', step=1.0, rtol=1e-13, atol=1e-13)
+    expected = Integrator(tight).integrate_segment(rhs, guards, 0.0, x0, t_end)
+    assert expected.fired is None
+    tolerances = np.array([1e-6, 1e-7, 1e-8, 1e-9, 1e-10])
+    errors, steps = [], []
+    for rtol in tolerances:
+        config = IntegratorConfig('rk45', step=1.0, rtol=rtol, atol=rtol)
+        got = native.integrate_segment(start, command, None, config, friction, {}, t_end)
+        assert got.fired is None and got.t == t_end
+        errors.append(float(np.max(np.abs(got.x - expected.x))))
+        steps.append(got.steps)
+    error_slope = np.polyfit(np.log(tolerances), np.log(errors), 1)[0]
+    step_slope = np.polyfit(np.log(tolerances), np.log(steps), 1)[0]
+    assert 0.85 <= error_slope <= 1.15, (errors, error_slope)
+    assert -0.25 <= step_slope <= -0.15, (steps, step_slope)
+    assert errors[-1] <= 1e-9
 
 
 def test_a_segment_without_event_reaches_the_end(robot):
@@ -248,10 +298,10 @@ def test_a_segment_without_event_reaches_the_end(robot):
         HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
         None, IntegratorConfig(method='implicit_euler', step=1e-3), FrictionModel(), {}, 0.01)
     assert segment.fired is None and segment.t == 0.01 and segment.steps == 10
-    with pytest.raises(SimulationError, match="no native fixed-step method 'rk45'"):
+    with pytest.raises(SimulationError, match="no native method 'dop853'"):
         native.integrate_segment(
             HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
-            None, IntegratorConfig(method='rk45'), FrictionModel(), {}, 0.01)
+            None, IntegratorConfig(method='dop853'), FrictionModel(), {}, 0.01)
 
 
 def test_two_seconds_of_skate_on_both_engines(tmp_path):

@@ -221,8 +221,8 @@ StateRow state_row(const HybridState & s)
 /// Construct a HybridSimulator in place from the Python-side settings (SimulatorConfig).
 void construct_simulator(
   HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, double control_period,
-  const std::string & method, double step, double event_tolerance, double mu, bool ice,
-  const ConstantRow & constants, double margin,
+  const std::string & method, double step, double rtol, double atol, double event_tolerance,
+  double mu, bool ice, const ConstantRow & constants, double margin,
   const std::vector<std::vector<std::string>> & guards, bool projection, double residual_bound,
   double fall_height, double max_speed, int max_instant_transitions, double zeno_window,
   double chatter_dwell)
@@ -234,6 +234,8 @@ void construct_simulator(
   s.control_period = control_period;
   s.method = iceskate_native::method_named(method);
   s.step = step;
+  s.rtol = rtol;
+  s.atol = atol;
   s.event_tolerance = event_tolerance;
   const auto set = guard_set({}, {}, mu, ice, constants, margin);
   s.friction = set.friction;
@@ -309,7 +311,8 @@ NB_MODULE(_kernel, m)
     "Eq. (7) of every Table 2 mode on the four support models (index side * 2 + pivot); keeps "
     "Pinocchio workspaces, so one instance per thread.")
     .def(
-      "__init__", &construct_dynamics, "models"_a, "frames"_a, "modes"_a, "damping"_a, "total_mass"_a, "limits"_a, "params"_a)
+      "__init__", &construct_dynamics, "models"_a, "frames"_a, "modes"_a, "damping"_a,
+      "total_mass"_a, "limits"_a, "params"_a)
     .def(
       "evaluate",
       [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
@@ -372,8 +375,8 @@ NB_MODULE(_kernel, m)
       [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
          double support_slide_dir, double heel_slide_dir, const Vector & tau,
          const Optional & stiffness, const Optional & damping, const std::string & push_frame,
-         const Optional & push_force, const std::string & method, double step,
-         double event_tolerance, const std::vector<std::string> & guards,
+         const Optional & push_force, const std::string & method, double step, double rtol,
+         double atol, double event_tolerance, const std::vector<std::string> & guards,
          const std::vector<double> & rested_until, double mu, bool ice,
          const ConstantRow & constants, double margin, double t0, const Vector & x0,
          double t_end) {
@@ -386,32 +389,41 @@ NB_MODULE(_kernel, m)
         const auto start = self.evaluate(
           contact, x.head<iceskate_native::kCoordinates>(),
           x.tail<iceskate_native::kCoordinates>(), inputs);
-        const auto segment = iceskate_native::integrate_fixed(
-          self, contact, inputs, iceskate_native::method_named(method), step, event_tolerance,
-          guard_set(guards, rested_until, mu, ice, constants, margin), t0, x, t_end, start);
+        const auto kind = iceskate_native::method_named(method);
+        const auto set = guard_set(guards, rested_until, mu, ice, constants, margin);
+        double first_step = step;
+        const auto segment =
+          kind == iceskate_native::Method::kRk45
+            ? iceskate_native::integrate_adaptive(
+                self, contact, inputs, {rtol, atol, step}, event_tolerance, set, t0, x, t_end,
+                start, first_step)
+            : iceskate_native::integrate_fixed(
+                self, contact, inputs, kind, step, event_tolerance, set, t0, x, t_end, start);
         return std::make_tuple(
           segment.t, Eigen::VectorXd(segment.x), result_tuple(segment.result), segment.fired,
           segment.steps, segment.evaluations + 1);
       },
       "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
       "heel_slide_dir"_a, "tau"_a, "stiffness"_a, "damping"_a, "push_frame"_a, "push_force"_a,
-      "method"_a, "step"_a, "event_tolerance"_a, "guards"_a, "rested_until"_a, "mu"_a, "ice"_a,
-      "constants"_a, "margin"_a, "t0"_a, "x0"_a, "t_end"_a,
-      "Integrate from (t0, x0) with a fixed-step method to t_end or the first crossing of one "
-      "of the named guards (located to event_tolerance [s]): (t, x, dynamics tuple as "
-      "evaluate's, index of the guard that fired or -1, steps, evaluations).");
+      "method"_a, "step"_a, "rtol"_a, "atol"_a, "event_tolerance"_a, "guards"_a,
+      "rested_until"_a, "mu"_a, "ice"_a, "constants"_a, "margin"_a, "t0"_a, "x0"_a, "t_end"_a,
+      "Integrate from (t0, x0) to t_end or the first crossing of one of the named guards "
+      "(located to event_tolerance [s]) with a fixed-step method (step [s]) or rk45 (rtol, "
+      "atol; step: its first and largest step [s]): (t, x, dynamics tuple as evaluate's, index "
+      "of the guard that fired or -1, steps, evaluations).");
 
   nb::class_<HybridSimulator>(
     m, "HybridSimulator",
     "Whole control periods of the hybrid simulation on a Dynamics kernel (kept alive by it): "
-    "fixed-step integration with event location, transitions, projection and health checks. "
-    "States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
+    "integration (fixed-step or rk45) with event location, transitions, projection and health "
+    "checks. States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
     "heel_slide_dir, step_index, t_exchange, t_touchdown).")
     .def(
       "__init__", &construct_simulator, "dynamics"_a, "initial"_a, "control_period"_a,
-      "method"_a, "step"_a, "event_tolerance"_a, "mu"_a, "ice"_a, "constants"_a, "margin"_a,
-      "guards"_a, "projection"_a, "residual_bound"_a, "fall_height"_a, "max_speed"_a,
-      "max_instant_transitions"_a, "zeno_window"_a, "chatter_dwell"_a, nb::keep_alive<1, 2>())
+      "method"_a, "step"_a, "rtol"_a, "atol"_a, "event_tolerance"_a, "mu"_a, "ice"_a,
+      "constants"_a, "margin"_a, "guards"_a, "projection"_a, "residual_bound"_a,
+      "fall_height"_a, "max_speed"_a, "max_instant_transitions"_a, "zeno_window"_a,
+      "chatter_dwell"_a, nb::keep_alive<1, 2>())
     .def("reset", &HybridSimulator::reset, "Back to the initial state; clears log and counters.")
     .def(
       "set_state",

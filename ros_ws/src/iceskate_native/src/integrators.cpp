@@ -55,6 +55,53 @@ State take_step(
 
 }  // namespace
 
+bool first_crossing(
+  const GuardSet & guards, const Contact & contact, double event_tolerance, double t,
+  const Eigen::VectorXd & g0, const Eigen::VectorXd & g1, double h, const StateAt & at,
+  Segment & segment)
+{
+  const double margin = guards.margin;
+  double best = std::numeric_limits<double>::infinity();
+  for (Eigen::Index i = 0; i < g1.size(); ++i) {
+    if (!(g0[i] <= margin && g1[i] > margin)) {
+      continue;
+    }
+    // phi(s): guard i minus the margin at offset s from t
+    State xs;
+    DynamicsResult rs;
+    const auto phi = [&](double s) {
+      at(s, xs, rs);
+      return guard_values(guards, contact, t + s, xs, rs)[i] - margin;
+    };
+    const double f0 = g0[i] - margin;
+    double s = 0.0;
+    if (f0 < 0.0) {
+      std::uintmax_t iterations = 100;
+      const auto close = [event_tolerance](double a, double b) {
+        return std::abs(b - a) <= event_tolerance;
+      };
+      const auto bracket =
+        boost::math::tools::toms748_solve(phi, 0.0, h, f0, g1[i] - margin, close, iterations);
+      s = bracket.second;  // the due side of the final bracket
+    }
+    double value = phi(s);
+    double nudge = event_tolerance;
+    while (value <= 0.0 && s < h) {  // move onto the due side of the zero
+      s = std::min(h, s + nudge);
+      nudge *= 2.0;
+      value = phi(s);
+    }
+    if (s < best) {
+      best = s;
+      segment.t = t + s;
+      segment.x = xs;
+      segment.result = rs;
+      segment.fired = static_cast<int>(i);
+    }
+  }
+  return segment.fired >= 0;
+}
+
 Method method_named(const std::string & name)
 {
   if (name == "symplectic_euler") {
@@ -66,8 +113,11 @@ Method method_named(const std::string & name)
   if (name == "rk4") {
     return Method::kRk4;
   }
+  if (name == "rk45") {
+    return Method::kRk45;
+  }
   throw std::invalid_argument(
-    "no native fixed-step method '" + name + "' (symplectic_euler, implicit_euler, rk4)");
+    "no native method '" + name + "' (symplectic_euler, implicit_euler, rk4, rk45)");
 }
 
 Eigen::VectorXd guard_values(
@@ -96,12 +146,14 @@ Segment integrate_fixed(
   if (!(step > 0.0) || !(event_tolerance > 0.0) || !std::isfinite(t0) || !std::isfinite(t_end)) {
     throw std::invalid_argument("a segment needs step > 0, event_tolerance > 0 and finite times");
   }
+  if (method == Method::kRk45) {
+    throw std::invalid_argument("rk45 is adaptive: it has no fixed-step segment");
+  }
   Segment segment;
   double t = t0;
   State x = x0;
   DynamicsResult r0 = start;
   Eigen::VectorXd g0 = guard_values(guards, contact, t, x, r0);
-  const double margin = guards.margin;
   while (t_end - t > 1e-12 * std::max(1.0, std::abs(t_end))) {
     const double h = std::min(step, t_end - t);
     int extra = 0;
@@ -112,54 +164,13 @@ Segment integrate_fixed(
     segment.steps += 1;
     const Eigen::VectorXd g1 = guard_values(guards, contact, t + h, x1, r1);
 
-    double best = std::numeric_limits<double>::infinity();
-    int fired = -1;
-    State best_x;
-    DynamicsResult best_result;
-    for (Eigen::Index i = 0; i < g1.size(); ++i) {
-      if (!(g0[i] <= margin && g1[i] > margin)) {
-        continue;
-      }
-      // phi(s): guard i minus the margin after a step of size s from (t, x)
-      State xs;
-      DynamicsResult rs;
-      const auto at = [&](double s) {
-        int more = 0;
-        xs = s > 0.0 ? take_step(dynamics, contact, inputs, method, x, r0.qdd, s, more) : x;
-        rs = dynamics.evaluate(contact, xs.head<kCoordinates>(), xs.tail<kCoordinates>(), inputs);
-        segment.evaluations += more + 1;
-        return guard_values(guards, contact, t + s, xs, rs)[i] - margin;
-      };
-      const double f0 = g0[i] - margin;
-      double s = 0.0;
-      if (f0 < 0.0) {
-        std::uintmax_t iterations = 100;
-        const auto close = [event_tolerance](double a, double b) {
-          return std::abs(b - a) <= event_tolerance;
-        };
-        const auto bracket = boost::math::tools::toms748_solve(
-          at, 0.0, h, f0, g1[i] - margin, close, iterations);
-        s = bracket.second;  // the due side of the final bracket
-      }
-      double phi = at(s);
-      double nudge = event_tolerance;
-      while (phi <= 0.0 && s < h) {  // move onto the due side of the zero
-        s = std::min(h, s + nudge);
-        nudge *= 2.0;
-        phi = at(s);
-      }
-      if (s < best) {
-        best = s;
-        fired = static_cast<int>(i);
-        best_x = xs;
-        best_result = rs;
-      }
-    }
-    if (fired >= 0) {
-      segment.t = t + best;
-      segment.x = best_x;
-      segment.result = best_result;
-      segment.fired = fired;
+    const auto at = [&](double s, State & xs, DynamicsResult & rs) {
+      int more = 0;
+      xs = s > 0.0 ? take_step(dynamics, contact, inputs, method, x, r0.qdd, s, more) : x;
+      rs = dynamics.evaluate(contact, xs.head<kCoordinates>(), xs.tail<kCoordinates>(), inputs);
+      segment.evaluations += more + 1;
+    };
+    if (first_crossing(guards, contact, event_tolerance, t, g0, g1, h, at, segment)) {
       return segment;
     }
     t += h;

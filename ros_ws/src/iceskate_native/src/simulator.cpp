@@ -44,8 +44,13 @@ HybridSimulator::HybridSimulator(
     throw std::invalid_argument("step, control_period and event_tolerance must be > 0 s");
   }
   const double ratio = s.control_period / s.step;
-  if (std::abs(ratio - std::round(ratio)) > 1e-9 * ratio || std::round(ratio) < 1.0) {
+  if (s.method != Method::kRk45
+      && (std::abs(ratio - std::round(ratio)) > 1e-9 * ratio || std::round(ratio) < 1.0))
+  {
     throw std::invalid_argument("control_period must be an integer multiple of the step");
+  }
+  if (!(s.rtol > 0.0) || !(s.atol > 0.0) || !std::isfinite(s.rtol) || !std::isfinite(s.atol)) {
+    throw std::invalid_argument("rtol and atol must be finite and > 0");
   }
   if (s.max_instant_transitions < 1) {
     throw std::invalid_argument("max_instant_transitions must be >= 1");
@@ -75,6 +80,7 @@ void HybridSimulator::reset()
   suppressed_.clear();
   instant_time_ = std::numeric_limits<double>::quiet_NaN();
   instant_modes_.clear();
+  adaptive_step_ = 0.0;
   result_ = evaluate(state_);
   start_state_ = state_;
   start_result_ = result_;
@@ -135,9 +141,15 @@ void HybridSimulator::advance(const Inputs & inputs)
       const GuardSet guards = guard_set(state_);
       State x0;
       x0 << state_.q, state_.v;
-      const Segment seg = integrate_fixed(
-        dynamics_, state_.contact, inputs_, settings_.method, settings_.step,
-        settings_.event_tolerance, guards, state_.t, x0, t_end, result_);
+      const Segment seg =
+        settings_.method == Method::kRk45
+          ? integrate_adaptive(
+              dynamics_, state_.contact, inputs_,
+              {settings_.rtol, settings_.atol, settings_.step}, settings_.event_tolerance,
+              guards, state_.t, x0, t_end, result_, adaptive_step_)
+          : integrate_fixed(
+              dynamics_, state_.contact, inputs_, settings_.method, settings_.step,
+              settings_.event_tolerance, guards, state_.t, x0, t_end, result_);
       stats_.steps += seg.steps;
       stats_.evaluations += seg.evaluations;
       if (!seg.x.allFinite()) {

@@ -30,6 +30,8 @@ Rhs = Callable[..., tuple[np.ndarray, DynamicsResult | None]]
 GuardFn = Callable[[float, np.ndarray, DynamicsResult], np.ndarray]
 METHODS = ('symplectic_euler', 'implicit_euler', 'rk4', 'rk45', 'dop853')
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
+#: The methods the native engine runs whole control periods with (dop853: Python loop).
+NATIVE_PERIODS = (*FIXED_STEP, 'rk45')
 GUARD_MARGIN = 1.0e-9  # a guard at most this positive right after a transition is not due
 
 

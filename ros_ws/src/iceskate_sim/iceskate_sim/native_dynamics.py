@@ -133,15 +133,17 @@ class NativeGaitDynamics(GaitDynamics):
                           push: tuple[str, np.ndarray] | None, integrator: IntegratorConfig,
                           friction: FrictionModel, suppressed: dict[str, float],
                           t_end: float) -> Segment:
-        """Integrate ``state`` with a fixed-step method to ``t_end`` or the first guard
-        crossing (``Integrator.integrate_segment``'s fixed-step path), natively."""
+        """Integrate ``state`` to ``t_end`` or the first guard crossing with a fixed-step
+        method or rk45 (``Integrator.integrate_segment``'s counterpart, natively; rk45 starts
+        with ``integrator.step`` and keeps no step history between calls)."""
         (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
          frame, force) = self._arguments(state.contact, state.q, state.v, command.bias, push,
                                          command.stiffness, command.damping)
         try:
             t, x, result, fired, steps, evaluations = self._kernel.integrate_segment(
                 mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness, damping,
-                frame, force, integrator.method, integrator.step, integrator.event_tolerance,
+                frame, force, integrator.method, integrator.step, integrator.rtol,
+                integrator.atol, integrator.event_tolerance,
                 *self._guard_arguments(mode, state.t, suppressed, friction), state.t,
                 np.concatenate([q, v]), t_end)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
@@ -172,10 +174,11 @@ def _hybrid_state(row: tuple) -> HybridState:
 
 
 class NativePeriods:
-    """Whole control periods in C++ (``iceskate_native.HybridSimulator``): the fixed-step
-    integration, event location, transitions, projection and health checks of
+    """Whole control periods in C++ (``iceskate_native.HybridSimulator``): the integration
+    (fixed-step methods, or rk45: Dormand-Prince 5(4) with its step-size control, events on its
+    dense output), event location, transitions, projection and health checks of
     ``Simulator.advance``, with no Python in between. ``Simulator`` uses it for the native
-    engine with a fixed-step method and mirrors its state, events and counters.
+    engine with those methods and mirrors its state, events and counters.
 
     :param dynamics: the native kernel it integrates (its workspace is shared: one thread).
     :param initial: the initial state. The other parameters are ``SimulatorConfig``'s.
@@ -191,7 +194,8 @@ class NativePeriods:
         try:
             self._kernel = iceskate_native.HybridSimulator(
                 dynamics._kernel, _state_row(initial), control_period, integrator.method,
-                integrator.step, integrator.event_tolerance, friction.mu, friction.rule == 'ice',
+                integrator.step, integrator.rtol, integrator.atol, integrator.event_tolerance,
+                friction.mu, friction.rule == 'ice',
                 GUARD_CONSTANTS, GUARD_MARGIN, guards, projection, residual_bound, fall_height,
                 max_speed, max_instant_transitions, zeno_window, chatter_dwell)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:

@@ -34,7 +34,13 @@ from iceskate_sim.hybrid import (
     resolve_contact_mode,
     resolved_cause,
 )
-from iceskate_sim.integrators import FIXED_STEP, GUARD_MARGIN, Integrator, IntegratorConfig
+from iceskate_sim.integrators import (
+    FIXED_STEP,
+    GUARD_MARGIN,
+    NATIVE_PERIODS,
+    Integrator,
+    IntegratorConfig,
+)
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import N_COORDINATES, Robot
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
@@ -94,7 +100,8 @@ class SimulatorConfig:
         [s]; every such case is counted in ``stats.suppressed_cycles``.
     :param engine: where the physics runs: 'native' (the C++ kernel: eq. (7) by
         ``NativeGaitDynamics``, and whole control periods by ``NativePeriods`` with a fixed-step
-        method) or 'python' (the readable reference, ``GaitDynamics`` and this class's loop).
+        method or rk45) or 'python' (the readable reference, ``GaitDynamics`` and this class's
+        loop).
     """
 
     control_period: float = 1.0e-3
@@ -149,7 +156,7 @@ class Simulator:
         if config.engine == 'native':
             from iceskate_sim.native_dynamics import NativeGaitDynamics, NativePeriods
             self.dynamics: GaitDynamics = NativeGaitDynamics(robot, params)
-            if config.integrator.method in FIXED_STEP:
+            if config.integrator.method in NATIVE_PERIODS:
                 self._periods = NativePeriods(
                     self.dynamics, initial, control_period=config.control_period,
                     integrator=config.integrator, friction=config.friction,
@@ -348,7 +355,7 @@ class Simulator:
                      head_origin: np.ndarray) -> NativeControlLoop | None:
         """The native loop of many control periods on this simulator (see
         ``NativeControlLoop``; advance it with ``run_loop``), or None where periods do not run
-        natively (the Python engine, an adaptive method)."""
+        natively (the Python engine, dop853)."""
         if self._periods is None:
             return None
         from iceskate_sim.native_dynamics import NativeControlLoop

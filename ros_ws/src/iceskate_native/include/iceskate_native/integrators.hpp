@@ -1,10 +1,14 @@
-// Fixed-step integration of one mode with event location (docs/model.md §6.4, §8.1): the state
+// Integration of one mode with event location (docs/model.md §6.4, §8.1): the state
 // x = [q (18), v (18)] advances with the inputs held, and stops at the first guard whose value
-// crosses zero from below, located by re-taking the step with a shorter size until the event
-// time is within the tolerance (TOMS 748 from Boost.Math). The native counterpart of the fixed-
-// step path of iceskate_sim.integrators.Integrator.integrate_segment.
+// crosses zero from below, located to the event tolerance by TOMS 748 (Boost.Math): for the
+// fixed-step methods by re-taking the step with a shorter size, for the adaptive Dormand-Prince
+// 5(4) pair (Boost.Odeint's runge_kutta_dopri5 under its step-size control,
+// integrators_adaptive.cpp) on the step's dense output. The native counterpart of
+// iceskate_sim.integrators.Integrator.integrate_segment.
 #pragma once
 
+#include <functional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -16,17 +20,18 @@ namespace iceskate_native
 
 using State = Eigen::Matrix<double, 2 * kCoordinates, 1>;
 
-/// The fixed-step methods: semi-implicit (symplectic) Euler, implicit Euler (semi-implicit
-/// Euler with the damping taken implicitly), classic RK4.
+/// The methods: fixed-step semi-implicit (symplectic) Euler, implicit Euler (semi-implicit
+/// Euler with the damping taken implicitly), classic RK4; adaptive Dormand-Prince 5(4).
 enum class Method
 {
   kSymplecticEuler,
   kImplicitEuler,
-  kRk4
+  kRk4,
+  kRk45
 };
 
-/// The method called `name` (symplectic_euler, implicit_euler, rk4); std::invalid_argument
-/// otherwise.
+/// The method called `name` (symplectic_euler, implicit_euler, rk4, rk45);
+/// std::invalid_argument otherwise.
 Method method_named(const std::string & name);
 
 /// What the guards need besides the state: the mode's guards, friction, constants, the
@@ -52,11 +57,39 @@ struct Segment
   int evaluations = 0;
 };
 
+/// The error control of an adaptive method: per state entry, the error estimate must stay
+/// below atol + rtol (|x| + h |xdot|); steps of at most max_step [s].
+struct Tolerances
+{
+  double rtol = 1e-8;
+  double atol = 1e-10;
+  double max_step = 1e-3;
+};
+
 /// Advance from (t0, x0), whose dynamics are `start`, to t_end or the first guard crossing.
+/// `method` is a fixed-step one.
 Segment integrate_fixed(
   Dynamics & dynamics, const Contact & contact, const Inputs & inputs, Method method,
   double step, double event_tolerance, const GuardSet & guards, double t0, const State & x0,
   double t_end, const DynamicsResult & start);
+
+/// The same with Dormand-Prince 5(4) under step-size control, events located on the dense
+/// output. `step` holds the step size to try first and, after the call, the last one accepted
+/// [s] (a run keeps it from segment to segment). NativeError if the step size underflows.
+Segment integrate_adaptive(
+  Dynamics & dynamics, const Contact & contact, const Inputs & inputs,
+  const Tolerances & tolerances, double event_tolerance, const GuardSet & guards, double t0,
+  const State & x0, double t_end, const DynamicsResult & start, double & step);
+
+/// The state and its dynamics at offset s [s] into a step (at(s, x, result)).
+using StateAt = std::function<void(double, State &, DynamicsResult &)>;
+
+/// Whether a guard crossed from g0 (at t) to g1 (at t + h); if so, the earliest crossing is
+/// located on `at` and written into segment (t, x, result, fired).
+bool first_crossing(
+  const GuardSet & guards, const Contact & contact, double event_tolerance, double t,
+  const Eigen::VectorXd & g0, const Eigen::VectorXd & g1, double h, const StateAt & at,
+  Segment & segment);
 
 /// The guards' values at (t, x) with `result` (rested ones -1).
 Eigen::VectorXd guard_values(

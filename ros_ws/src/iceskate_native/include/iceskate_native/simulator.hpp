@@ -41,7 +41,9 @@ struct SimulatorSettings
 {
   double control_period = 1.0e-3;  ///< [s], an integer multiple of step
   Method method = Method::kImplicitEuler;
-  double step = 1.0e-3;             ///< [s]
+  double step = 1.0e-3;             ///< [s]; the largest step of the adaptive method
+  double rtol = 1.0e-8;             ///< relative tolerance of the adaptive method
+  double atol = 1.0e-10;            ///< absolute tolerance of the adaptive method
   double event_tolerance = 1.0e-9;  ///< [s]
   Friction friction;
   GuardConstants constants{};
@@ -140,6 +142,7 @@ private:
   RunEnd ended_ = RunEnd::kNone;
   std::map<Guard, double> suppressed_;  // guard -> rested until [s]
   double instant_time_ = 0.0;           // the instant of the current transition cascade
+  double adaptive_step_ = 0.0;          // the adaptive method's next step size [s] (0: none)
   std::set<std::pair<int, int>> instant_modes_;  // (mode, side) visited at that instant
 };
 
