@@ -276,7 +276,8 @@ def main(argv: list[str] | None = None) -> int:
                                                            c.stiffness, c.damping)
         segment_args = (mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness,
                         damping, frame, force, config.integrator.method,
-                        config.integrator.step, config.integrator.event_tolerance,
+                        config.integrator.step, config.integrator.rtol,
+                        config.integrator.atol, config.integrator.event_tolerance,
                         *native._guard_arguments(mode, s.t, {}, config.friction),
                         s.t, np.concatenate([s.q, s.v]), end)
         kernel_segment.append(time_calls(

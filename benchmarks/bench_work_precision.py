@@ -1,10 +1,12 @@
 #!/usr/bin/env python3
 """Work-precision benchmark of the integrators: wall time against error.
 
-For every integrator (symplectic_euler, implicit_euler, rk4, rk45, dop853) and a sweep of
-fixed steps or tolerances, one closed-loop run (the scene's controllers at every control
-instant, as ``run_scene`` does, without recording) is timed and compared with a reference run of
-the same case at the tightest setting (dop853, rtol 1e-12, atol 1e-14). Cases:
+For every engine (native: the C++ core, whole blocks of periods with the laws in C++ where the
+method runs natively; python: the readable reference engine), every integrator
+(symplectic_euler, implicit_euler, rk4, rk45, dop853) and a sweep of fixed steps or tolerances,
+one closed-loop run (the scene's controllers at every control instant, as ``run_scene`` does,
+without recording) is timed and compared with a reference run of the same case at the tightest
+setting (dop853, rtol 1e-12, atol 1e-14, on the native engine's dynamics). Cases:
 
 * ``smooth``: the ``stand`` scene with the soft joint stops off, 0.4 s before the push: one mode
   (17), no events, visual lifting and the posture impedance running (a smooth right-hand side;
@@ -16,7 +18,7 @@ the same case at the tightest setting (dop853, rtol 1e-12, atol 1e-14). Cases:
 * ``passive``: the bent-knee double support (mode 17) with no inputs, joint damping and stops
   off, 0.3 s: a conservative system, so the energy drift is the integrator's;
 * ``skate`` (full mode only): the ``skate`` scene as shipped, 0.9 s, with its events, for the
-  goal figure below (implicit Euler only, plus one rk4 run).
+  goal figure below (the shipped implicit Euler and the cheap accurate settings of rk4, rk45).
 
 Figures per run, against the reference interpolated onto the run's samples (one per control
 period): ``head_err_max`` = max over the samples of |p_head - p_ref| (head-top y, z) [m];
@@ -25,13 +27,15 @@ period): ``head_err_max`` = max over the samples of |p_head - p_ref| (head-top y
 constraint residual (measured before each end-of-period projection) [m, rad].
 
 Outputs into ``--out`` (default runs/bench): ``work_precision_<case>.png`` (log-log error against
-wall time, one line per method), ``work_precision.md`` (tables) and ``work_precision.json`` (raw
-figures, machine). Then the headline: real-time factor of the headless ``stand`` and ``skate``
-scenes at their shipped settings (``iceskate_bringup.runner.run``, no output), set against the goal
-(headless skate >= 20x real time with head-trajectory error <= 1e-6 m).
+wall time, one line per method and engine: solid native, dashed python), ``work_precision.md``
+(tables) and ``work_precision.json`` (raw figures, machine). Then the headline: real-time
+factor of the headless ``stand`` and ``skate`` scenes at their shipped settings
+(``iceskate_bringup.runner.run``, no output), and the goal: the cheapest setting of the skate
+case with head-trajectory error <= 1e-6 m at >= 5x real time.
 
 Usage (from the repository root, environment sourced):
     python benchmarks/bench_work_precision.py [--out runs/bench] [--quick] [--cases smooth,...]
+        [--engines native,python]
 """
 
 from __future__ import annotations
@@ -55,7 +59,8 @@ REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 METHODS = ('symplectic_euler', 'implicit_euler', 'rk4', 'rk45', 'dop853')
 FIXED = ('symplectic_euler', 'implicit_euler', 'rk4')
 REFERENCE = ('dop853', 1.0e-12)  # method, rtol (atol = 1e-2 rtol)
-GOAL_RTF = 20.0
+ENGINES = ('native', 'python')
+GOAL_RTF = 5.0  # real-time factor of the cheapest setting within the head-error goal
 GOAL_HEAD_ERROR = 1.0e-6  # m
 ERROR_FLOOR = 1.0e-16  # plotted in place of an exact zero
 
@@ -89,6 +94,7 @@ class Run:
     """One timed closed-loop run: samples at every control instant (t_0 = start)."""
 
     label: str
+    engine: str
     method: str
     step: float
     rtol: float
@@ -195,7 +201,7 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
     integ = cfg.integrator
     discrete = np.array([(c.mode.number, c.side == 'left', step) for _, _, _, c, step
                          in samples], dtype=int)
-    return Run(label, integ.method, integ.step, integ.rtol, wall,
+    return Run(label, cfg.engine, integ.method, integ.step, integ.rtol, wall,
                np.array([s[0] for s in samples]), np.array([s[1] for s in samples]),
                np.array([s[2] for s in samples]), head, energies, discrete,
                sim.stats.evaluations,
@@ -267,7 +273,7 @@ def _scene(name: str, **edits: Any) -> Scene:
             raw.pop(key, None)
         else:
             raw[key] = value
-    return parse_scene(raw, f'{name} (benchmark variant)')
+    return parse_scene(raw)
 
 
 def make_cases(quick: bool) -> list[Case]:
@@ -309,34 +315,38 @@ def make_cases(quick: bool) -> list[Case]:
               'rk45': (1e-4, 1e-6, 1e-8),
               'dop853': (1e-5, 1e-7, 1e-9)}, energy=True),
         Case('skate', 'skate as shipped, 0.9 s (with events)', load_scene('skate'), 0.9,
-             {'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4), 'rk4': (5e-5,)}),
+             {'implicit_euler': (1e-3, 2.5e-4, 1e-4), 'rk4': (2e-4, 1e-4, 5e-5),
+              'rk45': (1e-2, 1e-3, 1e-4)}),
     ]
 
 
-def run_case(case: Case, robot: Any, max_wall: float, log) -> dict[str, Any]:
-    """Reference plus sweep of one case; returns its JSON figures."""
+def run_case(case: Case, robot: Any, max_wall: float, engines: tuple[str, ...],
+             log) -> dict[str, Any]:
+    """Reference plus sweep of one case on each engine; returns its JSON figures."""
     period = case.scene.simulator.control_period
     ref = simulate(case.scene, case.duration, integrator_config(REFERENCE[0], REFERENCE[1],
                                                                   period),
-                   robot, max_wall * 4, 'reference', case.energy)
+                   robot, max_wall * 4, 'reference', case.energy, engine='native')
     log(f'[{case.name}] reference {REFERENCE[0]} rtol {REFERENCE[1]:g}: {ref.wall:.1f} s wall, '
         f'{ref.evaluations} evaluations, {ref.transitions} transitions '
         f'{" ".join(ref.events[:30])}{" ..." if len(ref.events) > 30 else ""}, {ref.status}')
     rows = [_row(ref, ref, period)]
-    for method in METHODS:
-        for setting in case.sweep.get(method, ()):
-            try:
-                integ = integrator_config(method, setting, period)
-            except SimulationError as exc:
-                log(f'[{case.name}] {method} {setting:g}: skipped ({exc})')
-                continue
-            run = simulate(case.scene, case.duration, integ, robot, max_wall,
-                           f'{method} {setting:g}', case.energy)
-            row = _row(run, ref, period)
-            rows.append(row)
-            log(f'[{case.name}] {method:16s} {_setting(method, setting):>11s} '
-                f'{run.wall:7.2f} s  head {row["head_err_max"]:.2e} m  final q '
-                f'{row["final_q_err"]:.2e}  residual {run.residual:.1e}  {run.status}')
+    for engine in engines:
+        for method in METHODS:
+            for setting in case.sweep.get(method, ()):
+                try:
+                    integ = integrator_config(method, setting, period)
+                except SimulationError as exc:
+                    log(f'[{case.name}] {method} {setting:g}: skipped ({exc})')
+                    continue
+                run = simulate(case.scene, case.duration, integ, robot, max_wall,
+                               f'{method} {setting:g}', case.energy, engine=engine)
+                row = _row(run, ref, period)
+                rows.append(row)
+                log(f'[{case.name}] {engine:6s} {method:16s} {_setting(method, setting):>11s} '
+                    f'{run.wall:7.2f} s ({row["rtf"]:6.2f}x)  head {row["head_err_max"]:.2e} m'
+                    f'  final q {row["final_q_err"]:.2e}  residual {run.residual:.1e}  '
+                    f'{run.status}')
     return {'name': case.name, 'title': case.title, 'duration_s': case.duration,
             'reference': {'method': REFERENCE[0], 'rtol': REFERENCE[1],
                           'atol': REFERENCE[1] * 1e-2},
@@ -349,7 +359,8 @@ def _setting(method: str, setting: float) -> str:
 
 def _row(run: Run, ref: Run, period: float) -> dict[str, Any]:
     setting = run.step if run.method in FIXED else run.rtol
-    row = {'method': run.method, 'setting': _setting(run.method, setting),
+    row = {'engine': run.engine, 'method': run.method,
+           'setting': _setting(run.method, setting),
            'step': run.step, 'rtol': run.rtol, 'reference': run is ref, 'wall_s': run.wall,
            'sim_time_s': run.sim_time,
            'rtf': run.sim_time / run.wall if run.wall > 0 else float('nan'),
@@ -369,14 +380,17 @@ def plot_case(case: dict[str, Any], path: pathlib.Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
-    for method in METHODS:
-        rows = [r for r in case['runs'] if r['method'] == method and not r['reference']]
+    colours = {method: f'C{k}' for k, method in enumerate(METHODS)}
+    for engine, method in ((e, m) for e in ENGINES for m in METHODS):
+        rows = [r for r in case['runs'] if r['method'] == method and r['engine'] == engine
+                and not r['reference']]
         if not rows:
             continue
         for ax, key in zip(axes, ('head_err_max', 'final_q_err'), strict=True):
             x = [r['wall_s'] for r in rows]
             y = [max(r[key], ERROR_FLOOR) for r in rows]
-            line, = ax.loglog(x, y, 'o-', label=method)
+            line, = ax.loglog(x, y, 'o-' if engine == 'native' else 's--',
+                              color=colours[method], label=f'{method} ({engine})')
             for r, xi, yi in zip(rows, x, y, strict=True):
                 marker = r['setting'].split('=')[1] + ('' if r['status'] == 'ok' else ' (!)')
                 ax.annotate(marker, (xi, yi), fontsize=7, color=line.get_color(),
@@ -392,7 +406,7 @@ def plot_case(case: dict[str, Any], path: pathlib.Path) -> None:
     axes[0].axhline(GOAL_HEAD_ERROR, color='r', ls='--', lw=0.8, label='goal 1e-6 m')
     axes[0].axvline(case['duration_s'] / GOAL_RTF, color='r', ls='-.', lw=0.8,
                     label=f'goal {GOAL_RTF:g}x real time')
-    axes[0].legend(fontsize=8)
+    axes[0].legend(fontsize=7, ncol=2)
     fig.suptitle(f'work-precision: {case["title"]}; reference dop853 rtol 1e-12', fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -414,15 +428,16 @@ def markdown(cases: list[dict[str, Any]], headline: dict[str, Any], machine: dic
                   f'Events in the reference: {shown or "none"}. A * marks a final state in '
                   'another mode, support side or step than in the reference (q is '
                   'support-rooted, so its error there compares relabelled coordinates).',
-                  '', '| method | setting | wall s | RTF | evals/period | transitions | '
+                  '', '| engine | method | setting | wall s | RTF | evals/period | transitions | '
                   'head err max m | final q err | final v err | energy drift J | residual | '
-                  'status |', '|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|']
+                  'status |', '|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|']
         for r in case['runs']:
             name = r['method'] + (' (reference)' if r['reference'] else '')
             drift = f'{r["energy_drift"]:.2e}' if 'energy_drift' in r else '-'
             mark = '' if r['final_discrete_match'] else ' *'
             lines.append(
-                f'| {name} | {r["setting"]} | {r["wall_s"]:.2f} | {r["rtf"]:.3f} | '
+                f'| {r["engine"]} | {name} | {r["setting"]} | {r["wall_s"]:.2f} | '
+                f'{r["rtf"]:.3f} | '
                 f'{r["evaluations_per_period"]:.1f} | {r["transitions"]} | '
                 f'{r["head_err_max"]:.2e} | {r["final_q_err"]:.2e}{mark} | '
                 f'{r["final_v_err"]:.2e} | {drift} | '
@@ -485,7 +500,8 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
         for case in cases:
             if case['name'] == case_name:
                 for r in case['runs']:
-                    if r['method'] == 'implicit_euler' and r['step'] == 1e-3:
+                    if (r['method'] == 'implicit_euler' and r['step'] == 1e-3
+                            and r['engine'] == 'native'):
                         return r['head_err_max']
         return None
 
@@ -493,13 +509,8 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
         out = f'{f["sim_time_s"]:.3g} of {f["requested_s"]:g} s'
         return out + (f', stopped: {f["failure"][:70]}' if f['failure'] else '')
 
-    skate = figures['skate']
-    lines = [f'headless stand ({ran(figures["stand"])}; shipped settings): '
-             f'{figures["stand"]["rtf_median"]:.2f}x real time',
-             f'headless skate ({ran(skate)}; shipped settings): '
-             f'{skate["rtf_median"]:.2f}x real time; goal >= {GOAL_RTF:g}x: '
-             + ('met' if skate['rtf_median'] >= GOAL_RTF else
-                f'NOT met ({GOAL_RTF / skate["rtf_median"]:.0f}x too slow)')]
+    lines = [f'headless {name} ({ran(f)}; shipped settings, native engine): '
+             f'{f["rtf_median"]:.2f}x real time' for name, f in figures.items()]
     for case_name in ('skate', 'events', 'smooth'):
         err = default_error(case_name)
         if err is not None:
@@ -515,19 +526,33 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
 
 
 def _cheapest_meeting_goal(cases: list[dict[str, Any]]) -> str | None:
-    """The fastest setting of the eventful cases whose head error meets the goal."""
+    """The fastest setting of the eventful cases whose head error meets the goal, per engine,
+    and the ratio of the two engines' figures."""
     out = []
     for case in cases:
         if case['name'] not in ('skate', 'events'):
             continue
-        ok = [r for r in case['runs'] if not r['reference'] and r['status'] == 'ok'
-              and r['head_err_max'] <= GOAL_HEAD_ERROR]
-        if ok:
-            r = min(ok, key=lambda r: r['wall_s'])
-            out.append(f'{case["name"]}: fastest setting with head error <= 1e-6 m is '
-                       f'{r["method"]} {r["setting"]} at {r["rtf"]:.3f}x real time')
-        else:
-            out.append(f'{case["name"]}: no swept setting reaches head error <= 1e-6 m')
+        rtf = {}
+        for engine in ENGINES:
+            swept = [r for r in case['runs'] if not r['reference'] and r['engine'] == engine]
+            if not swept:
+                continue
+            ok = [r for r in swept if r['status'] == 'ok' and r['head_err_max'] <= GOAL_HEAD_ERROR]
+            if ok:
+                r = min(ok, key=lambda r: r['wall_s'])
+                rtf[engine] = r['rtf']
+                goal = ('' if case['name'] != 'skate' else
+                        f'; goal >= {GOAL_RTF:g}x: '
+                        + ('met' if r['rtf'] >= GOAL_RTF else 'NOT met'))
+                out.append(f'{case["name"]}, {engine} engine: fastest setting with head error '
+                           f'<= 1e-6 m is {r["method"]} {r["setting"]} at {r["rtf"]:.3f}x real '
+                           f'time{goal}')
+            else:
+                out.append(f'{case["name"]}, {engine} engine: no swept setting reaches head '
+                           f'error <= 1e-6 m')
+        if len(rtf) == 2:
+            out.append(f'{case["name"]}: native / python at that goal = '
+                       f'{rtf["native"] / rtf["python"]:.1f}x')
     return '; '.join(out) or None
 
 
@@ -540,6 +565,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--quick', action='store_true',
                         help='short spans and sparse sweeps (about 1-2 minutes)')
     parser.add_argument('--cases', help='comma-separated subset of the cases')
+    parser.add_argument('--engines', default=','.join(ENGINES),
+                        help='comma-separated engines to sweep (default native,python)')
     parser.add_argument('--max-run-wall', type=float, default=120.0,
                         help='wall-time limit of one swept run [s] (reference: 4x)')
     parser.add_argument('--repeat', type=int, default=1,
@@ -559,11 +586,14 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             parser.error(f'unknown cases {sorted(unknown)}; one of {[c.name for c in cases]}')
         cases = [c for c in cases if c.name in wanted]
+    engines = tuple(args.engines.split(','))
+    if set(engines) - set(ENGINES):
+        parser.error(f'--engines takes a comma-separated subset of {ENGINES}')
     robot = load_robot()
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for case in cases:
-        figures = run_case(case, robot, args.max_run_wall, log)
+        figures = run_case(case, robot, args.max_run_wall, engines, log)
         results.append(figures)
         png = args.out / f'work_precision_{case.name}.png'
         plot_case(figures, png)

@@ -194,7 +194,7 @@ class Session:
         """Advance up to ``count`` control periods with ``stack`` answering each observation
         in-process (the headless runner), recording every sample; return how many were taken.
 
-        On the native engine with a fixed-step method the whole block runs in C++
+        On the native engine with a fixed-step method or rk45 the whole block runs in C++
         (``Simulator.control_loop``: the same laws, sums, hold and periods as ``step``, with no
         Python in between); otherwise period by period through ``step``. A failure of the
         physics ends the run (``error``) as in ``step``; a controller's own error is raised once
