@@ -152,3 +152,27 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
     with pytest.raises(ValueError, match='number of periods must be >= 0'):
         loop._kernel.run(-1)
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('name', ['skate', 'skate_no_yaw', 'walk', 'stand'])
+def test_the_shipped_scenes_give_the_same_figures_on_both_engines(name: str) -> None:
+    """The whole scene as ``run_scene`` runs it (no bag) on each engine: the same steps and
+    transitions, and distance and arm-swing figures equal to what round-off grows to over the
+    run (measured: 4e-9 m, 3e-9 rad, 1.5e-9 in the correlation)."""
+    from iceskate_bringup.runner import run
+    figures = []
+    for engine in ('python', 'native'):
+        scene = load_scene(name)
+        scene = replace(scene, simulator=replace(scene.simulator, engine=engine),
+                        record_bag=False)
+        figures.append(run(scene, None, progress=False))
+    python, native = figures
+    for key in ('sim_time_s', 'steps', 'transitions', 'physics_steps', 'failure'):
+        assert native[key] == python[key], key
+    assert native['forward_distance_m'] == pytest.approx(python['forward_distance_m'], abs=1e-7)
+    if name == 'stand':
+        assert native['arm_swing'] is None and python['arm_swing'] is None
+        return
+    for key, value in python['arm_swing'].items():
+        assert native['arm_swing'][key] == pytest.approx(value, abs=1e-7), key
