@@ -57,7 +57,7 @@ def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, sa
                                                                     monkeypatch):
     def broken(self, record):
         raise OSError('disk full')
-    monkeypatch.setattr(recording.RecordEncoder, 'encode', broken)  # forked along
+    monkeypatch.setattr(recording.RecordEncoder, 'encode_block', broken)  # forked along
     with pytest.raises(SimulationError, match='bag writer .* failed: OSError: disk full'):
         _record(tmp_path / 'bag', samples, background=True)
     assert [topic for topic, _, _ in _messages(tmp_path / 'bag')] == ['/robot_description']
@@ -146,3 +146,78 @@ def test_the_encoder_falls_back_to_rosbags_when_no_layout_fits(skate_records, mo
         assert encoder.encode(record) == _rosbags_bytes(factory, record)
     layouts = [layout for by_topic in encoder._layouts.values() for layout in by_topic.values()]
     assert layouts and all(layout is None for layout in layouts)
+
+
+def _as_bytes(encoded: dict[str, list]) -> list[dict[str, bytes]]:
+    topics = list(encoded)
+    return [{topic: bytes(encoded[topic][k]) for topic in topics}
+            for k in range(len(encoded[topics[0]]))]
+
+
+def test_a_block_encodes_as_its_records_one_by_one(skate_records):
+    """``encode_block`` gives each record's bytes as ``encode`` and rosbags do, over gait modes,
+    support exchanges, steps and causes, with far fewer layouts than discrete states (the
+    side, pivot and step index are patched, not keyed)."""
+    factory = recording.MessageFactory()
+    block = recording.RecordBlock.of_records(skate_records)
+    for k, record in enumerate(skate_records):
+        got = block.record(k)
+        assert got._replace(values=None) == record._replace(values=None)
+        assert np.array_equal(got.values, record.values, equal_nan=True)
+    by_block = recording.RecordEncoder(factory)
+    got = _as_bytes(by_block.encode_block(block))
+    by_record = recording.RecordEncoder(factory)
+    assert got == [by_record.encode(record) for record in skate_records]
+    for k in range(0, len(skate_records), 50):
+        assert got[k] == _rosbags_bytes(factory, skate_records[k])
+    states = {(r.mode, r.side, r.pivot, r.step_index) for r in skate_records}
+    assert len({r.step_index for r in skate_records}) >= 3 and len(states) >= 10
+    assert len(by_block._layouts) < len(states)
+    layouts = [layout for by_topic in by_block._layouts.values() for layout in by_topic.values()]
+    assert all(layout is not None for layout in layouts)
+    assert any(layout.integers for layout in layouts)  # gait_state's side, pivot, step
+
+
+def test_a_block_with_non_finite_values_encodes_as_its_records(skate_records):
+    """Non-finite numbers, a stamp that cannot be one (then the same error as one record's)."""
+    factory = recording.MessageFactory()
+    nan, inf = float('nan'), float('inf')
+    records = []
+    for k, record in enumerate(skate_records[::60]):
+        values = record.values.copy()
+        values[[6, 2, 10, 11][k % 4]] = [nan, inf, nan, -inf][k % 4]
+        records.append(record._replace(values=values))
+    block = recording.RecordBlock.of_records(records)
+    encoder = recording.RecordEncoder(factory)
+    assert _as_bytes(encoder.encode_block(block)) == [_rosbags_bytes(factory, r)
+                                                      for r in records]
+    values = records[3].values.copy()
+    values[1] = -1.0  # the support exchange's time: a stamp of a negative time
+    broken = records[:3] + [records[3]._replace(values=values)]
+    with pytest.raises(SimulationError, match='a stamp needs a finite time >= 0 s, got -1.0'):
+        encoder.encode_block(recording.RecordBlock.of_records(broken))
+
+
+def test_the_native_block_packs_the_records_of_its_samples(tmp_path):
+    """``RecordBlock.of_columns`` (the native loop's samples) holds what ``bag_record`` packs of
+    the same samples stepped one by one."""
+    scene = replace(load_scene('skate'), duration=0.6, record_bag=False)
+    stepped = Session(scene)
+    stack = ControlStack(scene, stepped.robot, stepped.observation())
+    records = [recording.bag_record(stepped.step(stack.commands(stepped.observation())))
+               for _ in range(600)]
+    native = Session(scene)
+    stack = ControlStack(scene, native.robot, native.observation())
+    blocks = []
+    record_block = native._record_block
+    native._record_block = lambda block: (blocks.append(block), record_block(block))
+    while not native.done:
+        native.run_periods(stack, 250)
+    packed = [recording.RecordBlock.of_columns(
+        block, dict(zip(block['sources'], block['efforts'], strict=True)), block['present'],
+        native.sim.events) for block in blocks]
+    got = [block.record(k) for block in packed for k in range(len(block))]
+    assert len(got) == len(records) == 600
+    for a, b in zip(got, records, strict=True):
+        assert a._replace(values=None) == b._replace(values=None)
+        assert np.array_equal(a.values, b.values, equal_nan=True)

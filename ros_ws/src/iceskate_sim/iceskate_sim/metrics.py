@@ -94,8 +94,9 @@ class Trajectory:
         return {key: np.concatenate(blocks) for key, blocks in self._blocks.items()}
 
     def save(self, path: pathlib.Path) -> None:
-        """Write the columns to an ``.npz`` file."""
-        np.savez_compressed(path, **self.arrays())
+        """Write the columns to an uncompressed ``.npz`` file (zlib would halve it, 23.6 ->
+        10.9 MB for 15 s of skate, for 0.35 s of the run's end)."""
+        np.savez(path, **self.arrays())
 
 
 _NO_EFFORT = np.zeros(18)  # a source's column where it did not act (never written to)

@@ -22,20 +22,22 @@ the offline analysis reads either:
 Bag metadata (``custom_data``) holds the scene, its parameters, the integrator and the project
 version.
 
-Serialising the messages with rosbags costs about a quarter of a period's work, so the bag
-writes each record through ``RecordEncoder`` (the same bytes, patched into layouts learned from
-rosbags: 16 us instead of 57 us per record), and ``BagRecorder(..., background=True)`` hands
-each sample, packed into one float array (``BagRecord``), to a writer process that encodes and
-writes the messages while the simulation goes on (the bag's messages are byte-identical to an
-in-process recording). The writer also computes the /tf link poses from the record's q, side
-and pivot (the robot model is loaded before the fork), so /tf costs the simulating process
-nothing.
+Serialising the messages with rosbags costs more than a native control period, so the bag
+writes them through ``RecordEncoder``: the same bytes, patched into layouts learned from
+rosbags, for a whole ``RecordBlock`` of samples at once (column by column, a few numpy
+operations per topic and layout). ``BagRecorder(..., background=True)`` hands the samples, packed
+into float arrays (``BagRecord`` one by one, ``RecordBlock`` as the native loop returns them), to
+a writer process that encodes and writes the messages while the simulation goes on (the bag's
+messages are byte-identical to an in-process recording). The writer also computes the /tf link
+poses from the records' q, side and pivot (the robot model is loaded before the fork), so /tf
+costs the simulating process nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
+import gc
 import json
 import math
 import multiprocessing
@@ -147,41 +149,100 @@ def bag_record(sample: Sample) -> BagRecord:
                      tuple(sample.efforts), last.cause if last else None)
 
 
-def block_records(columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray],
-                  present: np.ndarray, events: list[Transition]) -> list[BagRecord]:
-    """The BagRecords of a block of samples (``bag_record`` of each, the same values).
+class RecordBlock(NamedTuple):
+    """Consecutive BagRecords column by column, cheap to pickle and to encode at once.
 
-    :param columns: the block's columns as ``iceskate_native.ControlLoop.run`` returns them (t,
-        t_exchange, t_touchdown, heel_anchor_y, support_normal, support_tangential, cop_y, q, v,
-        qdd, passive, multipliers, head_position, head_rotation (n, 3, 3), mode, side and pivot
-        codes, step_index, last_event: index in ``events``, -1 for none).
-    :param efforts: each source's (n, 18) generalized forces, in the order they first acted.
-    :param present: per sample, bit i set if the i-th source of ``efforts`` acted then.
-    :param events: the run's event log.
+    :ivar values: (n, V) each record's values up to its efforts (``BagRecord.values``).
+    :ivar efforts: (n, K, 18) the efforts of each record's sources, in their order (zero past
+        them).
+    :ivar source_sets: the distinct source tuples; ``source_set`` (n,) indexes them.
+    :ivar codes: (n, 4) mode number, side (index in SIDES), pivot (index in PIVOTS), step index.
+    :ivar causes: the distinct last-transition causes (None: none yet); ``cause`` (n,)
+        indexes them.
     """
-    n = len(columns['t'])
-    last = columns['last_event'].tolist()
-    last_t = np.array([events[i].t if i >= 0 else 0.0 for i in last])
-    base = np.hstack([
-        np.column_stack([columns[key] for key in (
-            't', 't_exchange', 't_touchdown', 'heel_anchor_y', 'support_normal',
-            'support_tangential', 'cop_y')] + [last_t]),
-        columns['q'], columns['v'], columns['qdd'], columns['passive'], columns['multipliers'],
-        columns['head_position'], columns['head_rotation'].reshape(n, 9)])
-    names = list(efforts)
-    values: list[np.ndarray] = [base[0]] * n
-    sources: list[tuple[str, ...]] = [()] * n
-    for mask in np.unique(present).tolist():
-        rows = np.flatnonzero(present == mask)
-        acting = tuple(name for i, name in enumerate(names) if mask >> i & 1)
-        block = np.hstack([base[rows], *(efforts[name][rows] for name in acting)])
-        for k, row in enumerate(rows.tolist()):
-            values[row], sources[row] = block[k], acting
-    return [BagRecord(values[k], mode, SIDES[side], PIVOTS[pivot], step, sources[k],
-                      events[i].cause if i >= 0 else None)
-            for k, (mode, side, pivot, step, i) in enumerate(zip(
-                columns['mode'].tolist(), columns['side'].tolist(), columns['pivot'].tolist(),
-                columns['step_index'].tolist(), last, strict=True))]
+
+    values: np.ndarray
+    efforts: np.ndarray
+    source_sets: tuple[tuple[str, ...], ...]
+    source_set: np.ndarray
+    codes: np.ndarray
+    causes: tuple[str | None, ...]
+    cause: np.ndarray
+
+    def __len__(self) -> int:
+        """Records in the block."""
+        return self.values.shape[0]
+
+    @classmethod
+    def of_records(cls, records: list[BagRecord]) -> RecordBlock:
+        """The block of these records (their values copied exactly)."""
+        sets = list(dict.fromkeys(r.sources for r in records))
+        causes = list(dict.fromkeys(r.last_cause for r in records))
+        width = max(len(s) for s in sets)
+        values = np.array([r.values[:_EFFORTS] for r in records]).reshape(-1, _EFFORTS)
+        efforts = np.zeros((len(records), width, _N))
+        for k, r in enumerate(records):
+            efforts[k, :len(r.sources)] = r.values[_EFFORTS:].reshape(-1, _N)
+        codes = np.array([(r.mode, SIDES.index(r.side), PIVOTS.index(r.pivot), r.step_index)
+                          for r in records], dtype=np.int64).reshape(-1, 4)
+        return cls(values, efforts, tuple(sets),
+                   np.array([sets.index(r.sources) for r in records], dtype=np.intp), codes,
+                   tuple(causes),
+                   np.array([causes.index(r.last_cause) for r in records], dtype=np.intp))
+
+    @classmethod
+    def of_columns(cls, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray],
+                   present: np.ndarray, events: list[Transition]) -> RecordBlock:
+        """The block of a native block of samples (the values ``bag_record`` packs).
+
+        :param columns: the block's columns as ``iceskate_native.ControlLoop.run`` returns them
+            (t, t_exchange, t_touchdown, heel_anchor_y, support_normal, support_tangential,
+            cop_y, q, v, qdd, passive, multipliers, head_position, head_rotation (n, 3, 3), mode,
+            side and pivot codes, step_index, last_event: index in ``events``, -1 for none).
+        :param efforts: each source's (n, 18) generalized forces, in the order they first
+            acted.
+        :param present: per sample, bit i set if the i-th source of ``efforts`` acted then.
+        :param events: the run's event log.
+        """
+        n = len(columns['t'])
+        last = columns['last_event']
+        indices = np.unique(last).tolist()
+        last_t = np.zeros(n)
+        for i in indices:
+            if i >= 0:
+                last_t[last == i] = events[i].t
+        values = np.hstack([
+            np.column_stack([columns[key] for key in (
+                't', 't_exchange', 't_touchdown', 'heel_anchor_y', 'support_normal',
+                'support_tangential', 'cop_y')] + [last_t]),
+            columns['q'], columns['v'], columns['qdd'], columns['passive'],
+            columns['multipliers'], columns['head_position'],
+            columns['head_rotation'].reshape(n, 9)])
+        names = list(efforts)
+        masks = np.unique(present).tolist()
+        sets = [tuple(name for i, name in enumerate(names) if mask >> i & 1) for mask in masks]
+        width = max([len(acting) for acting in sets] + [1])
+        acting_efforts = np.zeros((n, width, _N))
+        source_set = np.zeros(n, dtype=np.intp)
+        for index, (mask, acting) in enumerate(zip(masks, sets, strict=True)):
+            rows = present == mask
+            source_set[rows] = index
+            for j, name in enumerate(acting):
+                acting_efforts[rows, j] = efforts[name][rows]
+        codes = np.column_stack([columns['mode'], columns['side'], columns['pivot'],
+                                 columns['step_index']]).astype(np.int64)
+        cause = np.searchsorted(indices, last)
+        causes = tuple(events[i].cause if i >= 0 else None for i in indices)
+        return cls(values, acting_efforts, tuple(sets), source_set, codes, causes,
+                   cause.astype(np.intp))
+
+    def record(self, k: int) -> BagRecord:
+        """The k-th record."""
+        sources = self.source_sets[self.source_set[k]]
+        mode, side, pivot, step = self.codes[k].tolist()
+        values = np.concatenate([self.values[k], self.efforts[k, :len(sources)].ravel()])
+        return BagRecord(values, mode, SIDES[side], PIVOTS[pivot], step, sources,
+                         self.causes[self.cause[k]])
 
 
 def record_numbers(record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS) -> np.ndarray:
@@ -196,6 +257,39 @@ def record_numbers(record: BagRecord, topics: tuple[str, ...] = RECORDED_TOPICS)
     if '/head_pose' in topics:
         numbers[_QUAT] = rotation_to_quaternion(x[_HEAD_R].reshape(3, 3))
     return numbers
+
+
+def block_numbers(block: RecordBlock, rows: np.ndarray,
+                  topics: tuple[str, ...] = RECORDED_TOPICS) -> np.ndarray:
+    """``record_numbers`` of the block's ``rows``, which share one source set: (m, size)."""
+    acting = len(block.source_sets[block.source_set[rows[0]]])
+    values = block.values[rows]
+    m, width = values.shape
+    numbers = np.zeros((m, width + acting * _N + _N + 4))
+    numbers[:, :width] = values
+    efforts = block.efforts[rows, :acting]
+    numbers[:, width:width + acting * _N] = efforts.reshape(m, acting * _N)
+    if '/joint_states' in topics and acting:
+        total = efforts[:, 0].copy()
+        for j in range(1, acting):  # row by row, as the sum over axis 0 of one record adds
+            total += efforts[:, j]
+        numbers[:, -_N - 4:-4] = total
+    if '/head_pose' in topics:
+        for k, rotation in enumerate(values[:, _HEAD_R]):
+            numbers[k, -4:] = rotation_to_quaternion(rotation.reshape(3, 3))
+    return numbers
+
+
+def stamps_ns(t: np.ndarray) -> np.ndarray:
+    """``seconds_to_ns`` of each time in ``t`` [s], as int64 [ns].
+
+    :raises SimulationError: as ``seconds_to_ns`` does, for the first time that is not finite
+        and >= 0.
+    """
+    bad = ~(np.isfinite(t) & (t >= 0.0))
+    if bad.any():
+        seconds_to_ns(float(t[np.argmax(bad)]))
+    return np.rint(t * 1e9).astype(np.int64)
 
 
 def stamp_parts(t: float) -> tuple[int, int]:
@@ -282,17 +376,23 @@ class LinkTransforms:
     def rows(self, q: np.ndarray, side: str, pivot: str) -> np.ndarray:
         """The rows (one per ``frames`` entry, shape (n, 7)) at Table-2 coordinates q (18,)
         [m, rad] with the ``side`` foot supporting about its ``pivot`` edge."""
+        return self.block_rows(q[None], side, pivot)[0]
+
+    def block_rows(self, q: np.ndarray, side: str, pivot: str) -> np.ndarray:
+        """The rows of several states of one side and pivot: q (m, 18) -> (m, n, 7)."""
         support = self.robot.support_model(side, pivot)
         data = self._data[(side, pivot)]
-        pin.forwardKinematics(support.model, data, q)
-        root = pin.updateFramePlacement(support.model, data, support.frame_ids[self.root])
-        out = self._constant.copy()
-        out[0] = pin.SE3ToXYZQUAT(root)  # translation, quaternion: 0.2 us (a 10th of ours)
+        frame = support.frame_ids[self.root]
+        out = np.repeat(self._constant[None], len(q), axis=0)
+        for k, qk in enumerate(q):
+            pin.forwardKinematics(support.model, data, qk)
+            # translation, quaternion: 0.2 us (a 10th of ours)
+            out[k, 0] = pin.SE3ToXYZQUAT(pin.updateFramePlacement(support.model, data, frame))
         index, sign = self._coordinates[side]
-        half = (0.5 * q[index] * sign)[:, None]
+        half = (0.5 * q[:, index] * sign)[:, :, None]
         with np.errstate(invalid='ignore'):  # an infinite angle: NaN, as the bag copies it
             sin, cos = np.sin(half), np.cos(half)
-        out[self._moving, 3:] = sin * self._sin_part + cos * self._cos_part
+        out[:, self._moving, 3:] = sin * self._sin_part + cos * self._cos_part
         return out
 
 
@@ -330,6 +430,21 @@ def record_flags(record: BagRecord) -> RecordFlags:
     inside = (known and not get_mode(record.mode).q1_active
               and y0 + SOLE_HEEL_Y <= cop <= y0 + SOLE_TOE_Y)
     return RecordFlags(math.isfinite(float(x[2])), known, inside)
+
+
+#: Whether a mode's q1 (the support foot's pitch) is free, by mode number.
+_Q1_ACTIVE = np.array([number > 0 and get_mode(number).q1_active for number in range(21)])
+
+
+def block_flags(block: RecordBlock) -> np.ndarray:
+    """``record_flags`` of every record of the block, as (n, 3) booleans."""
+    x = block.values
+    cop, y0 = x[:, 6], x[:, _Q.start]
+    known = np.isfinite(cop)
+    with np.errstate(invalid='ignore'):
+        inside = (known & ~_Q1_ACTIVE[block.codes[:, 0]] & (y0 + SOLE_HEEL_Y <= cop)
+                  & (cop <= y0 + SOLE_TOE_Y))
+    return np.column_stack([np.isfinite(x[:, 2]), known, inside])
 
 
 class MessageFactory:
@@ -390,6 +505,19 @@ class MessageFactory:
         x = record.values
         rows = self.transforms.rows(x[_Q], record.side, record.pivot)
         return np.concatenate([x[:1], rows.ravel()])
+
+    def tf_block_numbers(self, block: RecordBlock) -> np.ndarray:
+        """``tf_numbers`` of every record of the block: (n, 1 + 7 frames)."""
+        x = block.values
+        out = np.empty((len(x), 1 + 7 * len(self.transforms.frames)))
+        out[:, 0] = x[:, 0]
+        contact = block.codes[:, 1] * len(PIVOTS) + block.codes[:, 2]
+        for code in np.unique(contact).tolist():
+            rows = np.flatnonzero(contact == code)
+            side, pivot = SIDES[code // len(PIVOTS)], PIVOTS[code % len(PIVOTS)]
+            out[rows, 1:] = self.transforms.block_rows(x[rows, _Q], side, pivot).reshape(
+                len(rows), -1)
+        return out
 
     def built(self, record: BagRecord, numbers: np.ndarray, flags: RecordFlags,
               topics: tuple[str, ...] = RECORDED_TOPICS) -> dict[str, Any]:
@@ -463,15 +591,17 @@ class MessageFactory:
 
 
 class _Layout(NamedTuple):
-    """Where a record's numbers go in the CDR bytes of one topic's message (for one key)."""
+    """Where a record's numbers and discrete codes go in the CDR bytes of one topic's message
+    (for one key)."""
 
     template: bytes  # the bytes of a message of this key
     slots: np.ndarray  # float64 slots (8-byte units after the 4-byte CDR header) to write ...
     index: np.ndarray  # ... with these entries of the numbers
     stamps: tuple[tuple[int, tuple[int, ...]], ...]  # (entry, byte offsets): Time of entry
+    integers: tuple[tuple[int, int], ...] = ()  # (byte offset, column of the codes)
 
-    def fill(self, numbers: np.ndarray) -> bytes:
-        """The bytes of the message with these numbers."""
+    def fill(self, numbers: np.ndarray, codes: tuple[int, ...]) -> bytes:
+        """The bytes of the message with these numbers and codes (``_codes``)."""
         out = bytearray(self.template)
         if self.slots.size:
             np.frombuffer(out, '<f8', (len(out) - 4) // 8, 4)[self.slots] = numbers[self.index]
@@ -479,10 +609,77 @@ class _Layout(NamedTuple):
             time = _TIME.pack(*stamp_parts(float(numbers[entry])))
             for offset in offsets:
                 out[offset:offset + _TIME.size] = time
+        for offset, column in self.integers:
+            data = _INTEGER_FIELDS[column].pack(codes[column])
+            out[offset:offset + len(data)] = data
         return bytes(out)
+
+    def fill_rows(self, numbers: np.ndarray, codes: np.ndarray) -> list[bytes | np.ndarray]:
+        """``fill`` of each row of numbers (m, size) and codes (m, 4), at once: the bytes of
+        each message as a row (uint8) of one array, or as bytes where ``fill`` is used."""
+        m, size = len(numbers), len(self.template)
+        seconds = [numbers[:, entry] for entry, _ in self.stamps]
+        if not all(np.all(np.isfinite(t) & (t >= 0.0) & (t < _MAX_STAMP)) for t in seconds):
+            # a stamp fill refuses: its error, from the first row it comes from
+            return [self.fill(n, tuple(c)) for n, c in zip(numbers, codes.tolist(), strict=True)]
+        # rows of 4 bytes of padding, then the message: its 8-byte slots after the 4-byte CDR
+        # header are aligned float64 columns 1, 2, ... of the row
+        width = (size + 4 + 7) // 8 * 8
+        rows = np.empty((m, width), dtype=np.uint8)
+        out = rows[:, 4:4 + size]
+        out[:] = np.frombuffer(self.template, dtype=np.uint8)
+        if self.slots.size:
+            rows.view('<f8')[:, 1 + self.slots] = numbers[:, self.index]
+        for (_, offsets), t in zip(self.stamps, seconds, strict=True):
+            ns = np.rint(t * 1e9).astype(np.int64)
+            time = np.empty(m, dtype=_TIME_DTYPE)
+            time['sec'], time['nanosec'] = np.divmod(ns, 1_000_000_000)
+            for offset in offsets:
+                out[:, offset:offset + 8] = time.view(np.uint8).reshape(m, 8)
+        for offset, column in self.integers:
+            field = _INTEGER_FIELDS[column]
+            written = codes[:, column] if field.values is None else np.take(field.values,
+                                                                            codes[:, column])
+            values = np.ascontiguousarray(written, dtype=field.dtype)
+            out[:, offset:offset + field.size] = values.view(np.uint8).reshape(m, field.size)
+        return list(out)  # each row a contiguous buffer
 
 
 _TIME = struct.Struct('<iI')
+_TIME_DTYPE = np.dtype([('sec', '<i4'), ('nanosec', '<u4')])
+_MAX_STAMP = 2.0 ** 31  # [s]: a Time's sec is an int32
+
+
+class _IntegerField(NamedTuple):
+    """How a discrete code of a record appears in a message: its CDR integer type, and the
+    value it writes for a code (``dtype`` has ``size`` bytes)."""
+
+    dtype: str
+    size: int
+    values: tuple[int, ...] | None  # code -> value written (None: the code itself)
+
+    def pack(self, code: int) -> bytes:
+        """The bytes of a code."""
+        value = code if self.values is None else self.values[code]
+        return np.array(value, dtype=self.dtype).tobytes()
+
+
+#: By column of ``RecordBlock.codes`` (mode, side, pivot, step index): the integer fields the
+#: messages carry that the encoder patches (the mode is part of the layout's key).
+_INTEGER_FIELDS = {1: _IntegerField('<u1', 1, None),  # GaitState.support_side: 0 right, 1 left
+                   2: _IntegerField('<u1', 1, (PIVOT_CODE['toe'], PIVOT_CODE['heel'])),
+                   3: _IntegerField('<u4', 4, None)}  # GaitState.step_index
+
+
+def _codes(record: BagRecord) -> tuple[int, int, int, int]:
+    """A record's discrete codes, as a row of ``RecordBlock.codes``."""
+    return (record.mode, SIDES.index(record.side), PIVOTS.index(record.pivot),
+            record.step_index)
+
+
+def _with_codes(record: BagRecord, codes: list[int]) -> BagRecord:
+    """The record with the side, pivot and step index of ``codes`` (its mode kept)."""
+    return record._replace(side=SIDES[codes[1]], pivot=PIVOTS[codes[2]], step_index=codes[3])
 
 
 def sentinels(size: int) -> np.ndarray:
@@ -495,19 +692,22 @@ class RecordEncoder:
     """The CDR bytes of a record's messages, equal to rosbags' serialisation of the factory's
     messages, at a fraction of its cost (the bag writer's main work).
 
-    Two records with the same discrete part and flags (the key) give messages that differ only
-    in numbers copied from ``record_numbers`` (or stamps of them). The first record of a key is
-    serialised by rosbags twice: as is, and with every number replaced by a distinct sentinel;
-    where each sentinel lands gives the layout, which must reproduce both serialisations
-    exactly (else that topic and key keep the plain rosbags path). Later records of the key
-    copy the bytes and write their numbers into them. The /tf message holds only numbers
-    (``tf_numbers``), so one layout of it serves every key.
+    Two records with the same mode, sources, last cause and flags (the key) give messages that
+    differ only in numbers copied from ``record_numbers`` (or stamps of them) and in the
+    integer fields of the side, pivot and step index. The first record of a key is serialised
+    by rosbags as is, with every number replaced by a distinct sentinel (where each sentinel
+    lands gives the number slots), and with each integer field set to two other values (where
+    the bytes change gives its slot); the layout must reproduce every one of these
+    serialisations exactly (else that topic and key keep the plain rosbags path). Later records
+    of the key copy the bytes and write their numbers and codes into them, one record
+    (``encode``) or a block of them with a few array operations per layout (``encode_block``).
+    The /tf message holds only numbers (``tf_numbers``), so one layout of it serves every key.
 
     :param factory: the message factory (and its typestore).
     :param capacity: keys kept (the oldest learned is dropped first).
     """
 
-    def __init__(self, factory: MessageFactory, capacity: int = 64) -> None:
+    def __init__(self, factory: MessageFactory, capacity: int = 256) -> None:
         self.factory = factory
         self.capacity = capacity
         self._layouts: dict[tuple, dict[str, _Layout | None]] = {}
@@ -517,30 +717,79 @@ class RecordEncoder:
                ) -> dict[str, bytes]:
         """Topic -> CDR bytes of the record's message, for ``topics``."""
         numbers, flags = record_numbers(record, topics), record_flags(record)
-        key = (record.mode, record.side, record.pivot, record.step_index, record.sources,
-               record.last_cause, flags, numbers.size)
+        layouts = self._keyed(record, flags, numbers.size)
+        codes = _codes(record)
+        out = {}
+        for topic in topics:
+            if topic == '/tf':
+                out[topic] = self._bytes(self._keyless, topic, record,
+                                         self.factory.tf_numbers(record), flags, codes)
+            else:
+                out[topic] = self._bytes(layouts, topic, record, numbers, flags, codes)
+        return out
+
+    def encode_block(self, block: RecordBlock, topics: tuple[str, ...] = RECORDED_TOPICS
+                     ) -> dict[str, list[bytes]]:
+        """Topic -> the CDR bytes of each record's message in the block (``encode`` of each
+        record, the same bytes), for ``topics``."""
+        n = len(block)
+        out: dict[str, list[bytes]] = {topic: [b''] * n for topic in topics}
+        flags = block_flags(block)
+        keys = np.column_stack([block.codes[:, 0], block.source_set, block.cause,
+                                flags @ np.array([1, 2, 4])])
+        _, group = np.unique(keys, axis=0, return_inverse=True)
+        group = group.ravel()
+        for g in range(int(group.max()) + 1 if n else 0):
+            rows = np.flatnonzero(group == g)
+            first = block.record(int(rows[0]))
+            numbers = block_numbers(block, rows, topics)
+            record_flag = record_flags(first)
+            layouts = self._keyed(first, record_flag, numbers.shape[1])
+            for topic in topics:
+                if topic != '/tf':
+                    self._rows(out[topic], layouts, topic, block, rows, numbers, record_flag)
+        if '/tf' in topics and n:
+            tf = self.factory.tf_block_numbers(block)
+            self._rows(out['/tf'], self._keyless, '/tf', block, np.arange(n), tf,
+                       record_flags(block.record(0)))
+        return out
+
+    def _keyed(self, record: BagRecord, flags: RecordFlags, size: int
+               ) -> dict[str, _Layout | None]:
+        """The layouts of the record's key (see the class), by topic."""
+        key = (record.mode, record.sources, record.last_cause, flags, size)
         layouts = self._layouts.get(key)
         if layouts is None:
             layouts = self._layouts[key] = {}
             if len(self._layouts) > self.capacity:
                 del self._layouts[next(iter(self._layouts))]
-        out = {}
-        for topic in topics:
-            if topic == '/tf':
-                out[topic] = self._bytes(self._keyless, topic, record,
-                                         self.factory.tf_numbers(record), flags)
-            else:
-                out[topic] = self._bytes(layouts, topic, record, numbers, flags)
-        return out
+        return layouts
+
+    def _rows(self, out: list[bytes], layouts: dict[str, _Layout | None], topic: str,
+              block: RecordBlock, rows: np.ndarray, numbers: np.ndarray,
+              flags: RecordFlags) -> None:
+        """Write the bytes of ``topic``'s message of the block's ``rows`` (one key; their
+        numbers) into ``out``."""
+        first = block.record(int(rows[0]))
+        if topic not in layouts:
+            layouts[topic] = self._learn(topic, first, numbers[0], flags)
+        layout = layouts[topic]
+        if layout is not None:
+            encoded = layout.fill_rows(numbers, block.codes[rows])
+        else:
+            encoded = [self._serialize(topic, block.record(k), row, flags)
+                       for k, row in zip(rows.tolist(), numbers, strict=True)]
+        for k, data in zip(rows.tolist(), encoded, strict=True):
+            out[k] = data
 
     def _bytes(self, layouts: dict[str, _Layout | None], topic: str, record: BagRecord,
-               numbers: np.ndarray, flags: RecordFlags) -> bytes:
+               numbers: np.ndarray, flags: RecordFlags, codes: tuple[int, ...]) -> bytes:
         """The bytes of ``topic``'s message through its layout in ``layouts`` (learned first if
         missing; rosbags if none fits)."""
         if topic not in layouts:
             layouts[topic] = self._learn(topic, record, numbers, flags)
         layout = layouts[topic]
-        return (layout.fill(numbers) if layout is not None
+        return (layout.fill(numbers, codes) if layout is not None
                 else self._serialize(topic, record, numbers, flags))
 
     def _serialize(self, topic: str, record: BagRecord, numbers: np.ndarray,
@@ -570,11 +819,39 @@ class RecordEncoder:
         times: dict[int, list[int]] = {}
         for offset, entry in stamps:
             times.setdefault(entry, []).append(offset)
+        # the integer fields at other values: where the bytes change is a field's slot
+        def variant(changes: dict[int, int]) -> tuple[tuple[int, ...], bytes]:
+            codes = list(_codes(record))
+            for column, code in changes.items():
+                codes[column] = code
+            return tuple(codes), self._serialize(topic, _with_codes(record, codes),
+                                                 probe_numbers, flags)
+
+        others = {column: (0, 1) if column != 3 else (0x01020304, 0x0A0B0C0D)
+                  for column in _INTEGER_FIELDS}
+        variants = [variant({column: pair[k] for column, pair in others.items()})
+                    for k in range(2)]
+        integers = []
+        if any(serialised != probe for _, serialised in variants):  # else: none in this topic
+            for column, pair in others.items():
+                both = [variant({column: code}) for code in pair]
+                if any(len(serialised) != len(probe) for _, serialised in both):
+                    return None
+                changed = [k for k, (a, b) in enumerate(zip(both[0][1], both[1][1], strict=True))
+                           if a != b]
+                if changed:
+                    if changed[-1] - changed[0] >= _INTEGER_FIELDS[column].size:
+                        return None
+                    integers.append((changed[-1] + 1 - _INTEGER_FIELDS[column].size, column))
+                variants += both
         layout = _Layout(actual, np.array([(o - 4) // 8 for o, _ in slots], dtype=np.intp),
                          np.array([e for _, e in slots], dtype=np.intp),
-                         tuple((entry, tuple(offsets)) for entry, offsets in times.items()))
+                         tuple((entry, tuple(offsets)) for entry, offsets in times.items()),
+                         tuple(integers))
         try:
-            fits = layout.fill(probe_numbers) == probe and layout.fill(numbers) == actual
+            fits = (layout.fill(numbers, _codes(record)) == actual
+                    and layout.fill(probe_numbers, _codes(record)) == probe
+                    and all(layout.fill(probe_numbers, c) == b for c, b in variants))
         except SimulationError:  # a stamp of a non-finite number: ambiguous sentinels
             fits = False
         return layout if fits else None
@@ -603,11 +880,15 @@ class _BagFile:
         data = self.factory.typestore.serialize_cdr(message, TOPICS[topic])
         self._writer.write(self._connections[topic], seconds_to_ns(t), data)
 
-    def write_record(self, record: BagRecord) -> None:
-        """Write the messages of one packed sample."""
-        ns = seconds_to_ns(float(record.values[0]))
-        for topic, data in self._encoder.encode(record).items():
-            self._writer.write(self._connections[topic], ns, data)
+    def write_block(self, block: RecordBlock) -> None:
+        """Write the messages of a block of packed samples, sample by sample."""
+        stamps = stamps_ns(block.values[:, 0]).tolist()
+        encoded = self._encoder.encode_block(block)
+        columns = [(self._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
+        write = self._writer.write
+        for k, ns in enumerate(stamps):
+            for connection, column in columns:
+                write(connection, ns, column[k])
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""
@@ -631,6 +912,7 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
     dropped (SIGALRM ends a read that would wait for its missing part forever)."""
     for signum in STOP_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
+    gc.freeze()  # what the parent had: not this process's garbage, never collected here
     reading, orphaned = False, False
 
     parent = multiprocessing.parent_process()
@@ -669,9 +951,9 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
                     reading = False
                 if batch is None:
                     break
-                for record in batch:
-                    bag.write_record(record)
-                    count += 1
+                block = batch if isinstance(batch, RecordBlock) else RecordBlock.of_records(batch)
+                bag.write_block(block)
+                count += len(block)
         finally:
             signal.alarm(0)
             bag.close()
@@ -695,9 +977,10 @@ class BagRecorder:
     :param background: build, serialise and write the messages in a writer process, forked
         here (a few ms, no re-import of ``__main__``; the writer touches neither ROS nor the
         simulation, so threads of the parent do not matter).
-        ``write`` packs the sample and hands it over in batches of ``BATCH``; it waits while
-        ``QUEUE_BATCHES`` batches are in flight and raises SimulationError once the writer has
-        failed. ``close`` waits until everything is written.
+        ``write`` packs the sample and hands it over in batches of ``BATCH``, ``write_block``
+        a block at once; they wait while ``QUEUE_BATCHES`` batches are in flight and raise
+        SimulationError once the writer has failed. ``close`` waits until everything is
+        written.
     """
 
     def __init__(self, path: str | pathlib.Path, metadata: dict[str, Any], urdf: str,
@@ -724,23 +1007,32 @@ class BagRecorder:
 
     def write(self, sample: Sample) -> None:
         """Record one control instant."""
-        self.write_records([bag_record(sample)])
-
-    def write_records(self, records: list[BagRecord]) -> None:
-        """Record control instants packed as BagRecords (``bag_record``, ``block_records``)."""
+        record = bag_record(sample)
         if self._bag is not None:
-            for record in records:
-                self._bag.write_record(record)
+            self._bag.write_block(RecordBlock.of_records([record]))
         elif self._process is not None:
-            self._batch.extend(records)
-            while len(self._batch) >= BATCH:
-                batch, self._batch = self._batch[:BATCH], self._batch[BATCH:]
+            self._batch.append(record)
+            if len(self._batch) >= BATCH:
+                batch, self._batch = self._batch, []
                 self._hand_over(batch)
         else:
             raise SimulationError(f'bag {self.path} is closed')
-        self.count += len(records)
+        self.count += 1
 
-    def _hand_over(self, item: list[BagRecord] | None) -> None:
+    def write_block(self, block: RecordBlock) -> None:
+        """Record consecutive control instants packed as a block (after those written before)."""
+        if self._bag is not None:
+            self._bag.write_block(block)
+        elif self._process is not None:
+            if self._batch:
+                batch, self._batch = self._batch, []
+                self._hand_over(batch)
+            self._hand_over(block)
+        else:
+            raise SimulationError(f'bag {self.path} is closed')
+        self.count += len(block)
+
+    def _hand_over(self, item: list[BagRecord] | RecordBlock | None) -> None:
         """Queue a batch (None: the end) for the writer process, waiting while it is busy."""
         self._check_writer()
         while True:

@@ -28,7 +28,7 @@ from iceskate_sim.hybrid import Transition
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.modes import MODES
 from iceskate_sim.observation import Observation
-from iceskate_sim.recording import BagRecorder, Sample, block_records
+from iceskate_sim.recording import BagRecorder, RecordBlock, Sample
 from iceskate_sim.robot import Robot, load_robot
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
@@ -239,8 +239,8 @@ class Session:
             'psi': psi, 'psi_d': block['head_target'], 'applied': block['applied']}
         self.trajectory.extend(columns, efforts)
         if self.recorder is not None:
-            self.recorder.write_records(block_records(block, efforts, block['present'],
-                                                      self.sim.events))
+            self.recorder.write_block(RecordBlock.of_columns(block, efforts, block['present'],
+                                                             self.sim.events))
         self.periods += len(block['t'])
 
     def flush(self) -> None:
@@ -274,6 +274,8 @@ class Session:
         try:
             try:
                 self.flush()
+                if self.out is not None:  # while the bag writer finishes
+                    self.trajectory.save(self.out / 'trajectory.npz')
             finally:
                 if self.recorder is not None:
                     self.recorder.close()
@@ -288,5 +290,4 @@ class Session:
             (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
             (self.out / 'events.json').write_text(json.dumps(
                 [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
-            self.trajectory.save(self.out / 'trajectory.npz')
         return self.metrics
