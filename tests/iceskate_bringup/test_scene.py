@@ -72,6 +72,9 @@ def test_stand_runs_only_what_it_declares():
     (('inputs', 'gait_manager', 'posture', 'stiffness'), -5.0, r'posture\.stiffness'),
     (('inputs', 'visual_lifting', 'kp'), [1.0, 2.0], r'inputs\.visual_lifting'),
     (('colour',), 'blue', r'colour.*unknown key'),
+    (('record', 'rate'), 300.0, r'record\.rate.*300 samples/s does not divide the control rate'),
+    (('record', 'rate'), 0.0, r'record\.rate'),
+    (('record', 'rate'), 2000.0, r'record\.rate.*does not divide'),
 ])
 def test_a_malformed_scene_is_refused_naming_the_key(path, value, match):
     raw = copy.deepcopy(_raw('skate'))
@@ -81,6 +84,13 @@ def test_a_malformed_scene_is_refused_naming_the_key(path, value, match):
     node[path[-1]] = value
     with pytest.raises(SimulationError, match=match):
         parse_scene(raw)
+
+
+def test_record_rate_is_a_divisor_of_the_control_rate():
+    raw = copy.deepcopy(_raw('skate'))
+    assert parse_scene(raw).record_every == 1
+    raw['record'] = {'rate': 250}
+    assert parse_scene(raw).record_every == 4
 
 
 def test_control_period_must_be_a_multiple_of_the_step():

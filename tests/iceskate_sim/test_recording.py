@@ -221,3 +221,27 @@ def test_the_native_block_packs_the_records_of_its_samples(tmp_path):
     for a, b in zip(got, records, strict=True):
         assert a._replace(values=None) == b._replace(values=None)
         assert np.array_equal(a.values, b.values, equal_nan=True)
+
+
+@pytest.mark.parametrize('engine', ['native', 'python'])
+def test_a_run_at_a_record_rate_keeps_every_nth_sample_and_analyses(tmp_path, engine):
+    """``record.rate`` 250 at the 1 kHz control rate: the trajectory and the bag hold the
+    samples of every 4th period, the same values as the full run's, and eq. (11) still closes
+    on them (each sample carries its own accelerations and efforts)."""
+    from iceskate_analysis.bag_io import read_bag
+    from iceskate_analysis.coupling import decompose
+    from iceskate_bringup.scene import parse_scene
+    raw = {**load_scene('skate').raw, 'duration': 0.6, 'engine': engine}
+    full = tmp_path / 'full'
+    run(parse_scene({**raw, 'record': {'bag': False}}), full, progress=False)
+    every4 = tmp_path / 'every4'
+    metrics = run(parse_scene({**raw, 'record': {'rate': 250}}), every4, progress=False)
+    assert metrics['failure'] is None and metrics['steps'] > 0
+    a, b = np.load(full / 'trajectory.npz'), np.load(every4 / 'trajectory.npz')
+    assert len(a['t']) == 600 and len(b['t']) == 150
+    for key in a.files:
+        assert np.array_equal(b[key], a[key][::4], equal_nan=True), key
+    clock = [t for topic, t, _ in _messages(every4 / 'bag') if topic == '/clock']
+    assert clock == [4_000_000 * k for k in range(150)]
+    d = decompose(read_bag(every4 / 'bag'), (11,))[11]
+    assert d.valid.all() and d.residual_rel.max() <= 1e-9

@@ -65,6 +65,8 @@ class Scene:
     inputs: dict[str, dict[str, Any]]
     pushes: tuple[Push, ...] = ()
     record_bag: bool = True
+    #: control periods per recorded sample (trajectory and bag; ``record.rate`` in the file)
+    record_every: int = 1
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
 
@@ -251,9 +253,23 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         pushes.append(Push(_number(item, 'start', f'{path}.start', 0.0, low=0.0),
                            _number(item, 'duration', f'{path}.duration', 0.0, positive=True),
                            frame, tuple(float(f) for f in force)))
-    record = _check_keys(raw.get('record', {}), 'record', {'bag'})
+    record = _check_keys(raw.get('record', {}), 'record', {'bag', 'rate'})
     return Scene(name, description, duration, simulator, initial, inputs, tuple(pushes),
-                 _boolean(record, 'bag', 'record.bag', True), raw)
+                 _boolean(record, 'bag', 'record.bag', True),
+                 _record_every(record, simulator.control_period), raw)
+
+
+def _record_every(record: dict[str, Any], control_period: float) -> int:
+    """Control periods per recorded sample from ``record.rate`` [samples/s], which must divide
+    the control rate (default: the control rate, every period)."""
+    control_rate = 1.0 / control_period
+    rate = _number(record, 'rate', 'record.rate', control_rate, positive=True)
+    every = round(control_rate / rate)
+    if every < 1 or abs(every * rate - control_rate) > 1e-9 * control_rate:
+        raise _fail('record.rate', f'{rate:g} samples/s does not divide the control rate '
+                    f'{control_rate:g} Hz (e.g. {control_rate:g}, {control_rate / 2:g}, '
+                    f'{control_rate / 10:g})')
+    return every
 
 def load_scene(path: str | pathlib.Path,
                validate_inputs: Callable[[str, dict[str, Any]], None] | None = None) -> Scene:

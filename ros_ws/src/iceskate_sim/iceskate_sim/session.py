@@ -186,7 +186,8 @@ class Session:
                         placement.rotation.copy(), last_event_before(sim, state.t))
         target = next((c.head_target for c in commands.values() if c.head_target is not None),
                       self.psi_initial)
-        self._unrecorded.append((sample, target))
+        if self.periods % self.scene.record_every == 0:  # record.rate
+            self._unrecorded.append((sample, target))
         self.periods += 1
         return sample
 
@@ -237,11 +238,26 @@ class Session:
             'multipliers': block['multipliers'], 'support_normal': block['support_normal'],
             'support_tangential': block['support_tangential'], 'cop_y': block['cop_y'],
             'psi': psi, 'psi_d': block['head_target'], 'applied': block['applied']}
+        count = len(block['t'])
+        kept = self._recorded_rows(count)
+        if kept is not None:  # record.rate: every n-th sample only
+            block = {key: value[kept] if isinstance(value, np.ndarray) else value
+                     for key, value in block.items()}
+            block['efforts'] = [e[kept] for e in block['efforts']]
+            columns = {key: value[kept] for key, value in columns.items()}
+            efforts = {key: value[kept] for key, value in efforts.items()}
         self.trajectory.extend(columns, efforts)
-        if self.recorder is not None:
+        if self.recorder is not None and len(block['t']):
             self.recorder.write_block(RecordBlock.of_columns(block, efforts, block['present'],
                                                              self.sim.events))
-        self.periods += len(block['t'])
+        self.periods += count
+
+    def _recorded_rows(self, count: int) -> np.ndarray | None:
+        """Which of the next ``count`` periods' samples ``record.rate`` keeps (None: all)."""
+        every = self.scene.record_every
+        if every == 1:
+            return None
+        return np.flatnonzero((self.periods + np.arange(count)) % every == 0)
 
     def flush(self) -> None:
         """Append the samples stepped since the last flush to the trajectory and the bag."""
