@@ -33,6 +33,7 @@ import json
 import math
 import pathlib
 import sys
+import threading
 from typing import TYPE_CHECKING, Any
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
@@ -76,11 +77,23 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     with contextlib.ExitStack() as signals:
         if stop is None:
             stop = signals.enter_context(StopRequest())
+        if out is not None:  # the summary's plotting library loads while the run goes on
+            threading.Thread(target=_import_plotting, name='import-plotting', daemon=True).start()
         bag = out / 'bag' if out is not None and scene.record_bag else None
         session = Session(scene, out, bag)
         stack = ControlStack(scene, session.robot, session.observation())
         bar = _progress(session.n_periods, scene.name, progress)
         ended: SimulationError | None = None
+
+        def summary() -> None:
+            """summary.png, while the bag writer finishes; also after a fall or a physics
+            error, not after a signal or a bug."""
+            if (out is not None and len(session.trajectory)
+                    and not isinstance(ended, RunInterrupted) and not crashed):
+                from iceskate_analysis.summary import write_summary
+                write_summary(out)
+
+        crashed = False
         try:
             while not session.done:
                 if stop.requested:
@@ -89,16 +102,21 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                 bar.update(session.run_periods(stack, BLOCK_PERIODS))
         except BaseException as exc:  # a bug: the outputs still say where the run stopped
             ended = SimulationError(f'the run stopped on {type(exc).__name__}: {exc}')
+            crashed = True
             raise
         finally:
             bar.close()
-            metrics = session.finish(ended)
+            metrics = session.finish(ended, written=summary)
     if isinstance(ended, RunInterrupted):
         raise ended
-    if out is not None and len(session.trajectory):  # also after a fall or a physics error
-        from iceskate_analysis.summary import write_summary
-        write_summary(out)
     return metrics, session.error
+
+
+def _import_plotting() -> None:
+    """Import what ``write_summary`` draws with (a third of a second; the native loop releases
+    the interpreter while it runs, so this happens meanwhile)."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
 
 
 class _NoBar:

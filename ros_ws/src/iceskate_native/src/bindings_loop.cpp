@@ -95,7 +95,14 @@ nb::dict run(BoundControlLoop & self, int periods)
     throw std::invalid_argument("the number of periods must be >= 0");
   }
   SampleBlock & b = self.block;
-  const auto n = static_cast<std::size_t>(self.loop.run(periods, b));
+  int taken = 0;
+  {
+    // The loop touches no Python object (the controllers are C++ ones, checked when bound):
+    // other Python threads, e.g. the one that hands the bag's samples to its writer, run.
+    nb::gil_scoped_release released;
+    taken = self.loop.run(periods, b);
+  }
+  const auto n = static_cast<std::size_t>(taken);
   constexpr std::size_t m = kCoordinates;
   nb::dict out;
   out["t"] = array_of(std::move(b.t), {n});

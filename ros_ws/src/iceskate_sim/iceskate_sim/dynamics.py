@@ -21,12 +21,13 @@ Units: SI (m, rad, s, kg, N, N m).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 import math
 from operator import itemgetter
+from types import ModuleType
 
 import numpy as np
 import pinocchio as pin
-from scipy.linalg.lapack import dgesv
 
 from iceskate_sim.command import all_finite
 from iceskate_sim.errors import SimulationError
@@ -715,13 +716,21 @@ def head_psi(translation: np.ndarray, rotation: np.ndarray) -> np.ndarray:
                      float(np.arctan2(-rotation[1, 2], rotation[2, 2]))])
 
 
+@functools.cache
+def _lapack() -> ModuleType:
+    """scipy's LAPACK bindings, imported on the Python engine's first solve (scipy.linalg
+    takes a fifth of a second to import; the native engine never needs it)."""
+    from scipy.linalg import lapack
+    return lapack
+
+
 def _solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """x = A^-1 b by LAPACK gesv (LU with partial pivoting, as np.linalg.solve, through scipy's
     binding: 2.6 us instead of 8 us for 18 unknowns) and whether x is finite.
 
     :raises np.linalg.LinAlgError: if A is exactly singular.
     """
-    _, _, x, info = dgesv(A, b)
+    _, _, x, info = _lapack().dgesv(A, b)
     if info > 0:
         raise np.linalg.LinAlgError(f'singular matrix (zero pivot U[{info - 1}, {info - 1}])')
     return x, all_finite(x)

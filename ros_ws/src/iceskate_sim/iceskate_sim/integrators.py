@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy import integrate as sp_integrate
-from scipy import optimize
 
 from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
@@ -168,6 +166,7 @@ class Integrator:
         The offset returned is the due side of the bracket (guard > margin there, within the
         event tolerance of the zero), so the transition is applied where it is due.
         """
+        from scipy import optimize  # here: the native engine never imports scipy
         best_s, best_i, calls = np.inf, -1, 0
         tol = self.config.event_tolerance
         for i in crossed:  # g0[i] <= margin < g1[i]
@@ -188,6 +187,7 @@ class Integrator:
     # ----------------------------------------------------------------- adaptive
     def _adaptive(self, rhs: Rhs, guards: GuardFn, t0: float, x0: np.ndarray, t_end: float,
                   start: tuple[np.ndarray, DynamicsResult] | None) -> Segment:
+        from scipy import integrate as sp_integrate  # here: the native engine never needs it
         cfg = self.config
         solver_class = sp_integrate.DOP853 if cfg.method == 'dop853' else sp_integrate.RK45
         counter = [0]

@@ -12,7 +12,7 @@ stepped to the trajectory and the bag (the node calls it while the controllers c
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict
 import json
 import pathlib
@@ -276,28 +276,52 @@ class Session:
         self._restart()
 
     def finish(self, error: SimulationError | None = None,
-               extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """End the run (once): close the bag, compute the metrics, write the output files.
+               extra: Mapping[str, Any] | None = None,
+               written: Callable[[], None] | None = None) -> dict[str, Any]:
+        """End the run (once): write the trajectory, compute the metrics, write the output
+        files, close the bag.
 
         :param error: why the run was ended from outside (kept unless the physics failed;
             a ``RunInterrupted`` for a signal).
         :param extra: more entries for the metrics (e.g. the rejected commands of a ROS run).
+        :param written: called once the output files are written, while the bag writer
+            finishes (e.g. to draw the summary); again if closing the bag then fails (the
+            metrics then say so).
         """
         if self.metrics is not None:
             return self.metrics
         if error is not None and self.error is None:
             self.error = error
+        bag_error: SimulationError | None = None
         try:
-            try:
-                self.flush()
-                if self.out is not None:  # while the bag writer finishes
-                    self.trajectory.save(self.out / 'trajectory.npz')
-            finally:
-                if self.recorder is not None:
-                    self.recorder.close()
+            self.flush()
         except SimulationError as exc:  # the bag failed: the other outputs are still written
-            if self.error is None:
-                self.error = exc
+            bag_error = exc
+        if self.out is not None:
+            self.trajectory.save(self.out / 'trajectory.npz')
+        self._write_metrics(extra, bag_error)
+        closed: SimulationError | None = None
+        try:
+            if written is not None:
+                written()
+        finally:  # the bag is closed whatever ``written`` does
+            if self.recorder is not None:
+                try:
+                    self.recorder.close()
+                except SimulationError as exc:
+                    closed = exc
+        if closed is not None and bag_error is None and self.error is None:
+            self._write_metrics(extra, closed)
+            if written is not None:
+                written()
+        return self.metrics
+
+    def _write_metrics(self, extra: Mapping[str, Any] | None,
+                       bag_error: SimulationError | None) -> None:
+        """Compute the metrics (a failed bag is the run's error unless it has one) and write
+        metrics.json and events.json."""
+        if bag_error is not None and self.error is None:
+            self.error = bag_error
         start = self._wall_start if self._wall_start is not None else time.perf_counter()
         self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
                                        time.perf_counter() - start, self.error)
@@ -306,4 +330,3 @@ class Session:
             (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
             (self.out / 'events.json').write_text(json.dumps(
                 [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
-        return self.metrics
