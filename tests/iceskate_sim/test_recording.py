@@ -245,3 +245,45 @@ def test_a_run_at_a_record_rate_keeps_every_nth_sample_and_analyses(tmp_path, en
     assert clock == [4_000_000 * k for k in range(150)]
     d = decompose(read_bag(every4 / 'bag'), (11,))[11]
     assert d.valid.all() and d.residual_rel.max() <= 1e-9
+
+
+def _short_session(tmp_path: pathlib.Path, periods: int = 120) -> Session:
+    scene = replace(load_scene('stand'), duration=periods * 1e-3)
+    session = Session(scene, tmp_path, tmp_path / 'bag')
+    stack = ControlStack(scene, session.robot, session.observation())
+    while not session.done:
+        session.run_periods(stack, 50)
+    return session
+
+
+def test_the_bag_is_closed_whatever_the_written_hook_does(tmp_path):
+    """``finish`` calls ``written`` (the runner draws the summary there) before it waits for
+    the bag writer; an exception there still leaves a closed bag with every period."""
+    session = _short_session(tmp_path)
+
+    def written() -> None:
+        assert (tmp_path / 'metrics.json').is_file() and (tmp_path / 'trajectory.npz').is_file()
+        raise RuntimeError('drawing failed')
+    with pytest.raises(RuntimeError, match='drawing failed'):
+        session.finish(written=written)
+    clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
+    assert clock == [k * 1_000_000 for k in range(120)]
+
+
+def test_a_bag_that_fails_to_close_is_the_runs_failure(tmp_path, monkeypatch):
+    """Closing the bag fails after the outputs were written: the metrics are written again
+    saying so, and ``written`` runs again (the summary shows it)."""
+    session = _short_session(tmp_path)
+
+    real_close = BagRecorder.close
+
+    def close(recorder: BagRecorder) -> None:
+        real_close(recorder)  # the writer process ends as it would
+        raise SimulationError('bag writer for bag failed: OSError: disk full')
+    monkeypatch.setattr(BagRecorder, 'close', close)
+    calls = []
+    metrics = session.finish(written=lambda: calls.append(
+        json.loads((tmp_path / 'metrics.json').read_text())['failure']))
+    assert calls == [None, 'bag writer for bag failed: OSError: disk full']
+    assert metrics['failure'] == calls[-1]
+    assert json.loads((tmp_path / 'metrics.json').read_text())['failure'] == calls[-1]
