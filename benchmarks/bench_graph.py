@@ -48,29 +48,17 @@ DEFAULT_SCENES = ['skate', str(REPO_ROOT / 'tests' / 'integration' / 'data' / 't
 
 
 def controller_compute_ms(scene) -> dict[str, float]:
-    """Median time [ms] of each controller node's law evaluation at the initial state."""
-    from gait_manager.law import GaitManagerParameters, gait_manager_commands, head_offset
-    from iceskate_sim.dynamics import GaitDynamics
+    """Median time [ms] of each controller node's law (the native one the nodes call, with the
+    command built as they send it) at the scene's initial observation."""
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_sim.native_control import native_command
     from iceskate_sim.robot import load_robot
     from iceskate_sim.simulation import Simulator
-    from visual_lifting.law import VisualLiftingParameters, visual_lifting
     robot = load_robot()
     obs = Simulator(robot, scene.simulator, scene.initial).observation()
-    dynamics = GaitDynamics(robot)
-    gm = (GaitManagerParameters.from_dict(scene.gait_manager or {})
-          if scene.gait_manager is not None else None)
-    out = {}
-    if scene.visual_lifting is not None:
-        vl = VisualLiftingParameters.from_dict(scene.visual_lifting or {})
-        psi0 = dynamics.head_pose(obs.contact(), obs.q)[0]
-
-        def vl_call():
-            visual_lifting(obs, dynamics, vl, psi0, head_offset(obs, dynamics, gm) if gm else
-                           (0.0, 0.0))
-        out['visual_lifting'] = _median_ms(vl_call)
-    if gm is not None:
-        out['gait_manager'] = _median_ms(lambda: gait_manager_commands(obs, dynamics, gm))
-    return out
+    stack = ControlStack(scene, robot, obs)
+    return {node: _median_ms(lambda c=controller: native_command(c, obs, stack.kinematics))
+            for node, controller in stack.controllers.items()}
 
 
 def _median_ms(func) -> float:
