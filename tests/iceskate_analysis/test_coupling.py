@@ -12,6 +12,7 @@ from iceskate_analysis.coupling import (
     arm_swing,
     decompose,
     dynamics_for_bag,
+    interval_accelerations,
     parse_joint,
 )
 from iceskate_sim.dynamics import ContactState
@@ -182,3 +183,57 @@ def test_parse_joint_accepts_indices_and_names(value, expected):
 def test_parse_joint_refuses_unknown_joints(value):
     with pytest.raises(SimulationError, match='unknown joint'):
         parse_joint(value)
+
+
+def test_interval_accelerations_are_the_velocity_steps_within_a_mode(sim):
+    a, defined = interval_accelerations(sim)
+    same = ((np.diff(sim.mode) == 0) & (np.diff(sim.side) == 0) & (np.diff(sim.pivot) == 0)
+            & (np.diff(sim.step_index) == 0))
+    assert np.array_equal(defined[:-1], same) and not defined[-1]
+    assert defined.sum() > 10 and not defined.all()  # the run changes mode
+    expected = (sim.v[1:] - sim.v[:-1]) / np.diff(sim.t)[:, None]
+    assert np.array_equal(a[:-1][same], expected[same])
+    assert np.all(np.isnan(a[~defined]))
+
+
+def test_the_averaged_view_with_the_recorded_accelerations_is_the_exact_row(sim):
+    """``period_averaged`` only swaps the accelerations: given the recorded ones it gives the
+    exact decomposition back (where defined), the rest of the row untouched."""
+    d = decompose(sim, (11,))[11]
+    a, defined = interval_accelerations(sim)
+    same = d.period_averaged(sim.qdd, defined)
+    assert np.array_equal(same.valid, d.valid & defined)
+    keep = same.valid
+    assert np.allclose(same.own_inertia[keep], d.own_inertia[keep], rtol=0, atol=1e-12)
+    assert np.allclose(same.m_total[keep], d.m_total[keep], rtol=1e-12, atol=1e-12)
+    assert np.array_equal(same.gravity, d.gravity) and np.array_equal(same.tau, d.tau)
+    averaged = d.period_averaged(a, defined)
+    row = d.mass_row[keep]
+    assert np.allclose(averaged.own_inertia[keep], row[:, 11] * a[keep, 11], rtol=1e-15)
+
+
+def test_interval_accelerations_are_the_integrators_velocity_steps(tmp_path):
+    """Semi-implicit Euler with one step per control period advances v by h times the
+    recorded q̈ (the dynamics at t_k under the held command): over every interval without an
+    event the interval average is the recorded q̈ (up to the end-of-period projection)."""
+    import json
+
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene, parse_scene
+    h = 1e-4
+    raw = {**load_scene('stand').raw, 'duration': 0.2, 'control_period': h,
+           'integrator': {'method': 'symplectic_euler', 'step': h}}
+    run(parse_scene(raw), tmp_path, progress=False)
+    bag = read_bag(tmp_path / 'bag')
+    events = np.array([e['t'] for e in json.loads((tmp_path / 'events.json').read_text())])
+    a, defined = interval_accelerations(bag)
+    t = bag.t
+    quiet = defined.copy()
+    quiet[:-1] &= ~np.array([np.any((events > t[k]) & (events <= t[k + 1]))
+                             for k in range(len(t) - 1)])
+    rows = np.flatnonzero(quiet)
+    assert rows.size > 1000 and len(events) > 0  # eventful, and mostly quiet
+    for k in rows:
+        active = bag.active[k]
+        error = np.abs(a[k, active] - bag.qdd[k, active])
+        assert np.all(error <= 1e-7 * np.max(np.abs(bag.qdd[k, active])) + 1e-7), (k, error.max())

@@ -119,9 +119,15 @@ def plot_compare_shoulders(cases: list[CaseResult], path: str | pathlib.Path,
 
 
 def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
-               joint: int | None = None) -> pathlib.Path:
-    """Figs. 7/8: the terms of eq. (11) at the joint against time, and the closure."""
-    d: JointDecomposition = case.decompositions[case.joint if joint is None else joint]
+               joint: int | None = None, averaged: bool = False) -> pathlib.Path:
+    """Figs. 7/8: the terms of eq. (11) at the joint against time, and the closure (always the
+    exact one of the recorded accelerations).
+
+    :param averaged: the inertia terms with the accelerations averaged over each sampling
+        interval (``CaseResult.averaged``) instead of the instantaneous ones.
+    """
+    exact: JointDecomposition = case.decompositions[case.joint if joint is None else joint]
+    d = case.averaged(exact) if averaged else exact
     i = _index(d.name)
     t = d.t
     fig, axes = _figure(3, height=2.7)
@@ -139,7 +145,8 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     if np.any(np.nan_to_num(d.constraint) != 0.0):
         ax.plot(t, d.constraint, color='tab:olive', lw=1.0, label='swing constraint')
     ax.set_ylabel('torque [N m]')
-    ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}')
+    ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}'
+                 + (' (q̈ averaged over each sampling interval)' if averaged else ''))
     clip_to_bulk(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia],
                  note='; full values in the CSV')
     _mark_steps(ax, case)
@@ -157,8 +164,9 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     ax.legend(loc='upper right', fontsize=7, ncol=3)
 
     ax = axes[2]
-    rel = np.where(d.valid, np.maximum(d.residual_rel, 1e-18), np.nan)
-    ax.semilogy(t, rel, color='0.3', lw=1.0, label='|closure residual| / Σ|terms|')
+    rel = np.where(exact.valid, np.maximum(exact.residual_rel, 1e-18), np.nan)
+    ax.semilogy(t, rel, color='0.3', lw=1.0,
+                label='|closure residual| / Σ|terms| (recorded q̈)')
     ax.axhline(1e-9, color='tab:red', lw=0.8, ls='--', label='1e-9')
     ax.set_ylabel('relative residual')
     ax.set_xlabel('time [s]')

@@ -98,6 +98,8 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
         written = [
             plots.plot_shoulders(case, out / f'{case.label}_shoulders.png'),
             plots.plot_terms(case, out / f'{case.label}_terms_{name}.png'),
+            plots.plot_terms(case, out / f'{case.label}_terms_{name}_averaged.png',
+                             averaged=True),
             plots.plot_coupling(case, out / f'{case.label}_coupling_{name}.png'),
             write_csv(out / f'{case.label}_series.csv', case_columns(case)),
         ]
@@ -124,6 +126,12 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
                              f'({without.label})'),
             plots.plot_terms(with_yaw, out / f'fig8_terms_{name}.png',
                              f'Fig. 8: terms of eq. (11) at {name} with τ8 ({with_yaw.label})'),
+            plots.plot_terms(without, out / f'fig7_terms_{name}_averaged.png',
+                             f'Fig. 7, q̈ averaged over each interval ({without.label})',
+                             averaged=True),
+            plots.plot_terms(with_yaw, out / f'fig8_terms_{name}_averaged.png',
+                             f'Fig. 8, q̈ averaged over each interval ({with_yaw.label})',
+                             averaged=True),
             plots.plot_compare_shoulders([without, with_yaw], out / 'compare_shoulders.png'),
         ]
         files['comparison'] = [p.name for p in paper]
@@ -135,6 +143,16 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
             'rms_coriolis_ratio_with_over_without': _ratio(
                 summaries[with_yaw.label]['rms']['coriolis'],
                 summaries[without.label]['rms']['coriolis']),
+            # the paper's reading of Figs. 7/8 at both shoulders: M_total ~ g_i in both runs,
+            # h_i changed by τ8
+            'paper_reading': {
+                d.name: {
+                    'without_yaw': without.paper_reading(d),
+                    'with_yaw': with_yaw.paper_reading(with_yaw.decompositions[d.joint]),
+                    'rms_h_with_over_without': _ratio(
+                        with_yaw.paper_reading(with_yaw.decompositions[d.joint])['rms_h'],
+                        without.paper_reading(d)['rms_h'])}
+                for d in without.decompositions.values()},
         }
     summary['files'] = files
     summary = jsonable(summary)
