@@ -31,7 +31,8 @@ MS = 1_000_000
 
 def test_killed_controller_ends_the_run_naming_it_and_the_bag_reads(
         listener, ros_domain_id, tmp_path, graph_factory):
-    graph = graph_factory(tmp_path / 'out', duration=2.0, control_timeout=1.0).start()
+    # long enough to be running when the listener has found the graph (it is ended earlier)
+    graph = graph_factory(tmp_path / 'out', duration=30.0, control_timeout=1.0).start()
     listener.subscribe('/clock', Clock)
     clocks = listener.messages['/clock']
     try:

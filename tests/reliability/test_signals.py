@@ -52,7 +52,8 @@ def _check_interrupted(run, code: int, stderr: str, name: str) -> None:
 
 @pytest.mark.parametrize('name, group', CASES)
 def test_headless_run_ends_cleanly_on_a_signal(launch, proc, name, group):
-    run = launch(str(proc.TINY), '--duration', '30')  # still running when the signal comes
+    # still running when the signal comes (the native engine runs tens of times real time)
+    run = launch(str(proc.TINY), '--duration', '3600')
     run.wait_running()
     time.sleep(_delay('headless', name, group))
     run.signal(SIGNALS[name], group)
@@ -65,7 +66,7 @@ def test_timeout_ends_a_headless_run_cleanly(launch, proc):
     """``timeout`` sends SIGTERM to the whole group (the bag writer too)."""
     if shutil.which('timeout') is None:
         pytest.skip('no timeout command')
-    run = launch(str(proc.TINY), '--duration', '60', prefix=('timeout', '5'))
+    run = launch(str(proc.TINY), '--duration', '3600', prefix=('timeout', '5'))
     proc.wait_until(lambda: run.watch() or run.process.poll() is not None, 60.0, 'the end')
     code, _stdout, stderr = run.communicate()
     assert code == 124, stderr  # timeout's own code once it had to stop the command
