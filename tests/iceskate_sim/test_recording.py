@@ -287,3 +287,37 @@ def test_a_bag_that_fails_to_close_is_the_runs_failure(tmp_path, monkeypatch):
     assert calls == [None, 'bag writer for bag failed: OSError: disk full']
     assert metrics['failure'] == calls[-1]
     assert json.loads((tmp_path / 'metrics.json').read_text())['failure'] == calls[-1]
+
+
+def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, samples):
+    """Past its memory budget a Trajectory moves its samples to files (a long run's memory stays
+    flat): the columns, a source that starts late included, equal the in-memory ones, on
+    both ways of growing it, and the files go with the Trajectory."""
+    from iceskate_sim.metrics import Trajectory
+    kept, spilled = Trajectory(), Trajectory(tmp_path, spill_bytes=20_000)
+    psi_d = np.array([0.0, 1.2, 0.0])
+    for k, sample in enumerate(samples):
+        if k == 150:  # a source that acts once, after samples were spilled
+            sample = replace(sample, efforts={**sample.efforts, 'late': np.full(18, 0.5)})
+        for trajectory in (kept, spilled):
+            trajectory.append(sample, psi_d)
+        if k % 100 == 99:  # blocks too
+            columns = {key: value[-5:] for key, value in kept.arrays().items()
+                       if not key.startswith('tau_')}
+            efforts = {key[4:]: value[-5:] for key, value in kept.arrays().items()
+                       if key.startswith('tau_')}
+            for trajectory in (kept, spilled):
+                trajectory.extend(columns, efforts)
+    assert spilled._spilled > 0 and spilled._held <= 20_000
+    a, b = kept.arrays(), spilled.arrays()
+    assert a.keys() == b.keys() and len(kept) == len(spilled) == len(samples) + 10
+    for key in a:
+        assert np.array_equal(a[key], b[key], equal_nan=True), key
+    acted = np.flatnonzero(a['tau_late'].any(axis=1))  # at sample 150 only: 0 elsewhere
+    assert acted.tolist() == [155] and np.all(a['tau_late'][155] == 0.5)
+    folder = spilled._spill_dir
+    assert folder.parent == tmp_path and any(folder.iterdir())
+    del spilled, trajectory, b
+    import gc
+    gc.collect()
+    assert not folder.exists()

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import pathlib
+import shutil
+import tempfile
 from typing import Any
+import weakref
 
 import numpy as np
 
@@ -27,15 +30,35 @@ METRIC_NAMES = (
     'yaw_range_rad')
 
 
+#: In-memory size [bytes] above which a Trajectory with a spill directory moves its samples
+#: to files there (a long run's memory stays flat).
+SPILL_BYTES = 64 * 2**20
+_SPILL_CHUNK = 65536  # rows written at a time when a column is filled with zeros
+
+
 class Trajectory:
     """Columns of per-control-instant samples, grown one sample at a time (``append``) or by
-    whole blocks of samples (``extend``)."""
+    whole blocks of samples (``extend``).
 
-    def __init__(self) -> None:
+    :param spill: where to move the samples once more than ``spill_bytes`` are held: a
+        private temporary directory made in this one on the first move, one raw file per
+        column appended to (``arrays`` then maps them), removed with the Trajectory or at exit;
+        None: all in memory.
+    :param spill_bytes: see ``spill``.
+    """
+
+    def __init__(self, spill: pathlib.Path | None = None,
+                 spill_bytes: int = SPILL_BYTES) -> None:
         self._blocks: dict[str, list[np.ndarray]] = {}  # arrays of whole blocks, in order
         self._rows: dict[str, list[Any]] = {}  # single samples since the last block
         self._count = 0
         self.sources: list[str] = []
+        self._spill_parent = spill
+        self._spill_dir: pathlib.Path | None = None  # made on the first move
+        self._spill_bytes = spill_bytes
+        self._held = 0  # bytes of the blocks in memory (single rows not counted)
+        self._spilled = 0  # samples moved to the files
+        self._layout: dict[str, tuple[np.dtype, tuple[int, ...]]] = {}  # of the spilled columns
 
     def append(self, sample: Sample, psi_d: np.ndarray) -> None:
         """Add one sample and the visual-lifting target psi_d at it."""
@@ -56,6 +79,10 @@ class Trajectory:
         for key, value in row.items():
             self._rows.setdefault(key, []).append(value)
         self._count += 1
+        if self._spill_parent is not None and len(self._rows['t']) >= 1000:
+            for key in list(self._rows):
+                self._close_rows(key)
+            self._maybe_spill()
 
     def extend(self, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray]) -> None:
         """Add a block of samples: ``columns`` holds every column of ``append``'s rows but the
@@ -68,30 +95,71 @@ class Trajectory:
         for key, values in columns.items():
             self._close_rows(key)
             self._blocks.setdefault(key, []).append(np.asarray(values))
+            self._held += self._blocks[key][-1].nbytes
         self._count += n
+        self._maybe_spill()
 
     def _add_sources(self, efforts: dict[str, np.ndarray]) -> None:
         """New source columns, 0 for the samples before."""
         for source in efforts:
             if source not in self.sources:
                 self.sources.append(source)
-                self._blocks[f'tau_{source}'] = [np.zeros((self._count, 18))]
+                key = f'tau_{source}'
+                if self._spilled:  # the spilled samples' zeros go straight to its file
+                    self._write(key, np.zeros((self._spilled, 18)))
+                self._blocks[key] = [np.zeros((self._count - self._spilled, 18))]
 
     def _close_rows(self, key: str) -> None:
         """Turn the single samples of column ``key`` into a block."""
         rows = self._rows.pop(key, None)
         if rows:
             self._blocks.setdefault(key, []).append(np.array(rows))
+            self._held += self._blocks[key][-1].nbytes
+
+    def _maybe_spill(self) -> None:
+        """Move the blocks in memory to the spill files once they pass ``spill_bytes``."""
+        if self._spill_parent is not None and self._held > self._spill_bytes:
+            self._spill()
+
+    def _spill(self) -> None:
+        """Append every column's blocks to its file (all rows are in blocks)."""
+        if self._spill_dir is None:
+            self._spill_parent.mkdir(parents=True, exist_ok=True)
+            self._spill_dir = pathlib.Path(tempfile.mkdtemp(prefix='.trajectory-',
+                                                            dir=self._spill_parent))
+            weakref.finalize(self, shutil.rmtree, self._spill_dir, True)
+        for key, blocks in self._blocks.items():
+            for block in blocks:
+                self._write(key, block)
+        self._blocks = {key: [] for key in self._blocks}
+        self._spilled = self._count
+        self._held = 0
+
+    def _write(self, key: str, block: np.ndarray) -> None:
+        """Append a block of column ``key`` to its spill file (zeros in chunks)."""
+        block = np.asarray(block)
+        layout = self._layout.setdefault(key, (block.dtype, block.shape[1:]))
+        if (block.dtype, block.shape[1:]) != layout:
+            block = block.astype(layout[0])
+        with (self._spill_dir / f'{key}.bin').open('ab') as stream:
+            for start in range(0, len(block), _SPILL_CHUNK):
+                stream.write(np.ascontiguousarray(block[start:start + _SPILL_CHUNK]).tobytes())
 
     def __len__(self) -> int:
         """Number of samples."""
         return self._count
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Every column as a numpy array (first axis: sample)."""
+        """Every column as a numpy array (first axis: sample); read-only maps of the spill
+        files once samples were spilled."""
         for key in list(self._rows):
             self._close_rows(key)
-        return {key: np.concatenate(blocks) for key, blocks in self._blocks.items()}
+        if not self._spilled:
+            return {key: np.concatenate(blocks) for key, blocks in self._blocks.items()}
+        self._spill()
+        return {key: np.memmap(self._spill_dir / f'{key}.bin', dtype=dtype, mode='r',
+                               shape=(self._count, *shape))
+                for key, (dtype, shape) in self._layout.items()}
 
     def save(self, path: pathlib.Path) -> None:
         """Write the columns to an uncompressed ``.npz`` file (zlib would halve it, 23.6 ->
@@ -172,11 +240,13 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     outside = flat & ~((cop >= y0 + SOLE_HEEL_Y) & (cop <= y0 + SOLE_TOE_Y))
     metrics['zmp_outside_support_fraction'] = float(np.mean(outside))
     metrics['edge_mode_fraction'] = float(np.mean(~flat))
-    steps = a['step_index']
-    metrics['support_positions_m'] = [float(y0[np.argmax(steps == k)])
-                                      for k in range(int(steps.max()) + 1)]
-    metrics['mode_sequence_per_step'] = {str(k): _runs(modes[steps == k])
-                                         for k in range(int(steps.max()) + 1)}
+    steps = np.asarray(a['step_index'])
+    # each step's samples (step_index never decreases in a run): [start, end) per step
+    bounds = np.searchsorted(steps, np.arange(int(steps.max()) + 2))
+    metrics['support_positions_m'] = [float(y0[start] if end > start else y0[0])
+                                      for start, end in zip(bounds[:-1], bounds[1:], strict=True)]
+    metrics['mode_sequence_per_step'] = {str(k): _runs(modes[start:end]) for k, (start, end)
+                                         in enumerate(zip(bounds[:-1], bounds[1:], strict=True))}
     late = steps >= ARM_SWING_FROM_STEP
     metrics['arm_swing'] = _arm_swing(a['q'], late)
     # the second half (in time) of that window: the swing once the transients have decayed

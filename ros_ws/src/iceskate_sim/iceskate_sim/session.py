@@ -137,7 +137,9 @@ class Session:
         obs = self.sim.observation()
         #: head pose at t = 0 (y, z, pitch): the target recorded where no controller sets one
         self.psi_initial = self.sim.dynamics.head_pose(obs.contact(), obs.q)[0]
-        self.trajectory = Trajectory()
+        # a long run's samples go to files beside its outputs (or in the temporary directory)
+        self.trajectory = Trajectory(self.out if self.out is not None
+                                     else pathlib.Path(tempfile.gettempdir()))
         self.periods = 0
         self.error: SimulationError | None = None
         self._unrecorded: list[tuple[Sample, np.ndarray]] = []  # (sample, head target)
