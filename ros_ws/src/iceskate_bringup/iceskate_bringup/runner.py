@@ -44,8 +44,9 @@ if TYPE_CHECKING:
     from iceskate_sim.scene import Scene
 
 #: Control periods run per call of ``Session.run_periods`` (one native call on the native
-#: engine): a signal is answered, and the progress shown, between two such blocks.
-BLOCK_PERIODS = 250
+#: engine, ~30 ms): a signal is answered, and the progress shown, between two such blocks;
+#: the bag writer encodes a block at once (longer blocks: fewer, larger array operations).
+BLOCK_PERIODS = 1000
 
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
