@@ -2,18 +2,15 @@
 """What skipping saves: the same scene with the skipping on and off.
 
 On the ``stand`` scene (visual lifting plus 2 of the 6 gait-manager sources, a chest push at
-2 s), headless, shipped integrator:
+2 s), headless, shipped integrator, native engine (the laws compute only the enabled sources):
 
-* **sources**: the scene's disabled gait-manager sources are not computed (shipped
-  ``ControlStack``) against all six computed every control period and zero-weighted (the
-  disabled ones' torques multiplied by 0 before the sum); results must be identical
-  (``np.array_equal`` on q and v at every control instant);
 * **recording**: ``run_scene`` with the bag and ``trajectory.npz`` written against the bag off
   against no output at all (trajectories of the first two compared bit for bit);
 * **projection**: the end-of-period projection onto the swing constraints on against off (this
   one changes the results: the drift it removes is reported, not an equality);
 * **per source**: the cost of one evaluation of each control source at the scene's initial
-  observation (what a scene that disables it saves per control period).
+  observation, the native law as the nodes and the runner call it (what a scene that disables
+  it saves per control period).
 
 Wall times are the median of ``--repeat`` runs, on and off interleaved. Then one run of the
 scene is profiled with pyinstrument: the top functions by own time and by total time are
@@ -41,63 +38,13 @@ from bench_work_precision import REPO_ROOT, machine_info, simulate
 import numpy as np
 
 from iceskate_bringup.composition import ControlStack
-from iceskate_bringup.scene import load_scene
-from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.robot import load_robot
 from iceskate_sim.scene import Scene
 
 
-class EagerStack(ControlStack):
-    """The shipped stack, but every gait-manager source is computed at every control instant;
-    the ones the scene disables are weighted by zero."""
-
-    def __init__(self, scene: Scene, robot: Any, initial: Any) -> None:
-        super().__init__(scene, robot, initial)
-        from gait_manager.law import SOURCES
-        self.disabled = (replace(self.gait_manager,
-                                 enabled=frozenset(SOURCES) - self.gait_manager.enabled)
-                         if self.gait_manager is not None else None)
-
-    def commands(self, obs: Any) -> dict[str, ControllerCommand]:
-        """The scene's commands, with every disabled source computed and added zero-weighted
-        into the gait manager's sum."""
-        from gait_manager.law import gait_manager_commands
-        commands = super().commands(obs)
-        if self.disabled is not None and self.disabled.enabled and 'gait_manager' in commands:
-            gm = commands['gait_manager']
-            zeros = [JointCommand(0.0 * c.effort) for c in
-                     gait_manager_commands(obs, self.dynamics, self.disabled).values()]
-            commands['gait_manager'] = replace(gm, command=JointCommand.total([gm.command,
-                                                                               *zeros]))
-        return commands
-
-
 def _median(values: list[float]) -> float:
     return statistics.median(values) if values else float('nan')
-
-
-def compare_sources(scene: Scene, duration: float, repeat: int, robot: Any, log) -> dict:
-    """Lazy (shipped) against eager zero-weighted sources."""
-    walls: dict[str, list[float]] = {'lazy': [], 'eager': []}
-    runs = {}
-    for _ in range(repeat):
-        for name, cls in (('lazy', ControlStack), ('eager', EagerStack)):
-            run = simulate(scene, duration, robot=robot, stack_class=cls)
-            walls[name].append(run.wall)
-            runs[name] = run
-    lazy, eager = runs['lazy'], runs['eager']
-    identical = (np.array_equal(lazy.q, eager.q) and np.array_equal(lazy.v, eager.v)
-                 and np.array_equal(lazy.t, eager.t))
-    out = {'duration_s': duration, 'repeat': repeat, 'wall_s_lazy': walls['lazy'],
-           'wall_s_eager': walls['eager'], 'median_lazy_s': _median(walls['lazy']),
-           'median_eager_s': _median(walls['eager']), 'identical_q_v': bool(identical),
-           'status': [lazy.status, eager.status],
-           'disabled_sources': sorted(EagerStack(scene, robot, _obs(scene, robot))
-                                      .disabled.enabled)}
-    out['saving'] = 1.0 - out['median_lazy_s'] / out['median_eager_s']
-    log(f'[sources] lazy {out["median_lazy_s"]:.2f} s, eager {out["median_eager_s"]:.2f} s '
-        f'({100 * out["saving"]:.1f} % saved), identical q and v: {identical}')
-    return out
 
 
 def _obs(scene: Scene, robot: Any):
@@ -165,22 +112,26 @@ def compare_projection(scene: Scene, duration: float, repeat: int, robot: Any, l
 
 
 def per_source_cost(scene: Scene, robot: Any, number: int, log) -> dict[str, float]:
-    """Microseconds per evaluation of each control source at the initial observation."""
-    from gait_manager.law import SOURCES, gait_manager_commands
-    from visual_lifting.law import visual_lifting
-    stack = ControlStack(scene, robot, _obs(scene, robot))
+    """Microseconds per evaluation of each control source at the initial observation: the
+    native law with that source alone, its command built as the nodes send it."""
+    from gait_manager.law import SOURCES
+    from gait_manager.native import GaitManagerController
+    from iceskate_bringup.scene import node_parameters
+    from iceskate_sim.native_control import native_command
     obs = _obs(scene, robot)
+    stack = ControlStack(scene, robot, obs)
     costs: dict[str, float] = {}
-    if stack.visual_lifting is not None:
-        def vl() -> None:
-            visual_lifting(obs, stack.dynamics, stack.visual_lifting, stack.psi_initial)
-        costs['visual_lifting'] = _time_us(vl, number)
-    if stack.gait_manager is not None:
+    if 'visual_lifting' in stack.controllers:
+        lifting = stack.controllers['visual_lifting']
+        costs['visual_lifting'] = _time_us(
+            lambda: native_command(lifting, obs, stack.kinematics), number)
+    gm = node_parameters(scene).get('gait_manager')
+    if gm is not None:
         for source in SOURCES:
-            params = replace(stack.gait_manager, enabled=frozenset({source}))
+            alone = GaitManagerController(replace(gm, enabled=frozenset({source})))
             costs[source] = _time_us(
-                lambda p=params: gait_manager_commands(obs, stack.dynamics, p), number)
-    enabled = set(scene.sources)
+                lambda c=alone: native_command(c, obs, stack.kinematics), number)
+    enabled = {s for sources in scene_sources(scene).values() for s in sources}
     log('[per source] us per evaluation: ' + ', '.join(
         f'{k} {v:.1f}{"" if k in enabled else " (disabled)"}' for k, v in costs.items()))
     return costs
@@ -236,16 +187,13 @@ def profile(scene: Scene, duration: float, out_dir: pathlib.Path, top: int, log)
 
 def markdown(figures: dict[str, Any]) -> str:
     """The figures as markdown tables."""
-    s, r, p = figures['sources'], figures['recording'], figures['projection']
+    r, p = figures['recording'], figures['projection']
     m = figures['machine']
     lines = ['# Laziness benchmark (stand scene)', '',
              f'Machine: {m["cpu"]}, {m["cpus"]} CPUs; {m["date"]}; load average at start '
-             f'{m["loadavg_start"]}. Median of {s["repeat"]} runs.', '',
+             f'{m["loadavg_start"]}. Median of {r["repeat"]} runs.', '',
              '| skipping | on (s) | off (s) | saved | identical results |',
              '|---|---:|---:|---:|---|',
-             f'| disabled sources not computed ({", ".join(s["disabled_sources"])}), '
-             f'{s["duration_s"]:g} s | {s["median_lazy_s"]:.2f} | {s["median_eager_s"]:.2f} | '
-             f'{100 * s["saving"]:.1f} % | {s["identical_q_v"]} (q, v) |',
              f'| no bag (files only vs bag + files), {r["duration_s"]:g} s | '
              f'{r["median_total_s"]["files"]:.2f} | {r["median_total_s"]["bag"]:.2f} | '
              f'{100 * (1 - r["median_total_s"]["files"] / r["median_total_s"]["bag"]):.1f} % | '
@@ -291,9 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     robot = load_robot()
     scene = load_scene('stand')
     figures: dict[str, Any] = {'machine': machine_info(), 'scene': scene.name,
-                               'enabled_sources': list(scene.sources)}
+                               'enabled_sources': scene_sources(scene)}
     figures['per_source_us'] = per_source_cost(scene, robot, 200, log)
-    figures['sources'] = compare_sources(scene, duration, repeat, robot, log)
     figures['recording'] = compare_recording(scene, duration, repeat, log)
     figures['projection'] = compare_projection(scene, duration, repeat, robot, log)
     if not args.no_profile:
@@ -303,8 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     table = markdown(figures)
     (args.out / 'laziness.md').write_text(table)
     print(table)
-    ok = figures['sources']['identical_q_v'] and figures['recording'][
-        'identical_q_v_bag_vs_files']
+    ok = figures['recording']['identical_q_v_bag_vs_files']
     log(f'outputs in {args.out} (laziness.md, laziness.json, profile_stand.html); identical '
         f'results where expected: {ok}')
     return 0 if ok else 1

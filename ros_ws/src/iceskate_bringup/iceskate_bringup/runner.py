@@ -78,10 +78,16 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     with contextlib.ExitStack() as signals:
         if stop is None:
             stop = signals.enter_context(StopRequest())
-        if out is not None:  # the summary's plotting library loads while the run goes on
-            threading.Thread(target=_import_plotting, name='import-plotting', daemon=True).start()
         bag = out / 'bag' if out is not None and scene.record_bag else None
-        session = Session(scene, out, bag)
+        session = Session(scene, out, bag)  # forks the bag writer
+        # The summary's plotting library loads while the run goes on: after the fork (a child
+        # forked while a thread imports waits forever for that import's lock) and joined before
+        # this returns (no other fork of this process meets it).
+        plotting = (threading.Thread(target=_import_plotting, name='import-plotting')
+                    if out is not None else None)
+        if plotting is not None:
+            plotting.start()
+            signals.callback(plotting.join)
         stack = ControlStack(scene, session.robot, session.observation())
         bar = _progress(session.n_periods, scene.name, progress)
         ended: SimulationError | None = None
