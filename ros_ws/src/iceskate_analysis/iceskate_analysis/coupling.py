@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, field, replace
+import functools
 import hashlib
 import pathlib
 import tempfile
@@ -479,9 +480,14 @@ class CaseResult:
         """Start of the paper's 4th step [s] (first sample with step_index >= 3)."""
         return self.bag.step_start_time(WINDOW_STEP)
 
+    @functools.cached_property
+    def interval(self) -> tuple[np.ndarray, np.ndarray]:
+        """``interval_accelerations`` of the bag."""
+        return interval_accelerations(self.bag)
+
     def averaged(self, d: JointDecomposition) -> JointDecomposition:
         """``d`` with the accelerations averaged over each sampling interval."""
-        return d.period_averaged(*interval_accelerations(self.bag))
+        return d.period_averaged(*self.interval)
 
     def paper_reading(self, d: JointDecomposition) -> dict[str, float]:
         """The figures the paper's reading of Figs. 7/8 rests on, over the window, with the

@@ -114,6 +114,9 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
     summary: dict[str, Any] = {'joint': name, 'cases': summaries}
     if len(cases) == 2:
         without, with_yaw, decided = _order_pair(cases)
+
+        def reading(case: CaseResult, joint: str) -> dict[str, float]:
+            return summaries[case.label]['joints'][joint]['paper_reading']
         paper = [
             plots.plot_shoulders(without, out / 'fig5_shoulders.png',
                                  f'Fig. 5: shoulder angles without torso-yaw input τ8 '
@@ -146,13 +149,11 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
             # the paper's reading of Figs. 7/8 at both shoulders: M_total ~ g_i in both runs,
             # h_i changed by τ8
             'paper_reading': {
-                d.name: {
-                    'without_yaw': without.paper_reading(d),
-                    'with_yaw': with_yaw.paper_reading(with_yaw.decompositions[d.joint]),
-                    'rms_h_with_over_without': _ratio(
-                        with_yaw.paper_reading(with_yaw.decompositions[d.joint])['rms_h'],
-                        without.paper_reading(d)['rms_h'])}
-                for d in without.decompositions.values()},
+                joint: {
+                    'without_yaw': reading(without, joint), 'with_yaw': reading(with_yaw, joint),
+                    'rms_h_with_over_without': _ratio(reading(with_yaw, joint)['rms_h'],
+                                                      reading(without, joint)['rms_h'])}
+                for joint in summaries[without.label]['joints']},
         }
     summary['files'] = files
     summary = jsonable(summary)

@@ -747,11 +747,12 @@ class RecordEncoder:
             layouts = self._keyed(first, record_flag, numbers.shape[1])
             for topic in topics:
                 if topic != '/tf':
-                    self._rows(out[topic], layouts, topic, block, rows, numbers, record_flag)
+                    self._rows(out[topic], layouts, topic, block, rows, numbers, first,
+                               record_flag)
         if '/tf' in topics and n:
-            tf = self.factory.tf_block_numbers(block)
-            self._rows(out['/tf'], self._keyless, '/tf', block, np.arange(n), tf,
-                       record_flags(block.record(0)))
+            first = block.record(0)
+            self._rows(out['/tf'], self._keyless, '/tf', block, np.arange(n),
+                       self.factory.tf_block_numbers(block), first, record_flags(first))
         return out
 
     def _keyed(self, record: BagRecord, flags: RecordFlags, size: int
@@ -766,11 +767,10 @@ class RecordEncoder:
         return layouts
 
     def _rows(self, out: list[bytes], layouts: dict[str, _Layout | None], topic: str,
-              block: RecordBlock, rows: np.ndarray, numbers: np.ndarray,
+              block: RecordBlock, rows: np.ndarray, numbers: np.ndarray, first: BagRecord,
               flags: RecordFlags) -> None:
-        """Write the bytes of ``topic``'s message of the block's ``rows`` (one key; their
-        numbers) into ``out``."""
-        first = block.record(int(rows[0]))
+        """Write the bytes of ``topic``'s message of the block's ``rows`` (one key, ``first``
+        the first of them; their numbers) into ``out``."""
         if topic not in layouts:
             layouts[topic] = self._learn(topic, first, numbers[0], flags)
         layout = layouts[topic]
