@@ -11,12 +11,12 @@ from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
 from gait_manager.native import GaitManagerController  # noqa: E402
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
 from iceskate_sim.command import ControllerCommand, JointCommand  # noqa: E402
+from iceskate_sim.effort_cdr import CommandDecoder  # noqa: E402
 from iceskate_sim.lockstep import LockstepSession  # noqa: E402
 from iceskate_sim.native_control import native_command, native_kinematics  # noqa: E402
 from iceskate_sim.node_support import write_parameter_file  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.robot import load_robot  # noqa: E402
-from iceskate_sim.ros_conversions import command_from_message, stamp_to_ns  # noqa: E402
 from iceskate_sim.session import Session  # noqa: E402
 
 
@@ -33,8 +33,8 @@ def gait_manager(ros_context, tmp_path):
     node = GaitManagerNode(context=ros_context, cli_args=['--ros-args', '--params-file',
                                                           str(params)])
     sent = []
-    node._publisher.publish = lambda msg: sent.append(
-        (stamp_to_ns(msg.header.stamp), command_from_message(msg)))
+    decoder = CommandDecoder()
+    node._publisher.publish = lambda data: sent.append(decoder.decode(data)[1:])
     try:
         yield node, sent
     finally:

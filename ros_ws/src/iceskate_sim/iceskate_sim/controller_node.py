@@ -9,7 +9,8 @@ rebuilds the ``Observation``, asks the subclass's law (``compute``: a native law
 robot through ``kinematics``) for its command and
 publishes it, with the per-source breakdown, as one ``EffortCommand`` (source: the node's name)
 on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
-instant and node. The message object is made once and refilled. ``use_sim_time`` is true unless
+instant and node, published raw (``effort_cdr.CommandEncoder``: the bytes of the previous
+instant with new values, 5 us where an rclpy message costs 15). ``use_sim_time`` is true unless
 overridden. A law failing at one instant logs an error and sends nothing: the simulator's
 timeout then names the node.
 """
@@ -24,6 +25,7 @@ from rclpy.parameter import Parameter
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.command import ControllerCommand
+from iceskate_sim.effort_cdr import CommandEncoder
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.native_control import native_kinematics
 from iceskate_sim.node_support import (
@@ -35,12 +37,7 @@ from iceskate_sim.node_support import (
 from iceskate_sim.observation import Observation
 from iceskate_sim.recording import TOPICS
 from iceskate_sim.robot import load_robot
-from iceskate_sim.ros_conversions import (
-    command_fields,
-    observation_from_gait_state,
-    set_stamp,
-    stamp_to_ns,
-)
+from iceskate_sim.ros_conversions import observation_from_gait_state, stamp_to_ns
 
 P = TypeVar('P')
 
@@ -62,7 +59,7 @@ class ControllerNode(Node, Generic[P]):
                                             self._on_parameters)
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
-        self._message = EffortCommand(source=node_name)
+        self._encoder = CommandEncoder(node_name)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self._typestore = make_typestore()
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
@@ -98,8 +95,4 @@ class ControllerNode(Node, Generic[P]):
         except (SimulationError, *self.law_errors) as exc:
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
             return
-        message = self._message
-        for field, value in command_fields(command).items():
-            setattr(message, field, value)
-        set_stamp(message.header.stamp, ns)
-        self._publisher.publish(message)
+        self._publisher.publish(self._encoder.encode(command, ns))

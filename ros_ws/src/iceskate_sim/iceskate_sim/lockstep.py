@@ -38,15 +38,11 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.command import ControllerCommand
+from iceskate_sim.effort_cdr import CommandDecoder
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record
-from iceskate_sim.ros_conversions import (
-    command_from_message,
-    ns_to_seconds,
-    seconds_to_ns,
-    stamp_to_ns,
-)
+from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
 from iceskate_sim.session import Session, last_event_before
 
 #: Live state topics the controllers read, published first, as soon as the state is known: the
@@ -315,6 +311,7 @@ class LockstepLoop:
         self.monitor = LoopMonitor(session.controllers, control_timeout,
                                    session.scene.simulator.control_period, realtime_factor)
         self._publish, self._report = publish, report
+        self._decoder = CommandDecoder()
         self._stats_file = pathlib.Path(stats_file) if stats_file else None
         self.phase, self.paused, self.budget, self.exit_code = 'starting', paused, 0, 0
 
@@ -375,21 +372,22 @@ class LockstepLoop:
             return self.finish()
         self.publish_state()
 
-    def take(self, msg: Any) -> str | None:
-        """Take an EffortCommand message; step once every source has answered t_k (lockstep).
+    def take(self, data: bytes) -> str | None:
+        """Take an EffortCommand (its CDR bytes); step once every source has answered t_k
+        (lockstep).
 
         :returns: why the command was rejected (None: taken, or ignored while not running).
         """
         if self.phase != 'running':
             return None
         try:
-            self.session.offer(msg.source, stamp_to_ns(msg.header.stamp),
-                               command_from_message(msg))
+            source, stamp_ns, command = self._decoder.decode(data)
+            self.session.offer(source, stamp_ns, command)
         except SimulationError as exc:
             self.monitor.reject(str(exc))
             return f'rejected command: {exc}'
         complete = self.session.lockstep and not self.session.missing()
-        self.monitor.command(msg.source, complete)
+        self.monitor.command(source, complete)
         if complete and self.may_step():
             self.step()
         return None

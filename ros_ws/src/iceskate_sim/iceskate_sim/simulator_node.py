@@ -4,7 +4,8 @@ Publishes ``gait_state``, ``/clock``, ``joint_states`` and ``head_pose`` at ever
 instant (the CDR bytes of the bag's message types, published raw; a topic nobody subscribes to
 is neither built nor sent: its readers are counted by the 20 ms timer, not at every instant)
 and ``robot_description`` once (transient local); takes ``effort_commands`` (best effort:
-see ``LOCKSTEP_READER_QOS``); services ``~/step``, ``~/pause``, ``~/resume``, ``~/reset``.
+see ``LOCKSTEP_READER_QOS``; raw, decoded by ``effort_cdr.CommandDecoder``); services
+``~/step``, ``~/pause``, ``~/resume``, ``~/reset``.
 Lockstep: state t_k out, a command stamped t_k from every source the scene runs, one period,
 repeat; a source silent for ``control_timeout`` s ends the run with an error naming it and its
 node. The bag is written while the controllers compute.
@@ -101,7 +102,7 @@ class SimulatorNode(Node):
                                                              getattr(self.loop, name)))
         self.create_timer(self.loop.timer_period, self.timer_callback)
         self.create_subscription(EffortCommand, 'effort_commands', self.on_effort_commands,
-                                 LOCKSTEP_READER_QOS)
+                                 LOCKSTEP_READER_QOS, raw=True)
 
     def _declare_controllers(self) -> None:
         """``controllers`` and, for each, ``sources.<controller>`` (string arrays)."""
@@ -153,9 +154,9 @@ class SimulatorNode(Node):
         else:
             (self.get_logger().error if failed else self.get_logger().info)(text)
 
-    def on_effort_commands(self, msg: EffortCommand) -> None:
-        """Take one command; step once every source has answered t_k (lockstep)."""
-        if rejected := self.loop.take(msg):
+    def on_effort_commands(self, data: bytes) -> None:
+        """Take one command (CDR bytes); step once every source has answered t_k (lockstep)."""
+        if rejected := self.loop.take(data):
             self.get_logger().error(rejected)
 
     def timer_callback(self) -> None:
