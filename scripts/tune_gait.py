@@ -46,7 +46,8 @@ from iceskate_sim.yaml_io import read_yaml
 
 # block.key -> (low, high)
 SPACE = {
-    'balance.swing_time': (0.3, 1.2), 'balance.clearance': (0.02, 0.06),
+    'balance.swing_time': (0.3, 1.2), 'balance.glide_time': (0.0, 0.6),
+    'balance.clearance': (0.02, 0.06),
     'balance.press': (0.0, 0.04), 'balance.placement_gain': (0.0, 0.4),
     'balance.step_length': (0.15, 0.6), 'balance.speed': (0.2, 0.7),
     'balance.speed_gain': (0.0, 300.0), 'balance.max_force': (10.0, 60.0),
@@ -232,6 +233,8 @@ def main() -> None:
     parser.add_argument('--max-rate', type=float, default=float('inf'),
                         help='cadence bound [exchanges/s]: more are penalised')
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
+    parser.add_argument('--start', type=pathlib.Path,
+                        help="start from the best point of this log (a previous search's --out)")
     args = parser.parse_args()
     path = next(d / f'{args.scene}.yaml' for d in scene_dirs()
                 if (d / f'{args.scene}.yaml').is_file())
@@ -239,6 +242,9 @@ def main() -> None:
     base['duration'] = args.duration
     base['record'] = {'bag': False}
     base['inputs']['gait_manager']['weight_transfer']['rule'] = 'com'
+    if args.start is not None:
+        entries = [json.loads(line) for line in args.start.read_text().splitlines() if line]
+        base = apply(base, max(entries, key=lambda e: e['score'])['params'])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     strategy = cma.CMAEvolutionStrategy(unit_of(base), args.sigma, {

@@ -148,3 +148,18 @@ def test_braking_force_is_bounded_by_max_brake(make_obs, dynamics):
         jac = _central_difference(lambda x: dynamics.center_of_mass(contact, x)[1], q,
                                   np.eye(18)[j])
         assert braked.effort[j] - free.effort[j] == pytest.approx(-brake * jac, rel=1e-6)
+
+
+def test_the_glide_holds_the_lifted_foot_behind_the_hip_then_swings(make_obs):
+    """With glide_time G the forward path is the plain one delayed by G: the foot, once lifted
+    to the clearance, waits 0.15 m behind the hip until G."""
+    plain = BalanceParameters(lift_fraction=0.2, descent_start=0.5)
+    glide = BalanceParameters(lift_fraction=0.2, descent_start=0.5, glide_time=0.3)
+    lifted = plain.lift_fraction * plain.swing_time
+    for t in np.linspace(lifted, glide.glide_time, 7):
+        y, z = swing_ankle_target(make_obs(t=t), glide, 1.0, 1.2, glide.speed)
+        assert y == pytest.approx(1.0 - 0.15, abs=1e-12)
+        assert z == pytest.approx(ANKLE_HEIGHT + glide.clearance, abs=1e-12)
+    for t in np.linspace(lifted, plain.swing_time, 9):
+        assert swing_ankle_target(make_obs(t=t + glide.glide_time), glide, 1.0, 1.2, 0.3) == \
+            pytest.approx(swing_ankle_target(make_obs(t=t), plain, 1.0, 1.2, 0.3), abs=1e-12)

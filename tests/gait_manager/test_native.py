@@ -45,6 +45,8 @@ VARIANTS = {
     'balance, no ankle strategy, no blend, push steps': {
         'posture': {'reference': 'balance'},
         'balance': {'com_stiffness': 0.0, 'com_damping': 0.0, 'blend': 0.0, 'push_ramp': 0.0}},
+    'balance with a glide': {
+        'posture': {'reference': 'balance'}, 'balance': {'glide_time': 0.2}},
     'weight transfer ramp': {
         'weight_transfer': {'rule': 'ramp', 'moment_arm': 0.05, 'joint1_torque': True}},
     'weight transfer ramp, steps, no moment, no q1': {

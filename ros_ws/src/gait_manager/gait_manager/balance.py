@@ -20,8 +20,9 @@ chain):
 * gravity compensation g(q) on joints 2, 3, 4, 9, 10; torso-yaw centring spring on 8;
 * swing leg in the air: the ankle follows a path from behind the hip to the landing point
   y_land = y_com + step_length/2 + placement_gain (v_com - v_d): it rises by ``clearance`` over
-  the first ``lift_fraction`` of ``swing_time`` and descends from ``descent_start`` to
-  ``press`` below the floor, so that the heel strikes; a 2-link IK (thigh, shank) gives the hip
+  the first ``lift_fraction`` of ``swing_time`` and waits behind the hip until ``glide_time``
+  after the exchange (the support foot glides alone), then moves forward over ``swing_time``
+  and descends from ``descent_start`` of it to ``press`` below the floor, so the heel strikes; a 2-link IK (thigh, shank) gives the hip
   and knee references;
 * double support (swing foot on the floor): the front knee is held straight-ish, the front
   hip is held at its angle of the control instant, and from the heel strike over
@@ -62,6 +63,9 @@ class BalanceParameters:
 
     swing_time: float = setting(0.45, 'duration of the swing-foot path after the exchange',
                                 unit='s', low=0.05, high=2.0)
+    glide_time: float = setting(0.0, 'time after the exchange the lifted swing foot waits '
+                                'behind the hip before it swings forward (a glide on the '
+                                'support foot)', unit='s', low=0.0, high=2.0)
     clearance: float = setting(0.04, 'height the swing ankle rises above its floor height',
                                unit='m', low=0.0, high=0.2)
     press: float = setting(0.02, 'depth below the floor the swing path ends at (makes the heel '
@@ -142,8 +146,9 @@ def leg_ik(d_y: float, d_z: float, thigh: float, shank: float) -> tuple[float, f
 def swing_ankle_target(obs: Observation, params: BalanceParameters, hip_y: float,
                        com_y: float, com_vy: float) -> tuple[float, float]:
     """World (y, z) [m] of the swing-ankle path point at ``obs.t`` (see module)."""
-    s = (obs.t - obs.t_exchange) / params.swing_time
-    up = smoothstep(s / params.lift_fraction)
+    elapsed = obs.t - obs.t_exchange
+    up = smoothstep(elapsed / params.swing_time / params.lift_fraction)
+    s = max(elapsed - params.glide_time, 0.0) / params.swing_time  # the forward path
     down = smoothstep((s - params.descent_start) / (1.0 - params.descent_start))
     z = ANKLE_HEIGHT + params.clearance * up - (params.clearance + params.press) * down
     land = com_y + params.step_length / 2.0 + params.placement_gain * (com_vy - params.speed)

@@ -41,8 +41,9 @@ std::pair<double, double> swing_ankle_target(
   const iceskate_native::Observation & obs, const BalanceParameters & p, double hip_y,
   double com_y, double com_vy)
 {
-  const double s = (obs.t - obs.t_exchange) / p.swing_time;
-  const double up = smoothstep(s / p.lift_fraction);
+  const double elapsed = obs.t - obs.t_exchange;
+  const double up = smoothstep(elapsed / p.swing_time / p.lift_fraction);
+  const double s = std::max(elapsed - p.glide_time, 0.0) / p.swing_time;  // the forward path
   const double down = smoothstep((s - p.descent_start) / (1.0 - p.descent_start));
   const double z = kAnkleHeight + p.clearance * up - (p.clearance + p.press) * down;
   const double land = com_y + p.step_length / 2.0 + p.placement_gain * (com_vy - p.speed);

@@ -66,6 +66,7 @@ gm::BalanceParameters balance_of(const Fields & f)
   gm::BalanceParameters p;
   for (auto [name, field] : std::initializer_list<std::pair<const char *, double *>>{
          {"swing_time", &p.swing_time},
+         {"glide_time", &p.glide_time},
          {"clearance", &p.clearance},
          {"press", &p.press},
          {"lift_fraction", &p.lift_fraction},

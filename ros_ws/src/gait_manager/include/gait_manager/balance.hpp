@@ -17,6 +17,7 @@ namespace gait_manager
 struct BalanceParameters
 {
   double swing_time = 0.0;     ///< [s]
+  double glide_time = 0.0;     ///< [s]
   double clearance = 0.0;      ///< [m]
   double press = 0.0;          ///< [m]
   double lift_fraction = 0.0;
