@@ -38,6 +38,7 @@ from dataclasses import replace
 import json
 import pathlib
 import statistics
+import struct
 import sys
 import tempfile
 import time
@@ -185,11 +186,13 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
     from rosgraph_msgs.msg import Clock
 
     from iceskate_bringup.graph import ros_environment, stop
-    from iceskate_bringup.scene import load_scene
+    from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_sim.lockstep import CONTROL_TOPICS, LockstepSession
     from iceskate_sim.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
-    session = LockstepSession(load_scene(scene_arg))
+    from iceskate_sim.session import Session
+    scene = load_scene(scene_arg)
+    session = LockstepSession(Session(scene), scene_sources(scene))
     payloads = list(session.state_bytes(CONTROL_TOPICS).values())
     env = ros_environment()
     echoes = [subprocess.Popen([sys.executable, __file__, '--echo', name, '--scenes', scene_arg],
@@ -205,7 +208,7 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
         answers = [0]
         node.create_subscription(EffortCommand, 'effort_commands',
                                  lambda _: answers.__setitem__(0, answers[0] + 1),
-                                 LOCKSTEP_READER_QOS)
+                                 LOCKSTEP_READER_QOS, raw=True)
         executor = EventsExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0
@@ -244,25 +247,24 @@ def _echo(name: str, scene_arg: str) -> int:
     from rclpy.experimental import EventsExecutor
     from rclpy.parameter import Parameter
 
-    from iceskate_bringup.scene import load_scene
+    from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
     from iceskate_sim.command import ControllerCommand, JointCommand
-    from iceskate_sim.lockstep import sources_by_controller
+    from iceskate_sim.effort_cdr import CommandEncoder
     from iceskate_sim.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
-    from iceskate_sim.ros_conversions import command_fields
-    sources = sources_by_controller(load_scene(scene_arg))[name]
+    sources = scene_sources(load_scene(scene_arg))[name]
     zero = JointCommand(np.zeros(18))
-    message = EffortCommand(source=name, **command_fields(ControllerCommand.of(
-        dict.fromkeys(sources, zero), np.zeros(18), np.zeros(18))))
+    command = ControllerCommand.of(dict.fromkeys(sources, zero), np.zeros(18), np.zeros(18))
+    encoder = CommandEncoder(name)
     rclpy.init()
     node = rclpy.create_node(name, parameter_overrides=[
         Parameter('use_sim_time', Parameter.Type.BOOL, True)])
     publisher = node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
 
-    def answer(state: GaitState) -> None:
-        message.header.stamp = state.header.stamp
-        publisher.publish(message)
-    node.create_subscription(GaitState, 'gait_state', answer, LOCKSTEP_READER_QOS)
+    def answer(state: bytes) -> None:  # its stamp, as the controller nodes read it
+        sec, nanosec = struct.unpack_from('<iI', state, 4)
+        publisher.publish(encoder.encode(command, sec * 1_000_000_000 + nanosec))
+    node.create_subscription(GaitState, 'gait_state', answer, LOCKSTEP_READER_QOS, raw=True)
     executor = EventsExecutor()
     executor.add_node(node)
     try:

@@ -39,6 +39,7 @@ import time
 import cma
 import numpy as np
 
+from gait_manager.law import GaitManagerParameters
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene, scene_dirs
 from iceskate_sim.errors import SimulationError
@@ -82,14 +83,11 @@ def point_of(unit: np.ndarray) -> dict[str, float]:
 
 
 def unit_of(raw: dict) -> np.ndarray:
-    """The base scene's values in the unit box (the middle for keys it does not set)."""
-    gm = raw['inputs']['gait_manager']
-    unit = np.full(len(SPACE), 0.5)
-    for i, key in enumerate(SPACE):
-        block, name = key.split('.')
-        if name in gm.get(block, {}):
-            unit[i] = (gm[block][name] - LOW[i]) / (HIGH[i] - LOW[i])
-    return np.clip(unit, 0.0, 1.0)
+    """The base scene's values in the unit box (the parameters' defaults where it sets none)."""
+    params = GaitManagerParameters.from_dict(raw['inputs']['gait_manager'])
+    values = [getattr(getattr(params, block), name)
+              for block, name in (key.split('.') for key in SPACE)]
+    return np.clip((np.array(values) - LOW) / (HIGH - LOW), 0.0, 1.0)
 
 
 def apply(raw: dict, point: dict[str, float]) -> dict:
