@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from iceskate_analysis.summary import MAX_POINTS, _decimate, write_summary
+from iceskate_analysis.summary import MAX_POINTS, _decimate, _shoulders, write_summary
 from iceskate_bringup.runner import main, run
 from iceskate_bringup.scene import load_scene, parse_scene, scene_path
 from iceskate_sim.errors import SimulationError
@@ -106,3 +106,17 @@ def test_run_scene_prints_the_json_then_where_the_outputs_are(tmp_path, capsys):
     last = captured.err.strip().splitlines()[-1]
     assert last == (f'outputs in {out}: metrics.json, events.json, trajectory.npz, bag/, '
                     'summary.png')
+
+
+@pytest.mark.parametrize('chunk', [1, 7, 1000])
+def test_the_shoulders_are_read_in_chunks_as_np_load_reads_them(stand_run, chunk):
+    path = stand_run[0] / 'trajectory.npz'
+    with np.load(path) as npz:
+        q = npz['q']
+    np.testing.assert_array_equal(_shoulders(path, chunk), q[:, [11, 14]])
+
+
+def test_a_q_of_the_wrong_shape_is_refused(tmp_path):
+    np.savez(tmp_path / 'trajectory.npz', q=np.zeros((4, 17)))
+    with pytest.raises(SimulationError, match=r'q of shape \(4, 17\)'):
+        _shoulders(tmp_path / 'trajectory.npz')
