@@ -42,7 +42,6 @@ import json
 import math
 import multiprocessing
 from multiprocessing.connection import Connection
-import os
 import pathlib
 import queue
 import signal
@@ -89,9 +88,6 @@ RECORDED_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state', '/joi
 PIVOT_CODE = {'toe': 1, 'heel': 2}
 BATCH = 100  # samples per hand-over to the writer process
 QUEUE_BATCHES = 40  # batches in flight before ``write`` waits for the writer process
-#: The writer process's nice value: a consumer with a queue, it yields a busy core to the run
-#: (the lockstep graph's nodes wait on each other; the writer waits on nobody).
-WRITER_NICENESS = 10
 
 
 @dataclass
@@ -905,8 +901,7 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
                     factory: MessageFactory, records: multiprocessing.Queue,
                     status: Connection) -> None:
     """Body of the writer process: write the batches of ``records`` until None, then close the
-    bag and send ('ok', samples) or ('error', message) on ``status``. It runs under the normal
-    scheduling policy at ``WRITER_NICENESS``.
+    bag and send ('ok', samples) or ('error', message) on ``status``.
 
     SIGINT, SIGTERM and SIGHUP are ignored: sent to the whole process group (Ctrl-C, ``timeout``,
     a closed terminal), they reach the parent too, which ends the run and closes the bag through
@@ -917,10 +912,6 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
     dropped (SIGALRM ends a read that would wait for its missing part forever)."""
     for signum in STOP_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
-    with contextlib.suppress(OSError):  # a real-time parent's policy is not inherited
-        if os.sched_getscheduler(0) != os.SCHED_OTHER:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        os.nice(WRITER_NICENESS)
     gc.freeze()  # what the parent had: not this process's garbage, never collected here
     reading, orphaned = False, False
 
