@@ -16,13 +16,26 @@ over 15 s.
 
     python scripts/tune_gait.py --scene skate --method cma --runs 400 --jobs 2 --duration 8
 
-``--objective robust`` scores each point over ``SCENARIOS`` (friction from 0.002 to 0.02, a
-150 N x 0.1 s chest push forward and backward after the 4th step) for ``--duration`` each, and
-the cadence of the nominal one (mean step period from the 4th exchange against ``CADENCE``,
-and its spread): the search the robust gait needs, affordable on the native engine (a 20 s run
-takes ~0.5 s).
+Those searches ran with this script as of commit a282ca0 (``git show
+a282ca0:scripts/tune_gait.py``): its box ``SPACE`` was narrower and had no ``glide_time``, so
+the same seed draws other points today.
 
-    python scripts/tune_gait.py --scene skate --method cma --objective robust --duration 20
+``--objective robust`` scores each point over ``SCENARIOS`` (friction 0.005, 0.002 and 0.02, a
+150 N x 0.1 s chest push forward and backward at 5 s and forward at 9 s) for ``--duration``
+each: the fraction of each case walked (up to ``STALL`` s after its last clean exchange, so
+that standing still scores nothing) and the share walked to the end, minus, for the nominal
+case, its mean step period's distance to ``CADENCE``, its spread and its head y error beyond
+``HEAD_Y_RMS``; the visual-lifting target then moves at the gait's speed (v_d = balance.speed).
+About 2.2 s a point with ``--jobs 2`` on the native engine. ``--start LOG`` starts from the
+best point of an earlier search's log; ``--check`` runs the base scene (with ``--start``: that
+point) over ``CHECKS``, cases the search did not see, and prints one JSON line per case.
+
+    python scripts/tune_gait.py --scene skate --method cma --objective robust --duration 12 \
+        --runs 500 --jobs 2 --sigma 0.1 --out runs/robust1.jsonl
+    python scripts/tune_gait.py --scene skate --method cma --objective robust --duration 12 \
+        --runs 400 --jobs 2 --sigma 0.1 --start runs/robust1.jsonl --out runs/robust2.jsonl
+    python scripts/tune_gait.py --scene skate --objective robust --start runs/robust2.jsonl \
+        --check --duration 15
 """
 
 from __future__ import annotations
@@ -69,6 +82,15 @@ SCENARIOS = (
     {'mu': 0.005}, {'mu': 0.002}, {'mu': 0.02},
     {'mu': 0.005, 'push': (5.0, 150.0)}, {'mu': 0.005, 'push': (5.0, -150.0)},
     {'mu': 0.005, 'push': (9.0, 150.0)},
+)
+#: Cases outside ``SCENARIOS`` the chosen values are checked on (``--check``): other frictions,
+#: pushes at other times and both directions, and a run of 60 s.
+CHECKS = (
+    {'mu': 0.003}, {'mu': 0.01}, {'mu': 0.015},
+    {'mu': 0.005, 'push': (3.3, 150.0)}, {'mu': 0.005, 'push': (6.6, -150.0)},
+    {'mu': 0.005, 'push': (7.45, 150.0)}, {'mu': 0.005, 'push': (10.2, -150.0)},
+    {'mu': 0.005, 'push': (12.8, 150.0)}, {'mu': 0.002, 'push': (8.0, -150.0)},
+    {'mu': 0.02, 'push': (8.0, 150.0)}, {'mu': 0.005, 'duration': 60.0},
 )
 CADENCE = (0.8, 1.0)  # s: the step period sought from the 4th exchange (the paper's ~T/2)
 STALL = 1.5  # s: a case counts as walking until this long after its last clean exchange
@@ -140,8 +162,10 @@ def exchange_times(events: list[dict]) -> list[float]:
 
 
 def scenario(raw: dict, case: dict) -> dict:
-    """The scene ``raw`` with a case of ``SCENARIOS`` applied."""
+    """The scene ``raw`` with a case of ``SCENARIOS`` or ``CHECKS`` applied."""
     raw = copy.deepcopy(raw)
+    if 'duration' in case:
+        raw['duration'] = case['duration']
     raw['floor'] = {**raw.get('floor', {}), 'mu': case['mu']}
     if 'push' in case:
         start, force = case['push']
@@ -179,6 +203,23 @@ def robust_score(raw: dict, duration: float) -> tuple[float, dict]:
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
     head = min(max(head_y - HEAD_Y_RMS, 0.0) / HEAD_Y_RMS, 5.0)
     return 10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - head, details
+
+
+def check(raw: dict, duration: float) -> list[dict]:
+    """``raw`` over ``CHECKS`` (``duration`` s unless a case sets its own): one row per case
+    (walked seconds, fall, steps, step period from the 4th exchange, head y error RMS)."""
+    rows = []
+    for case in CHECKS:
+        edited = scenario({**raw, 'duration': duration}, case)
+        metrics, events = run_metrics(edited)
+        exchanges = exchange_times(events)
+        periods = np.diff(exchanges[3:])
+        rows.append({'case': str(case), 'duration_s': edited['duration'],
+                     'sim_time_s': metrics.get('sim_time_s'), 'fell': metrics.get('fell', True),
+                     'failure': metrics.get('failure'), 'steps': metrics.get('steps'),
+                     'step_period_s': float(periods.mean()) if periods.size else None,
+                     'head_y_rms_m': (metrics.get('head_error_rms') or {}).get('y')})
+    return rows
 
 
 def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
@@ -233,6 +274,9 @@ def main() -> None:
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
     parser.add_argument('--start', type=pathlib.Path,
                         help="start from the best point of this log (a previous search's --out)")
+    parser.add_argument('--check', action='store_true',
+                        help='no search: run the base scene (with --start: that point) over '
+                             'CHECKS and print one JSON line per case')
     args = parser.parse_args()
     path = next(d / f'{args.scene}.yaml' for d in scene_dirs()
                 if (d / f'{args.scene}.yaml').is_file())
@@ -243,6 +287,13 @@ def main() -> None:
     if args.start is not None:
         entries = [json.loads(line) for line in args.start.read_text().splitlines() if line]
         base = apply(base, max(entries, key=lambda e: e['score'])['params'])
+    if args.check:
+        if args.objective == 'robust':  # as the robust search ran it
+            base['inputs']['visual_lifting']['v_d'] = \
+                base['inputs']['gait_manager']['balance']['speed']
+        for row in check(base, args.duration):
+            print(json.dumps(row), flush=True)
+        return
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     strategy = cma.CMAEvolutionStrategy(unit_of(base), args.sigma, {
