@@ -1,0 +1,75 @@
+"""scripts/tune_gait.py: the robust objective's scoring and the starting point of a search."""
+
+import importlib.util
+import pathlib
+
+import numpy as np
+import pytest
+
+from iceskate_sim.yaml_io import read_yaml
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+pytest.importorskip('cma')
+
+
+@pytest.fixture(scope='module')
+def tune():
+    spec = importlib.util.spec_from_file_location('tune_gait', ROOT / 'scripts' / 'tune_gait.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def skate():
+    return read_yaml(ROOT / 'ros_ws/src/iceskate_bringup/scenes/skate.yaml', 'scene')
+
+
+def exchanges(times):
+    return [{'event': 'E6', 't': t} for t in times]
+
+
+def test_walking_counts_only_while_the_robot_steps(tune, skate, monkeypatch):
+    """A case that stands still after its last exchange counts STALL s beyond it; a nominal
+    case stepping every 0.9 s evenly loses nothing for its cadence."""
+    steady = exchanges(np.arange(0.5, 12.0, 0.9))
+    stalled = exchanges([0.5, 1.4, 2.3])
+
+    def fake(raw):
+        pushed = 'disturbances' in raw
+        return ({'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.05}},
+                stalled if pushed else steady)
+    monkeypatch.setattr(tune, 'run_metrics', fake)
+    score, details = tune.robust_score(skate, 12.0)
+    pushed = [case for case in tune.SCENARIOS if 'push' in case]
+    walked = [details[str(case)]['walked_s'] for case in tune.SCENARIOS]
+    assert walked == [12.0 if case not in pushed else 2.3 + tune.STALL
+                      for case in tune.SCENARIOS]
+    share = 1.0 - len(pushed) / len(tune.SCENARIOS)
+    assert details['step_period_s']['mean'] == pytest.approx(0.9)
+    assert score == pytest.approx(10.0 * (np.mean(walked) / 12.0 + share), abs=1e-9)
+
+
+def test_cadence_and_head_error_cost_as_documented(tune, skate, monkeypatch):
+    fast = exchanges(np.arange(0.5, 12.0, 0.4))
+    monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
+        {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.15}}, fast))
+    score, _ = tune.robust_score(skate, 12.0)
+    miss = (tune.CADENCE[0] - 0.4) / 0.1
+    head = (0.15 - tune.HEAD_Y_RMS) / tune.HEAD_Y_RMS
+    assert score == pytest.approx(20.0 - miss - head, abs=1e-6)
+
+
+def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):
+    point = tune.point_of(tune.unit_of(skate))
+    balance = skate['inputs']['gait_manager']['balance']
+    assert point['balance.swing_time'] == pytest.approx(balance['swing_time'])
+    assert point['balance.glide_time'] == 0.0  # not in the scene: the parameter's default
+
+
+def test_check_cases_edit_the_scene(tune, skate):
+    long = tune.scenario(skate, {'mu': 0.005, 'duration': 60.0})
+    assert long['duration'] == 60.0 and long['floor']['mu'] == 0.005
+    pushed = tune.scenario(skate, {'mu': 0.002, 'push': (8.0, -150.0)})
+    assert pushed['disturbances'] == [{'start': 8.0, 'duration': 0.1, 'frame': 'chest',
+                                       'force': [0.0, -150.0, 0.0]}]
