@@ -22,8 +22,8 @@ chain):
   y_land = y_com + step_length/2 + placement_gain (v_com - v_d): it rises by ``clearance`` over
   the first ``lift_fraction`` of ``swing_time`` and waits behind the hip until ``glide_time``
   after the exchange (the support foot glides alone), then moves forward over ``swing_time``
-  and descends from ``descent_start`` of it to ``press`` below the floor, so the heel strikes; a 2-link IK (thigh, shank) gives the hip
-  and knee references;
+  and descends from ``descent_start`` of it to ``press`` below the floor, so the heel strikes;
+  a 2-link IK (thigh, shank) gives the hip and knee references;
 * double support (swing foot on the floor): the front knee is held straight-ish, the front
   hip is held at its angle of the control instant, and from the heel strike over
   ``push_ramp`` s the rear ankle PD gives way to a push-off torque ``push`` while the rear
