@@ -71,7 +71,7 @@ SPACE = {
     'balance.front_knee_stiffness': (100.0, 500.0), 'balance.descent_start': (0.3, 0.9),
     'balance.blend': (0.05, 0.5), 'balance.lift_fraction': (0.1, 0.5),
     'balance.trunk': (-0.045, 0.05), 'balance.max_brake': (0.0, 60.0),
-    'balance.com_stiffness': (0.0, 600.0), 'balance.com_damping': (0.0, 80.0),
+    'balance.com_stiffness': (0.0, 1500.0), 'balance.com_damping': (0.0, 200.0),
     'balance.com_offset': (-0.05, 0.1),
     'weight_transfer.capture_gain': (0.0, 1.5), 'weight_transfer.share': (0.9, 1.3),
     'weight_transfer.share_min': (0.0, 1.0), 'weight_transfer.ramp_time': (0.1, 1.0),
