@@ -1,6 +1,7 @@
 """Soak: back-to-back runs through the ROS graph, a random node SIGKILLed at a random moment in
 every other one. No run gets stuck, no process of a run outlives it, every bag is readable."""
 
+import contextlib
 import os
 from pathlib import Path
 import random
@@ -66,7 +67,8 @@ class _Killer(threading.Thread):
                 pids = sorted((s, p) for p, (s, n) in self.seen.items() if n == self.victim)
                 if pids:
                     self.killed = pids[0][1]
-                    os.kill(self.killed, signal.SIGKILL)
+                    with contextlib.suppress(ProcessLookupError):  # the run may be over
+                        os.kill(self.killed, signal.SIGKILL)
             time.sleep(0.02)
 
 
