@@ -174,12 +174,13 @@ def scenario(raw: dict, case: dict) -> dict:
     return raw
 
 
-def robust_score(raw: dict, duration: float) -> tuple[float, dict]:
+def robust_score(raw: dict, duration: float) -> tuple[float, dict, tuple[dict, list[dict]]]:
     """Mean walked fraction and share of cases walked to the end over ``SCENARIOS`` (x10),
     minus, for the nominal case, its mean step period's distance (from the 4th exchange) to
     ``CADENCE`` in tenths of a second, its coefficient of variation (x5) and its head y error
-    RMS beyond ``HEAD_Y_RMS`` in units of it (up to 5): (score, details). A case counts as
-    walked up to ``STALL`` s after its last clean exchange, so standing still scores nothing."""
+    RMS beyond ``HEAD_Y_RMS`` in units of it (up to 5): (score, details, the nominal case's
+    metrics and events). A case counts as walked up to ``STALL`` s after its last clean
+    exchange, so standing still scores nothing."""
     walked, details = [], {}
     periods, head_y = np.zeros(0), float('inf')
     for k, case in enumerate(SCENARIOS):
@@ -190,6 +191,7 @@ def robust_score(raw: dict, duration: float) -> tuple[float, dict]:
         details[str(case)] = {'sim_time_s': metrics.get('sim_time_s'), 'walked_s': until,
                               'failure': metrics.get('failure')}
         if k == 0:
+            nominal = (metrics, events)
             periods = np.diff(exchanges[3:])
             head_y = (metrics.get('head_error_rms') or {}).get('y', float('inf'))
     if periods.size >= 2:
@@ -202,7 +204,7 @@ def robust_score(raw: dict, duration: float) -> tuple[float, dict]:
     details['head_y_rms_m'] = head_y
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
     head = min(max(head_y - HEAD_Y_RMS, 0.0) / HEAD_Y_RMS, 5.0)
-    return 10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - head, details
+    return 10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - head, details, nominal
 
 
 def check(raw: dict, duration: float) -> list[dict]:
@@ -239,14 +241,17 @@ def evaluate(base: dict, duration: float, objective: str, max_rate: float,
     raw = apply(base, point)
     if objective == 'robust':  # the visual-lifting target moves at the gait's intended speed
         raw['inputs']['visual_lifting']['v_d'] = point['balance.speed']
-    metrics, events = run_metrics(raw)
+    if objective == 'robust':  # its first case is the nominal run
+        robust, robustness, (metrics, events) = robust_score(raw, duration)
+    else:
+        metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
     entry = {'score': value, 'clean_exchanges': clean, 'steps': metrics['steps'],
              'forward_distance_m': metrics.get('forward_distance_m'),
              'sim_time_s': metrics.get('sim_time_s'), 'failure': metrics.get('failure'),
              'arm_swing': metrics.get('arm_swing'), 'params': point}
     if objective == 'robust':
-        entry['score'], entry['robustness'] = robust_score(raw, duration)
+        entry['score'], entry['robustness'] = robust, robustness
     elif objective == 'arm_swing':
         gm = raw['inputs']['gait_manager']
         gm['enabled'] = [name for name in gm['enabled'] if name != 'yaw']

@@ -40,7 +40,7 @@ def test_walking_counts_only_while_the_robot_steps(tune, skate, monkeypatch):
         return ({'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.05}},
                 stalled if pushed else steady)
     monkeypatch.setattr(tune, 'run_metrics', fake)
-    score, details = tune.robust_score(skate, 12.0)
+    score, details, _ = tune.robust_score(skate, 12.0)
     pushed = [case for case in tune.SCENARIOS if 'push' in case]
     walked = [details[str(case)]['walked_s'] for case in tune.SCENARIOS]
     assert walked == [12.0 if case not in pushed else 2.3 + tune.STALL
@@ -54,7 +54,8 @@ def test_cadence_and_head_error_cost_as_documented(tune, skate, monkeypatch):
     fast = exchanges(np.arange(0.5, 12.0, 0.4))
     monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
         {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.15}}, fast))
-    score, _ = tune.robust_score(skate, 12.0)
+    score, _, nominal = tune.robust_score(skate, 12.0)
+    assert nominal[1] == fast
     miss = (tune.CADENCE[0] - 0.4) / 0.1
     head = (0.15 - tune.HEAD_Y_RMS) / tune.HEAD_Y_RMS
     assert score == pytest.approx(20.0 - miss - head, abs=1e-6)
