@@ -59,9 +59,9 @@ class ControllerNode(Node, Generic[P]):
                                             self._on_parameters)
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
-        self._encoder = CommandEncoder(node_name)
-        self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self._typestore = make_typestore()
+        self._encoder = CommandEncoder(node_name, self._typestore)
+        self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
                                  LOCKSTEP_READER_QOS, raw=True)
 

@@ -15,7 +15,8 @@ instant (its names, sources and array lengths do not change), so:
 
 Both follow the XCDR1 little-endian encoding rclpy and Fast DDS use (4-byte encapsulation
 header, alignment counted from the end of it, strings with their NUL, sequences with a uint32
-count), so the bytes equal ``rclpy.serialization.serialize_message``'s up to its padding.
+count), so the bytes equal ``rclpy.serialization.serialize_message``'s up to its padding; a new
+layout is serialized by rosbags (the bag's codec).
 """
 
 from __future__ import annotations
@@ -26,7 +27,9 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+from rosbags.typesys.store import Typestore
 
+from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.command import ControllerCommand, JointCommand, all_finite
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
@@ -40,6 +43,7 @@ _HEADER = len(_ENCAPSULATION)
 _STAMP = struct.Struct('<iI')
 _COUNT = struct.Struct('<I')
 _EMPTY = np.zeros(0)
+_TYPE = 'iceskate_interfaces/msg/EffortCommand'
 
 
 @dataclass(frozen=True)
@@ -186,10 +190,12 @@ class CommandDecoder:
 
 class CommandEncoder:
     """A controller's ``ControllerCommand`` -> its ``effort_commands`` CDR bytes (see the module
-    docstring); ``source``: the controller's name."""
+    docstring); ``source``: the controller's name; ``typestore`` serializes a new layout
+    (default: ``make_typestore()``)."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(self, source: str, typestore: Typestore | None = None) -> None:
         self.source = source
+        self._typestore = typestore or make_typestore()
         self._last: tuple[tuple[Any, ...], _Layout, bytearray] | None = None
 
     def encode(self, answer: ControllerCommand, stamp_ns: int) -> bytes:
@@ -202,7 +208,7 @@ class CommandEncoder:
                   answer.head_target if answer.head_target is not None else empty)
         shape = (*answer.source_efforts, *(x.size for x in arrays))
         if self._last is None or self._last[0] != shape:
-            data = bytearray(_serialize(self.source, command_fields(answer)))
+            data = bytearray(self._serialize(command_fields(answer)))
             self._last = (shape, read_effort_command(bytes(data))[1], data)
         _, layout, data = self._last
         _STAMP.pack_into(data, _HEADER, *ns_to_sec_nanosec(stamp_ns))
@@ -210,39 +216,13 @@ class CommandEncoder:
             data[offset:offset + 8 * count] = x.astype('<f8', copy=False).tobytes()
         return bytes(data)
 
-
-def _serialize(source: str, fields: dict[str, Any]) -> bytes:
-    """The CDR bytes of an EffortCommand with ``fields`` (stamp 0, empty frame id)."""
-    out = bytearray(_ENCAPSULATION + _STAMP.pack(0, 0))
-
-    def align(size: int) -> None:
-        out.extend(bytes(-(len(out) - _HEADER) % size))
-
-    def string(text: str) -> None:
-        raw = text.encode('utf-8') + b'\x00'
-        align(4)
-        out.extend(_COUNT.pack(len(raw)) + raw)
-
-    def strings(texts: list[str]) -> None:
-        align(4)
-        out.extend(_COUNT.pack(len(texts)))
-        for text in texts:
-            string(text)
-
-    def doubles(values: Any) -> None:
-        x = np.frombuffer(values, dtype=np.float64)
-        align(4)
-        out.extend(_COUNT.pack(x.size))
-        if x.size:
-            align(8)
-            out.extend(x.astype('<f8').tobytes())
-
-    string('')
-    string(source)
-    strings(fields['joint_names'])
-    for name in ARRAYS[:4]:
-        doubles(fields[name])
-    strings(fields['source_names'])
-    for name in ARRAYS[4:]:
-        doubles(fields[name])
-    return bytes(out)
+    def _serialize(self, fields: dict[str, Any]) -> bytes:
+        """The CDR bytes (rosbags' serializer) of this controller's EffortCommand with
+        ``fields`` (stamp 0, empty frame id)."""
+        types = self._typestore.types
+        header = types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=0, nanosec=0), frame_id='')
+        values = {key: np.frombuffer(value, dtype=np.float64) if key in ARRAYS else list(value)
+                  for key, value in fields.items()}
+        message = types[_TYPE](header=header, source=self.source, **values)
+        return bytes(self._typestore.serialize_cdr(message, _TYPE))
