@@ -228,7 +228,7 @@ def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
     """(metrics, events) of the scene ``raw``; a SimulationError counts as a run of 0 s."""
     with tempfile.TemporaryDirectory() as tmp:
         try:
-            metrics = run(parse_scene(raw), pathlib.Path(tmp), progress=False)
+            metrics = run(parse_scene(raw), pathlib.Path(tmp), progress=False, picture=False)
             return metrics, json.loads((pathlib.Path(tmp) / 'events.json').read_text())
         except SimulationError as exc:
             return {'steps': 0, 'failure': str(exc)}, []
@@ -239,9 +239,8 @@ def evaluate(base: dict, duration: float, objective: str, max_rate: float,
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
-    if objective == 'robust':  # the visual-lifting target moves at the gait's intended speed
+    if objective == 'robust':  # v_d: the gait's intended speed; the first case is nominal
         raw['inputs']['visual_lifting']['v_d'] = point['balance.speed']
-    if objective == 'robust':  # its first case is the nominal run
         robust, robustness, (metrics, events) = robust_score(raw, duration)
     else:
         metrics, events = run_metrics(raw)

@@ -120,3 +120,11 @@ def test_a_q_of_the_wrong_shape_is_refused(tmp_path):
     np.savez(tmp_path / 'trajectory.npz', q=np.zeros((4, 17)))
     with pytest.raises(SimulationError, match=r'q of shape \(4, 17\)'):
         _shoulders(tmp_path / 'trajectory.npz')
+
+
+def test_a_run_without_the_picture_writes_the_other_outputs(tmp_path):
+    metrics = run(replace(load_scene('stand'), duration=0.2), tmp_path, progress=False,
+                  picture=False)
+    assert not metrics['fell']
+    assert {p.name for p in tmp_path.iterdir()} == {'metrics.json', 'events.json',
+                                                    'trajectory.npz', 'bag'}

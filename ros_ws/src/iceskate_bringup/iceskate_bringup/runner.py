@@ -50,24 +50,26 @@ BLOCK_PERIODS = 1000
 
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
-        stop: StopRequest | None = None) -> dict[str, Any]:
+        stop: StopRequest | None = None, picture: bool = True) -> dict[str, Any]:
     """Run ``scene``; write the outputs into ``out`` (if given) and return the metrics.
 
     A SIGINT, SIGTERM or SIGHUP (``stop``; None: one is installed for the call) ends the run
     between two control periods: the bag is closed with its metadata and the outputs are
-    written (``interrupted`` in the metrics), then ``RunInterrupted`` is raised.
+    written (``interrupted`` in the metrics), then ``RunInterrupted`` is raised. ``picture``:
+    draw summary.png (False: the other outputs only, as a parameter search wants them).
 
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
-    metrics, error = simulate(scene, out, progress, stop)
+    metrics, error = simulate(scene, out, progress, stop, picture)
     if error is not None:
         raise error
     return metrics
 
 
 def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
-             stop: StopRequest | None = None) -> tuple[dict[str, Any], SimulationError | None]:
+             stop: StopRequest | None = None, picture: bool = True
+             ) -> tuple[dict[str, Any], SimulationError | None]:
     """``run``, but a failure of the physics is returned beside the metrics (which say where
     the run stopped) instead of raised.
 
@@ -83,8 +85,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         # The summary's plotting library loads while the run goes on: after the fork (a child
         # forked while a thread imports waits forever for that import's lock) and joined before
         # this returns (no other fork of this process meets it).
+        picture = picture and out is not None
         plotting = (threading.Thread(target=_import_plotting, name='import-plotting')
-                    if out is not None else None)
+                    if picture else None)
         if plotting is not None:
             plotting.start()
             signals.callback(plotting.join)
@@ -95,7 +98,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
             error, not after a signal or a bug."""
-            if (out is not None and len(session.trajectory)
+            if (picture and len(session.trajectory)
                     and not isinstance(ended, RunInterrupted) and not crashed):
                 from iceskate_analysis.summary import write_summary
                 write_summary(out)
