@@ -150,6 +150,53 @@ def test_braking_force_is_bounded_by_max_brake(make_obs, dynamics):
         assert braked.effort[j] - free.effort[j] == pytest.approx(-brake * jac, rel=1e-6)
 
 
+def _speed_joint_efforts(obs, dynamics, params: BalanceParameters,
+                         head_start_y: float = 0.0) -> np.ndarray:
+    return balance_command(obs, dynamics, params, 20.0, 2.0, head_start_y).effort
+
+
+@pytest.mark.parametrize('t', [0.2, 1.0, 3.5])
+def test_drive_and_pace_terms_add_to_the_virtual_force(make_obs, dynamics, t):
+    """drive F_0 (ramped over 0.5 s) and pace_gain k_p (y_H(0) + v_d t - y_H) add to the
+    virtual force: the efforts of joints 2-4 move by that force times the CoM Jacobian row y
+    (central differences), y_H from the head-top frame; nothing else moves."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    obs = make_obs(t=t, q=q, mode=3)
+    contact = obs.contact()
+    base = replace(BalanceParameters(), speed_gain=0.0, max_force=1e3, max_brake=1e3)
+    drive, pace, start = 12.0, 150.0, -0.7
+    head_y = dynamics.frame_placement(contact, q, 'head_top').translation[1]
+    lag = start + base.speed * t - head_y
+    assert abs(lag) > 0.1  # the pace term is not trivial
+    force = drive * min(t / 0.5, 1.0) + pace * lag
+    difference = (_speed_joint_efforts(obs, dynamics, replace(base, drive=drive, pace_gain=pace),
+                                       start)
+                  - _speed_joint_efforts(obs, dynamics, base, start))
+    for j in (2, 3, 4):
+        jac = _central_difference(lambda x: dynamics.center_of_mass(contact, x)[1], q,
+                                  np.eye(18)[j])
+        assert difference[j] == pytest.approx(force * jac, rel=1e-6)
+    assert np.count_nonzero(difference[[0, 1, *range(5, 18)]]) == 0
+
+
+def test_pace_point_starts_at_the_head_and_moves_at_the_speed(make_obs, dynamics):
+    """With the head on the pace point (start = y_H - v_d t) the pace term is zero; a start 1 cm
+    further ahead pulls forward by k_p x 1 cm."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    obs = make_obs(t=2.0, q=q, mode=3)
+    head_y = dynamics.frame_placement(obs.contact(), q, 'head_top').translation[1]
+    base = replace(BalanceParameters(), speed_gain=0.0)
+    paced = replace(base, pace_gain=300.0)
+    on_point = head_y - base.speed * obs.t
+    np.testing.assert_allclose(_speed_joint_efforts(obs, dynamics, paced, on_point),
+                               _speed_joint_efforts(obs, dynamics, base, on_point), atol=1e-12)
+    ahead = (_speed_joint_efforts(obs, dynamics, paced, on_point + 0.01)
+             - _speed_joint_efforts(obs, dynamics, base, on_point + 0.01))
+    unit = (_speed_joint_efforts(obs, dynamics, replace(base, drive=1.0), on_point)
+            - _speed_joint_efforts(obs, dynamics, base, on_point))  # J_com,y^T x 1 N
+    np.testing.assert_allclose(ahead, 3.0 * unit, rtol=1e-9, atol=1e-12)
+
+
 def test_the_glide_holds_the_lifted_foot_behind_the_hip_then_swings(make_obs):
     """With glide_time G the forward path is the plain one delayed by G: the foot, once lifted
     to the clearance, waits 0.15 m behind the hip until G."""

@@ -47,6 +47,8 @@ VARIANTS = {
         'balance': {'com_stiffness': 0.0, 'com_damping': 0.0, 'blend': 0.0, 'push_ramp': 0.0}},
     'balance with a glide': {
         'posture': {'reference': 'balance'}, 'balance': {'glide_time': 0.2}},
+    'balance with drive and pace': {
+        'posture': {'reference': 'balance'}, 'balance': {'drive': 15.0, 'pace_gain': 120.0}},
     'weight transfer ramp': {
         'weight_transfer': {'rule': 'ramp', 'moment_arm': 0.05, 'joint1_torque': True}},
     'weight transfer ramp, steps, no moment, no q1': {
@@ -58,6 +60,8 @@ VARIANTS = {
         'weight_transfer': {'rule': 'com', 'share_min': 0.3, 'ramp_time': 0.0}},
     'feedforward without q1, heel without ramp': {
         'enabled': ALL, 'feedforward': {'joint1_torque': False}, 'heel': {'ramp_time': 0.0}},
+    'arm release': {'enabled': ALL, 'arm_assist': {'release_time': 0.5,
+                                                   'release_damping': 3.0}},
     'phases A': {'enabled': ALL, 'yaw': {'phase': 'A'},
                  'arm_assist': {'phase': 'A', 'off_from_step_index': 10}},
     'phases B clipped': {'enabled': ALL, 'yaw': {'phase': 'B_clipped'},
@@ -110,9 +114,9 @@ def test_the_native_sources_equal_the_reference_on_real_runs(scene, name, scene_
     params = variant(scene, name)
     controller = GaitManagerController(params)
     for obs in with_sliding_twins(scene_observations[scene]):
-        expected = ControllerCommand.of(gait_manager_commands(obs, dynamics, params), obs.q,
-                                        obs.v)
         got = native_command(controller, obs, kinematics)
+        expected = ControllerCommand.of(
+            gait_manager_commands(obs, dynamics, params, controller.head_start_y), obs.q, obs.v)
         assert list(got.source_efforts) == list(expected.source_efforts)
         for source, effort in expected.source_efforts.items():
             assert_close(got.source_efforts[source], effort,
@@ -135,6 +139,25 @@ def test_new_parameters_apply_from_the_next_observation(scene_observations, dyna
     expected = ControllerCommand.of(gait_manager_commands(obs, dynamics, params), obs.q, obs.v)
     np.testing.assert_allclose(got.source_efforts['yaw'], expected.source_efforts['yaw'],
                                **TOLERANCE)
+
+
+def test_the_pace_point_starts_at_the_head_of_t_0(scene_observations, dynamics, kinematics):
+    """The controller latches the head top's y at its first observation and again at every
+    t = 0 (a restarted run), and keeps it in between."""
+    run = scene_observations['skate']
+    assert run[0].t == 0.0 and run[-1].t > 1.0
+
+    def head_y(obs) -> float:
+        return dynamics.frame_placement(obs.contact(), obs.q, 'head_top').translation[1]
+
+    controller = GaitManagerController(variant('skate', 'balance with drive and pace'))
+    assert controller.head_start_y is None
+    native_command(controller, run[-1], kinematics)  # joined late: starts where the head is
+    assert controller.head_start_y == pytest.approx(head_y(run[-1]), abs=1e-12)
+    native_command(controller, run[0], kinematics)
+    native_command(controller, run[-1], kinematics)
+    assert controller.head_start_y == pytest.approx(head_y(run[0]), abs=1e-12)
+    assert abs(head_y(run[-1]) - head_y(run[0])) > 0.1
 
 
 def test_a_command_that_is_not_finite_is_a_gait_manager_error(make_obs, kinematics):

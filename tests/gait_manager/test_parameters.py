@@ -23,7 +23,7 @@ CLASSES = (PostureParameters, BalanceParameters, FeedforwardParameters,
            GaitManagerParameters)
 LEAVES = leaf_fields(GaitManagerParameters)
 UNITS = {'', 'm', 's', 'rad', 'm/s', 'N', 'N m', 'N m/rad', 'N m s/rad', 'N s/m', 'N m/m',
-         'N m s/m'}
+         'N m s/m', 'N/m'}
 
 
 def _entry_type(tp: Any) -> Any:

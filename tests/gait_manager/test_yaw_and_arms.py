@@ -61,13 +61,30 @@ def test_arm_assist_elbow_and_wrist_pd(make_obs):
 
 
 @pytest.mark.parametrize('step_index', [3, 4, 10])
-def test_arm_assist_is_zero_from_the_fourth_step_on(make_obs, step_index):
+def test_arm_assist_without_release_is_zero_from_the_fourth_step_on(make_obs, step_index):
     q = np.zeros(18)
     q[11:17] = 0.3
     v = np.full(18, 0.5)
     tau = arm_assist_torque(make_obs(t=1.3, t_exchange=1.0, q=q, v=v, step_index=step_index),
                             ArmAssistParameters())
     assert np.all(tau == 0.0)
+
+
+@pytest.mark.parametrize(('elapsed', 'fade'), [(0.0, 1.0), (0.2, 0.84375), (0.4, 0.5),
+                                               (0.8, 0.0), (1.2, 0.0)])
+def test_the_release_brakes_the_shoulders_and_fades_out(make_obs, elapsed, fade):
+    """From the exchange of the 4th step on, joints 11 and 14 get -b (1 - S(t'/T_r)) v over T_r
+    (S the smoothstep 3x^2 - 2x^3: 0.84375 at a quarter, 1/2 at half); nothing else moves, and
+    the next step gets no brake."""
+    v = np.linspace(-1.0, 1.0, 18)
+    params = ArmAssistParameters(release_time=0.8, release_damping=4.0)
+    tau = arm_assist_torque(make_obs(t=2.0 + elapsed, t_exchange=2.0, v=v, step_index=3),
+                            params)
+    np.testing.assert_allclose(tau[[11, 14]], -4.0 * fade * v[[11, 14]], rtol=1e-12, atol=1e-15)
+    assert np.count_nonzero(tau[[*range(11), 12, 13, 15, 16, 17]]) == 0
+    later = arm_assist_torque(make_obs(t=2.0 + elapsed, t_exchange=2.0, v=v, step_index=4),
+                              params)
+    assert np.all(later == 0.0)
 
 
 @pytest.mark.parametrize(('cls', 'key', 'value'), [

@@ -78,19 +78,21 @@ class GaitManagerParameters:
 
 
 def gait_manager_commands(obs: Observation, dynamics: GaitDynamics,
-                          params: GaitManagerParameters) -> dict[str, JointCommand]:
+                          params: GaitManagerParameters,
+                          head_start_y: float = 0.0) -> dict[str, JointCommand]:
     """Return {source: JointCommand} for the enabled sources only, in SOURCES order.
 
     The posture stabiliser carries a joint impedance (its PD runs at the physics rate); the
     other sources are torques held over the control period. ``dynamics`` is used only by
-    'posture' and 'weight_transfer'.
+    'posture' and 'weight_transfer'; ``head_start_y`` [m] (the head top's y at t = 0) only by
+    the walking stabiliser's pace term.
     """
     out: dict[str, JointCommand] = {}
     enabled = params.enabled
     if 'posture' in enabled:
         posture = params.posture
         out['posture'] = (balance_command(obs, dynamics, params.balance, posture.yaw_stiffness,
-                                          posture.yaw_damping)
+                                          posture.yaw_damping, head_start_y)
                           if posture.reference == 'balance'
                           else posture_command(obs, dynamics, posture))
     if 'feedforward' in enabled:
@@ -108,10 +110,12 @@ def gait_manager_commands(obs: Observation, dynamics: GaitDynamics,
 
 
 def gait_manager_torques(obs: Observation, dynamics: GaitDynamics,
-                         params: GaitManagerParameters) -> dict[str, np.ndarray]:
-    """Return {source: 18-vector torque [N m]} at ``obs`` for the enabled sources only."""
-    return {source: command.torque(obs.q, obs.v)
-            for source, command in gait_manager_commands(obs, dynamics, params).items()}
+                         params: GaitManagerParameters,
+                         head_start_y: float = 0.0) -> dict[str, np.ndarray]:
+    """Return {source: 18-vector torque [N m]} at ``obs`` for the enabled sources only
+    (``head_start_y`` as in ``gait_manager_commands``)."""
+    return {source: command.torque(obs.q, obs.v) for source, command
+            in gait_manager_commands(obs, dynamics, params, head_start_y).items()}
 
 
 def total_torque(torques: Mapping[str, np.ndarray]) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "iceskate_native/stance.hpp"
+
 namespace gait_manager
 {
 
@@ -18,6 +20,13 @@ iceskate_native::Vector18 arm_assist_torque(
 {
   iceskate_native::Vector18 tau = iceskate_native::Vector18::Zero();
   if (obs.step_index >= params.off_from_step_index) {
+    const double elapsed = obs.t - obs.t_exchange;
+    if (obs.step_index == params.off_from_step_index && elapsed < params.release_time) {
+      const double fade = 1.0 - iceskate_native::smoothstep(elapsed / params.release_time);
+      for (int j : {kRightShoulder, kLeftShoulder}) {
+        tau[j] = -params.release_damping * fade * obs.v[j];
+      }
+    }
     return tau;
   }
   const double sign = obs.side == 0 ? 1.0 : -1.0;

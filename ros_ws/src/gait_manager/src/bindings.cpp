@@ -9,6 +9,7 @@
 #include <utility>
 
 #include <nanobind/nanobind.h>
+#include <nanobind/stl/optional.h>
 
 #include "gait_manager/errors.hpp"
 #include "gait_manager/law.hpp"
@@ -75,6 +76,8 @@ gm::BalanceParameters balance_of(const Fields & f)
          {"placement_gain", &p.placement_gain},
          {"speed", &p.speed},
          {"speed_gain", &p.speed_gain},
+         {"pace_gain", &p.pace_gain},
+         {"drive", &p.drive},
          {"max_force", &p.max_force},
          {"max_brake", &p.max_brake},
          {"com_stiffness", &p.com_stiffness},
@@ -130,7 +133,8 @@ gm::Parameters parameters_of(nb::handle object)
   const Fields arm = fields.block("arm_assist");
   p.arm_assist = {arm.number("amplitude"), arm.number("period"), phase_of(arm),
                   arm.number("stiffness"), arm.number("damping"),
-                  arm.integer("off_from_step_index", 0)};
+                  arm.integer("off_from_step_index", 0), arm.number("release_time"),
+                  arm.number("release_damping")};
   const Fields yaw = fields.block("yaw");
   p.yaw = {yaw.number("amplitude"), yaw.number("period"), phase_of(yaw)};
   for (const auto & name : fields.texts("enabled")) {
@@ -181,5 +185,9 @@ NB_MODULE(_law, m)
       [](GaitManagerController & self, nb::handle params) {
         self.set_parameters(parameters_of(params));
       },
-      "params"_a, "New parameters from the next observation on.");
+      "params"_a, "New parameters from the next observation on (the pace point's start stays).")
+    .def_prop_ro(
+      "head_start_y", &GaitManagerController::head_start_y,
+      "The head top's y [m] at t = 0 (or at the first observation), the start of the walking "
+      "stabiliser's pace point; None before.");
 }

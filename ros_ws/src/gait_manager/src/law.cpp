@@ -16,12 +16,16 @@ void GaitManagerController::compute(
   out.clear();
   const iceskate_native::Mode & mode = kinematics.mode(obs.mode);
   const auto name = [](Source source) { return kSourceNames[static_cast<std::size_t>(source)]; };
+  if (obs.t == 0.0 || !head_start_y_) {
+    head_start_y_ =
+      kinematics.frame_position(obs.support(), obs.q, iceskate_native::Frame::kHeadTop)[1];
+  }
   if (enabled(Source::kPosture)) {
     auto & command = out.add(name(Source::kPosture));
     const PostureParameters & posture = params_.posture;
     if (posture.reference == PostureReference::kBalance) {
       balance_command(obs, kinematics, params_.balance, posture.yaw_stiffness,
-                      posture.yaw_damping, command);
+                      posture.yaw_damping, *head_start_y_, command);
     } else {
       posture_command(obs, kinematics, posture, command);
     }

@@ -1,6 +1,6 @@
 // Arm auxiliary input of steps 1-3 (docs/model.md §11.7): anti-phase shoulder sinusoid and an
-// elbow/wrist PD to 0 before the 4th step, nothing from then on. The counterpart of
-// gait_manager/arm_assist.py.
+// elbow/wrist PD to 0 before the 4th step, then a fading shoulder brake over release_time, then
+// nothing. The counterpart of gait_manager/arm_assist.py.
 #pragma once
 
 #include "gait_manager/phase.hpp"
@@ -17,7 +17,9 @@ struct ArmAssistParameters
   PhaseReading phase = PhaseReading::kB;
   double stiffness = 0.0;  ///< elbow and wrist PD [N m/rad]
   double damping = 0.0;    ///< [N m s/rad]
-  int off_from_step_index = 0;  ///< all arm torques 0 from this many exchanges on
+  int off_from_step_index = 0;  ///< the assist stops from this many exchanges on
+  double release_time = 0.0;     ///< shoulder brake after the assist stops [s]
+  double release_damping = 0.0;  ///< its initial damping [N m s/rad]
 };
 
 /// The arm assist [N m] on joints 11-16.

@@ -26,6 +26,8 @@ struct BalanceParameters
   double placement_gain = 0.0; ///< [s]
   double speed = 0.0;          ///< v_d [m/s]
   double speed_gain = 0.0;     ///< k_v [N s/m]
+  double pace_gain = 0.0;      ///< k_p [N/m]
+  double drive = 0.0;          ///< F_0 [N]
   double max_force = 0.0;      ///< [N]
   double max_brake = 0.0;      ///< [N]
   double com_stiffness = 0.0;  ///< [N m/m]
@@ -57,10 +59,11 @@ std::pair<double, double> swing_ankle_target(
   double com_y, double com_vy);
 
 /// The walking stabiliser as a joint command (impedance + effort), with the torso-yaw spring
-/// (yaw_stiffness [N m/rad], yaw_damping [N m s/rad]). GaitManagerError when not finite.
+/// (yaw_stiffness [N m/rad], yaw_damping [N m s/rad]); head_start_y [m] is the head top's y at
+/// t = 0, the start of the pace point. GaitManagerError when not finite.
 void balance_command(
   const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,
   const BalanceParameters & params, double yaw_stiffness, double yaw_damping,
-  iceskate_native::JointCommand & out);
+  double head_start_y, iceskate_native::JointCommand & out);
 
 }  // namespace gait_manager

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 
 #include "gait_manager/arm_assist.hpp"
 #include "gait_manager/balance.hpp"
@@ -46,7 +47,9 @@ struct Parameters
 };
 
 /// The enabled sources as a controller: posture a joint command with an impedance, the others
-/// torques held over the control period. GaitManagerError when a command is not finite.
+/// torques held over the control period. The head top's y at t = 0 (or at the first call) is
+/// latched as the start of the walking stabiliser's pace point. GaitManagerError when a
+/// command is not finite.
 class GaitManagerController final : public iceskate_native::Controller
 {
 public:
@@ -61,10 +64,14 @@ public:
 
   const Parameters & parameters() const noexcept { return params_; }
 
+  /// The head top's y [m] latched at t = 0 (or at the first call); nullopt before.
+  std::optional<double> head_start_y() const noexcept { return head_start_y_; }
+
 private:
   bool enabled(Source source) const { return params_.enabled[static_cast<std::size_t>(source)]; }
 
   Parameters params_;
+  std::optional<double> head_start_y_;
 };
 
 }  // namespace gait_manager
