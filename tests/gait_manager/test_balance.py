@@ -210,18 +210,3 @@ def test_the_glide_holds_the_lifted_foot_behind_the_hip_then_swings(make_obs):
     for t in np.linspace(lifted, plain.swing_time, 9):
         assert swing_ankle_target(make_obs(t=t + glide.glide_time), glide, 1.0, 1.2, 0.3) == \
             pytest.approx(swing_ankle_target(make_obs(t=t), plain, 1.0, 1.2, 0.3), abs=1e-12)
-
-
-def test_skate_glide_steps_at_the_papers_cadence(tmp_path):
-    """The shipped skate_glide scene: from the 4th support exchange a step every 0.8-1.0 s with
-    a coefficient of variation under 10 %, mostly gliding on a flat sole (mode 3)."""
-    import json
-    scene = replace(load_scene('skate_glide'), duration=8.0, record_bag=False)
-    metrics = run(scene, tmp_path, progress=False)
-    assert not metrics['fell'], metrics['failure']
-    events = json.loads((tmp_path / 'events.json').read_text())
-    exchanges = [e['t'] for e in events if e['event'] in ('E6', 'E7')]
-    periods = np.diff(exchanges[3:])
-    assert len(periods) >= 3
-    assert 0.8 <= periods.mean() <= 1.0 and periods.std() / periods.mean() <= 0.1, periods
-    assert metrics['mode_time_fraction']['3'] > 0.5

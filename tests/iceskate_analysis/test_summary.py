@@ -51,7 +51,7 @@ def test_write_summary_returns_the_path_and_redraws(stand_run, tmp_path):
 
 
 def test_a_skate_run_with_support_exchanges_is_summarised(tmp_path):
-    metrics = run(replace(load_scene('skate'), duration=1.0), tmp_path, progress=False)
+    metrics = run(replace(load_scene('skate'), duration=2.5), tmp_path, progress=False)
     steps = np.load(tmp_path / 'trajectory.npz')['step_index']
     assert metrics['steps'] >= 2 and np.count_nonzero(np.diff(steps)) == metrics['steps']
     _assert_picture(tmp_path / 'summary.png')

@@ -14,7 +14,7 @@ from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import SIDES, load_robot
 from iceskate_sim.simulation import Simulator
 
-SHORT_SKATE = 2.0  # s: the first steps of the skate scene
+SHORT_SKATE = 5.0  # s: the first steps of the skate scene (past the arm assist's release)
 
 
 @pytest.fixture(scope='module')
@@ -45,13 +45,15 @@ def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
 def test_short_skate_run_visits_the_expected_modes(skate_run):
     """The scene's single-support start (mode 1; the first sample may already be on the toe,
     2, after the transitions due at t = 0), then the ice cycle of docs/model.md §6.6: support
-    gliding (F-G: 3), front heel landing and gliding (Hs: 7 or 8), support exchanges (E6/E7)."""
+    gliding (F-G: 3), front heel landing and gliding (Hs: 7 or 8; the gait passes these within a
+    control period, so only the events show them), support exchanges (E6/E7)."""
     out, _metrics = skate_run
     events = json.loads((out / 'events.json').read_text())
     modes = set(np.load(out / 'trajectory.npz')['mode'].tolist())
     assert events[0]['from_mode'] == 1
     assert int(np.load(out / 'trajectory.npz')['mode'][0]) in (1, 2, 3, 4)  # swing foot up
-    assert {3} <= modes and modes & {7, 8}
+    assert 3 in modes  # a sampled glide
+    assert {e['to_mode'] for e in events} & {7, 8}  # passed through (maybe within a period)
     exchanges = [e['t'] for e in events if e['event'] in ('E6', 'E7')]
     assert len(exchanges) >= 3, exchanges
 

@@ -8,6 +8,7 @@ entries agree to ~1e-13).
 """
 
 import itertools
+import pathlib
 
 import numpy as np
 import pytest
@@ -17,6 +18,9 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MODES, get_mode
 from iceskate_sim.native_dynamics import NativeGaitDynamics
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, load_robot
+
+#: a fast-stepping skate gait (test data): many events in a short window
+FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
 
 SEED = 20190605
 TOLERANCE = 1e-11
@@ -314,7 +318,7 @@ def test_two_seconds_of_skate_on_both_engines(tmp_path):
 
     from iceskate_bringup.runner import run
     from iceskate_bringup.scene import load_scene
-    scene = replace(load_scene('skate'), duration=2.0, record_bag=False)
+    scene = replace(load_scene(FAST_SKATE), duration=2.0, record_bag=False)
     for engine in ('python', 'native'):
         run(replace(scene, simulator=replace(scene.simulator, engine=engine)),
             tmp_path / engine, progress=False)

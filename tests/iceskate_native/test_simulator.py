@@ -12,6 +12,7 @@ agree to round-off amplified by the gait over the run, not bit for bit.
 from __future__ import annotations
 
 from dataclasses import replace
+import pathlib
 
 import numpy as np
 import pytest
@@ -23,8 +24,11 @@ from iceskate_sim.hybrid import FrictionModel
 from iceskate_sim.scene import Push, Scene
 from iceskate_sim.session import Session
 
+#: a fast-stepping skate gait (test data): many events in a short window
+FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
 
-def _scene(name: str, duration: float, engine: str, **simulator: object) -> Scene:
+
+def _scene(name: str | pathlib.Path, duration: float, engine: str, **simulator: object) -> Scene:
     scene = load_scene(name)
     config = replace(scene.simulator, engine=engine, **simulator)
     return replace(scene, duration=duration, simulator=config, record_bag=False)
@@ -78,9 +82,9 @@ def test_native_periods_follow_the_python_reference(name: str, duration: float) 
     ('symplectic_euler', 1e-4, 0.6), ('rk4', 2.5e-4, 0.8)])
 def test_native_periods_with_the_other_fixed_step_methods(method: str, step: float,
                                                           duration: float) -> None:
-    scene = load_scene('skate')
+    scene = load_scene(FAST_SKATE)
     integrator = replace(scene.simulator.integrator, method=method, step=step)
-    runs = [_run(_scene('skate', duration, engine, integrator=integrator))
+    runs = [_run(_scene(FAST_SKATE, duration, engine, integrator=integrator))
             for engine in ('python', 'native')]
     assert len(runs[0].sim.events) > 20
     _assert_same_run(*runs, tolerance=1e-6)
@@ -91,10 +95,10 @@ def test_native_periods_with_rk45_follow_the_python_rk45() -> None:
     runge_kutta_dopri5 natively; their error norms differ: RMS against max): the same event
     log, and trajectories that agree to what the tolerance lets each stray (measured at
     rtol 1e-8 over 0.6 s: event times 5e-10 s, q 2e-8)."""
-    scene = load_scene('skate')
+    scene = load_scene(FAST_SKATE)
     integrator = replace(scene.simulator.integrator, method='rk45', step=1e-3, rtol=1e-8,
                          atol=1e-8)
-    runs = [_run(_scene('skate', 0.6, engine, integrator=integrator))
+    runs = [_run(_scene(FAST_SKATE, 0.6, engine, integrator=integrator))
             for engine in ('python', 'native')]
     assert len(runs[0].sim.events) > 20
     _assert_same_run(*runs, tolerance=2e-7, same_steps=False)

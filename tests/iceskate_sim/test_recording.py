@@ -19,6 +19,9 @@ from iceskate_sim.robot import load_robot
 from iceskate_sim.session import Session
 from iceskate_sim.simulation import Simulator
 
+#: a fast-stepping skate gait (test data): many events in a short window
+FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
+
 PERIODS = 2 * BATCH + 17  # two full batches and a partial one
 
 
@@ -84,8 +87,8 @@ def test_a_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path, 
 
 @pytest.fixture(scope='module')
 def skate_records() -> list[recording.BagRecord]:
-    """1.5 s of the skate scene: support exchanges, heel strikes, several gait modes."""
-    scene = load_scene('skate')
+    """1.5 s of a fast skate gait: support exchanges, heel strikes, several gait modes."""
+    scene = load_scene(FAST_SKATE)
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
     return [recording.bag_record(session.step(stack.commands(session.observation())))
@@ -231,7 +234,7 @@ def test_a_run_at_a_record_rate_keeps_every_nth_sample_and_analyses(tmp_path, en
     from iceskate_analysis.bag_io import read_bag
     from iceskate_analysis.coupling import decompose
     from iceskate_bringup.scene import parse_scene
-    raw = {**load_scene('skate').raw, 'duration': 0.6, 'engine': engine}
+    raw = {**load_scene(FAST_SKATE).raw, 'duration': 0.6, 'engine': engine}
     full = tmp_path / 'full'
     run(parse_scene({**raw, 'record': {'bag': False}}), full, progress=False)
     every4 = tmp_path / 'every4'

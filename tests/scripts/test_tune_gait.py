@@ -62,10 +62,20 @@ def test_cadence_and_head_error_cost_as_documented(tune, skate, monkeypatch):
 
 
 def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):
-    point = tune.point_of(tune.unit_of(skate))
     balance = skate['inputs']['gait_manager']['balance']
+    balance.pop('glide_time', None)
+    point = tune.point_of(tune.unit_of(skate))
     assert point['balance.swing_time'] == pytest.approx(balance['swing_time'])
     assert point['balance.glide_time'] == 0.0  # not in the scene: the parameter's default
+
+
+def test_set_arguments_name_a_value_or_stop_in_one_sentence(tune):
+    assert tune.parse_setting('balance.drive=37') == ('balance.drive', 37.0)
+    for text, words in (('balance.drive', 'expected block.key=value'),
+                        ('drive=37', 'expected block.key=value'),
+                        ('balance.drive=fast', "'fast' is not a number")):
+        with pytest.raises(SystemExit, match=words):
+            tune.parse_setting(text)
 
 
 def test_check_cases_edit_the_scene(tune, skate):
