@@ -16,7 +16,7 @@ help:
 	@echo 'make setup      create .venv from requirements.lock and colcon-build ros_ws (idempotent)'
 	@echo 'make test       setup, then the whole pytest suite (what CI runs)'
 	@echo 'make run        setup, then run a scene headless (SCENE=skate, OUT=runs/<scene>-<time>)'
-	@echo 'make study      setup, then the shipped arm_swing study into runs/arm_swing (~3-6 min)'
+	@echo 'make study      setup, then the shipped arm_swing study into runs/arm_swing (~20 s)'
 	@echo 'make bench      setup, then work-precision and laziness benchmarks into runs/bench (~4-8 min)'
 	@echo 'make stress     setup, then the stress cases and stand for STRESS_DURATION=600 s (long)'
 	@echo 'make sanitize   setup, then the native core under ASan+UBSan: its tests and 2 s of skate'
