@@ -193,11 +193,11 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
     pd(4, p.stiffness, 80.0, p.trunk - phi3 - q[9] - q[10])
     pd(8, yaw_stiffness, yaw_damping, 0.0)
     ramp = min(obs.t / 0.5, 1.0)
-    drive = p.drive * ramp + p.speed_gain * (p.speed * ramp - com_v[1])
+    demand = p.drive * ramp + p.speed_gain * (p.speed * ramp - com_v[1])
     if p.pace_gain:
         head_y = dynamics.frame_placement(obs.contact(), q, 'head_top').translation[1]
-        drive += p.pace_gain * (head_start_y + p.speed * obs.t - head_y)
-    force = min(max(drive, -p.max_brake), p.max_force)
+        demand += p.pace_gain * (head_start_y + p.speed * obs.t - head_y)
+    force = min(max(demand, -p.max_brake), p.max_force)
     jac_com_y = pin.jacobianCenterOfMass(sm.model, data, q)[1]
     effort[SPEED_JOINTS] += jac_com_y[SPEED_JOINTS] * force
     if p.com_stiffness or p.com_damping:

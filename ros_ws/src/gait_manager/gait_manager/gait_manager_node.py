@@ -47,6 +47,9 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
 
     def compute(self, obs: Observation) -> ControllerCommand:
         """The sum of the enabled sources at ``obs``, with each source's share."""
+        if self.controller.head_start_y is None and obs.t != 0.0:
+            self.get_logger().warning(f'first state seen at t={obs.t} s, not 0: its head y is '
+                                      "taken as the start of the stabiliser's pace point")
         return native_command(self.controller, obs, self.kinematics)
 
 
