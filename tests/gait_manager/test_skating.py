@@ -117,3 +117,16 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
     before, braked_end = _shoulder_speeds(events, a, release)
     assert np.all(braked_end < 0.5 * before), (before, braked_end)
     assert np.all(braked_end < 0.7 * free_end), (free_end, braked_end)
+
+
+def test_a_backward_chest_push_after_the_fourth_step_is_survived(tmp_path):
+    """A 150 N x 0.1 s (15 N s) backward push at the chest at 6.6 s: no fall to 9 s, and the
+    gait steps on after it (the forward ones it does not survive: docs/results.md)."""
+    raw = read_yaml(scene_path('skate'), 'scene')
+    raw['duration'], raw['record'] = 9.0, {'bag': False}
+    raw['disturbances'] = [{'start': 6.6, 'duration': 0.1, 'frame': 'chest',
+                            'force': [0.0, -150.0, 0.0]}]
+    metrics = run(parse_scene(raw), tmp_path, progress=False)
+    assert not metrics['fell'], metrics['failure']
+    events = json.loads((tmp_path / 'events.json').read_text())
+    assert sum(e['event'] in ('E6', 'E7') and e['t'] > 6.7 for e in events) >= 2
