@@ -18,6 +18,8 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 BENCH = REPO / 'benchmarks'
 
 CASES = {
+    'bench_bag_write': (['stand', '--duration', '0.3', '--rounds', '1'],
+                        'the two bags are the same file'),
     'bench_dynamics': (['--repeat', '1', '--number', '2'], '18-coordinate modes: worst evaluate'),
     'bench_period': (['stand', '--duration', '0.05', '--no-bag'], 'real-time factor: native loop'),
     'bench_physics': (['--states', '2', '--spacing', '2', '--repeat', '1', '--number', '2',

@@ -53,6 +53,7 @@ import pinocchio as pin
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys.store import Typestore
 
+from iceskate_sim.bag_bulk import write_many
 from iceskate_sim.bag_types import PASSIVE, make_typestore
 from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
@@ -881,14 +882,13 @@ class _BagFile:
         self._writer.write(self._connections[topic], seconds_to_ns(t), data)
 
     def write_block(self, block: RecordBlock) -> None:
-        """Write the messages of a block of packed samples, sample by sample."""
+        """Write the messages of a block of packed samples, sample by sample, in one go
+        (``bag_bulk.write_many``)."""
         stamps = stamps_ns(block.values[:, 0]).tolist()
         encoded = self._encoder.encode_block(block)
         columns = [(self._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
-        write = self._writer.write
-        for k, ns in enumerate(stamps):
-            for connection, column in columns:
-                write(connection, ns, column[k])
+        write_many(self._writer, [(connection, ns, column[k]) for k, ns in enumerate(stamps)
+                                  for connection, column in columns])
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""

@@ -1,0 +1,116 @@
+#!/usr/bin/env python3
+"""The bag writer's work per control instant: rosbags' Writer.write one message at a time
+against ``bag_bulk.write_many`` (a whole block at once), on the blocks of a real run.
+
+Runs a scene headless (native engine, no bag) for ``--duration`` s and keeps the blocks of
+samples the runner hands to its bag writer; then, ``--rounds`` times in turn, writes them into a
+fresh MCAP bag in this process the way the writer process does (``_BagFile.write_block``: the
+block encoded, then its messages written), once per message through ``Writer.write`` and once
+through ``write_many``, checks that the two bags are the same file, and prints microseconds per
+control instant (medians over the rounds) and their ratio, all measured in this one run. The
+writer process must keep up with the native loop (about 30 us a period here) or the run waits
+for it at the end.
+
+Usage (from the repository root, environment sourced; no other benchmark running):
+    python benchmarks/bench_bag_write.py [skate] [--duration 15] [--rounds 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+import pathlib
+import statistics
+import tempfile
+import time
+
+from bench_work_precision import machine_info
+
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
+from iceskate_sim import recording
+from iceskate_sim.recording import RecordBlock
+from iceskate_sim.session import Session, scene_metadata
+
+WAYS = ('Writer.write, message by message', 'write_many, block by block')
+
+
+class _Blocks:
+    """Stands in for the session's bag recorder: keeps the blocks it is handed."""
+
+    def __init__(self) -> None:
+        self.blocks: list[RecordBlock] = []
+
+    def write_block(self, block: RecordBlock) -> None:
+        self.blocks.append(block)
+
+    def close(self) -> None:
+        pass
+
+
+def _one_by_one(bag: recording._BagFile, block: RecordBlock) -> None:
+    """``_BagFile.write_block`` as it was: every message through ``Writer.write``."""
+    stamps = recording.stamps_ns(block.values[:, 0]).tolist()
+    encoded = bag._encoder.encode_block(block)
+    columns = [(bag._connections[topic], encoded[topic]) for topic in recording.RECORDED_TOPICS]
+    for k, ns in enumerate(stamps):
+        for connection, column in columns:
+            bag._writer.write(connection, ns, column[k])
+
+
+def _write(path: pathlib.Path, scene: object, session: Session, blocks: list[RecordBlock],
+           way: str) -> float:
+    """Seconds to write ``blocks`` into a new bag at ``path`` (opening and closing it)."""
+    start = time.perf_counter()
+    bag = recording._BagFile(path, scene_metadata(scene),
+                             session.robot.urdf_path.read_text(encoding='utf-8'),
+                             recording.MessageFactory(robot=session.robot))
+    for block in blocks:
+        if way == WAYS[0]:
+            _one_by_one(bag, block)
+        else:
+            bag.write_block(block)
+    bag.close()
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('scene', nargs='?', default='skate')
+    parser.add_argument('--duration', type=float, default=15.0, help='simulated seconds')
+    parser.add_argument('--rounds', type=int, default=3, help='writes of each way (median)')
+    args = parser.parse_args()
+    info = machine_info()
+    scene = replace(load_scene(args.scene), duration=args.duration, record_bag=False)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    session.recorder = recorder = _Blocks()
+    while not session.done:
+        session.run_periods(stack, 1000)
+    session.finish()
+    samples = sum(len(block) for block in recorder.blocks)
+    times: dict[str, list[float]] = {way: [] for way in WAYS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(args.rounds):
+            paths = {}
+            for i, way in enumerate(WAYS):
+                paths[way] = pathlib.Path(tmp) / f'{k}-{i}' / 'bag'
+                paths[way].parent.mkdir()
+                times[way].append(_write(paths[way], scene, session, recorder.blocks, way))
+            files = [(paths[way] / 'bag.mcap').read_bytes() for way in WAYS]
+            if files[0] != files[1]:
+                raise SystemExit('the two ways wrote different bags')
+    print(f'{args.scene}, {args.duration:g} s: {samples} control instants, '
+          f'{len(recording.RECORDED_TOPICS)} messages each; median of {args.rounds} rounds, '
+          'ways in turn; the two bags are the same file')
+    print(f'machine: {info["cpu"]}, {info["cpus"]} CPUs; load average at start '
+          f'{info["loadavg_start"]}; {info["date"]}')
+    per = {way: statistics.median(times[way]) / samples * 1e6 for way in WAYS}
+    for way in WAYS:
+        print(f'{way:36s} {per[way]:7.1f} us per control instant (encoding included)')
+    print(f'ratio: write_many takes {per[WAYS[1]] / per[WAYS[0]]:.2f} of the time '
+          f'({per[WAYS[0]] / per[WAYS[1]]:.2f}x faster)')
+
+
+if __name__ == '__main__':
+    main()
