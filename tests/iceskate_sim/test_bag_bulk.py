@@ -98,3 +98,9 @@ def test_a_connection_the_bag_does_not_have_is_refused(tmp_path):
         write_many(writer, [(stranger, 1, b'\x00')])
     writer.close()
     other.close()
+
+
+def test_a_writer_that_is_not_open_is_refused(tmp_path):
+    writer = Writer(tmp_path / 'bag', version=9, storage_plugin=StoragePlugin.MCAP)
+    with pytest.raises(SimulationError, match='is not open'):
+        write_many(writer, [])

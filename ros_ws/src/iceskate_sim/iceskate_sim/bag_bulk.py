@@ -37,6 +37,8 @@ def write_many(writer: Writer, messages: Sequence[tuple[Connection, int, bytes]]
     :raises SimulationError: for a writer that is not open or a connection it does not have.
     """
     storage = writer.storage
+    if storage is None:
+        raise SimulationError(f'bag {writer.path} is not open')
     if not isinstance(storage, McapWriter) or writer.compression_mode == CompressionMode.MESSAGE:
         for connection, stamp, data in messages:
             writer.write(connection, stamp, data)
