@@ -111,6 +111,14 @@ def unit_of(raw: dict) -> np.ndarray:
     return np.clip((np.array(values) - LOW) / (HIGH - LOW), 0.0, 1.0)
 
 
+def target_at_gait_speed(raw: dict) -> dict:
+    """``raw`` with the visual-lifting target moving at the gait's intended speed (v_d =
+    balance.speed), as the robust objective runs every point."""
+    raw = copy.deepcopy(raw)
+    raw['inputs']['visual_lifting']['v_d'] = raw['inputs']['gait_manager']['balance']['speed']
+    return raw
+
+
 def apply(raw: dict, point: dict[str, float]) -> dict:
     """The base scene with the sampled gait-manager parameters."""
     raw = copy.deepcopy(raw)
@@ -238,9 +246,9 @@ def evaluate(base: dict, duration: float, objective: str, max_rate: float,
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
-    if objective == 'robust':  # v_d: the gait's intended speed; the first case is nominal
-        raw['inputs']['visual_lifting']['v_d'] = point['balance.speed']
-        robust, robustness, (metrics, events) = robust_score(raw, duration)
+    if objective == 'robust':  # the first case is nominal
+        robust, robustness, (metrics, events) = robust_score(target_at_gait_speed(raw),
+                                                             duration)
     else:
         metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
@@ -291,8 +299,8 @@ def main() -> None:
     parser.add_argument('--set', action='append', default=[], metavar='BLOCK.KEY=VALUE',
                         help='start from this gait-manager value (after --start; repeatable)')
     parser.add_argument('--check', action='store_true',
-                        help='no search: run the base scene (with --start: that point) over '
-                             'CHECKS and print one JSON line per case')
+                        help='no search: run the base scene (with --start/--set: that point) '
+                             'over CHECKS and print one JSON line per case')
     args = parser.parse_args()
     try:  # YAML 1.2 numbers, as run_scene reads it
         base = read_yaml(scene_path(args.scene), 'scene')
@@ -307,8 +315,7 @@ def main() -> None:
     base = apply(base, dict(parse_setting(text) for text in args.set))
     if args.check:
         if args.objective == 'robust':  # as the robust search ran it
-            base['inputs']['visual_lifting']['v_d'] = \
-                base['inputs']['gait_manager']['balance']['speed']
+            base = target_at_gait_speed(base)
         for row in check(base, args.duration):
             print(json.dumps(row), flush=True)
         return

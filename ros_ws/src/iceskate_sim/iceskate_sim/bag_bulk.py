@@ -46,21 +46,22 @@ def write_many(writer: Writer, messages: Sequence[tuple[Connection, int, bytes]]
     used = {connection.id: connection for connection, _, _ in messages}
     if any(connection not in writer.connections for connection in used.values()):
         raise SimulationError(f'bag {writer.path}: a message of a connection it does not have')
-    start = 0
+    start, counts = 0, Counter()
     while start < len(messages):
-        start = _fill_chunk(storage, messages, start)
-    if messages:
-        stamps = [stamp for _, stamp, _ in messages]
-        writer.min_timestamp = min(writer.min_timestamp, min(stamps))
-        writer.max_timestamp = max(writer.max_timestamp, max(stamps))
-        for cid, count in Counter(connection.id for connection, _, _ in messages).items():
-            writer.counts[cid] += count
+        end, chunk_counts, first, last = _fill_chunk(storage, messages, start)
+        counts.update(chunk_counts)
+        writer.min_timestamp = min(writer.min_timestamp, first)
+        writer.max_timestamp = max(writer.max_timestamp, last)
+        start = end
+    for cid, count in counts.items():
+        writer.counts[cid] += count
 
 
 def _fill_chunk(storage: McapWriter, messages: Sequence[tuple[Connection, int, bytes]],
-                start: int) -> int:
-    """Append messages from ``start`` to the open chunk until it is full (then close it);
-    return the index of the first message not written."""
+                start: int) -> tuple[int, Counter, int, int]:
+    """Append messages from ``start`` to the open chunk until it is full (then close it):
+    (the index of the first message not written, the messages written per channel id, their
+    first and last stamp [ns])."""
     chunk = storage.chunk
     offset = chunk.bio.tell()
     parts: list[bytes] = []
@@ -78,8 +79,9 @@ def _fill_chunk(storage: McapWriter, messages: Sequence[tuple[Connection, int, b
     storage.message_end_time = max(last, storage.message_end_time)
     chunk.message_start_time = min(first, chunk.message_start_time)
     chunk.message_end_time = max(last, chunk.message_end_time)
-    for cid, count in Counter(connection.id for connection, _, _ in messages[start:end]).items():
+    counts = Counter(connection.id for connection, _, _ in messages[start:end])
+    for cid, count in counts.items():
         storage.channel_stats[cid] += count
     if offset > _CHUNK_BYTES:
         storage.close_chunk()
-    return end
+    return end, counts, first, last
