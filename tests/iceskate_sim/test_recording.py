@@ -213,7 +213,7 @@ def test_the_native_block_packs_the_records_of_its_samples(tmp_path):
     stack = ControlStack(scene, native.robot, native.observation())
     blocks = []
     record_block = native._record_block
-    native._record_block = lambda block: (blocks.append(block), record_block(block))
+    native._record_block = lambda block, first: (blocks.append(block), record_block(block, first))
     while not native.done:
         native.run_periods(stack, 250)
     packed = [recording.RecordBlock.of_columns(

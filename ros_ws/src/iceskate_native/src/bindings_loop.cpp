@@ -3,6 +3,10 @@
 // objects, e.g. visual_lifting._law.VisualLiftingController), which it keeps alive; run(n)
 // returns the samples of up to n periods as numpy arrays, and raise_error() re-raises what
 // stopped it early (the simulator's DivergenceError & co. or the controller's own error).
+// A loop without controllers takes the commands of controller nodes (receive, checked for
+// sizes, finiteness and gains >= 0), holds them one period at a time (hold) into a block taken
+// with take_block, and gives the live view of the current state (live).
+#include <algorithm>
 #include <cstdint>
 #include <exception>
 #include <initializer_list>
@@ -39,6 +43,10 @@ struct BoundControlLoop
   std::vector<nb::object> controllers;
   ControlLoop loop;
   SampleBlock block;
+  std::vector<ReceivedCommand> inbox;  ///< one per controller node of `receive`
+  std::vector<bool> received;          ///< inbox[k] holds a command
+  std::vector<ReceivedCommand> held;   ///< the received ones of a period, in order
+  LiveRecord live;
 };
 
 /// The C++ object behind `object`; std::invalid_argument naming `what` if it is no T.
@@ -60,10 +68,12 @@ using PushRow = std::tuple<double, double, std::string, Eigen::VectorXd>;
 void construct_loop(
   BoundControlLoop * self, nb::object simulator, nb::object kinematics,
   std::vector<nb::object> controllers, const std::vector<PushRow> & pushes,
-  const Eigen::Ref<const Eigen::VectorXd> & head_origin)
+  const Eigen::Ref<const Eigen::VectorXd> & head_origin,
+  const std::vector<std::vector<std::string>> & inbox)
 {
   HybridSimulator & sim = native_object<HybridSimulator>(simulator, "the simulator");
-  Kinematics & kin = native_object<Kinematics>(kinematics, "the kinematics");
+  Kinematics * kin =
+    kinematics.is_none() ? nullptr : &native_object<Kinematics>(kinematics, "the kinematics");
   std::vector<Controller *> laws;
   for (std::size_t k = 0; k < controllers.size(); ++k) {
     laws.push_back(
@@ -75,9 +85,81 @@ void construct_loop(
     rows.push_back({start, duration, frame, force});
   }
   require_finite_vector(head_origin, 3, "head_origin", "psi: y [m], z [m], pitch [rad]");
+  std::vector<ReceivedCommand> slots(inbox.size());
+  for (std::size_t k = 0; k < inbox.size(); ++k) {
+    slots[k].sources = inbox[k];
+  }
   new (self) BoundControlLoop{
     std::move(simulator), std::move(kinematics), std::move(controllers),
-    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin), SampleBlock{}};
+    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin), SampleBlock{},
+    std::move(slots), std::vector<bool>(inbox.size(), false), {}, LiveRecord{}};
+}
+
+using Values = Eigen::Ref<const Eigen::VectorXd>;
+
+/// Store controller node `index`'s command (see bind_control_loop for the arguments).
+void receive(
+  BoundControlLoop & self, std::size_t index, const Values & effort, const Values & stiffness,
+  const Values & damping, const Values & reference, const Values & source_efforts,
+  const Values & head_target)
+{
+  if (index >= self.inbox.size()) {
+    throw std::invalid_argument(
+      "controller index " + std::to_string(index) + " is not below the "
+      + std::to_string(self.inbox.size()) + " controller nodes of the loop");
+  }
+  ReceivedCommand & command = self.inbox[index];
+  const auto sources = static_cast<Eigen::Index>(command.sources.size());
+  const char * joints = "[y0, q1..q17]";
+  require_finite_vector(effort, kCoordinates, "effort", joints);
+  const bool impedance = stiffness.size() + damping.size() + reference.size() > 0;
+  if (impedance) {
+    require_finite_vector(stiffness, kCoordinates, "stiffness", joints);
+    require_finite_vector(damping, kCoordinates, "damping", joints);
+    require_finite_vector(reference, kCoordinates, "position_reference", joints);
+    if (stiffness.minCoeff() < 0.0 || damping.minCoeff() < 0.0) {
+      throw std::invalid_argument("stiffness and damping must be >= 0");
+    }
+  }
+  require_finite_vector(
+    source_efforts, sources * kCoordinates, "source_efforts", "18 per source, in order");
+  if (head_target.size() != 0) {
+    require_finite_vector(head_target, 3, "head_target", "y [m], z [m], pitch [rad]");
+  }
+  command.total.effort = effort;
+  command.total.has_impedance = impedance;
+  if (impedance) {
+    command.total.stiffness = stiffness;
+    command.total.damping = damping;
+    command.total.reference = reference;
+  }
+  command.efforts = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, kCoordinates,
+                                                   Eigen::RowMajor>>(source_efforts.data(),
+                                                                     sources, kCoordinates);
+  command.has_head_target = head_target.size() != 0;
+  if (command.has_head_target) {
+    command.head_target = head_target;
+  }
+  self.received[index] = true;
+}
+
+bool hold(BoundControlLoop & self, bool clear)
+{
+  self.held.clear();
+  for (std::size_t k = 0; k < self.inbox.size(); ++k) {
+    if (self.received[k]) {
+      self.held.push_back(self.inbox[k]);
+    }
+  }
+  bool taken = false;
+  {
+    nb::gil_scoped_release released;
+    taken = self.loop.hold(self.held, self.block);
+  }
+  if (clear) {
+    std::fill(self.received.begin(), self.received.end(), false);
+  }
+  return taken;
 }
 
 /// A numpy array that takes over `data` (no copy), of the given shape.
@@ -89,20 +171,10 @@ nb::object array_of(std::vector<T> && data, std::initializer_list<std::size_t> s
   return nb::cast(nb::ndarray<nb::numpy, T>(owner->data(), shape, deleter));
 }
 
-nb::dict run(BoundControlLoop & self, int periods)
+/// The samples of `b` as numpy arrays (taken over: `b` is left empty, its sources kept).
+nb::dict block_arrays(SampleBlock & b)
 {
-  if (periods < 0) {
-    throw std::invalid_argument("the number of periods must be >= 0");
-  }
-  SampleBlock & b = self.block;
-  int taken = 0;
-  {
-    // The loop touches no Python object (the controllers are C++ ones, checked when bound):
-    // other Python threads, e.g. the one that hands the bag's samples to its writer, run.
-    nb::gil_scoped_release released;
-    taken = self.loop.run(periods, b);
-  }
-  const auto n = static_cast<std::size_t>(taken);
+  const auto n = static_cast<std::size_t>(b.count);
   constexpr std::size_t m = kCoordinates;
   nb::dict out;
   out["t"] = array_of(std::move(b.t), {n});
@@ -135,7 +207,32 @@ nb::dict run(BoundControlLoop & self, int periods)
   }
   out["sources"] = sources;
   out["efforts"] = efforts;
+  b.clear();
   return out;
+}
+
+nb::dict run(BoundControlLoop & self, int periods)
+{
+  if (periods < 0) {
+    throw std::invalid_argument("the number of periods must be >= 0");
+  }
+  {
+    // The loop touches no Python object (the controllers are C++ ones, checked when bound):
+    // other Python threads, e.g. the one that hands the bag's samples to its writer, run.
+    nb::gil_scoped_release released;
+    self.loop.run(periods, self.block);
+  }
+  return block_arrays(self.block);
+}
+
+nb::tuple live(BoundControlLoop & self)
+{
+  LiveRecord & r = self.live;
+  self.loop.live(r);
+  std::vector<double> values(r.values);
+  const std::size_t n = values.size();
+  return nb::make_tuple(array_of(std::move(values), {n}), r.mode, r.side, r.pivot,
+                        r.step_index, r.last_event);
 }
 
 }  // namespace
@@ -149,11 +246,46 @@ void bind_control_loop(nb::module_ & m)
     "commands' sum and the active push are held over the period, the simulator advances. It "
     "keeps the simulator, kinematics and controllers alive.")
     .def(
-      "__init__", &construct_loop, "simulator"_a, "kinematics"_a, "controllers"_a, "pushes"_a,
-      "head_origin"_a,
-      "simulator: a HybridSimulator; kinematics: a Kinematics; controllers: Controller "
-      "objects; pushes: [(start [s], duration [s], frame, world force (3,) [N])]; "
-      "head_origin: the head target recorded while no controller steers one.")
+      "__init__", &construct_loop, "simulator"_a, "kinematics"_a.none(), "controllers"_a,
+      "pushes"_a, "head_origin"_a, "inbox"_a = std::vector<std::vector<std::string>>{},
+      "simulator: a HybridSimulator; kinematics: a Kinematics (None without controllers); "
+      "controllers: Controller objects; pushes: [(start [s], duration [s], frame, world force "
+      "(3,) [N])]; head_origin: the head target recorded while no controller steers one; "
+      "inbox: the source names of each controller node whose commands come through receive(), "
+      "in summing order.")
+    .def(
+      "receive", &receive, "index"_a, "effort"_a, "stiffness"_a, "damping"_a, "reference"_a,
+      "source_efforts"_a, "head_target"_a,
+      "Keep the command of controller node `index` of the inbox for the next hold(), as an "
+      "EffortCommand carries it: effort (18,); stiffness, damping, reference (18,) each, or all "
+      "three empty (no impedance); source_efforts: 18 per source of the node, in order, flat; "
+      "head_target (3,) or empty. ValueError for a wrong size, a non-finite value or a "
+      "negative gain (the command is then not kept).")
+    .def(
+      "hold", &hold, "clear"_a = true,
+      "One control period holding the sum of the commands received (in the inbox's order) and "
+      "the active push; its sample is appended to the block (take_block). Returns False if the "
+      "physics failed (raise_error() raises why). clear: forget the commands afterwards (else "
+      "they are held again until replaced).")
+    .def(
+      "forget",
+      [](BoundControlLoop & self) {
+        std::fill(self.received.begin(), self.received.end(), false);
+      },
+      "Drop the commands received (hold() then holds none until the next receive()).")
+    .def(
+      "take_block", [](BoundControlLoop & self) { return block_arrays(self.block); },
+      "The samples held since the last take_block, as run() returns them; the block is emptied.")
+    .def_prop_ro(
+      "block_size", [](const BoundControlLoop & self) { return self.block.count; },
+      "Samples held and not taken yet.")
+    .def(
+      "live", &live,
+      "The live view of the current state, what the simulator publishes before the commands "
+      "of t_k exist: (values, mode, side, pivot, step_index, last_event); values in the order "
+      "of iceskate_sim.recording.BagRecord with the held input's generalized force at the "
+      "state as the one effort; side 0 right / 1 left, pivot 0 toe / 1 heel, last_event: "
+      "index of the latest transition at or before t_k (-1: none).")
     .def(
       "run", &run, "periods"_a,
       "Up to `periods` control periods; returns their samples as a dict of numpy arrays (t, "

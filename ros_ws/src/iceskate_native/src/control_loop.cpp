@@ -35,6 +35,16 @@ Observation observation_of(const HybridState & s, const Mode & mode)
   return obs;
 }
 
+/// Index in `events` of the latest transition at or before t [s] (-1: none).
+long last_event_at(const std::vector<TransitionRecord> & events, double t)
+{
+  long last = static_cast<long>(events.size()) - 1;
+  while (last >= 0 && !(events[static_cast<std::size_t>(last)].t <= t)) {
+    --last;
+  }
+  return last;
+}
+
 template <typename Derived>
 void append(std::vector<double> & column, const Eigen::DenseBase<Derived> & values)
 {
@@ -64,7 +74,7 @@ void SampleBlock::clear()
 }
 
 ControlLoop::ControlLoop(
-  HybridSimulator & simulator, Kinematics & kinematics, std::vector<Controller *> controllers,
+  HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
   std::vector<Push> pushes, const Eigen::Vector3d & head_origin)
 : simulator_(simulator),
   kinematics_(kinematics),
@@ -77,6 +87,9 @@ ControlLoop::ControlLoop(
     if (controller == nullptr) {
       throw std::invalid_argument("a control loop's controller is missing (null)");
     }
+  }
+  if (kinematics_ == nullptr && !controllers_.empty()) {
+    throw std::invalid_argument("a control loop with controllers needs their kinematics");
   }
   for (const Push & push : pushes_) {
     simulator_.dynamics().support_model(0, 0).frame(push.frame);  // invalid_argument if unknown
@@ -120,30 +133,63 @@ std::size_t ControlLoop::source_index(SampleBlock & block, const std::string & n
   return block.sources.size() - 1;
 }
 
+bool ControlLoop::hold(const std::vector<ReceivedCommand> & commands, SampleBlock & block)
+{
+  error_ = nullptr;
+  physics_failed_ = false;
+  try {
+    period(commands, block);
+  } catch (...) {
+    error_ = std::current_exception();
+    return false;
+  }
+  return true;
+}
+
 void ControlLoop::step(SampleBlock & block)
+{
+  const HybridState & now = simulator_.state();
+  const Observation obs = observation_of(now, simulator_.dynamics().mode(now.contact.mode));
+  commands_.resize(controllers_.size());
+  for (std::size_t k = 0; k < controllers_.size(); ++k) {  // what each node would send
+    ControllerOutput & out = outputs_[k];
+    out.clear();
+    controllers_[k]->compute(obs, *kinematics_, out);
+    ReceivedCommand & command = commands_[k];
+    command.total = out.total();
+    command.sources.resize(out.sources.size());
+    command.efforts.resize(static_cast<Eigen::Index>(out.sources.size()), kCoordinates);
+    for (std::size_t i = 0; i < out.sources.size(); ++i) {
+      command.sources[i] = out.sources[i].source;
+      command.efforts.row(static_cast<Eigen::Index>(i)) =
+        out.sources[i].command.torque(obs.q, obs.v).transpose();
+    }
+    command.has_head_target = out.has_head_target;
+    command.head_target = out.head_target;
+  }
+  period(commands_, block);
+}
+
+void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBlock & block)
 {
   Dynamics & dynamics = simulator_.dynamics();
   const HybridState & now = simulator_.state();
   const Placement head = dynamics.frame_placement(now.contact, now.q, "head_top");
-  const Observation obs = observation_of(now, dynamics.mode(now.contact.mode));
 
-  // the commands of t_k, and the held sum (iceskate_sim.command.HeldCommand.of_controllers)
+  // the held sum of the commands of t_k (iceskate_sim.command.HeldCommand.of_controllers)
   Inputs inputs;
   inputs.has_impedance = true;
   const Eigen::Vector3d * target = &head_origin_;
-  for (std::size_t k = 0; k < controllers_.size(); ++k) {
-    ControllerOutput & out = outputs_[k];
-    out.clear();
-    controllers_[k]->compute(obs, kinematics_, out);
-    const JointCommand total = out.total();
+  for (const ReceivedCommand & command : commands) {
+    const JointCommand & total = command.total;
     inputs.tau += total.effort;
     if (total.has_impedance) {
       inputs.tau += total.stiffness.cwiseProduct(total.reference);
       inputs.stiffness += total.stiffness;
       inputs.damping += total.damping;
     }
-    if (out.has_head_target && target == &head_origin_) {
-      target = &out.head_target;
+    if (command.has_head_target && target == &head_origin_) {
+      target = &command.head_target;
     }
   }
   const double t = now.t;
@@ -179,9 +225,9 @@ void ControlLoop::step(SampleBlock & block)
     }
     present |= std::uint64_t{1} << i;
   };
-  for (const ControllerOutput & out : outputs_) {
-    for (const auto & [source, command] : out.sources) {
-      effort(source, command.torque(obs.q, obs.v));
+  for (const ReceivedCommand & command : commands) {
+    for (std::size_t i = 0; i < command.sources.size(); ++i) {
+      effort(command.sources[i], command.efforts.row(static_cast<Eigen::Index>(i)).transpose());
     }
   }
   if (!inputs.push_frame.empty()) {
@@ -214,13 +260,41 @@ void ControlLoop::step(SampleBlock & block)
     append(block.head_rotation, head.rotation.row(i));
   }
   append(block.head_target, *target);
-  const auto & events = simulator_.events();
-  long last = static_cast<long>(events.size()) - 1;
-  while (last >= 0 && !(events[static_cast<std::size_t>(last)].t <= s.t)) {
-    --last;
-  }
-  block.last_event.push_back(last);
+  block.last_event.push_back(last_event_at(simulator_.events(), s.t));
   ++block.count;
+}
+
+void ControlLoop::live(LiveRecord & record)
+{
+  const HybridState & s = simulator_.state();
+  const DynamicsResult & r = simulator_.result();
+  const Inputs & held = simulator_.inputs();
+  const Placement head = simulator_.dynamics().frame_placement(s.contact, s.q, "head_top");
+  record.last_event = last_event_at(simulator_.events(), s.t);
+  const double last_t = record.last_event < 0
+                          ? 0.0
+                          : simulator_.events()[static_cast<std::size_t>(record.last_event)].t;
+  std::vector<double> & values = record.values;
+  values.clear();
+  for (const double x : {s.t, s.t_exchange, s.t_touchdown, s.contact.heel_anchor_y,
+                         r.support_normal, r.support_tangential, r.cop_y, last_t}) {
+    values.push_back(x);
+  }
+  append(values, s.q);
+  append(values, s.v);
+  append(values, r.qdd);
+  append(values, r.passive);
+  append(values, r.multipliers);
+  append(values, head.translation);
+  for (int i = 0; i < 3; ++i) {  // row-major
+    append(values, head.rotation.row(i));
+  }
+  // iceskate_sim.command.HeldCommand.torque: bias - stiffness q - damping v
+  append(values, held.tau - held.stiffness.cwiseProduct(s.q) - held.damping.cwiseProduct(s.v));
+  record.mode = s.contact.mode;
+  record.side = s.contact.side;
+  record.pivot = s.contact.pivot;
+  record.step_index = s.step_index;
 }
 
 }  // namespace iceskate_native

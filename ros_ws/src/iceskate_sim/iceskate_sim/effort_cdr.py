@@ -9,7 +9,8 @@ instant (its names, sources and array lengths do not change), so:
   and checks it with ``command_from_message``, which names any problem; it then keeps the
   message's *skeleton* (the bytes other than the stamp and the float64 values). A later message
   with the same skeleton is read from the known offsets (its values checked: finite, gains
-  >= 0); any other goes the checked way again.
+  >= 0) into ``CommandValues``, views of its bytes that the native loop takes as they are; any
+  other goes the checked way again.
 * ``CommandEncoder`` writes a controller's command into the bytes of its previous one when the
   layout is the same (stamp and values only), else serializes it whole.
 
@@ -24,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import struct
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from rosbags.typesys.store import Typestore
@@ -44,6 +45,49 @@ _STAMP = struct.Struct('<iI')
 _COUNT = struct.Struct('<I')
 _EMPTY = np.zeros(0)
 _TYPE = 'iceskate_interfaces/msg/EffortCommand'
+
+
+class CommandValues(NamedTuple):
+    """A controller's command as an EffortCommand carries it, over the 18 coordinates in order
+    (views of the message's bytes once its layout is known; checked).
+
+    :ivar effort: (18,) [N m, N].
+    :ivar stiffness: (18,) [N m/rad], or empty (with ``damping`` and ``reference``: no
+        impedance).
+    :ivar source_efforts: each source's generalized force, 18 per source in ``sources``' order,
+        flat.
+    :ivar head_target: (3,) y [m], z [m], pitch [rad], or empty (none).
+    """
+
+    effort: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    reference: np.ndarray
+    source_efforts: np.ndarray
+    head_target: np.ndarray
+    sources: tuple[str, ...]
+
+    @classmethod
+    def of(cls, answer: ControllerCommand) -> CommandValues:
+        """The values of ``answer``."""
+        command, efforts = answer.command, answer.source_efforts
+        return cls(command.effort, *((command.stiffness, command.damping, command.reference)
+                                     if command.has_impedance else (_EMPTY,) * 3),
+                   np.concatenate(list(efforts.values())) if efforts else _EMPTY,
+                   _EMPTY if answer.head_target is None else answer.head_target,
+                   tuple(efforts))
+
+    def command(self) -> ControllerCommand:
+        """The ControllerCommand of these values (copies).
+
+        :raises SimulationError: for a wrong length, a non-finite value or a negative gain.
+        """
+        command = (JointCommand(self.effort.copy(), self.stiffness.copy(), self.damping.copy(),
+                                self.reference.copy()) if self.stiffness.size
+                   else JointCommand(self.effort.copy()))
+        rows = self.source_efforts.reshape(len(self.sources), N_COORDINATES).copy()
+        return ControllerCommand(command, dict(zip(self.sources, rows, strict=True)),
+                                 self.head_target.copy() if self.head_target.size else None)
 
 
 @dataclass(frozen=True)
@@ -142,15 +186,24 @@ def _source_of(data: bytes) -> str | None:
 
 
 class CommandDecoder:
-    """``effort_commands`` CDR bytes -> (source, stamp [ns], ControllerCommand), every
-    message checked as ``command_from_message`` checks it (see the module docstring)."""
+    """``effort_commands`` CDR bytes -> (source, stamp [ns], command), every message checked
+    as ``command_from_message`` checks it (see the module docstring)."""
 
     def __init__(self) -> None:
         #: per source: its last checked message's layout and the names that go with it
         self._known: dict[str, tuple[_Layout, tuple[str, ...]]] = {}
 
     def decode(self, data: bytes) -> tuple[str, int, ControllerCommand]:
-        """The sender, stamp and command of one message.
+        """The sender, stamp and ControllerCommand of one message.
+
+        :raises SimulationError: naming the problem (and the source, once it is readable).
+        """
+        source, stamp_ns, values = self.decode_values(data)
+        return source, stamp_ns, values.command()
+
+    def decode_values(self, data: bytes) -> tuple[str, int, CommandValues]:
+        """The sender, stamp and command values of one message (views of ``data`` when its
+        layout is known).
 
         :raises SimulationError: naming the problem (and the source, once it is readable).
         """
@@ -159,33 +212,28 @@ class CommandDecoder:
         known = self._known.get(source) if source is not None else None
         if known is not None and len(data) >= known[0].size \
                 and _skeleton(data, known[0]) == known[0].skeleton:
-            command = self._values(data, *known)
-            if command is not None:
+            values = self._values(data, *known)
+            if values is not None:
                 sec, nanosec = _STAMP.unpack_from(data, _HEADER)
-                return source, sec * 1_000_000_000 + nanosec, command
+                return source, sec * 1_000_000_000 + nanosec, values
         message, layout = read_effort_command(data)
-        command = command_from_message(message)
+        values = CommandValues.of(command_from_message(message))
         if message.joint_names == list(COORDINATE_NAMES):  # the layout the fast way assumes
             self._known[message.source] = (layout, tuple(message.source_names))
-        return message.source, message.stamp_ns, command
+        return message.source, message.stamp_ns, values
 
     @staticmethod
-    def _values(data: bytes, layout: _Layout, sources: tuple[str, ...]
-                ) -> ControllerCommand | None:
-        """The command in ``data`` (all 18 names in order, as checked before); None when a
+    def _values(data: bytes, layout: _Layout, sources: tuple[str, ...]) -> CommandValues | None:
+        """The values in ``data`` (all 18 names in order, as checked before); None when a
         value is not finite or a gain negative (the checked way then says which)."""
-        effort, stiffness, damping, reference, parts, target = (
-            np.frombuffer(data, '<f8', count, offset).copy() for offset, count in layout.arrays)
-        for x in (effort, stiffness, damping, reference, parts, target):
+        arrays = [np.frombuffer(data, '<f8', count, offset) for offset, count in layout.arrays]
+        for x in arrays:
             if not all_finite(x):
                 return None
+        stiffness, damping = arrays[1], arrays[2]
         if stiffness.size and (min(stiffness.tolist()) < 0.0 or min(damping.tolist()) < 0.0):
             return None
-        command = (JointCommand(effort, stiffness, damping, reference) if stiffness.size
-                   else JointCommand(effort))
-        rows = parts.reshape(len(sources), N_COORDINATES)
-        return ControllerCommand(command, dict(zip(sources, rows, strict=True)),
-                                 target if target.size else None)
+        return CommandValues(*arrays, sources)
 
 
 class CommandEncoder:

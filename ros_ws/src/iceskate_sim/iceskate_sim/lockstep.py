@@ -6,7 +6,9 @@ per controller node, its sources summed; checked sender, stamp, content and brea
 every controller the scene runs has answered (``missing()`` is empty) integrates one period
 with the ``Session`` the headless runner uses: the same zero-order hold of the summed
 commands, the same push, the same samples in the same trajectory and bag. So a lockstep ROS run
-gives the headless trajectory and ``metrics.json``.
+gives the headless trajectory and ``metrics.json``. On the native engine the commands go
+straight into the native loop the headless runner uses (``Session.command_inbox``), which
+holds them and keeps the samples, so a period costs no Python objects.
 
 Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
 *starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
@@ -28,7 +30,6 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import replace
 import json
 import pathlib
 import re
@@ -38,10 +39,11 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.command import ControllerCommand
-from iceskate_sim.effort_cdr import CommandDecoder
+from iceskate_sim.effort_cdr import CommandDecoder, CommandValues
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record
+from iceskate_sim.robot import PIVOTS, SIDES
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
 from iceskate_sim.session import Session, last_event_before
 
@@ -82,6 +84,9 @@ class LockstepSession:
         self.recorder = session.recorder
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
         self.encoder = RecordEncoder(self.factory)
+        #: the native loop that holds the commands (None: the periods step in Python)
+        self._inbox = session.command_inbox(tuple(controllers.values()))
+        self._index = {c: k for k, c in enumerate(self.controllers)}
         self._restart()
 
     def _restart(self) -> None:
@@ -125,36 +130,48 @@ class LockstepSession:
         bag's message types, publishable raw (encoded as the bag's records are)."""
         s = self.sim.state
         if self._live is None or self._live[0] is not s:  # built once per instant
-            placement = self.sim.head_placement()
-            sample = Sample(s, self.sim.result, {'held': self.sim.command.torque(s.q, s.v)},
-                            placement.translation, placement.rotation,
-                            last_event_before(self.sim, s.t))
-            self._live = (s, bag_record(sample))
+            self._live = (s, self._live_record(s))
         return self.encoder.encode(self._live[1], topics)
 
+    def _live_record(self, s: HybridState) -> BagRecord:
+        """The record of the live view of the current state ``s``."""
+        if self._inbox is not None:
+            values, mode, side, pivot, step_index, last = self._inbox.live()
+            return BagRecord(values, mode, SIDES[side], PIVOTS[pivot], step_index, ('held',),
+                             self.sim.events[last].cause if last >= 0 else None)
+        placement = self.sim.head_placement()
+        return bag_record(Sample(s, self.sim.result, {'held': self.sim.command.torque(s.q, s.v)},
+                                 placement.translation, placement.rotation,
+                                 last_event_before(self.sim, s.t)))
+
     # -------------------------------------------------------------------------- commands
-    def offer(self, controller: str, stamp_ns: int, command: ControllerCommand) -> bool:
+    def offer(self, controller: str, stamp_ns: int,
+              command: CommandValues | ControllerCommand) -> bool:
         """Take a controller's command; False for a repeat of its last stamp (ignored).
 
         An empty breakdown is the effort of a controller's only source, named like it,
         evaluated at the current state.
 
         :raises SimulationError: for an unknown controller, a breakdown that does not name the
-            controller's sources in order, or a stamp that is stale (before t_k, or in
-            free-running mode before the controller's last command) or in the future.
+            controller's sources in order, a stamp that is stale (before t_k, or in
+            free-running mode before the controller's last command) or in the future, or (on
+            the native engine) values of a wrong size, not finite or negative gains.
         """
         if controller not in self.controllers:
             raise SimulationError(f'command from unknown source {controller!r}; scene '
                                   f'{self.scene.name!r} runs the controllers '
                                   f'{list(self.controllers)}')
+        if isinstance(command, ControllerCommand):
+            command = CommandValues.of(command)
         expected = self._breakdown[controller]
-        if not command.source_efforts and expected == (controller,):
+        if not command.sources and expected == (controller,):
             state = self.sim.state
-            command = replace(command, source_efforts={
-                controller: command.command.torque(state.q, state.v)})
-        if tuple(command.source_efforts) != expected:
+            total = command.command().command
+            command = command._replace(source_efforts=total.torque(state.q, state.v),
+                                       sources=expected)
+        if command.sources != expected:
             raise SimulationError(f'command of {controller!r} breaks down into sources '
-                                  f'{list(command.source_efforts)}; scene {self.scene.name!r} '
+                                  f'{list(command.sources)}; scene {self.scene.name!r} '
                                   f'runs {list(expected)} on it')
         now = self.t_ns
         if stamp_ns > now:
@@ -168,6 +185,11 @@ class LockstepSession:
             raise SimulationError(f'stale command of {controller!r} stamped '
                                   f'{ns_to_seconds(stamp_ns)} s (simulation at '
                                   f'{ns_to_seconds(now)} s)')
+        if self._inbox is not None:
+            try:
+                self._inbox.receive(self._index[controller], command)
+            except SimulationError as exc:
+                raise SimulationError(f'{exc} (from {controller!r})') from None
         self._commands[controller] = command
         self._stamps[controller] = stamp_ns
         return True
@@ -180,23 +202,29 @@ class LockstepSession:
         return [c for c in self.controllers if c not in self._commands]
 
     # -------------------------------------------------------------------------- stepping
-    def step(self) -> Sample | None:
-        """Integrate one period under the commands in (``Session.step``); None if done."""
+    def step(self) -> bool:
+        """Integrate one period under the commands in (``Session.hold`` on the native engine,
+        else ``Session.step``); False if done."""
         if self.done:
-            return None
+            return False
         if self.lockstep and self.missing():
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
                                   f'{self.missing()}')
-        commands = {c: self._commands[c] for c in self.controllers if c in self._commands}
-        sample = self.session.step(commands)
+        if self._inbox is not None:
+            taken = self.session.hold(clear=self.lockstep)
+        else:
+            commands = {c: self._commands[c].command() for c in self.controllers
+                        if c in self._commands}
+            taken = self.session.step(commands) is not None
         if self.lockstep:
             self._commands.clear()
-        return sample
+        return taken
 
-    def flush(self) -> None:
+    def flush(self, whole: bool = True) -> None:
         """Record the periods stepped (off the lockstep's critical path: call it while the
-        controllers compute)."""
-        self.session.flush()
+        controllers compute); ``whole=False``: the native engine's samples a block at a time
+        (``Session.flush``)."""
+        self.session.flush(whole)
 
     def reset(self) -> None:
         """Back to the scene's initial state (refused while recording a bag)."""
@@ -352,7 +380,7 @@ class LockstepLoop:
         bag) and the other topics go out."""
         self._publish_live(CONTROL_TOPICS)
         self.monitor.published(again)
-        self.session.flush()
+        self.session.flush(whole=False)
         self._publish_live(STATE_TOPICS[len(CONTROL_TOPICS):])
 
     def _publish_live(self, topics: tuple[str, ...]) -> None:
@@ -381,7 +409,7 @@ class LockstepLoop:
         if self.phase != 'running':
             return None
         try:
-            source, stamp_ns, command = self._decoder.decode(data)
+            source, stamp_ns, command = self._decoder.decode_values(data)
             self.session.offer(source, stamp_ns, command)
         except SimulationError as exc:
             self.monitor.reject(str(exc))

@@ -13,6 +13,8 @@ system as its ``NativeError``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 import iceskate_native
@@ -37,6 +39,9 @@ from iceskate_sim.hybrid import (
 from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
 from iceskate_sim.modes import MODES
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
+
+if TYPE_CHECKING:
+    from iceskate_sim.effort_cdr import CommandValues
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)
@@ -278,24 +283,31 @@ class NativeControlLoop:
     samples come back as arrays. It is what ``Session.step`` does for each period when the
     headless runner's ``ControlStack`` answers, without Python in between.
 
+    Without controllers it holds the commands of controller nodes received from outside (the
+    ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the
+    block), ``take_block`` the samples held; ``live`` is the live view of the current state.
+
     :param periods: the native periods it advances (a ``Simulator``'s, which mirrors them after
         each block).
-    :param kinematics: the controllers' view of the robot (``native_control.native_kinematics``).
+    :param kinematics: the controllers' view of the robot (``native_control.native_kinematics``;
+        None without controllers).
     :param controllers: the native laws, in summing order.
     :param pushes: the scene's pushes (``start``, ``duration``, ``frame``, ``force``).
     :param head_origin: psi at t = 0, the head target recorded while no controller steers one.
+    :param inbox: the sources of each controller node whose commands ``receive`` takes, in
+        summing order.
     :raises SimulationError: for an unknown push frame or a non-finite value.
     """
 
-    def __init__(self, periods: NativePeriods, kinematics: iceskate_native.Kinematics,
+    def __init__(self, periods: NativePeriods, kinematics: iceskate_native.Kinematics | None,
                  controllers: list[iceskate_native.Controller], pushes: tuple,
-                 head_origin: np.ndarray) -> None:
+                 head_origin: np.ndarray, inbox: tuple[tuple[str, ...], ...] = ()) -> None:
         self._periods = periods
         rows = [(p.start, p.duration, p.frame, np.asarray(p.force, dtype=float)) for p in pushes]
         try:
             self._kernel = iceskate_native.ControlLoop(
                 periods._kernel, kinematics, list(controllers), rows,
-                np.asarray(head_origin, dtype=float))
+                np.asarray(head_origin, dtype=float), [list(s) for s in inbox])
         except (ValueError, TypeError) as exc:
             raise SimulationError(f'native control loop: {exc}') from None
 
@@ -312,3 +324,46 @@ class NativeControlLoop:
             except Exception as exc:  # noqa: BLE001 - handed back beside the samples taken
                 error = self._periods.failure(exc) if self._kernel.physics_failed else exc
         return block, error
+
+    def receive(self, index: int, values: CommandValues) -> None:
+        """Keep the command ``values`` of the inbox's controller node ``index`` for the next
+        ``hold`` (its sources' efforts in the inbox's order).
+
+        :raises SimulationError: naming the field with a wrong size, a non-finite value or a
+            negative gain (the command is not kept).
+        """
+        try:
+            self._kernel.receive(index, *values[:6])
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'command: {exc}') from None
+
+    def hold(self, clear: bool = True) -> None:
+        """One control period holding the commands received (``iceskate_native.ControlLoop.hold``;
+        ``clear``: forget them afterwards).
+
+        :raises SimulationError: where the physics failed (``NativePeriods.failure``).
+        """
+        if not self._kernel.hold(clear):
+            try:
+                self._kernel.raise_error()
+            except Exception as exc:  # noqa: BLE001 - the kernel's failure, in our words
+                raise self._periods.failure(exc) from None
+
+    def forget(self) -> None:
+        """Drop the commands received (none is held until the next ``receive``)."""
+        self._kernel.forget()
+
+    @property
+    def block_size(self) -> int:
+        """Samples held and not taken yet."""
+        return self._kernel.block_size
+
+    def take_block(self) -> dict:
+        """The samples held since the last call, as ``run`` returns them."""
+        return self._kernel.take_block()
+
+    def live(self) -> tuple[np.ndarray, int, int, int, int, int]:
+        """The live view of the current state: (values in ``BagRecord``'s order with the held
+        input's generalized force as the one effort, mode, side index, pivot index, step index,
+        index of the latest transition or -1)."""
+        return self._kernel.live()

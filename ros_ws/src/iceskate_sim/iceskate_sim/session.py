@@ -37,6 +37,8 @@ if TYPE_CHECKING:
     from iceskate_native import Controller, Kinematics
     from iceskate_sim.native_dynamics import NativeControlLoop
 
+#: Samples of held periods (``Session.hold``) recorded at once by a partial ``flush``.
+HELD_BLOCK = 100
 #: q1_active of each mode number (index 0 unused)
 _Q1_ACTIVE = np.array([False] + [MODES[k].q1_active for k in range(1, len(MODES) + 1)])
 
@@ -131,6 +133,8 @@ class Session:
                                      self.robot.urdf_path.read_text(encoding='utf-8'),
                                      background=True) if bag is not None else None)
         self.metrics: dict[str, Any] | None = None
+        #: the native loop holding commands received from outside (``command_inbox``)
+        self._inbox: NativeControlLoop | None = None
         self._restart()
 
     def _restart(self) -> None:
@@ -146,6 +150,9 @@ class Session:
         self._wall_start: float | None = None
         #: the native loop of ``run_periods`` (None: not made yet; False: none for this engine)
         self._loop: NativeControlLoop | bool | None = None
+        if self._inbox is not None:  # the samples and commands of the run left behind
+            self._inbox.take_block()
+            self._inbox.forget()
 
     @property
     def done(self) -> bool:
@@ -193,6 +200,32 @@ class Session:
         self.periods += 1
         return sample
 
+    def command_inbox(self, inbox: tuple[tuple[str, ...], ...]) -> NativeControlLoop | None:
+        """The native loop that holds commands received from outside (``hold``): ``inbox`` has
+        the sources of each controller node in summing order; ``receive`` a node's command by
+        its index. None where periods do not run natively (then ``step`` the commands)."""
+        if self._inbox is None:
+            self._inbox = self.sim.control_loop(None, [], self.scene.pushes, self.psi_initial,
+                                                inbox)
+        return self._inbox
+
+    def hold(self, clear: bool = True) -> bool:
+        """``step`` for the commands received by the ``command_inbox`` loop: one period in C++
+        (the same sum, hold, push and sample), its sample recorded by a later ``flush``;
+        ``clear``: forget the commands afterwards. False if the run is done; a SimulationError
+        of the physics ends the run (``error``)."""
+        if self.done:
+            return False
+        if self._wall_start is None:
+            self._wall_start = time.perf_counter()
+        try:
+            self.sim.hold_period(self._inbox, clear)
+        except SimulationError as exc:
+            self.error = exc
+            return False
+        self.periods += 1
+        return True
+
     def run_periods(self, stack: Controllers, count: int) -> int:
         """Advance up to ``count`` control periods with ``stack`` answering each observation
         in-process (the headless runner), recording every sample; return how many were taken.
@@ -219,15 +252,17 @@ class Session:
         block, error = self.sim.run_loop(self._loop, min(count, self.n_periods - self.periods))
         taken = len(block['t'])
         if taken:
-            self._record_block(block)
+            self._record_block(block, self.periods)
+            self.periods += taken
         if isinstance(error, SimulationError):
             self.error = error
         elif error is not None:
             raise error
         return taken
 
-    def _record_block(self, block: dict[str, Any]) -> None:
-        """Append a native block of samples to the trajectory and the bag."""
+    def _record_block(self, block: dict[str, Any], first: int) -> None:
+        """Append a native block of samples, the first of period ``first``, to the trajectory
+        and the bag."""
         efforts = dict(zip(block['sources'], block['efforts'], strict=True))
         pivot = np.where(_Q1_ACTIVE[block['mode']], block['pivot'] + 1, 0)  # toe 1, heel 2
         rotation = block['head_rotation']
@@ -240,8 +275,7 @@ class Session:
             'multipliers': block['multipliers'], 'support_normal': block['support_normal'],
             'support_tangential': block['support_tangential'], 'cop_y': block['cop_y'],
             'psi': psi, 'psi_d': block['head_target'], 'applied': block['applied']}
-        count = len(block['t'])
-        kept = self._recorded_rows(count)
+        kept = self._recorded_rows(first, len(block['t']))
         if kept is not None:  # record.rate: every n-th sample only
             block = {key: value[kept] if isinstance(value, np.ndarray) else value
                      for key, value in block.items()}
@@ -252,17 +286,23 @@ class Session:
         if self.recorder is not None and len(block['t']):
             self.recorder.write_block(RecordBlock.of_columns(block, efforts, block['present'],
                                                              self.sim.events))
-        self.periods += count
 
-    def _recorded_rows(self, count: int) -> np.ndarray | None:
-        """Which of the next ``count`` periods' samples ``record.rate`` keeps (None: all)."""
+    def _recorded_rows(self, first: int, count: int) -> np.ndarray | None:
+        """Which of ``count`` periods' samples from period ``first`` on ``record.rate`` keeps
+        (None: all)."""
         every = self.scene.record_every
         if every == 1:
             return None
-        return np.flatnonzero((self.periods + np.arange(count)) % every == 0)
+        return np.flatnonzero((first + np.arange(count)) % every == 0)
 
-    def flush(self) -> None:
-        """Append the samples stepped since the last flush to the trajectory and the bag."""
+    def flush(self, whole: bool = True) -> None:
+        """Append the samples stepped since the last flush to the trajectory and the bag
+        (``whole``: all of them; else the samples ``hold`` took wait until a block of
+        ``HELD_BLOCK`` has gathered: one block of arrays costs what a few samples do)."""
+        inbox = self._inbox
+        if inbox is not None and inbox.block_size >= (1 if whole else HELD_BLOCK):
+            first = self.periods - inbox.block_size
+            self._record_block(inbox.take_block(), first)
         for sample, target in self._unrecorded:
             self.trajectory.append(sample, target)
             if self.recorder is not None:

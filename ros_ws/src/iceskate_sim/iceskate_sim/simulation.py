@@ -175,6 +175,9 @@ class Simulator:
         self._command = HeldCommand.torque_only(np.zeros(N_COORDINATES))
         self._push: tuple[str, np.ndarray] | None = None
         self._head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
+        self._result: DynamicsResult | None = None
+        #: (start_state, start_result) of the last period (None: not mirrored yet)
+        self._start: tuple[HybridState, DynamicsResult] | None = None
         self.events: list[Transition] = []
         self.stats = RunStatistics()
         if self._periods is not None:
@@ -299,17 +302,15 @@ class Simulator:
                 self._periods.advance(command, self._push)
             finally:
                 self._mirror_periods()
-            self.start_state, self.start_result = self._periods.start()
             return self.result
-        self.start_state = self.state
-        self.start_result = self._evaluate(self.state.q, self.state.v)
+        self.result = self._evaluate(self.state.q, self.state.v)
+        self._start = (self.state, self.result)
         t_end = self.state.t + self.config.control_period
         n = N_COORDINATES
-        self.result = self.start_result
         instant, at_instant = self.state.t, 0
         try:
             self._settle()  # a guard the new command makes due fires at the period start
-            self.start_state, self.start_result = self.state, self.result
+            self._start = (self.state, self.result)
             while t_end - self.state.t > 1e-12:
                 self._contact = self.state.contact
                 x0 = np.concatenate([self.state.q, self.state.v])
@@ -352,14 +353,33 @@ class Simulator:
         return self.result
 
     def control_loop(self, kinematics: object, controllers: list, pushes: tuple,
-                     head_origin: np.ndarray) -> NativeControlLoop | None:
+                     head_origin: np.ndarray, inbox: tuple[tuple[str, ...], ...] = ()
+                     ) -> NativeControlLoop | None:
         """The native loop of many control periods on this simulator (see
-        ``NativeControlLoop``; advance it with ``run_loop``), or None where periods do not run
-        natively (the Python engine, dop853)."""
+        ``NativeControlLoop``; advance it with ``run_loop`` or, for the commands of its
+        ``inbox``, ``hold_period``), or None where periods do not run natively (the Python
+        engine, dop853)."""
         if self._periods is None:
             return None
         from iceskate_sim.native_dynamics import NativeControlLoop
-        return NativeControlLoop(self._periods, kinematics, controllers, pushes, head_origin)
+        return NativeControlLoop(self._periods, kinematics, controllers, pushes, head_origin,
+                                 inbox)
+
+    def hold_period(self, loop: NativeControlLoop, clear: bool = True) -> None:
+        """One control period of ``loop`` holding the commands it received
+        (``NativeControlLoop.hold``; the sample stays in its block), then this simulator
+        mirrors the native state, events, counters and end (the dynamics when asked).
+
+        :raises SimulationError: where the physics failed, as ``advance``.
+        """
+        if self.ended is not None:
+            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
+                                  f'{self.state.mode.number} ({self.ended}); no further '
+                                  'period can be simulated')
+        try:
+            loop.hold(clear)
+        finally:
+            self._mirror_periods()
 
     def run_loop(self, loop: NativeControlLoop, periods: int) -> tuple[dict, Exception | None]:
         """Up to ``periods`` control periods of ``loop`` (``NativeControlLoop.run``: the samples
@@ -373,15 +393,40 @@ class Simulator:
             block, error = loop.run(periods)
         finally:
             self._mirror_periods()
-        if len(block['t']):
-            self.start_state, self.start_result = self._periods.start()
         return block, error
 
+    # the dynamics of the native periods are mirrored when asked (a lockstep period needs none)
+    @property
+    def result(self) -> DynamicsResult:
+        """The dynamics at the current state under the last input."""
+        if self._result is None:
+            self._result = self._periods.result()
+        return self._result
+
+    @result.setter
+    def result(self, value: DynamicsResult) -> None:
+        self._result = value
+
+    @property
+    def start_state(self) -> HybridState:
+        """The state at the start of the last period, after the transitions due then."""
+        if self._start is None:
+            self._start = self._periods.start()
+        return self._start[0]
+
+    @property
+    def start_result(self) -> DynamicsResult:
+        """The dynamics at ``start_state`` under the last period's input."""
+        if self._start is None:
+            self._start = self._periods.start()
+        return self._start[1]
+
     def _mirror_periods(self) -> None:
-        """Take the state, dynamics, new events, counters and end of the native periods."""
+        """Take the state, new events, counters and end of the native periods (their dynamics
+        when asked: ``result``, ``start_state``, ``start_result``)."""
         periods = self._periods
         self.state = periods.state()
-        self.result = periods.result()
+        self._result = self._start = None
         self.events.extend(periods.events_since(len(self.events)))
         s = self.stats
         (s.steps, s.evaluations, s.control_periods, s.max_constraint_residual,

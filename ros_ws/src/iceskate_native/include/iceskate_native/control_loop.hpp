@@ -3,7 +3,8 @@
 // Kinematics), the sum of their commands and the scene's push are held over [t_k, t_k+1]
 // (zero-order hold) while HybridSimulator::advance integrates the period, and the sample of
 // t_k goes into a SampleBlock. The native counterpart of iceskate_sim.session.Session.step
-// driven by the headless composition of the controllers, tested against it.
+// driven by the headless composition of the controllers, tested against it. The same period
+// runs under commands received from outside (hold(): the controller nodes of a ROS graph).
 #pragma once
 
 #include <cstdint>
@@ -30,6 +31,18 @@ struct Push
   Eigen::Vector3d force = Eigen::Vector3d::Zero();
 
   bool active(double t) const { return start <= t && t < start + duration; }
+};
+
+/// A controller node's command for one control instant as the simulator receives it: the sum
+/// of its sources (held over the period), each source's generalized force at the state it
+/// answered (rows, in the order of `sources`; what is recorded) and its head target, if any.
+struct ReceivedCommand
+{
+  JointCommand total;
+  std::vector<std::string> sources;
+  Eigen::Matrix<double, Eigen::Dynamic, kCoordinates, Eigen::RowMajor> efforts;
+  bool has_head_target = false;
+  Eigen::Vector3d head_target = Eigen::Vector3d::Zero();
 };
 
 /// The samples of consecutive control instants, column by column (row-major per sample). A
@@ -59,15 +72,32 @@ struct SampleBlock
   void clear();
 };
 
+/// What the simulator publishes at the current instant t_k before the commands of t_k exist:
+/// the state, the dynamics and the generalized force of the inputs still held from the last
+/// period, evaluated at t_k. `values` in the order of iceskate_sim.recording.BagRecord: t,
+/// t_exchange, t_touchdown, heel_anchor_y [s, s, s, m], N_s, F_y [N], CoP y [m], time of the
+/// latest transition [s] (0: none), q, v, qdd, passive (18 each), multipliers (3), head-top
+/// position (3) and rotation (9, row-major), the held input's generalized force (18).
+struct LiveRecord
+{
+  std::vector<double> values;
+  int mode = 1;
+  int side = 0;   ///< 0 right, 1 left
+  int pivot = 0;  ///< 0 toe, 1 heel
+  int step_index = 0;
+  long last_event = -1;  ///< index in the event log of the latest transition at or before t_k
+};
+
 /// The loop of control periods over a simulator, its controllers (in summing order) and the
 /// scene's pushes. It holds references: the simulator, the kinematics and the controllers
-/// must outlive it. Not thread-safe.
+/// must outlive it (the kinematics may be null for a loop without controllers, which only
+/// holds received commands). Not thread-safe.
 class ControlLoop
 {
 public:
   /// head_origin: the head target recorded while no controller steers one (psi at t = 0).
   ControlLoop(
-    HybridSimulator & simulator, Kinematics & kinematics, std::vector<Controller *> controllers,
+    HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
     std::vector<Push> pushes, const Eigen::Vector3d & head_origin);
 
   /// Up to `periods` control periods into `block` (cleared first); returns the samples taken.
@@ -76,21 +106,32 @@ public:
   /// exception and the simulator is where it failed.
   int run(int periods, SampleBlock & block);
 
-  /// What stopped the last run() early (null: nothing).
+  /// One control period under `commands` (one per controller node, in summing order) instead
+  /// of the loop's own controllers: the same sum, hold, push and sample as run(), the sample
+  /// appended to `block` (not cleared). Returns false if the physics failed: error() then
+  /// holds why, as after run().
+  bool hold(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
+
+  /// The live view of the current state (LiveRecord), into `record`.
+  void live(LiveRecord & record);
+
+  /// What stopped the last run() or hold() early (null: nothing).
   std::exception_ptr error() const noexcept { return error_; }
   /// Whether that came from the simulator's period (else from a controller or the sample).
   bool physics_failed() const noexcept { return physics_failed_; }
 
 private:
   void step(SampleBlock & block);
+  void period(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
   std::size_t source_index(SampleBlock & block, const std::string & name);
 
   HybridSimulator & simulator_;
-  Kinematics & kinematics_;
+  Kinematics * kinematics_;
   std::vector<Controller *> controllers_;
   std::vector<Push> pushes_;
   Eigen::Vector3d head_origin_;
-  std::vector<ControllerOutput> outputs_;  // one per controller, reused
+  std::vector<ControllerOutput> outputs_;    // one per controller, reused
+  std::vector<ReceivedCommand> commands_;    // their commands as a node would send them
   std::exception_ptr error_;
   bool physics_failed_ = false;
 };

@@ -108,6 +108,8 @@ public:
   const DynamicsResult & start_result() const noexcept { return start_result_; }
   /// The dynamics at the current state under the last inputs.
   const DynamicsResult & result() const noexcept { return result_; }
+  /// The inputs held over the last period (zero before the first).
+  const Inputs & inputs() const noexcept { return inputs_; }
   const std::vector<TransitionRecord> & events() const noexcept { return events_; }
   const RunStatistics & statistics() const noexcept { return stats_; }
   RunEnd ended() const noexcept { return ended_; }
