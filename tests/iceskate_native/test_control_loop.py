@@ -1,8 +1,10 @@
 """Many control periods in one native call (``iceskate_native.ControlLoop``, through
 ``Session.run_periods``) against the same session stepped period by period (``Session.step``
-with ``ControlStack.commands``, the path of the ROS simulator node).
+with ``ControlStack.commands``), and the commands of controller nodes held one period at a
+time by the same loop (``Session.hold``, the path of the ROS simulator node on the native
+engine).
 
-Both run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
+All run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
 bit: every trajectory column, the event log, the counters, the bag's messages and the way a run
 stops on a failure of the physics or of a controller.
 """
@@ -19,11 +21,15 @@ from rosbags.rosbag2 import Reader
 
 from gait_manager.errors import GaitManagerError
 from iceskate_bringup.composition import ControlStack
-from iceskate_bringup.scene import load_scene
+from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
+from iceskate_sim.command import HeldCommand
+from iceskate_sim.effort_cdr import CommandValues
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.recording import Sample, bag_record
+from iceskate_sim.robot import PIVOTS, SIDES
 from iceskate_sim.scene import Push, Scene
-from iceskate_sim.session import Session
+from iceskate_sim.session import Session, last_event_before
 
 
 def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -> Scene:
@@ -47,6 +53,22 @@ def _blocks(scene: Scene, block: int, out: pathlib.Path | None = None) -> Sessio
     stack = ControlStack(scene, session.robot, session.observation())
     while not session.done:
         assert session.run_periods(stack, block) > 0 or session.done
+    session.finish()
+    return session
+
+
+def _held(scene: Scene, out: pathlib.Path | None = None) -> Session:
+    """The session as the simulator node drives it: each controller node's command received
+    (as values) and held one period at a time, the samples recorded a block at a time."""
+    session = Session(scene, out, out / 'bag' if out is not None and scene.record_bag else None)
+    stack = ControlStack(scene, session.robot, session.observation())
+    inbox = session.command_inbox(tuple(scene_sources(scene).values()))
+    while not session.done:
+        commands = stack.commands(session.observation())
+        for index, command in enumerate(commands.values()):
+            inbox.receive(index, CommandValues.of(command))
+        assert session.hold()
+        session.flush(whole=False)
     session.finish()
     return session
 
@@ -80,6 +102,73 @@ def test_a_push_and_any_block_size_give_the_same_run() -> None:
     assert 'push' in reference.trajectory.sources
     for block in (1, 7, 1000):
         _assert_identical(reference, _blocks(scene, block))
+    _assert_identical(reference, _held(scene))
+
+
+@pytest.mark.parametrize(('name', 'duration', 'every'), [('skate', 2.0, 1), ('walk', 0.6, 3)])
+def test_commands_held_one_period_at_a_time_equal_the_session_stepped(
+        name: str, duration: float, every: int) -> None:
+    scene = replace(_scene(name, duration), record_every=every)
+    _assert_identical(_stepped(scene), _held(scene))
+
+
+def test_the_live_view_is_the_record_of_the_current_state_under_the_held_command() -> None:
+    scene = _scene('skate', 0.5)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    inbox = session.command_inbox(tuple(scene_sources(scene).values()))
+    sim = session.sim
+    for period in range(300):  # past the first transitions
+        commands = stack.commands(session.observation())
+        for index, command in enumerate(commands.values()):
+            inbox.receive(index, CommandValues.of(command))
+        session.hold()
+        if period % 50 == 49 or period == 0:
+            state = sim.state
+            held = HeldCommand.of_controllers(commands.values()).torque(state.q, state.v)
+            placement = sim.head_placement()
+            expected = bag_record(Sample(state, sim.result, {'held': held},
+                                         placement.translation, placement.rotation,
+                                         last_event_before(sim, state.t)))
+            values, mode, side, pivot, step_index, last = inbox.live()
+            assert np.array_equal(values, expected.values, equal_nan=True)
+            assert (mode, SIDES[side], PIVOTS[pivot], step_index) == (
+                expected.mode, expected.side, expected.pivot, expected.step_index)
+            assert (sim.events[last].cause if last >= 0 else None) == expected.last_cause
+    assert sim.events  # transitions happened
+
+
+def test_the_inbox_refuses_bad_commands_and_forgets_on_request() -> None:
+    scene = _scene('skate', 0.1)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    inbox = session.command_inbox(tuple(scene_sources(scene).values()))
+    good = CommandValues.of(stack.commands(session.observation())['gait_manager'])
+    assert good.stiffness.size == 18  # with an impedance
+    for bad, match in [
+            (good._replace(effort=np.zeros(17)), 'effort has 17 entries, expected 18'),
+            (good._replace(source_efforts=good.source_efforts[:-18]),
+             r'source_efforts has \d+ entries, expected \d+ \(18 per source'),
+            (good._replace(head_target=np.zeros(2)), 'head_target has 2 entries'),
+            (good._replace(effort=np.full(18, math.inf)), r'effort\[0\] is inf'),
+            (good._replace(damping=-good.damping - 1.0), 'stiffness and damping must be >= 0'),
+            (good._replace(reference=np.full(18, math.nan)), r'position_reference\[0\] is nan'),
+            (good._replace(reference=np.zeros(0)), 'position_reference has 0 entries')]:
+        with pytest.raises(SimulationError, match='command: ' + match):
+            inbox.receive(1, bad)
+    with pytest.raises(SimulationError, match='controller index 2 is not below the 2'):
+        inbox.receive(2, good)
+    # nothing kept: the period holds no command, as a session stepped without commands
+    reference = Session(scene)
+    reference.step({})
+    reference.flush()
+    inbox.receive(1, good)
+    inbox.forget()
+    session.hold()
+    session.flush()
+    assert np.array_equal(session.trajectory.arrays()['q'], reference.trajectory.arrays()['q'])
+    assert np.array_equal(session.trajectory.arrays()['applied'],
+                          reference.trajectory.arrays()['applied'])
 
 
 def test_the_bag_of_blocks_holds_the_same_messages(tmp_path: pathlib.Path) -> None:
