@@ -4,8 +4,8 @@ A ``ControllerNode`` declares its law's parameters as typed ROS parameters, gene
 law's parameter class (``declare_parameters``: ``ros2 param list/describe/get/set`` show and
 change them, a change is checked by the class's own rules), subscribes ``gait_state`` (the whole
 hybrid state of an instant: one message in per instant, best effort), taken as CDR bytes and
-decoded with the bag's typestore (rosbags: 8 us, where rclpy's message classes take 19 us),
-rebuilds the ``Observation``, asks the subclass's law (``compute``: a native law, reading the
+read straight into the ``Observation`` (``gait_state_cdr.read_observation``: no message object),
+asks the subclass's law (``compute``: a native law, reading the
 robot through ``kinematics``) for its command and
 publishes it, with the per-source breakdown, as one ``EffortCommand`` (source: the node's name)
 on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
@@ -23,10 +23,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
-from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.command import ControllerCommand
 from iceskate_sim.effort_cdr import CommandEncoder
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.gait_state_cdr import read_observation
 from iceskate_sim.native_control import native_kinematics
 from iceskate_sim.node_support import (
     LOCKSTEP_READER_QOS,
@@ -35,9 +35,7 @@ from iceskate_sim.node_support import (
     declare_parameters,
 )
 from iceskate_sim.observation import Observation
-from iceskate_sim.recording import TOPICS
 from iceskate_sim.robot import load_robot
-from iceskate_sim.ros_conversions import observation_from_gait_state, stamp_to_ns
 
 P = TypeVar('P')
 
@@ -59,8 +57,7 @@ class ControllerNode(Node, Generic[P]):
                                             self._on_parameters)
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
-        self._typestore = make_typestore()
-        self._encoder = CommandEncoder(node_name, self._typestore)
+        self._encoder = CommandEncoder(node_name)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
                                  LOCKSTEP_READER_QOS, raw=True)
@@ -84,13 +81,11 @@ class ControllerNode(Node, Generic[P]):
         if not self.active:
             return
         try:
-            msg = self._typestore.deserialize_cdr(data, TOPICS['/gait_state'])
-        except Exception as exc:  # rosbags raises several kinds on bytes it cannot decode
-            self.get_logger().error(f'undecodable gait_state ({len(data)} bytes): {exc}')
+            ns, obs = read_observation(data)
+        except SimulationError as exc:
+            self.get_logger().error(f'no command: {exc}')
             return
-        ns = stamp_to_ns(msg.header.stamp)
         try:
-            obs = observation_from_gait_state(msg)
             command = self.compute(obs)
         except (SimulationError, *self.law_errors) as exc:
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')

@@ -14,9 +14,8 @@ instant (its names, sources and array lengths do not change), so:
 * ``CommandEncoder`` writes a controller's command into the bytes of its previous one when the
   layout is the same (stamp and values only), else serializes it whole.
 
-Both follow the XCDR1 little-endian encoding rclpy and Fast DDS use (4-byte encapsulation
-header, alignment counted from the end of it, strings with their NUL, sequences with a uint32
-count), so the bytes equal ``rclpy.serialization.serialize_message``'s up to its padding; a new
+Both follow the XCDR1 little-endian encoding rclpy and Fast DDS use (``cdr``), so the bytes
+equal ``rclpy.serialization.serialize_message``'s up to its padding; a new
 layout is serialized by rosbags (the bag's codec).
 """
 
@@ -31,6 +30,7 @@ import numpy as np
 from rosbags.typesys.store import Typestore
 
 from iceskate_sim.bag_types import make_typestore
+from iceskate_sim.cdr import HEADER, STAMP, CdrReader
 from iceskate_sim.command import ControllerCommand, JointCommand, all_finite
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
@@ -39,10 +39,6 @@ from iceskate_sim.ros_conversions import command_fields, command_from_message, n
 #: The float64 sequences of an EffortCommand, in order.
 ARRAYS = ('effort', 'stiffness', 'damping', 'position_reference', 'source_efforts',
           'head_target')
-_ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR, little endian
-_HEADER = len(_ENCAPSULATION)
-_STAMP = struct.Struct('<iI')
-_COUNT = struct.Struct('<I')
 _EMPTY = np.zeros(0)
 _TYPE = 'iceskate_interfaces/msg/EffortCommand'
 
@@ -100,47 +96,6 @@ class _Layout:
     skeleton: bytes
 
 
-class _Reader:
-    """Walks the payload of a CDR message (offsets from the start of the bytes)."""
-
-    def __init__(self, data: bytes) -> None:
-        if len(data) < _HEADER or data[:2] != _ENCAPSULATION[:2]:
-            raise ValueError('not little-endian CDR')
-        self.data, self.pos = data, _HEADER
-
-    def _align(self, size: int) -> None:
-        self.pos += -(self.pos - _HEADER) % size
-
-    def take(self, size: int) -> int:
-        """Offset of the next ``size`` bytes, which it steps over."""
-        start = self.pos
-        self.pos += size
-        if self.pos > len(self.data):
-            raise ValueError(f'{len(self.data)} bytes end inside the message')
-        return start
-
-    def count(self) -> int:
-        self._align(4)
-        return _COUNT.unpack_from(self.data, self.take(4))[0]
-
-    def string(self) -> str:
-        size = self.count()
-        start = self.take(size)
-        if size == 0 or self.data[start + size - 1] != 0:
-            raise ValueError('a string without its terminating NUL')
-        return bytes(self.data[start:start + size - 1]).decode('utf-8')
-
-    def strings(self) -> list[str]:
-        return [self.string() for _ in range(self.count())]
-
-    def doubles(self) -> tuple[int, int]:
-        """(byte offset, count) of a float64 sequence."""
-        count = self.count()
-        if count:
-            self._align(8)
-        return self.take(8 * count), count
-
-
 def read_effort_command(data: bytes) -> tuple[SimpleNamespace, _Layout]:
     """An EffortCommand's CDR bytes as an object with its fields (float64 arrays as numpy
     copies, ``stamp_ns``), and its layout.
@@ -148,8 +103,8 @@ def read_effort_command(data: bytes) -> tuple[SimpleNamespace, _Layout]:
     :raises SimulationError: for bytes that are not an EffortCommand.
     """
     try:
-        reader = _Reader(data)
-        sec, nanosec = _STAMP.unpack_from(data, reader.take(_STAMP.size))
+        reader = CdrReader(data)
+        sec, nanosec = STAMP.unpack_from(data, reader.take(STAMP.size))
         fields: dict[str, Any] = {'frame_id': reader.string(), 'source': reader.string(),
                                   'joint_names': reader.strings()}
         arrays = [reader.doubles() for _ in range(4)]
@@ -167,9 +122,9 @@ def read_effort_command(data: bytes) -> tuple[SimpleNamespace, _Layout]:
 
 def _skeleton(data: bytes, layout: _Layout) -> bytes:
     """``data``'s skeleton in ``layout`` (its bytes with the value regions zeroed)."""
-    skeleton = bytearray(data[_HEADER + _STAMP.size:layout.size])
+    skeleton = bytearray(data[HEADER + STAMP.size:layout.size])
     for offset, count in layout.arrays:
-        start = offset - _HEADER - _STAMP.size
+        start = offset - HEADER - STAMP.size
         skeleton[start:start + 8 * count] = bytes(8 * count)
     return bytes(skeleton)
 
@@ -177,8 +132,8 @@ def _skeleton(data: bytes, layout: _Layout) -> bytes:
 def _source_of(data: bytes) -> str | None:
     """The sender named in an EffortCommand's bytes (None: unreadable)."""
     try:
-        reader = _Reader(data)
-        reader.take(_STAMP.size)
+        reader = CdrReader(data)
+        reader.take(STAMP.size)
         reader.string()  # frame_id
         return reader.string()
     except (ValueError, UnicodeDecodeError, struct.error):
@@ -214,7 +169,7 @@ class CommandDecoder:
                 and _skeleton(data, known[0]) == known[0].skeleton:
             values = self._values(data, *known)
             if values is not None:
-                sec, nanosec = _STAMP.unpack_from(data, _HEADER)
+                sec, nanosec = STAMP.unpack_from(data, HEADER)
                 return source, sec * 1_000_000_000 + nanosec, values
         message, layout = read_effort_command(data)
         values = CommandValues.of(command_from_message(message))
@@ -259,7 +214,7 @@ class CommandEncoder:
             data = bytearray(self._serialize(command_fields(answer)))
             self._last = (shape, read_effort_command(bytes(data))[1], data)
         _, layout, data = self._last
-        _STAMP.pack_into(data, _HEADER, *ns_to_sec_nanosec(stamp_ns))
+        STAMP.pack_into(data, HEADER, *ns_to_sec_nanosec(stamp_ns))
         for (offset, count), x in zip(layout.arrays, arrays, strict=True):
             data[offset:offset + 8 * count] = x.astype('<f8', copy=False).tobytes()
         return bytes(data)

@@ -8,9 +8,11 @@ The headless runner builds it straight from the simulator state; the ROS nodes b
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
+from iceskate_sim.command import all_finite
 from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import GaitMode, get_mode
@@ -50,7 +52,7 @@ class Observation:
         """Validate shapes, finiteness and the discrete fields."""
         for name in ('q', 'v'):
             x = np.asarray(getattr(self, name), dtype=float)
-            if x.shape != (N_COORDINATES,) or not np.isfinite(x).all():
+            if x.shape != (N_COORDINATES,) or not all_finite(x):
                 raise SimulationError(f'observation {name} must be {N_COORDINATES} finite values')
             object.__setattr__(self, name, x)
         get_mode(self.mode)
@@ -58,7 +60,7 @@ class Observation:
             raise SimulationError(f'observation side {self.side!r} not in {SIDES}')
         if self.pivot not in PIVOTS:
             raise SimulationError(f'observation pivot {self.pivot!r} not in {PIVOTS}')
-        if not np.isfinite(self.t) or not np.isfinite(self.t_exchange):
+        if not math.isfinite(self.t) or not math.isfinite(self.t_exchange):
             raise SimulationError('observation times must be finite')
 
     @property

@@ -77,7 +77,7 @@ def set_stamp(stamp: Any, ns: int) -> Any:
 
 
 # ------------------------------------------------------------------------------ observation
-def _finite_vector(values: Any, names: Sequence[str], what: str, length: str) -> np.ndarray:
+def finite_vector(values: Any, names: Sequence[str], what: str, length: str) -> np.ndarray:
     """``values`` as a new float array of one entry per name, all finite.
 
     :param what: the field, as the error messages name it.
@@ -93,7 +93,7 @@ def _finite_vector(values: Any, names: Sequence[str], what: str, length: str) ->
 
 
 def _state_vector(gait_state: Any, field: str) -> np.ndarray:
-    return _finite_vector(getattr(gait_state, field), COORDINATE_NAMES, f'gait_state {field}',
+    return finite_vector(getattr(gait_state, field), COORDINATE_NAMES, f'gait_state {field}',
                           f'; it needs {N_COORDINATES} (y0, q1..q17)')
 
 
@@ -131,7 +131,7 @@ def _indices(names: list[str], where: str) -> np.ndarray:
 
 
 def _array(msg: Any, field: str, names: list[str], where: str) -> np.ndarray:
-    return _finite_vector(getattr(msg, field), names, f'{where}: {field}',
+    return finite_vector(getattr(msg, field), names, f'{where}: {field}',
                           f' for {len(names)} joint names')
 
 
