@@ -46,7 +46,6 @@ struct BoundControlLoop
   std::vector<ReceivedCommand> inbox;  ///< one per controller node of `receive`
   std::vector<bool> received;          ///< inbox[k] holds a command
   std::vector<ReceivedCommand> held;   ///< the received ones of a period, in order
-  LiveRecord live;
 };
 
 /// The C++ object behind `object`; std::invalid_argument naming `what` if it is no T.
@@ -92,7 +91,7 @@ void construct_loop(
   new (self) BoundControlLoop{
     std::move(simulator), std::move(kinematics), std::move(controllers),
     ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin), SampleBlock{},
-    std::move(slots), std::vector<bool>(inbox.size(), false), {}, LiveRecord{}};
+    std::move(slots), std::vector<bool>(inbox.size(), false), {}};
 }
 
 using Values = Eigen::Ref<const Eigen::VectorXd>;
@@ -145,16 +144,21 @@ void receive(
 
 bool hold(BoundControlLoop & self, bool clear)
 {
-  self.held.clear();
-  for (std::size_t k = 0; k < self.inbox.size(); ++k) {
-    if (self.received[k]) {
-      self.held.push_back(self.inbox[k]);
+  // every node answered (lockstep): the inbox as it is; else a copy of the commands received
+  const bool all =
+    std::all_of(self.received.begin(), self.received.end(), [](bool got) { return got; });
+  if (!all) {
+    self.held.clear();
+    for (std::size_t k = 0; k < self.inbox.size(); ++k) {
+      if (self.received[k]) {
+        self.held.push_back(self.inbox[k]);
+      }
     }
   }
   bool taken = false;
   {
     nb::gil_scoped_release released;
-    taken = self.loop.hold(self.held, self.block);
+    taken = self.loop.hold(all ? self.inbox : self.held, self.block);
   }
   if (clear) {
     std::fill(self.received.begin(), self.received.end(), false);
@@ -227,11 +231,10 @@ nb::dict run(BoundControlLoop & self, int periods)
 
 nb::tuple live(BoundControlLoop & self)
 {
-  LiveRecord & r = self.live;
+  LiveRecord r;
   self.loop.live(r);
-  std::vector<double> values(r.values);
-  const std::size_t n = values.size();
-  return nb::make_tuple(array_of(std::move(values), {n}), r.mode, r.side, r.pivot,
+  const std::size_t n = r.values.size();
+  return nb::make_tuple(array_of(std::move(r.values), {n}), r.mode, r.side, r.pivot,
                         r.step_index, r.last_event);
 }
 
