@@ -50,15 +50,16 @@ DEFAULT_SCENES = ['skate', str(REPO_ROOT / 'tests' / 'integration' / 'data' / 't
 
 def controller_compute_ms(scene) -> dict[str, float]:
     """Median time [ms] of each controller node's law (the native one the nodes call, with the
-    command built as they send it) at the scene's initial observation."""
+    command values they send) at the scene's initial observation."""
     from iceskate_bringup.composition import ControlStack
-    from iceskate_sim.native_control import native_command
+    from iceskate_sim.native_control import native_observation, native_values
     from iceskate_sim.robot import load_robot
     from iceskate_sim.simulation import Simulator
     robot = load_robot()
     obs = Simulator(robot, scene.simulator, scene.initial).observation()
     stack = ControlStack(scene, robot, obs)
-    return {node: _median_ms(lambda c=controller: native_command(c, obs, stack.kinematics))
+    native = native_observation(obs)
+    return {node: _median_ms(lambda c=controller: native_values(c, native, stack.kinematics))
             for node, controller in stack.controllers.items()}
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_sim.command import CommandValues, ControllerCommand, JointCommand
 from iceskate_sim.effort_cdr import CommandDecoder, CommandEncoder, read_effort_command
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import MessageFactory
@@ -66,7 +66,7 @@ def assert_same(got: ControllerCommand, expected: ControllerCommand) -> None:
 @pytest.mark.parametrize('layout', list(answers()))
 def test_encoded_bytes_decode_with_rosbags_to_the_command(typestore, layout):
     answer = answers()[layout]
-    data = CommandEncoder('gait_manager').encode(answer, STAMP)
+    data = CommandEncoder('gait_manager').encode(CommandValues.of(answer), STAMP)
     msg = typestore.deserialize_cdr(data, TYPE)
     assert msg.source == 'gait_manager'
     assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == STAMP
@@ -87,8 +87,9 @@ def test_the_encoder_rewrites_values_and_stamp_and_follows_a_layout_change(types
             if command.has_impedance else ()))
         answer = ControllerCommand(scaled, {s: tau + k for s, tau in base.source_efforts.items()},
                                    base.head_target)
-        data = CommandEncoder('gait_manager').encode(answer, STAMP + k)
-        assert encoder.encode(answer, STAMP + k) == data  # reused bytes == fresh ones
+        values = CommandValues.of(answer)
+        data = CommandEncoder('gait_manager').encode(values, STAMP + k)
+        assert encoder.encode(values, STAMP + k) == data  # reused bytes == fresh ones
         assert_same(command_from_message(typestore.deserialize_cdr(data, TYPE)), answer)
 
 
@@ -117,7 +118,7 @@ def test_the_decoder_reads_rclpy_bytes_whose_padding_is_not_zero():
         source, ns, got = decoder.decode(data)
         assert (source, ns) == ('gait_manager', 3_000_000_007)
         assert_same(got, answer)
-    back = serialization.deserialize_message(CommandEncoder('gait_manager').encode(answer, 5),
+    back = serialization.deserialize_message(CommandEncoder('gait_manager').encode(CommandValues.of(answer), 5),
                                              EffortCommand)
     assert_same(command_from_message(back), answer)
 

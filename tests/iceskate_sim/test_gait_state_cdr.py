@@ -1,7 +1,7 @@
-"""gait_state_cdr: GaitState CDR bytes -> Observation, against the typestores' own codecs and
-``observation_from_gait_state`` (the conversion of a decoded message)."""
+"""gait_state_cdr: GaitState CDR bytes -> the native observation, against the typestores' own
+codecs and ``observation_from_gait_state`` (the conversion of a decoded message)."""
 
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +12,7 @@ from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.gait_state_cdr import read_observation
 from iceskate_sim.lockstep import LockstepSession
+from iceskate_sim.native_control import native_observation
 from iceskate_sim.ros_conversions import observation_from_gait_state, stamp_to_ns
 from iceskate_sim.session import Session
 
@@ -24,13 +25,18 @@ def typestore():
     return make_typestore()
 
 
+FIELDS = ('t', 'q', 'v', 'mode', 'side', 'pivot', 'step_index', 't_exchange', 'heel_anchor_y',
+          't_touchdown')
+
+
 def assert_same(a, b) -> None:
-    for f in fields(a):
-        x, y = getattr(a, f.name), getattr(b, f.name)
+    """Native observations ``a`` and ``b`` are equal, field by field."""
+    for name in FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
         if isinstance(x, np.ndarray):
-            assert x.dtype == y.dtype and np.array_equal(x, y), f.name
+            assert x.dtype == y.dtype and np.array_equal(x, y), name
         else:
-            assert x == y or (x != x and y != y), f.name  # NaN: no touchdown
+            assert x == y or (x != x and y != y), name  # NaN: no touchdown
 
 
 @pytest.fixture(scope='module')
@@ -59,7 +65,7 @@ def test_the_reader_gives_the_observation_of_the_decoded_message(typestore, stat
         msg = typestore.deserialize_cdr(data, TYPE)
         ns, obs = read_observation(data)
         assert ns == stamp_to_ns(msg.header.stamp)
-        assert_same(obs, observation_from_gait_state(msg))
+        assert_same(obs, native_observation(observation_from_gait_state(msg)))
         seen['modes'].add(obs.mode)
         seen['multipliers'].add(len(msg.multipliers))
         seen['touched'].add(bool(msg.touched_down))
@@ -73,8 +79,8 @@ def test_the_reader_reads_rclpy_bytes_whose_padding_is_not_zero(typestore, state
     for data in states[::15]:
         back = serialization.serialize_message(
             serialization.deserialize_message(data, GaitState))
-        assert_same(read_observation(back)[1],
-                    observation_from_gait_state(typestore.deserialize_cdr(data, TYPE)))
+        assert_same(read_observation(back)[1], native_observation(
+            observation_from_gait_state(typestore.deserialize_cdr(data, TYPE))))
 
 
 def _changed(typestore, data: bytes, **change) -> bytes:
@@ -87,7 +93,8 @@ def _changed(typestore, data: bytes, **change) -> bytes:
 @pytest.mark.parametrize(('change', 'match'), [
     ({'support_side': 2}, 'gait_state support_side must be 0 or 1, got 2'),
     ({'pivot': 7}, 'gait_state pivot must be 0, 1 or 2, got 7'),
-    ({'mode': 21}, 'mode'),
+    ({'mode': 21}, 'gait_state: observation mode 21 is not a Table 2 mode'),
+    ({'heel_anchor_y': np.inf}, "gait_state: the observation's t, t_exchange and heel_anchor_y"),
     ({'position': np.zeros(17)}, r'gait_state position has 17 entries; it needs 18'),
     ({'velocity': np.r_[np.zeros(5), np.nan, np.zeros(12)]},
      r"gait_state velocity is not finite at \['q5'\]"),

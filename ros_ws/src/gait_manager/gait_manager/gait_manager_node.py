@@ -15,11 +15,11 @@ from __future__ import annotations
 from gait_manager.errors import GaitManagerError
 from gait_manager.law import GaitManagerParameters
 from gait_manager.native import GaitManagerController
-from iceskate_sim.command import ControllerCommand
+import iceskate_native
+from iceskate_sim.command import CommandValues
 from iceskate_sim.controller_node import ControllerNode
-from iceskate_sim.native_control import native_command
+from iceskate_sim.native_control import native_values
 from iceskate_sim.node_support import run_node
-from iceskate_sim.observation import Observation
 
 
 class GaitManagerNode(ControllerNode[GaitManagerParameters]):
@@ -45,12 +45,12 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
         """Idle while no source is enabled."""
         return bool(self.params.enabled)
 
-    def compute(self, obs: Observation) -> ControllerCommand:
+    def compute(self, obs: iceskate_native.Observation) -> CommandValues:
         """The sum of the enabled sources at ``obs``, with each source's share."""
         if self.controller.head_start_y is None and obs.t != 0.0:
             self.get_logger().warning(f'first state seen at t={obs.t} s, not 0: its head y is '
                                       "taken as the start of the stabiliser's pace point")
-        return native_command(self.controller, obs, self.kinematics)
+        return native_values(self.controller, obs, self.kinematics)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -4,8 +4,8 @@
 // (nanobind shares registered types between modules built with the same nanobind), the
 // Observation a law answers, and the queries of a Kinematics (tested against the Python model).
 #include <array>
+#include <cstddef>
 #include <cmath>
-#include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -15,7 +15,6 @@
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
 #include <nanobind/stl/map.h>
-#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
@@ -37,7 +36,6 @@ namespace
 {
 
 using Vector = Eigen::Ref<const Eigen::VectorXd>;
-using Optional = std::optional<Eigen::VectorXd>;
 
 Vector18 vector18(const Vector & value, const char * name)
 {
@@ -105,11 +103,6 @@ SupportState support_state(int mode, int side, int pivot)
     throw std::invalid_argument("side and pivot must be 0 or 1");
   }
   return {mode, side, pivot};
-}
-
-Optional optional(bool given, const Vector18 & value)
-{
-  return given ? Optional(Eigen::VectorXd(value)) : std::nullopt;
 }
 
 }  // namespace
@@ -223,23 +216,27 @@ void bind_controller(nb::module_ & m)
       [](Controller & self, const Observation & obs, Kinematics & kinematics) {
         ControllerOutput out;
         self.compute(obs, kinematics, out);
-        std::vector<std::tuple<std::string, Eigen::VectorXd>> efforts;
-        for (const auto & [source, command] : out.sources) {
-          efforts.emplace_back(source, Eigen::VectorXd(command.torque(obs.q, obs.v)));
-        }
         const JointCommand total = out.total();
+        const Eigen::Index impedance = total.has_impedance ? kCoordinates : 0;
+        Eigen::VectorXd source_efforts(kCoordinates * out.sources.size());
+        std::vector<std::string> sources;
+        for (std::size_t k = 0; k < out.sources.size(); ++k) {
+          source_efforts.segment<kCoordinates>(kCoordinates * k) =
+            out.sources[k].command.torque(obs.q, obs.v);
+          sources.push_back(out.sources[k].source);
+        }
         return std::make_tuple(
-          std::move(efforts),
-          std::make_tuple(Eigen::VectorXd(total.effort),
-                          optional(total.has_impedance, total.stiffness),
-                          optional(total.has_impedance, total.damping),
-                          optional(total.has_impedance, total.reference)),
-          out.has_head_target ? Optional(Eigen::VectorXd(out.head_target)) : std::nullopt);
+          Eigen::VectorXd(total.effort), Eigen::VectorXd(total.stiffness.head(impedance)),
+          Eigen::VectorXd(total.damping.head(impedance)),
+          Eigen::VectorXd(total.reference.head(impedance)), std::move(source_efforts),
+          Eigen::VectorXd(out.head_target.head(out.has_head_target ? 3 : 0)),
+          std::move(sources));
       },
       "obs"_a, "kinematics"_a,
-      "The answer at obs: ([(source, its generalized force at (q, v))], the sum of the sources' "
-      "commands (effort, stiffness, damping, reference; the last three None without an "
-      "impedance), head_target or None).");
+      "The answer at obs as an EffortCommand carries it (iceskate_sim.effort_cdr.CommandValues): "
+      "the sum of the sources' commands (effort, stiffness, damping, reference; the last three "
+      "empty without an impedance), each source's generalized force at (q, v) (18 per source, "
+      "flat), the head target (y, z, pitch; empty: none) and the sources' names in order.");
 }
 
 }  // namespace iceskate_native::bindings

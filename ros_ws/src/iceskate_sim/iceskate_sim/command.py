@@ -16,12 +16,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Iterable
+from typing import Iterable, NamedTuple
 
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import N_COORDINATES
+
+#: An absent array (no impedance, no head target) in ``CommandValues``.
+EMPTY = np.zeros(0)
 
 
 def all_finite(x: np.ndarray) -> bool:
@@ -123,6 +126,50 @@ class ControllerCommand:
         """The controller command of its sources' ``commands`` at the state (q, v) answered."""
         return cls(JointCommand.total(commands.values()),
                    {source: c.torque(q, v) for source, c in commands.items()}, head_target)
+
+
+class CommandValues(NamedTuple):
+    """A controller's command as an EffortCommand carries it, over the 18 coordinates in order:
+    what a native law answers and what the simulator reads from a message (views of its bytes
+    once its layout is known; checked).
+
+    :ivar effort: (18,) [N m, N].
+    :ivar stiffness: (18,) [N m/rad], or empty (with ``damping`` and ``reference``: no
+        impedance).
+    :ivar source_efforts: each source's generalized force, 18 per source in ``sources``' order,
+        flat.
+    :ivar head_target: (3,) y [m], z [m], pitch [rad], or empty (none).
+    """
+
+    effort: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    reference: np.ndarray
+    source_efforts: np.ndarray
+    head_target: np.ndarray
+    sources: tuple[str, ...]
+
+    @classmethod
+    def of(cls, answer: ControllerCommand) -> CommandValues:
+        """The values of ``answer``."""
+        command, efforts = answer.command, answer.source_efforts
+        return cls(command.effort, *((command.stiffness, command.damping, command.reference)
+                                     if command.has_impedance else (EMPTY,) * 3),
+                   np.concatenate(list(efforts.values())) if efforts else EMPTY,
+                   EMPTY if answer.head_target is None else answer.head_target,
+                   tuple(efforts))
+
+    def command(self) -> ControllerCommand:
+        """The ControllerCommand of these values (copies).
+
+        :raises SimulationError: for a wrong length, a non-finite value or a negative gain.
+        """
+        command = (JointCommand(self.effort.copy(), self.stiffness.copy(), self.damping.copy(),
+                                self.reference.copy()) if self.stiffness.size
+                   else JointCommand(self.effort.copy()))
+        rows = self.source_efforts.reshape(len(self.sources), N_COORDINATES).copy()
+        return ControllerCommand(command, dict(zip(self.sources, rows, strict=True)),
+                                 self.head_target.copy() if self.head_target.size else None)
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,10 @@ A ``ControllerNode`` declares its law's parameters as typed ROS parameters, gene
 law's parameter class (``declare_parameters``: ``ros2 param list/describe/get/set`` show and
 change them, a change is checked by the class's own rules), subscribes ``gait_state`` (the whole
 hybrid state of an instant: one message in per instant, best effort), taken as CDR bytes and
-read straight into the ``Observation`` (``gait_state_cdr.read_observation``: no message object),
-asks the subclass's law (``compute``: a native law, reading the
-robot through ``kinematics``) for its command and
-publishes it, with the per-source breakdown, as one ``EffortCommand`` (source: the node's name)
+read straight into the native observation (``gait_state_cdr.read_observation``: no message
+object), asks the subclass's law (``compute``: a native law, reading the robot through
+``kinematics``) for its command values and publishes them, with the per-source breakdown, as
+one ``EffortCommand`` (source: the node's name)
 on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
 instant and node, published raw (``effort_cdr.CommandEncoder``: the bytes of the previous
 instant with new values, 5 us where an rclpy message costs 15). ``use_sim_time`` is true unless
@@ -23,7 +23,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
-from iceskate_sim.command import ControllerCommand
+import iceskate_native
+from iceskate_sim.command import CommandValues
 from iceskate_sim.effort_cdr import CommandEncoder
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.gait_state_cdr import read_observation
@@ -34,7 +35,6 @@ from iceskate_sim.node_support import (
     check_unknown,
     declare_parameters,
 )
-from iceskate_sim.observation import Observation
 from iceskate_sim.robot import load_robot
 
 P = TypeVar('P')
@@ -72,7 +72,7 @@ class ControllerNode(Node, Generic[P]):
         """Whether the node answers states (an idle controller sends nothing)."""
         return True
 
-    def compute(self, obs: Observation) -> ControllerCommand:
+    def compute(self, obs: iceskate_native.Observation) -> CommandValues:
         """This node's command at ``obs`` (its sources summed, with their breakdown)."""
         raise NotImplementedError
 
@@ -86,8 +86,8 @@ class ControllerNode(Node, Generic[P]):
             self.get_logger().error(f'no command: {exc}')
             return
         try:
-            command = self.compute(obs)
+            values = self.compute(obs)
         except (SimulationError, *self.law_errors) as exc:
             self.get_logger().error(f'no command at t={ns / 1e9:.6f} s: {exc}')
             return
-        self._publisher.publish(self._encoder.encode(command, ns))
+        self._publisher.publish(self._encoder.encode(values, ns))

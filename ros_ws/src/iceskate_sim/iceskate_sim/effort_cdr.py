@@ -24,14 +24,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import struct
 from types import SimpleNamespace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from rosbags.typesys.store import Typestore
 
 from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.cdr import HEADER, STAMP, CdrReader
-from iceskate_sim.command import ControllerCommand, JointCommand, all_finite
+from iceskate_sim.command import CommandValues, ControllerCommand, all_finite
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
 from iceskate_sim.ros_conversions import command_fields, command_from_message, ns_to_sec_nanosec
@@ -39,51 +39,7 @@ from iceskate_sim.ros_conversions import command_fields, command_from_message, n
 #: The float64 sequences of an EffortCommand, in order.
 ARRAYS = ('effort', 'stiffness', 'damping', 'position_reference', 'source_efforts',
           'head_target')
-_EMPTY = np.zeros(0)
 _TYPE = 'iceskate_interfaces/msg/EffortCommand'
-
-
-class CommandValues(NamedTuple):
-    """A controller's command as an EffortCommand carries it, over the 18 coordinates in order
-    (views of the message's bytes once its layout is known; checked).
-
-    :ivar effort: (18,) [N m, N].
-    :ivar stiffness: (18,) [N m/rad], or empty (with ``damping`` and ``reference``: no
-        impedance).
-    :ivar source_efforts: each source's generalized force, 18 per source in ``sources``' order,
-        flat.
-    :ivar head_target: (3,) y [m], z [m], pitch [rad], or empty (none).
-    """
-
-    effort: np.ndarray
-    stiffness: np.ndarray
-    damping: np.ndarray
-    reference: np.ndarray
-    source_efforts: np.ndarray
-    head_target: np.ndarray
-    sources: tuple[str, ...]
-
-    @classmethod
-    def of(cls, answer: ControllerCommand) -> CommandValues:
-        """The values of ``answer``."""
-        command, efforts = answer.command, answer.source_efforts
-        return cls(command.effort, *((command.stiffness, command.damping, command.reference)
-                                     if command.has_impedance else (_EMPTY,) * 3),
-                   np.concatenate(list(efforts.values())) if efforts else _EMPTY,
-                   _EMPTY if answer.head_target is None else answer.head_target,
-                   tuple(efforts))
-
-    def command(self) -> ControllerCommand:
-        """The ControllerCommand of these values (copies).
-
-        :raises SimulationError: for a wrong length, a non-finite value or a negative gain.
-        """
-        command = (JointCommand(self.effort.copy(), self.stiffness.copy(), self.damping.copy(),
-                                self.reference.copy()) if self.stiffness.size
-                   else JointCommand(self.effort.copy()))
-        rows = self.source_efforts.reshape(len(self.sources), N_COORDINATES).copy()
-        return ControllerCommand(command, dict(zip(self.sources, rows, strict=True)),
-                                 self.head_target.copy() if self.head_target.size else None)
 
 
 @dataclass(frozen=True)
@@ -192,7 +148,7 @@ class CommandDecoder:
 
 
 class CommandEncoder:
-    """A controller's ``ControllerCommand`` -> its ``effort_commands`` CDR bytes (see the module
+    """A controller's ``CommandValues`` -> its ``effort_commands`` CDR bytes (see the module
     docstring); ``source``: the controller's name; ``typestore`` serializes a new layout
     (default: ``make_typestore()``)."""
 
@@ -201,17 +157,12 @@ class CommandEncoder:
         self._typestore = typestore or make_typestore()
         self._last: tuple[tuple[Any, ...], _Layout, bytearray] | None = None
 
-    def encode(self, answer: ControllerCommand, stamp_ns: int) -> bytes:
-        """The message of ``answer`` to the state stamped ``stamp_ns``."""
-        command, empty = answer.command, _EMPTY
-        arrays = (command.effort, *((command.stiffness, command.damping, command.reference)
-                                    if command.has_impedance else (empty,) * 3),
-                  np.concatenate(list(answer.source_efforts.values()))
-                  if answer.source_efforts else empty,
-                  answer.head_target if answer.head_target is not None else empty)
-        shape = (*answer.source_efforts, *(x.size for x in arrays))
+    def encode(self, values: CommandValues, stamp_ns: int) -> bytes:
+        """The message of the command ``values`` to the state stamped ``stamp_ns``."""
+        arrays = values[:6]
+        shape = (values.sources, *(x.size for x in arrays))
         if self._last is None or self._last[0] != shape:
-            data = bytearray(self._serialize(command_fields(answer)))
+            data = bytearray(self._serialize(command_fields(values.command())))
             self._last = (shape, read_effort_command(bytes(data))[1], data)
         _, layout, data = self._last
         STAMP.pack_into(data, HEADER, *ns_to_sec_nanosec(stamp_ns))

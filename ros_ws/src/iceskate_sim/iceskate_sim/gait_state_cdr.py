@@ -1,6 +1,6 @@
-"""``GaitState`` CDR bytes -> the ``Observation`` a control law sees, without message objects
-(the controller nodes' hot path: rosbags' deserialisation and the conversion of its message
-cost 30 us per instant, this reading 7 us).
+"""``GaitState`` CDR bytes -> the observation a native control law takes, without message
+objects (the controller nodes' hot path: rosbags' deserialisation and the conversion of its
+message cost 30 us per instant, this reading 10 us).
 
 ``read_observation`` walks the message field by field (``cdr.CdrReader``), skipping what a law
 does not read (frame id, multipliers, forces, ZMP, the last transition), and checks what it
@@ -13,10 +13,10 @@ import struct
 
 import numpy as np
 
+import iceskate_native
 from iceskate_sim.cdr import STAMP, CdrReader
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.observation import Observation
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, PIVOTS
 from iceskate_sim.ros_conversions import NS_PER_S, PIVOT_OF_CODE, finite_vector
 
 _CODES = struct.Struct('<3B')         # mode, support_side, pivot
@@ -30,8 +30,9 @@ def _seconds(sec: int, nanosec: int) -> float:
     return (sec * NS_PER_S + nanosec) / 1e9
 
 
-def read_observation(data: bytes) -> tuple[int, Observation]:
-    """The stamp [ns] and the Observation of one GaitState's CDR bytes.
+def read_observation(data: bytes) -> tuple[int, iceskate_native.Observation]:
+    """The stamp [ns] and the observation of one GaitState's CDR bytes, as the native laws take
+    it (``native_control.native_observation`` of ``observation_from_gait_state``'s).
 
     :raises SimulationError: for bytes that are not a GaitState ('undecodable gait_state ...')
         or a malformed field (naming it, as ``observation_from_gait_state``).
@@ -64,7 +65,11 @@ def read_observation(data: bytes) -> tuple[int, Observation]:
     q, v = (finite_vector(np.frombuffer(data, '<f8', count, offset), COORDINATE_NAMES,
                           f'gait_state {field}', f'; it needs {N_COORDINATES} (y0, q1..q17)')
             for field, (offset, count) in (('position', position), ('velocity', velocity)))
-    return sec * NS_PER_S + nanosec, Observation(
-        _seconds(sec, nanosec), q, v, mode, SIDES[side], pivot_name, step_index,
-        _seconds(*exchange), heel_anchor_y,
-        _seconds(*touchdown) if touched_down else float('nan'))
+    try:
+        obs = iceskate_native.Observation(
+            _seconds(sec, nanosec), q, v, mode, side, PIVOTS.index(pivot_name), step_index,
+            _seconds(*exchange), heel_anchor_y,
+            _seconds(*touchdown) if touched_down else float('nan'))
+    except ValueError as exc:
+        raise SimulationError(f'gait_state: {exc}') from None
+    return sec * NS_PER_S + nanosec, obs

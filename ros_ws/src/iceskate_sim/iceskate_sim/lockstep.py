@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import ControllerCommand
-from iceskate_sim.effort_cdr import CommandDecoder, CommandValues
+from iceskate_sim.command import CommandValues, ControllerCommand
+from iceskate_sim.effort_cdr import CommandDecoder
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record

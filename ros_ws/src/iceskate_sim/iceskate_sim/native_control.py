@@ -4,14 +4,15 @@ The laws of visual_lifting and gait_manager run in C++ (``iceskate_native.Contro
 subclasses of their packages' ``_law`` modules) and read the robot through an
 ``iceskate_native.ModelKinematics`` over the same four support models the dynamics use. This
 module makes that kinematics from a ``Robot``, turns an ``Observation`` into the native one
-(side 0 right / 1 left, pivot 0 toe / 1 heel) and a law's answer into the ``ControllerCommand``
-a controller sends, so that the headless composition and the ROS nodes share this one path.
+(side 0 right / 1 left, pivot 0 toe / 1 heel) and gives a law's answer as the ``CommandValues``
+a controller node sends (or as a ``ControllerCommand``), so that the headless composition and
+the ROS nodes share this one path.
 """
 
 from __future__ import annotations
 
 import iceskate_native
-from iceskate_sim.command import ControllerCommand, JointCommand
+from iceskate_sim.command import CommandValues, ControllerCommand
 from iceskate_sim.modes import MODES
 from iceskate_sim.observation import Observation
 from iceskate_sim.robot import PIVOTS, SIDES, Robot
@@ -34,12 +35,16 @@ def native_observation(obs: Observation) -> iceskate_native.Observation:
         obs.t_exchange, obs.heel_anchor_y, obs.t_touchdown)
 
 
+def native_values(controller: iceskate_native.Controller, obs: iceskate_native.Observation,
+                  kinematics: iceskate_native.Kinematics) -> CommandValues:
+    """What ``controller`` sends at ``obs`` (a native observation), as an EffortCommand carries
+    it: the sum of its sources' commands (``JointCommand.total``, summed natively), each
+    source's generalized force at (q, v) and its head target (if it steers one)."""
+    *arrays, sources = controller.compute(obs, kinematics)
+    return CommandValues(*arrays, tuple(sources))
+
+
 def native_command(controller: iceskate_native.Controller, obs: Observation,
                    kinematics: iceskate_native.Kinematics) -> ControllerCommand:
-    """What ``controller`` sends at ``obs``: the sum of its sources' commands
-    (``JointCommand.total``, summed natively), each source's generalized force at (q, v) and its
-    head target (if it steers one)."""
-    efforts, (effort, stiffness, damping, reference), head_target = controller.compute(
-        native_observation(obs), kinematics)
-    return ControllerCommand(JointCommand(effort, stiffness, damping, reference), dict(efforts),
-                             head_target)
+    """``native_values`` at ``obs`` as a ``ControllerCommand``."""
+    return native_values(controller, native_observation(obs), kinematics).command()

@@ -41,7 +41,7 @@ from iceskate_sim.modes import MODES
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
 
 if TYPE_CHECKING:
-    from iceskate_sim.effort_cdr import CommandValues
+    from iceskate_sim.command import CommandValues
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)

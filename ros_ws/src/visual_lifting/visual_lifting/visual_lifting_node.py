@@ -11,11 +11,11 @@ The law runs natively (``visual_lifting.native``; ``law`` is its readable refere
 
 from __future__ import annotations
 
-from iceskate_sim.command import ControllerCommand
+import iceskate_native
+from iceskate_sim.command import CommandValues
 from iceskate_sim.controller_node import ControllerNode
-from iceskate_sim.native_control import native_command
+from iceskate_sim.native_control import native_values
 from iceskate_sim.node_support import run_node
-from iceskate_sim.observation import Observation
 from visual_lifting.errors import VisualLiftingError
 from visual_lifting.law import VisualLiftingParameters
 from visual_lifting.native import VisualLiftingController
@@ -37,12 +37,12 @@ class VisualLiftingNode(ControllerNode[VisualLiftingParameters]):
         super()._on_parameters(params)
         self.controller.set_parameters(params)
 
-    def compute(self, obs: Observation) -> ControllerCommand:
+    def compute(self, obs: iceskate_native.Observation) -> CommandValues:
         """tau_h = J_H^T K_p (psi_d - psi) at ``obs``, with its target psi_d."""
         if self.controller.origin is None and obs.t != 0.0:
             self.get_logger().warning(f'first state seen at t={obs.t} s, not 0: its head pose '
                                       'is taken as psi(0)')
-        return native_command(self.controller, obs, self.kinematics)
+        return native_values(self.controller, obs, self.kinematics)
 
 
 def main(args: list[str] | None = None) -> int:
