@@ -161,3 +161,17 @@ def test_read_effort_command_gives_the_fields(typestore):
     assert msg.joint_names == list(COORDINATE_NAMES) and msg.source_names == ['a', 'b']
     np.testing.assert_array_equal(msg.source_efforts, np.arange(36.0))
     assert msg.stiffness.size == 0
+
+
+def test_the_skeleton_tells_senders_and_source_names_of_one_layout_apart(typestore):
+    """Messages that differ only in the sender's or the sources' names (same lengths) decode
+    as their own, the fast way or not."""
+    decoder = CommandDecoder()
+    for k in range(3):
+        for sender, names in (('aa', ['x', 'y']), ('bb', ['x', 'y']), ('aa', ['u', 'v'])):
+            data = rosbags_bytes(typestore, sender, STAMP + k, effort=np.full(18, k + 1.0),
+                                 source_names=names, source_efforts=np.arange(36.0) * k)
+            source, ns, got = decoder.decode_values(data)
+            assert (source, ns, got.sources) == (sender, STAMP + k, tuple(names))
+            np.testing.assert_array_equal(got.effort, np.full(18, k + 1.0))
+            np.testing.assert_array_equal(got.source_efforts, np.arange(36.0) * k)

@@ -28,9 +28,11 @@ EMPTY = np.zeros(0)
 
 
 def all_finite(x: np.ndarray) -> bool:
-    """Whether every entry of a float array is finite: a finite float sum proves it (0.3 us for
-    18 entries; ``np.isfinite(x).all()``: 1.2 us), a sum that overflowed gets the exact check."""
-    return math.isfinite(sum(x.tolist())) or bool(np.isfinite(x).all())
+    """Whether every entry of a float array is finite: a finite sum (up to 32 entries: 0.3 us
+    for 18) or dot product with itself (0.8 us for 200) proves it (``np.isfinite(x).all()``:
+    1.2-1.4 us); one that overflowed gets the exact check."""
+    return (math.isfinite(sum(x.tolist()) if x.size <= 32 else x @ x)
+            or bool(np.isfinite(x).all()))
 
 
 def _vector(name: str, value: np.ndarray | None) -> np.ndarray:

@@ -21,7 +21,8 @@ layout is serialized by rosbags (the bag's codec).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import cached_property
 import struct
 from types import SimpleNamespace
 from typing import Any
@@ -45,11 +46,27 @@ _TYPE = 'iceskate_interfaces/msg/EffortCommand'
 @dataclass(frozen=True)
 class _Layout:
     """Where one EffortCommand's values lie: ``arrays`` (byte offset, count) per ``ARRAYS``
-    field, the message's length and its skeleton (see the module docstring)."""
+    field, the message's length and its skeleton (see the module docstring) as (byte offset,
+    bytes) parts."""
 
     arrays: tuple[tuple[int, int], ...]
     size: int
-    skeleton: bytes
+    skeleton: tuple[tuple[int, bytes], ...] = ()
+
+    def fits(self, data: bytes) -> bool:
+        """Whether ``data`` has this layout (its skeleton's bytes)."""
+        return len(data) >= self.size and all(
+            data[offset:offset + len(part)] == part for offset, part in self.skeleton)
+
+    @cached_property
+    def slots(self) -> tuple[np.ndarray, tuple[slice, ...], slice]:
+        """The value slots as float64 indices from byte ``HEADER`` on (the arrays are aligned
+        there): all of them, each array's, and the gains' (stiffness, damping) among all."""
+        starts = [((offset - HEADER) // 8, count) for offset, count in self.arrays]
+        every = np.concatenate([np.arange(start, start + count) for start, count in starts])
+        effort, stiffness, damping = (count for _, count in starts[:3])
+        return (every, tuple(slice(start, start + count) for start, count in starts),
+                slice(effort, effort + stiffness + damping))
 
 
 def read_effort_command(data: bytes) -> tuple[SimpleNamespace, _Layout]:
@@ -71,29 +88,13 @@ def read_effort_command(data: bytes) -> tuple[SimpleNamespace, _Layout]:
                               f'{exc}') from None
     for name, (offset, count) in zip(ARRAYS, arrays, strict=True):
         fields[name] = np.frombuffer(data, '<f8', count, offset).copy()
-    layout = _Layout(tuple(arrays), reader.pos, b'')
+    skeleton, start = [], HEADER + STAMP.size
+    for offset, count in [*arrays, (reader.pos, 0)]:
+        if offset > start:
+            skeleton.append((start, bytes(data[start:offset])))
+        start = max(start, offset + 8 * count)
     message = SimpleNamespace(stamp_ns=sec * 1_000_000_000 + nanosec, **fields)
-    return message, replace(layout, skeleton=_skeleton(data, layout))
-
-
-def _skeleton(data: bytes, layout: _Layout) -> bytes:
-    """``data``'s skeleton in ``layout`` (its bytes with the value regions zeroed)."""
-    skeleton = bytearray(data[HEADER + STAMP.size:layout.size])
-    for offset, count in layout.arrays:
-        start = offset - HEADER - STAMP.size
-        skeleton[start:start + 8 * count] = bytes(8 * count)
-    return bytes(skeleton)
-
-
-def _source_of(data: bytes) -> str | None:
-    """The sender named in an EffortCommand's bytes (None: unreadable)."""
-    try:
-        reader = CdrReader(data)
-        reader.take(STAMP.size)
-        reader.string()  # frame_id
-        return reader.string()
-    except (ValueError, UnicodeDecodeError, struct.error):
-        return None
+    return message, _Layout(tuple(arrays), reader.pos, tuple(skeleton))
 
 
 class CommandDecoder:
@@ -119,14 +120,13 @@ class CommandDecoder:
         :raises SimulationError: naming the problem (and the source, once it is readable).
         """
         data = bytes(data)
-        source = _source_of(data)
-        known = self._known.get(source) if source is not None else None
-        if known is not None and len(data) >= known[0].size \
-                and _skeleton(data, known[0]) == known[0].skeleton:
-            values = self._values(data, *known)
-            if values is not None:
-                sec, nanosec = STAMP.unpack_from(data, HEADER)
-                return source, sec * 1_000_000_000 + nanosec, values
+        for source, (layout, sources) in self._known.items():  # the skeleton names the source
+            if layout.fits(data):
+                values = self._values(data, layout, sources)
+                if values is not None:
+                    sec, nanosec = STAMP.unpack_from(data, HEADER)
+                    return source, sec * 1_000_000_000 + nanosec, values
+                break
         message, layout = read_effort_command(data)
         values = CommandValues.of(command_from_message(message))
         if message.joint_names == list(COORDINATE_NAMES):  # the layout the fast way assumes
@@ -137,14 +137,13 @@ class CommandDecoder:
     def _values(data: bytes, layout: _Layout, sources: tuple[str, ...]) -> CommandValues | None:
         """The values in ``data`` (all 18 names in order, as checked before); None when a
         value is not finite or a gain negative (the checked way then says which)."""
-        arrays = [np.frombuffer(data, '<f8', count, offset) for offset, count in layout.arrays]
-        for x in arrays:
-            if not all_finite(x):
-                return None
-        stiffness, damping = arrays[1], arrays[2]
-        if stiffness.size and (min(stiffness.tolist()) < 0.0 or min(damping.tolist()) < 0.0):
+        every, arrays, gains = layout.slots
+        doubles = np.frombuffer(data, '<f8', (layout.size - HEADER) // 8, HEADER)
+        values = doubles[every]
+        if not all_finite(values) or (gains.stop > gains.start
+                                      and min(values[gains].tolist()) < 0.0):
             return None
-        return CommandValues(*arrays, sources)
+        return CommandValues(*(doubles[array] for array in arrays), sources)
 
 
 class CommandEncoder:
