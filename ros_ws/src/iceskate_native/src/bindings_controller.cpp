@@ -4,7 +4,6 @@
 // (nanobind shares registered types between modules built with the same nanobind), the
 // Observation a law answers, and the queries of a Kinematics (tested against the Python model).
 #include <array>
-#include <cstddef>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -218,25 +217,28 @@ void bind_controller(nb::module_ & m)
         self.compute(obs, kinematics, out);
         const JointCommand total = out.total();
         const Eigen::Index impedance = total.has_impedance ? kCoordinates : 0;
-        Eigen::VectorXd source_efforts(kCoordinates * out.sources.size());
-        std::vector<std::string> sources;
-        for (std::size_t k = 0; k < out.sources.size(); ++k) {
-          source_efforts.segment<kCoordinates>(kCoordinates * k) =
-            out.sources[k].command.torque(obs.q, obs.v);
-          sources.push_back(out.sources[k].source);
+        const Eigen::Index sources = static_cast<Eigen::Index>(out.sources.size());
+        Eigen::VectorXd values(
+          kCoordinates + 3 * impedance + kCoordinates * sources + (out.has_head_target ? 3 : 0));
+        values << total.effort, total.stiffness.head(impedance), total.damping.head(impedance),
+          total.reference.head(impedance), Eigen::VectorXd::Zero(kCoordinates * sources),
+          out.head_target.head(out.has_head_target ? 3 : 0);
+        std::vector<std::string> names;
+        Eigen::Index at = kCoordinates + 3 * impedance;
+        for (const auto & [source, command] : out.sources) {
+          values.segment<kCoordinates>(at) = command.torque(obs.q, obs.v);
+          at += kCoordinates;
+          names.push_back(source);
         }
         return std::make_tuple(
-          Eigen::VectorXd(total.effort), Eigen::VectorXd(total.stiffness.head(impedance)),
-          Eigen::VectorXd(total.damping.head(impedance)),
-          Eigen::VectorXd(total.reference.head(impedance)), std::move(source_efforts),
-          Eigen::VectorXd(out.head_target.head(out.has_head_target ? 3 : 0)),
-          std::move(sources));
+          std::move(values), total.has_impedance, out.has_head_target, std::move(names));
       },
       "obs"_a, "kinematics"_a,
-      "The answer at obs as an EffortCommand carries it (iceskate_sim.effort_cdr.CommandValues): "
-      "the sum of the sources' commands (effort, stiffness, damping, reference; the last three "
-      "empty without an impedance), each source's generalized force at (q, v) (18 per source, "
-      "flat), the head target (y, z, pitch; empty: none) and the sources' names in order.");
+      "The answer at obs as an EffortCommand carries it (iceskate_sim.effort_cdr.CommandValues), "
+      "in one vector: the sum of the sources' commands (effort, then stiffness, damping and "
+      "reference if it has an impedance), each source's generalized force at (q, v) (18 per "
+      "source), the head target (y, z, pitch) if it steers one; then whether it has an "
+      "impedance, whether it has a head target and the sources' names in order.");
 }
 
 }  // namespace iceskate_native::bindings

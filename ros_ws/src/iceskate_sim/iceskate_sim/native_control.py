@@ -12,10 +12,10 @@ the ROS nodes share this one path.
 from __future__ import annotations
 
 import iceskate_native
-from iceskate_sim.command import CommandValues, ControllerCommand
+from iceskate_sim.command import EMPTY, CommandValues, ControllerCommand
 from iceskate_sim.modes import MODES
 from iceskate_sim.observation import Observation
-from iceskate_sim.robot import PIVOTS, SIDES, Robot
+from iceskate_sim.robot import N_COORDINATES, PIVOTS, SIDES, Robot
 
 
 def native_kinematics(robot: Robot) -> iceskate_native.ModelKinematics:
@@ -40,8 +40,14 @@ def native_values(controller: iceskate_native.Controller, obs: iceskate_native.O
     """What ``controller`` sends at ``obs`` (a native observation), as an EffortCommand carries
     it: the sum of its sources' commands (``JointCommand.total``, summed natively), each
     source's generalized force at (q, v) and its head target (if it steers one)."""
-    *arrays, sources = controller.compute(obs, kinematics)
-    return CommandValues(*arrays, tuple(sources))
+    values, impedance, steers, sources = controller.compute(obs, kinematics)
+    n = N_COORDINATES
+    m = 4 * n if impedance else n  # the end of the total command
+    head = m + n * len(sources)
+    return CommandValues(values[:n], values[n:2 * n] if impedance else EMPTY,
+                         values[2 * n:3 * n] if impedance else EMPTY,
+                         values[3 * n:m] if impedance else EMPTY, values[m:head],
+                         values[head:] if steers else EMPTY, tuple(sources))
 
 
 def native_command(controller: iceskate_native.Controller, obs: Observation,
