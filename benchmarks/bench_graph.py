@@ -148,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"\nscene {r['scene']}: {r['duration_s']} s at "
                   f"{1e3 * r['control_period_s']:g} ms, {'with' if r['bag'] else 'no'} bag; "
                   "controller compute "
-                  + ', '.join(f'{k} {v:.2f} ms' for k, v in r['controller_compute_ms'].items()))
+                  + ', '.join(f'{k} {1e3 * v:.1f} us'
+                              for k, v in r['controller_compute_ms'].items()))
             print(f"  headless                 RTF {r['headless_rtf']:.3f}")
             for label in ('three_process', 'three_process_fifo', 'single_process'):
                 if label not in r:

@@ -23,8 +23,7 @@ from gait_manager.errors import GaitManagerError
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
-from iceskate_sim.command import HeldCommand
-from iceskate_sim.command import CommandValues
+from iceskate_sim.command import CommandValues, HeldCommand
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording import Sample, bag_record
 from iceskate_sim.robot import PIVOTS, SIDES

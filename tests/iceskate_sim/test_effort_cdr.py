@@ -118,8 +118,8 @@ def test_the_decoder_reads_rclpy_bytes_whose_padding_is_not_zero():
         source, ns, got = decoder.decode(data)
         assert (source, ns) == ('gait_manager', 3_000_000_007)
         assert_same(got, answer)
-    back = serialization.deserialize_message(CommandEncoder('gait_manager').encode(CommandValues.of(answer), 5),
-                                             EffortCommand)
+    data = CommandEncoder('gait_manager').encode(CommandValues.of(answer), 5)
+    back = serialization.deserialize_message(data, EffortCommand)
     assert_same(command_from_message(back), answer)
 
 

@@ -3,6 +3,7 @@ its failures and the run's failures still leave a closed, readable bag."""
 
 from dataclasses import replace
 import json
+import os
 import pathlib
 
 import numpy as np
@@ -54,6 +55,18 @@ def test_background_writer_writes_the_same_messages(tmp_path, samples):
     assert recorder.count == PERIODS
     assert len(background) == 1 + 6 * PERIODS  # the URDF, then 6 topics per sample
     assert background == inline
+
+
+def test_the_background_writer_runs_at_idle_priority(tmp_path, samples):
+    """The writer takes only the CPU time the run leaves (SCHED_IDLE), whatever the parent's
+    scheduling; the parent's stays as it was."""
+    before = os.sched_getscheduler(0)
+    urdf = load_robot().urdf_path.read_text(encoding='utf-8')
+    with BagRecorder(tmp_path / 'bag', {'scene': 'stand'}, urdf,
+                     background=True) as recorder:
+        recorder.write(samples[0])
+        assert os.sched_getscheduler(recorder._process.pid) == os.SCHED_IDLE
+    assert os.sched_getscheduler(0) == before
 
 
 def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, samples,

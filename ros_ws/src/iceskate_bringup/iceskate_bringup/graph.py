@@ -10,7 +10,8 @@ which ends the run cleanly (``run_graph``). DIR then holds what the headless run
 metrics.json, events.json, trajectory.npz and bag/. ``single_process=True`` runs the three
 nodes in one process on one EventsExecutor instead.
 ``rt_priority=N`` (``--rt-priority N``) runs the nodes under real-time scheduling (SCHED_FIFO
-at priority N, as ``chrt --fifo N`` would; every thread and the bag writer inherit it): the
+at priority N, as ``chrt --fifo N`` would; every thread inherits it, the bag writer runs under
+SCHED_IDLE): the
 processes are started from a thread switched to it for that moment (or, in one process, the
 run's thread is switched while it runs).
 

@@ -34,7 +34,7 @@ from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.cdr import HEADER, STAMP, CdrReader
 from iceskate_sim.command import CommandValues, ControllerCommand, all_finite
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
+from iceskate_sim.robot import COORDINATE_NAMES
 from iceskate_sim.ros_conversions import command_fields, command_from_message, ns_to_sec_nanosec
 
 #: The float64 sequences of an EffortCommand, in order.

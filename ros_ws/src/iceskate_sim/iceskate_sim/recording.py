@@ -42,6 +42,7 @@ import json
 import math
 import multiprocessing
 from multiprocessing.connection import Connection
+import os
 import pathlib
 import queue
 import signal
@@ -976,7 +977,8 @@ class BagRecorder:
 
     :param background: build, serialise and write the messages in a writer process, forked
         here (a few ms, no re-import of ``__main__``; the writer touches neither ROS nor the
-        simulation, so threads of the parent do not matter).
+        simulation, so threads of the parent do not matter) and run under SCHED_IDLE: it takes
+        only the CPU time the run and the ROS nodes leave.
         ``write`` packs the sample and hands it over in batches of ``BATCH``, ``write_block``
         a block at once; they wait while ``QUEUE_BATCHES`` batches are in flight and raise
         SimulationError once the writer has failed. ``close`` waits until everything is
@@ -1002,6 +1004,9 @@ class BagRecorder:
             target=_writer_process, name='bag-writer', daemon=True,
             args=(self.path, metadata, urdf, self.factory, self._records, child_status))
         self._process.start()
+        # the lowest priority: the writer never delays the run or a lockstep node (its queue
+        # is bounded: a parent that gets ahead waits, and the writer then has the CPU)
+        os.sched_setscheduler(self._process.pid, os.SCHED_IDLE, os.sched_param(0))
         child_status.close()
         self._batch: list[BagRecord] = []
 
