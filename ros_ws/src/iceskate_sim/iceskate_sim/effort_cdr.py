@@ -51,7 +51,7 @@ class _Layout:
 
     arrays: tuple[tuple[int, int], ...]
     size: int
-    skeleton: tuple[tuple[int, bytes], ...] = ()
+    skeleton: tuple[tuple[int, bytes], ...]
 
     def fits(self, data: bytes) -> bool:
         """Whether ``data`` has this layout (its skeleton's bytes)."""
