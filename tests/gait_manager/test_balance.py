@@ -197,6 +197,27 @@ def test_pace_point_starts_at_the_head_and_moves_at_the_speed(make_obs, dynamics
     np.testing.assert_allclose(ahead, 3.0 * unit, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize('lag', [-0.7, 0.002, 0.7])
+def test_the_feedback_limit_bounds_the_speed_and_pace_terms_not_the_drive(make_obs, dynamics,
+                                                                         lag):
+    """With ``feedback_limit`` L the speed and pace terms together act within [-L, L] N (a
+    pace lag of +-0.7 m asks k_p x 0.7 = 105 N; 2 mm asks 0.3 N, inside the bound), and the
+    drive F_0 adds to them unbounded by L."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    obs = make_obs(t=2.0, q=q, mode=3)
+    head_y = dynamics.frame_placement(obs.contact(), q, 'head_top').translation[1]
+    base = replace(BalanceParameters(), speed_gain=0.0, max_force=1e3, max_brake=1e3)
+    start = head_y - base.speed * obs.t + lag
+    unit = (_speed_joint_efforts(obs, dynamics, replace(base, drive=1.0), start)
+            - _speed_joint_efforts(obs, dynamics, base, start))  # J_com,y^T x 1 N
+    limit, pace, drive = 20.0, 150.0, 12.0
+    bounded = replace(base, pace_gain=pace, feedback_limit=limit, drive=drive)
+    force = drive + min(max(pace * lag, -limit), limit)
+    np.testing.assert_allclose(_speed_joint_efforts(obs, dynamics, bounded, start)
+                               - _speed_joint_efforts(obs, dynamics, base, start),
+                               force * unit, rtol=1e-9, atol=1e-12)
+
+
 def test_the_glide_holds_the_lifted_foot_behind_the_hip_then_swings(make_obs):
     """With glide_time G the forward path is the plain one delayed by G: the foot, once lifted
     to the clearance, waits 0.15 m behind the hip until G."""

@@ -49,6 +49,9 @@ VARIANTS = {
         'posture': {'reference': 'balance'}, 'balance': {'glide_time': 0.2}},
     'balance with drive and pace': {
         'posture': {'reference': 'balance'}, 'balance': {'drive': 15.0, 'pace_gain': 120.0}},
+    'balance with drive and a bounded pace': {
+        'posture': {'reference': 'balance'},
+        'balance': {'drive': 15.0, 'pace_gain': 120.0, 'feedback_limit': 4.0}},
     'weight transfer ramp': {
         'weight_transfer': {'rule': 'ramp', 'moment_arm': 0.05, 'joint1_torque': True}},
     'weight transfer ramp, steps, no moment, no q1': {

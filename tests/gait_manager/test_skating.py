@@ -119,14 +119,28 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
     assert np.all(braked_end < 0.7 * free_end), (free_end, braked_end)
 
 
-def test_a_backward_chest_push_after_the_fourth_step_is_survived(tmp_path):
-    """A 150 N x 0.1 s (15 N s) backward push at the chest at 6.6 s: no fall to 9 s, and the
-    gait steps on after it (the forward ones it does not survive: docs/results.md)."""
+@pytest.mark.parametrize('force', [150.0, -150.0])
+def test_a_chest_push_after_the_fourth_step_is_survived(tmp_path, force):
+    """A 150 N x 0.1 s (15 N s) chest push at 6.6 s, forward or backward: no fall to 9 s, and
+    the gait steps on after it (forward: the bounded speed feedback lets the robot keep the
+    speed it got instead of braking its support foot out from under it)."""
     raw = read_yaml(scene_path('skate'), 'scene')
     raw['duration'], raw['record'] = 9.0, {'bag': False}
     raw['disturbances'] = [{'start': 6.6, 'duration': 0.1, 'frame': 'chest',
-                            'force': [0.0, -150.0, 0.0]}]
+                            'force': [0.0, force, 0.0]}]
     metrics = run(parse_scene(raw), tmp_path, progress=False)
     assert not metrics['fell'], metrics['failure']
     events = json.loads((tmp_path / 'events.json').read_text())
     assert sum(e['event'] in ('E6', 'E7') and e['t'] > 6.7 for e in events) >= 2
+
+
+def test_without_the_feedback_bound_a_forward_push_is_a_fall(tmp_path):
+    """The same forward push with the speed and pace terms unbounded (feedback_limit 0): the
+    braking drives the support foot out and the robot falls before 9 s."""
+    raw = read_yaml(scene_path('skate'), 'scene')
+    raw['duration'], raw['record'] = 9.0, {'bag': False}
+    raw['inputs']['gait_manager']['balance']['feedback_limit'] = 0.0
+    raw['disturbances'] = [{'start': 6.6, 'duration': 0.1, 'frame': 'chest',
+                            'force': [0.0, 150.0, 0.0]}]
+    metrics = run(parse_scene(raw), tmp_path, progress=False)
+    assert metrics['fell'], 'survived without the bound'

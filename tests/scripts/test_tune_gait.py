@@ -29,23 +29,24 @@ def exchanges(times):
     return [{'event': 'E6', 't': t} for t in times]
 
 
-def test_walking_counts_only_while_the_robot_steps(tune, skate, monkeypatch):
+@pytest.mark.parametrize('name', ['robust', 'pushes'])
+def test_walking_counts_only_while_the_robot_steps(tune, skate, monkeypatch, name):
     """A case that stands still after its last exchange counts STALL s beyond it; a nominal
     case stepping every 0.9 s evenly loses nothing for its cadence."""
     steady = exchanges(np.arange(0.5, 12.0, 0.9))
     stalled = exchanges([0.5, 1.4, 2.3])
+    cases = tune.SCENARIOS[name]
 
     def fake(raw):
         pushed = 'disturbances' in raw
         return ({'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.05}},
                 stalled if pushed else steady)
     monkeypatch.setattr(tune, 'run_metrics', fake)
-    score, details, _ = tune.robust_score(skate, 12.0)
-    pushed = [case for case in tune.SCENARIOS if 'push' in case]
-    walked = [details[str(case)]['walked_s'] for case in tune.SCENARIOS]
-    assert walked == [12.0 if case not in pushed else 2.3 + tune.STALL
-                      for case in tune.SCENARIOS]
-    share = 1.0 - len(pushed) / len(tune.SCENARIOS)
+    score, details, _ = tune.robust_score(skate, 12.0, cases)
+    pushed = [case for case in cases if 'push' in case]
+    walked = [details[str(case)]['walked_s'] for case in cases]
+    assert walked == [12.0 if case not in pushed else 2.3 + tune.STALL for case in cases]
+    share = 1.0 - len(pushed) / len(cases)
     assert details['step_period_s']['mean'] == pytest.approx(0.9)
     assert score == pytest.approx(10.0 * (np.mean(walked) / 12.0 + share), abs=1e-9)
 
@@ -54,11 +55,31 @@ def test_cadence_and_head_error_cost_as_documented(tune, skate, monkeypatch):
     fast = exchanges(np.arange(0.5, 12.0, 0.4))
     monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
         {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.15}}, fast))
-    score, _, nominal = tune.robust_score(skate, 12.0)
+    score, _, nominal = tune.robust_score(skate, 12.0, tune.SCENARIOS['robust'])
     assert nominal[1] == fast
     miss = (tune.CADENCE[0] - 0.4) / 0.1
     head = (0.15 - tune.HEAD_Y_RMS) / tune.HEAD_Y_RMS
     assert score == pytest.approx(20.0 - miss - head, abs=1e-6)
+
+
+def test_the_no_yaw_twin_runs_without_tau8_and_its_head_error_counts(tune, skate,
+                                                                     monkeypatch):
+    """'twins' ends with the nominal case without the yaw source; the head y penalty takes the
+    larger of the nominal case's error and its twin's."""
+    steady = exchanges(np.arange(0.5, 12.0, 0.9))
+    seen = []
+
+    def fake(raw):
+        enabled = raw['inputs']['gait_manager']['enabled']
+        seen.append('yaw' in enabled)
+        error = 0.04 if 'yaw' in enabled else 0.075
+        return {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': error}}, steady
+    monkeypatch.setattr(tune, 'run_metrics', fake)
+    cases = tune.SCENARIOS['twins']
+    score, details, _ = tune.robust_score(skate, 12.0, cases)
+    assert seen == [True] * (len(cases) - 1) + [False]
+    assert details['head_y_rms_m'] == 0.075
+    assert score == pytest.approx(20.0 - (0.075 - tune.HEAD_Y_RMS) / tune.HEAD_Y_RMS, abs=1e-9)
 
 
 def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):

@@ -13,11 +13,14 @@ chain):
 * support knee q3 and ankle q2: PD to ``stance_knee`` and -stance_knee/2 (hip over the
   ankle), blended from the current angles over ``blend`` s after each exchange;
 * speed: a virtual horizontal force F = F_0 + k_v (v_d - v_com) + k_p (y_H(0) + v_d t - y_H)
-  (F_0 and v_d ramped in over 0.5 s; -``max_brake`` <= F <= ``max_force``) at the centre of
+  (F_0 and v_d ramped in over 0.5 s; the speed and pace terms together within
+  +-``feedback_limit`` if set; -``max_brake`` <= F <= ``max_force``) at the centre of
   mass, realised as J_com,y^T F on the support joints 2, 3, 4 (on ice a braking F only slides
   the support foot forward, hence its own bound); F_0 (``drive``) makes up for the ice's
   losses at speed, and the pace term (``pace_gain``) holds the head top y_H on the pace point
-  that leaves its start y_H(0) at v_d, so the robot keeps the intended speed on average;
+  that leaves its start y_H(0) at v_d, so the robot keeps the intended speed on average; the
+  bound lets a pushed robot keep some of its new speed rather than brake its support foot out
+  from under it;
 * ankle strategy: the support ankle adds k_c (y_com - y_ankle - ``com_offset``) + b_c (v_com -
   v_ankle), which keeps the centre of mass over a gliding sole;
 * gravity compensation g(q) on joints 2, 3, 4, 9, 10; torso-yaw centring spring on 8;
@@ -88,6 +91,10 @@ class BalanceParameters:
     pace_gain: float = setting(0.0, "virtual force per m the head top lags behind the pace "
                                "point, which leaves the head's start at t = 0 at speed v_d",
                                unit='N/m', low=0.0)
+    feedback_limit: float = setting(0.0, 'bound of the speed and pace terms together (0: none): '
+                                    'after a push the robot keeps some of the speed it got '
+                                    'instead of braking, which on ice only slides the support '
+                                    'foot forward', unit='N', low=0.0)
     drive: float = setting(0.0, 'constant part F_0 of the virtual force (reached over the '
                            "first 0.5 s): the push that makes up for the ice's losses at speed",
                            unit='N', low=-100.0, high=100.0)
@@ -193,11 +200,13 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
     pd(4, p.stiffness, 80.0, p.trunk - phi3 - q[9] - q[10])
     pd(8, yaw_stiffness, yaw_damping, 0.0)
     ramp = min(obs.t / 0.5, 1.0)
-    demand = p.drive * ramp + p.speed_gain * (p.speed * ramp - com_v[1])
+    feedback = p.speed_gain * (p.speed * ramp - com_v[1])
     if p.pace_gain:
         head_y = dynamics.frame_placement(obs.contact(), q, 'head_top').translation[1]
-        demand += p.pace_gain * (head_start_y + p.speed * obs.t - head_y)
-    force = min(max(demand, -p.max_brake), p.max_force)
+        feedback += p.pace_gain * (head_start_y + p.speed * obs.t - head_y)
+    if p.feedback_limit > 0.0:
+        feedback = min(max(feedback, -p.feedback_limit), p.feedback_limit)
+    force = min(max(p.drive * ramp + feedback, -p.max_brake), p.max_force)
     jac_com_y = pin.jacobianCenterOfMass(sm.model, data, q)[1]
     effort[SPEED_JOINTS] += jac_com_y[SPEED_JOINTS] * force
     if p.com_stiffness or p.com_damping:

@@ -86,12 +86,15 @@ void balance_command(
   pd(4, p.stiffness, 80.0, p.trunk - phi3 - q[9] - q[10]);
   pd(8, yaw_stiffness, yaw_damping, 0.0);
   const double ramp = std::min(obs.t / 0.5, 1.0);
-  double demand = p.drive * ramp + p.speed_gain * (p.speed * ramp - com.velocity[1]);
+  double feedback = p.speed_gain * (p.speed * ramp - com.velocity[1]);
   if (p.pace_gain != 0.0) {  // the head's lag behind the pace point
     const double head_y = kinematics.frame_position(state, q, iceskate_native::Frame::kHeadTop)[1];
-    demand += p.pace_gain * (head_start_y + p.speed * obs.t - head_y);
+    feedback += p.pace_gain * (head_start_y + p.speed * obs.t - head_y);
   }
-  const double force = std::min(std::max(demand, -p.max_brake), p.max_force);
+  if (p.feedback_limit > 0.0) {
+    feedback = std::min(std::max(feedback, -p.feedback_limit), p.feedback_limit);
+  }
+  const double force = std::min(std::max(p.drive * ramp + feedback, -p.max_brake), p.max_force);
   for (int j : kSpeedJoints) {
     effort[j] += com.jacobian_y[j] * force;
   }

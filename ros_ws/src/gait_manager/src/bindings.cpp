@@ -77,6 +77,7 @@ gm::BalanceParameters balance_of(const Fields & f)
          {"speed", &p.speed},
          {"speed_gain", &p.speed_gain},
          {"pace_gain", &p.pace_gain},
+         {"feedback_limit", &p.feedback_limit},
          {"drive", &p.drive},
          {"max_force", &p.max_force},
          {"max_brake", &p.max_brake},

@@ -27,6 +27,7 @@ struct BalanceParameters
   double speed = 0.0;          ///< v_d [m/s]
   double speed_gain = 0.0;     ///< k_v [N s/m]
   double pace_gain = 0.0;      ///< k_p [N/m]
+  double feedback_limit = 0.0; ///< bound of the speed and pace terms [N] (0: none)
   double drive = 0.0;          ///< F_0 [N]
   double max_force = 0.0;      ///< [N]
   double max_brake = 0.0;      ///< [N]
