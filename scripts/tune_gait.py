@@ -42,12 +42,14 @@ runs; the two logs' best scores saturate at the maximum, 20):
         --start runs/pushes.jsonl --start-run 110 --out runs/twins.jsonl
     python scripts/tune_gait.py --scene skate --objective robust --check --duration 15
 
-The arm assist's release (``arm_assist.release_time`` 0.6 s, ``release_damping`` 20 N m s/rad,
-not searched) was chosen by hand among three tries for the arm-swing ratio, with the values
-before these (run 374 of a search from commit c9e304c's ``skate_glide.yaml``, seed 2, sigma
-0.08, 400 points, without the feedback bound). Earlier skate values came from searches with
-this script as of commit a282ca0 (its box ``SPACE`` was narrower, so the same seed draws other
-points today).
+The scenes' initial knee bend (``initial.knee_bend`` 0.11 rad, not searched) was then chosen
+among 0.05-0.15 rad by the head height error and the same checks (0.13 makes ``skate_no_yaw``
+fall at its start). The arm assist's release (``arm_assist.release_time`` 0.6 s,
+``release_damping`` 20 N m s/rad, not searched) was chosen by hand among three tries for the
+arm-swing ratio, with the values before these (run 374 of a search from commit c9e304c's
+``skate_glide.yaml``, seed 2, sigma 0.08, 400 points, without the feedback bound). Earlier
+skate values came from searches with this script as of commit a282ca0 (its box ``SPACE`` was
+narrower, so the same seed draws other points today).
 """
 
 from __future__ import annotations

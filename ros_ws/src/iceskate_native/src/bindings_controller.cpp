@@ -217,11 +217,12 @@ void bind_controller(nb::module_ & m)
         self.compute(obs, kinematics, out);
         const JointCommand total = out.total();
         const Eigen::Index impedance = total.has_impedance ? kCoordinates : 0;
-        const Eigen::Index sources = static_cast<Eigen::Index>(out.sources.size());
+        const Eigen::Index source_count = static_cast<Eigen::Index>(out.sources.size());
         Eigen::VectorXd values(
-          kCoordinates + 3 * impedance + kCoordinates * sources + (out.has_head_target ? 3 : 0));
+          kCoordinates + 3 * impedance + kCoordinates * source_count +
+          (out.has_head_target ? 3 : 0));
         values << total.effort, total.stiffness.head(impedance), total.damping.head(impedance),
-          total.reference.head(impedance), Eigen::VectorXd::Zero(kCoordinates * sources),
+          total.reference.head(impedance), Eigen::VectorXd::Zero(kCoordinates * source_count),
           out.head_target.head(out.has_head_target ? 3 : 0);
         std::vector<std::string> names;
         Eigen::Index at = kCoordinates + 3 * impedance;
@@ -234,7 +235,7 @@ void bind_controller(nb::module_ & m)
           std::move(values), total.has_impedance, out.has_head_target, std::move(names));
       },
       "obs"_a, "kinematics"_a,
-      "The answer at obs as an EffortCommand carries it (iceskate_sim.effort_cdr.CommandValues), "
+      "The answer at obs as an EffortCommand carries it (iceskate_sim.command.CommandValues), "
       "in one vector: the sum of the sources' commands (effort, then stiffness, damping and "
       "reference if it has an impedance), each source's generalized force at (q, v) (18 per "
       "source), the head target (y, z, pitch) if it steers one; then whether it has an "
