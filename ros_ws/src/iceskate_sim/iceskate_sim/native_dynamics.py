@@ -13,12 +13,10 @@ system as its ``NativeError``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 import iceskate_native
-from iceskate_sim.command import HeldCommand
+from iceskate_sim.command import CommandValues, HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
@@ -39,9 +37,6 @@ from iceskate_sim.hybrid import (
 from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
 from iceskate_sim.modes import MODES
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
-
-if TYPE_CHECKING:
-    from iceskate_sim.command import CommandValues
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)

@@ -285,10 +285,7 @@ class Simulator:
         :raises SimulationError: on bad input or divergence. A run that ends physically
             (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
         """
-        if self.ended is not None:
-            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
-                                  f'{self.state.mode.number} ({self.ended}); no further '
-                                  'period can be simulated')
+        self._require_running()
         if not isinstance(command, HeldCommand):
             tau = np.asarray(command, dtype=float)
             if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
@@ -365,6 +362,13 @@ class Simulator:
         return NativeControlLoop(self._periods, kinematics, controllers, pushes, head_origin,
                                  inbox)
 
+    def _require_running(self) -> None:
+        """:raises SimulationError: once the run has ended (no further period)."""
+        if self.ended is not None:
+            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
+                                  f'{self.state.mode.number} ({self.ended}); no further '
+                                  'period can be simulated')
+
     def hold_period(self, loop: NativeControlLoop, clear: bool = True) -> None:
         """One control period of ``loop`` holding the commands it received
         (``NativeControlLoop.hold``; the sample stays in its block), then this simulator
@@ -372,10 +376,7 @@ class Simulator:
 
         :raises SimulationError: where the physics failed, as ``advance``.
         """
-        if self.ended is not None:
-            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
-                                  f'{self.state.mode.number} ({self.ended}); no further '
-                                  'period can be simulated')
+        self._require_running()
         try:
             loop.hold(clear)
         finally:
@@ -385,10 +386,7 @@ class Simulator:
         """Up to ``periods`` control periods of ``loop`` (``NativeControlLoop.run``: the samples
         and what stopped the block early), then this simulator mirrors the native state, events,
         counters and end."""
-        if self.ended is not None:
-            raise SimulationError(f'the run ended at t={self.state.t:.6f} s in mode '
-                                  f'{self.state.mode.number} ({self.ended}); no further '
-                                  'period can be simulated')
+        self._require_running()
         try:
             block, error = loop.run(periods)
         finally:
