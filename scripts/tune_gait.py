@@ -13,11 +13,13 @@ of this script whose random draws differ), rounded to 3 digits and checked over 
 'robust', frictions 0.005, 0.002, 0.01 and 0.02 and 150 N x 0.1 s chest pushes three times
 forward and three times backward; 'pushes', fewer frictions and seven pushes backward, two
 forward; 'twins', 'pushes' and the nominal case without the yaw source, the ``skate_no_yaw``
-twin) for ``--duration`` each: the fraction of each case walked (up to ``STALL`` s after its
-last clean exchange, so that standing still scores nothing) and the share walked to the end,
-minus, for the nominal case, its mean step period's distance to ``CADENCE``, its spread and its
-head y error beyond ``HEAD_Y_RMS`` (the larger of it and its twin's); the visual-lifting target
-then moves at the gait's speed (v_d = balance.speed). About 2 s a point with ``--jobs 2`` on
+twin; 'phases', frictions, the twin and 30 pushes placed by the gait's own exchanges) for
+``--duration`` each: the fraction of each case walked (up to ``STALL`` s after its last clean
+exchange, so that standing still scores nothing) and the share walked to the end, minus, for
+the nominal case, its mean step period's distance to ``CADENCE``, its spread, its head y error
+beyond ``HEAD_Y_RMS`` and ``--height-weight`` times its head height error beyond
+``HEAD_Z_RMS`` (each the larger of the nominal case's and its twin's); the visual-lifting
+target then moves at the gait's speed (v_d = balance.speed). About 2 s a point with ``--jobs 2`` on
 the native engine. ``--start LOG`` starts from the best point of an earlier search's log
 (``--start-run N``: from its run N), ``--set block.key=value`` from a given value; ``--check``
 runs the base scene (with ``--start``/``--set``: that point) over ``CHECKS``, cases the search
@@ -111,6 +113,16 @@ SCENARIOS = {
     ),
 }
 SCENARIOS['twins'] = (*SCENARIOS['pushes'], {'mu': 0.005, 'yaw': False})
+#: the nominal case, its twin, the lowest and highest friction, and pushes placed by the gait's
+#: own phase: ``push_before`` (exchange, lead [s], force [N]) pushes ``lead`` s before the
+#: nominal case's clean exchange number ``exchange``; backward just before the landing and
+#: mid-glide, forward in the glide and the swing (where a 0.05 s grid of pushes found falls)
+SCENARIOS['phases'] = (
+    {'mu': 0.005}, {'mu': 0.005, 'yaw': False}, {'mu': 0.002}, {'mu': 0.02},
+    *({'mu': 0.005, 'push_before': (exchange, lead, force)} for exchange in range(5, 10)
+      for lead, force in ((0.05, -150.0), (0.08, -150.0), (0.54, -150.0), (0.12, 150.0),
+                          (0.4, 150.0), (0.86, 150.0))),
+)
 #: Cases outside ``SCENARIOS`` the chosen values are checked on (``--check``): other frictions,
 #: pushes at other times and both directions, and a run of 60 s.
 CHECKS = (
@@ -123,6 +135,7 @@ CHECKS = (
 CADENCE = (0.8, 1.0)  # s: the step period sought from the 4th exchange (the paper's ~T/2)
 STALL = 1.5  # s: a case counts as walking until this long after its last clean exchange
 HEAD_Y_RMS = 0.05  # m: the head y error RMS sought in the nominal case
+HEAD_Z_RMS = 0.0075  # m: the head height error RMS sought (``--height-weight``)
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
 
@@ -213,19 +226,27 @@ def scenario(raw: dict, case: dict) -> dict:
     return raw
 
 
-def robust_score(raw: dict, duration: float, cases: tuple[dict, ...]
+def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_weight: float = 0.0
                  ) -> tuple[float, dict, tuple[dict, list[dict]]]:
     """Mean walked fraction and share of cases walked to the end over ``cases`` (x10; the first
     is the nominal case),
     minus, for the nominal case, its mean step period's distance (from the 4th exchange) to
     ``CADENCE`` in tenths of a second, its coefficient of variation (x5) and its head y error
     RMS (the larger of it and its no-yaw twin's, if a case is that twin) beyond ``HEAD_Y_RMS``
-    in units of it (up to 5): (score, details, the nominal case's
-    metrics and events). A case counts as walked up to ``STALL`` s after its last clean
+    in units of it (up to 5), and ``height_weight`` times its head height error RMS (the same
+    larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5): (score, details, the nominal
+    case's metrics and events). A case counts as walked up to ``STALL`` s after its last clean
     exchange, so standing still scores nothing."""
-    walked, details = [], {}
-    periods, head_y = np.zeros(0), float('inf')
+    walked, details, nominal_exchanges = [], {}, []
+    periods, head = np.zeros(0), {'y': 0.0, 'z': 0.0}
     for k, case in enumerate(cases):
+        if 'push_before' in case:  # placed by the nominal case's exchanges (the first case)
+            exchange, lead, force = case['push_before']
+            if exchange >= len(nominal_exchanges):  # the nominal case did not get that far
+                walked.append(0.0)
+                details[str(case)] = {'sim_time_s': 0.0, 'walked_s': 0.0, 'failure': None}
+                continue
+            case = {'mu': case['mu'], 'push': (nominal_exchanges[exchange] - lead, force)}
         metrics, events = run_metrics(scenario(raw, case))
         exchanges = exchange_times(events)
         until = min(metrics.get('sim_time_s', 0.0), (exchanges[-1] if exchanges else 0.0) + STALL)
@@ -233,11 +254,11 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...]
         details[str(case)] = {'sim_time_s': metrics.get('sim_time_s'), 'walked_s': until,
                               'failure': metrics.get('failure')}
         if k == 0:
-            nominal = (metrics, events)
+            nominal, nominal_exchanges = (metrics, events), exchanges
             periods = np.diff(exchanges[3:])
         if k == 0 or set(case) == {'mu', 'yaw'}:  # the nominal case, and its no-yaw twin
-            head_y = max(head_y if k else 0.0,
-                         (metrics.get('head_error_rms') or {}).get('y', float('inf')))
+            errors = metrics.get('head_error_rms') or {}
+            head = {axis: max(head[axis], errors.get(axis, float('inf'))) for axis in head}
     if periods.size >= 2:
         mean = float(periods.mean())
         miss = max(CADENCE[0] - mean, mean - CADENCE[1], 0.0) / 0.1
@@ -245,10 +266,12 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...]
     else:
         mean, miss, spread = float('nan'), 10.0, 1.0
     details['step_period_s'] = {'mean': mean, 'cv': spread}
-    details['head_y_rms_m'] = head_y
+    details['head_y_rms_m'], details['head_z_rms_m'] = head['y'], head['z']
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
-    head = min(max(head_y - HEAD_Y_RMS, 0.0) / HEAD_Y_RMS, 5.0)
-    return 10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - head, details, nominal
+    beyond = {axis: min(max(head[axis] - goal, 0.0) / goal, 5.0)
+              for axis, goal in (('y', HEAD_Y_RMS), ('z', HEAD_Z_RMS))}
+    return (10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - beyond['y']
+            - height_weight * beyond['z'], details, nominal)
 
 
 def check(raw: dict, duration: float) -> list[dict]:
@@ -279,13 +302,13 @@ def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
 
 
 def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases: str,
-             point: dict[str, float]) -> dict:
+             height_weight: float, point: dict[str, float]) -> dict:
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
     if objective == 'robust':  # the first case is nominal
-        robust, robustness, (metrics, events) = robust_score(target_at_gait_speed(raw),
-                                                             duration, SCENARIOS[cases])
+        robust, robustness, (metrics, events) = robust_score(
+            target_at_gait_speed(raw), duration, SCENARIOS[cases], height_weight)
     else:
         metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
@@ -330,6 +353,9 @@ def main() -> None:
                         default='exchanges')
     parser.add_argument('--scenarios', choices=sorted(SCENARIOS), default='robust',
                         help="the robust objective's cases (SCENARIOS)")
+    parser.add_argument('--height-weight', type=float, default=0.0,
+                        help='robust objective: weight of the head height error beyond '
+                             'HEAD_Z_RMS (in units of it)')
     parser.add_argument('--max-rate', type=float, default=float('inf'),
                         help='cadence bound [exchanges/s]: more are penalised')
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
@@ -375,7 +401,8 @@ def main() -> None:
             units = strategy.ask() if strategy else \
                 [rng.uniform(size=len(SPACE)) for _ in range(args.jobs)]
             entries = pool.map(functools.partial(evaluate, base, args.duration, args.objective,
-                                                 args.max_rate, args.scenarios),
+                                                 args.max_rate, args.scenarios,
+                                                 args.height_weight),
                                [point_of(u) for u in units])
             if strategy:
                 strategy.tell(units, [-e['score'] for e in entries])

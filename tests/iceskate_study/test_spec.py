@@ -155,15 +155,15 @@ def test_the_shipped_study_is_valid():
     assert all(p.raw['engine'] == 'native' and p.raw['duration'] == 15.0 for p in points)
 
 
-def test_the_shipped_push_study_pushes_once_at_every_quarter_second_both_ways():
+def test_the_shipped_push_study_pushes_once_every_half_push_length_both_ways():
     assert 'push_robustness' in shipped_studies()
     points = expand(load_spec('push_robustness'))
-    assert len(points) == 66
+    assert len(points) == 322
     pushes = [p.raw['disturbances'] for p in points]
     assert all(len(d) == 1 and d[0]['frame'] == 'chest' and d[0]['duration'] == 0.1
                for d in pushes)
     starts = sorted({d[0]['start'] for d in pushes})
-    assert starts[0] == 4.0 and starts[-1] == 12.0 and np.allclose(np.diff(starts), 0.25)
+    assert starts[0] == 4.0 and starts[-1] == 12.0 and np.allclose(np.diff(starts), 0.05)
     assert sorted({tuple(d[0]['force']) for d in pushes}) == [(0.0, -150.0, 0.0),
                                                               (0.0, 150.0, 0.0)]
     assert all(p.raw['engine'] == 'native' and p.raw['duration'] == 15.0 for p in points)

@@ -82,6 +82,52 @@ def test_the_no_yaw_twin_runs_without_tau8_and_its_head_error_counts(tune, skate
     assert score == pytest.approx(20.0 - (0.075 - tune.HEAD_Y_RMS) / tune.HEAD_Y_RMS, abs=1e-9)
 
 
+def test_head_height_costs_only_with_its_weight(tune, skate, monkeypatch):
+    """The larger head height error of the nominal case and its twin beyond HEAD_Z_RMS costs
+    ``height_weight`` per HEAD_Z_RMS; with weight 0 (the earlier searches) it costs nothing."""
+    steady = exchanges(np.arange(0.5, 12.0, 0.9))
+
+    def fake(raw):
+        with_yaw = 'yaw' in raw['inputs']['gait_manager']['enabled']
+        height = 0.009 if with_yaw else 0.012
+        return ({'sim_time_s': 12.0, 'fell': False,
+                 'head_error_rms': {'y': 0.03, 'z': height}}, steady)
+    monkeypatch.setattr(tune, 'run_metrics', fake)
+    cases = tune.SCENARIOS['twins']
+    unweighted, details, _ = tune.robust_score(skate, 12.0, cases)
+    weighted, _, _ = tune.robust_score(skate, 12.0, cases, height_weight=5.0)
+    assert details['head_z_rms_m'] == 0.012
+    assert unweighted == pytest.approx(20.0, abs=1e-9)
+    assert weighted == pytest.approx(20.0 - 5.0 * (0.012 - tune.HEAD_Z_RMS) / tune.HEAD_Z_RMS,
+                                     abs=1e-9)
+
+
+def test_phase_cases_push_before_the_nominal_cases_exchanges(tune, skate, monkeypatch):
+    """'phases' places each push ``lead`` s before the nominal case's clean exchange number
+    ``exchange``; when the nominal case stops short of it the case counts as not walked."""
+    steady = np.arange(0.5, 12.0, 0.9)
+    pushes = []
+
+    def fake(raw):
+        pushes.extend((d['start'], d['force'][1]) for d in raw.get('disturbances', []))
+        return ({'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.03, 'z': 0.005}},
+                exchanges(steady))
+    monkeypatch.setattr(tune, 'run_metrics', fake)
+    cases = tune.SCENARIOS['phases']
+    placed = [case['push_before'] for case in cases if 'push_before' in case]
+    score, _, _ = tune.robust_score(skate, 12.0, cases)
+    assert pushes == [pytest.approx((steady[k] - lead, force)) for k, lead, force in placed]
+    assert score == pytest.approx(20.0, abs=1e-9)
+
+    short = steady[:6]  # the nominal case's exchanges 6 and later never come
+    monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
+        {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.03, 'z': 0.005}},
+        exchanges(short)))
+    _, details, _ = tune.robust_score(skate, 12.0, cases)
+    missing = [case for case in cases if case.get('push_before', (0,))[0] >= len(short)]
+    assert missing and all(details[str(case)]['walked_s'] == 0.0 for case in missing)
+
+
 def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):
     balance = skate['inputs']['gait_manager']['balance']
     balance.pop('glide_time', None)
