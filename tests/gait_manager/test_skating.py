@@ -44,9 +44,10 @@ def test_skates_at_the_papers_cadence_without_falling(skate_runs, name):
 @pytest.mark.parametrize('name', ['skate', 'skate_no_yaw'])
 def test_the_head_keeps_pace_with_the_visual_lifting_target(skate_runs, name):
     """The target moves at the gait's speed and the robot keeps it: head y error RMS <= 5 cm
-    over the whole run, height within 1.5 cm and pitch within 5 mrad RMS."""
+    over the whole run, height within 7.5 mm and pitch
+    within 5 mrad RMS."""
     rms = skate_runs[name][0]['head_error_rms']
-    assert rms['y'] <= 0.05 and rms['z'] <= 0.015 and rms['pitch'] <= 0.005, rms
+    assert rms['y'] <= 0.05 and rms['z'] <= 0.0075 and rms['pitch'] <= 0.005, rms
 
 @pytest.mark.parametrize('name', ['skate', 'skate_no_yaw'])
 def test_the_head_moves_forward_at_every_step(skate_runs, name):
@@ -121,17 +122,18 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
 
 @pytest.mark.parametrize('force', [150.0, -150.0])
 def test_a_chest_push_after_the_fourth_step_is_survived(tmp_path, force):
-    """A 150 N x 0.1 s (15 N s) chest push at 6.6 s, forward or backward: no fall to 9 s, and
-    the gait steps on after it (forward: the bounded speed feedback lets the robot keep the
-    speed it got instead of braking its support foot out from under it)."""
+    """A 150 N x 0.1 s (15 N s) chest push at 6.5 s, forward or backward: no fall to the end
+    of the 15 s run, and the gait steps on after it (forward: the bounded speed feedback lets
+    the robot keep the speed it got instead of braking its support foot out from under it)."""
     raw = read_yaml(scene_path('skate'), 'scene')
-    raw['duration'], raw['record'] = 9.0, {'bag': False}
-    raw['disturbances'] = [{'start': 6.6, 'duration': 0.1, 'frame': 'chest',
+    raw['record'] = {'bag': False}
+    raw['disturbances'] = [{'start': 6.5, 'duration': 0.1, 'frame': 'chest',
                             'force': [0.0, force, 0.0]}]
     metrics = run(parse_scene(raw), tmp_path, progress=False)
     assert not metrics['fell'], metrics['failure']
+    assert metrics['sim_time_s'] == pytest.approx(15.0, abs=1e-9)
     events = json.loads((tmp_path / 'events.json').read_text())
-    assert sum(e['event'] in ('E6', 'E7') and e['t'] > 6.7 for e in events) >= 2
+    assert sum(e['event'] in ('E6', 'E7') and e['t'] > 6.6 for e in events) >= 8
 
 
 def test_without_the_feedback_bound_a_forward_push_is_a_fall(tmp_path):
@@ -140,7 +142,7 @@ def test_without_the_feedback_bound_a_forward_push_is_a_fall(tmp_path):
     raw = read_yaml(scene_path('skate'), 'scene')
     raw['duration'], raw['record'] = 9.0, {'bag': False}
     raw['inputs']['gait_manager']['balance']['feedback_limit'] = 0.0
-    raw['disturbances'] = [{'start': 6.6, 'duration': 0.1, 'frame': 'chest',
+    raw['disturbances'] = [{'start': 6.5, 'duration': 0.1, 'frame': 'chest',
                             'force': [0.0, 150.0, 0.0]}]
     metrics = run(parse_scene(raw), tmp_path, progress=False)
     assert metrics['fell'], 'survived without the bound'
