@@ -44,8 +44,7 @@ def test_skates_at_the_papers_cadence_without_falling(skate_runs, name):
 @pytest.mark.parametrize('name', ['skate', 'skate_no_yaw'])
 def test_the_head_keeps_pace_with_the_visual_lifting_target(skate_runs, name):
     """The target moves at the gait's speed and the robot keeps it: head y error RMS <= 5 cm
-    over the whole run, height within 7.5 mm and pitch
-    within 5 mrad RMS."""
+    over the whole run, height within 7.5 mm and pitch within 5 mrad RMS."""
     rms = skate_runs[name][0]['head_error_rms']
     assert rms['y'] <= 0.05 and rms['z'] <= 0.0075 and rms['pitch'] <= 0.005, rms
 
