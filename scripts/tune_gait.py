@@ -250,11 +250,12 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
     is the nominal case),
     minus, for the nominal case, its mean step period's distance (from the 4th exchange) to
     ``CADENCE`` in tenths of a second, its coefficient of variation (x5) and its head y error
-    RMS (the larger of it and its no-yaw twin's, if a case is that twin) beyond ``HEAD_Y_RMS``
-    in units of it (up to 5), and ``height_weight`` times its head height error RMS (the same
-    larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5): (score, details, the nominal
-    case's metrics and events). A case counts as walked up to ``STALL`` s after its last clean
-    exchange, so standing still scores nothing."""
+    RMS (the larger of it and its no-yaw twin's, if a case is the nominal one without yaw)
+    beyond ``HEAD_Y_RMS`` in units of it (up to 5), and ``height_weight`` times its head height
+    error RMS (the same larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5): (score,
+    details, the nominal case's metrics and events). A case counts as walked up to ``STALL`` s
+    after its last clean exchange, so standing still scores nothing; a ``push_before`` case is
+    pushed by the nominal case's exchanges, and counts 0 if that case has too few."""
     walked, details, nominal_exchanges = [], {}, []
     periods, head = np.zeros(0), {'y': 0.0, 'z': 0.0}
     for k, case in enumerate(cases):
