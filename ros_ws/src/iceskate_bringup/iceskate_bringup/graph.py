@@ -11,9 +11,8 @@ metrics.json, events.json, trajectory.npz and bag/. ``single_process=True`` runs
 nodes in one process on one EventsExecutor instead.
 ``rt_priority=N`` (``--rt-priority N``) runs the nodes under real-time scheduling (SCHED_FIFO
 at priority N, as ``chrt --fifo N`` would; every thread inherits it, the bag writer runs under
-SCHED_IDLE): the
-processes are started from a thread switched to it for that moment (or, in one process, the
-run's thread is switched while it runs).
+SCHED_IDLE): the processes are started from a thread switched to it for that moment (or, in one
+process, the run's thread is switched while it runs).
 
 The executables are the installed ones (``<prefix>/lib/<pkg>/<exe>``, as ``ros2 run`` finds
 them), else ``python -m <module>`` from the sources. Node logs go to
