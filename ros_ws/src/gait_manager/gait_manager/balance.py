@@ -58,6 +58,7 @@ from iceskate_sim.stance import smoothstep
 ANKLE_HEIGHT = 0.07  # m, ankle above the sole (docs/model.md, foot and other offsets)
 THIGH, SHANK = 0.38, 0.40  # m, leg link lengths (Table 1)
 SWING_START_BEHIND = 0.15  # m, start of the swing-ankle path behind the hip
+FRONT_KNEE = -0.05  # rad, front knee reference in double support (nearly straight)
 GRAVITY_JOINTS = np.array([2, 3, 4, 9, 10])
 SPEED_JOINTS = np.array([2, 3, 4])
 
@@ -135,6 +136,9 @@ class BalanceParameters:
     blend: float = setting(0.2, 'time over which the support references move from the current '
                            'angles to their nominal values after an exchange', unit='s',
                            low=0.0, high=2.0)
+    front_knee_step: float = setting(0.0, 'largest distance of the front knee reference from '
+                                     'the current angle in double support (0: no bound)',
+                                     unit='rad', low=0.0, high=2.0)
 
     def __post_init__(self) -> None:
         """Check and normalise every field (GaitManagerError naming the key)."""
@@ -225,7 +229,9 @@ def balance_command(obs: Observation, dynamics: GaitDynamics, params: BalancePar
         pd(6, p.swing_stiffness, p.swing_damping, phi6 - phi5)
         effort[4] += p.swing_stiffness * (phi5 - phi4 - q[5]) - p.swing_damping * v[5]
     else:
-        pd(6, p.front_knee_stiffness, 20.0, -0.05)
+        knee = FRONT_KNEE if p.front_knee_step == 0.0 else min(
+            max(FRONT_KNEE, q[6] - p.front_knee_step), q[6] + p.front_knee_step)
+        pd(6, p.front_knee_stiffness, 20.0, knee)
         pd(5, p.front_hip_stiffness, 20.0, q[5])  # held where it is at this instant
         if obs.t_touchdown > obs.t_exchange:
             r = min(max((obs.t - obs.t_touchdown) / p.push_ramp, 0.0), 1.0) \

@@ -17,6 +17,7 @@ constexpr double kAnkleHeight = 0.07;      // [m] ankle above the sole (docs/mod
 constexpr double kThigh = 0.38;            // [m] leg link lengths (Table 1)
 constexpr double kShank = 0.40;            // [m]
 constexpr double kSwingStartBehind = 0.15;  // [m] start of the swing-ankle path behind the hip
+constexpr double kFrontKnee = -0.05;       // [rad] front knee reference in double support
 constexpr int kGravityJoints[] = {2, 3, 4, 9, 10};
 constexpr int kSpeedJoints[] = {2, 3, 4};
 constexpr int kAnkle = 2;     // support ankle q2
@@ -116,7 +117,11 @@ void balance_command(
     pd(6, p.swing_stiffness, p.swing_damping, phi6 - phi5);
     effort[4] += p.swing_stiffness * (phi5 - phi4 - q[5]) - p.swing_damping * v[5];
   } else {
-    pd(6, p.front_knee_stiffness, 20.0, -0.05);
+    const double knee =
+      p.front_knee_step == 0.0
+        ? kFrontKnee
+        : std::min(std::max(kFrontKnee, q[6] - p.front_knee_step), q[6] + p.front_knee_step);
+    pd(6, p.front_knee_stiffness, 20.0, knee);
     pd(5, p.front_hip_stiffness, 20.0, q[5]);  // held where it is at this instant
     if (obs.t_touchdown > obs.t_exchange) {
       const double r =

@@ -96,7 +96,8 @@ gm::BalanceParameters balance_of(const Fields & f)
          {"push", &p.push},
          {"push_ramp", &p.push_ramp},
          {"toe_off_flex", &p.toe_off_flex},
-         {"blend", &p.blend}}) {
+         {"blend", &p.blend},
+         {"front_knee_step", &p.front_knee_step}}) {
     *field = f.number(name);
   }
   return p;

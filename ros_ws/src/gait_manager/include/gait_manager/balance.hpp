@@ -47,6 +47,7 @@ struct BalanceParameters
   double push_ramp = 0.0;      ///< [s]
   double toe_off_flex = 0.0;   ///< [rad]
   double blend = 0.0;          ///< [s]
+  double front_knee_step = 0.0;  ///< [rad] (0: no bound)
 };
 
 /// World pitch angles (phi_thigh, phi_shank) [rad] of a hanging 2-link leg whose ankle is at
