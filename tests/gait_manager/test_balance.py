@@ -231,3 +231,17 @@ def test_the_glide_holds_the_lifted_foot_behind_the_hip_then_swings(make_obs):
     for t in np.linspace(lifted, plain.swing_time, 9):
         assert swing_ankle_target(make_obs(t=t + glide.glide_time), glide, 1.0, 1.2, 0.3) == \
             pytest.approx(swing_ankle_target(make_obs(t=t), plain, 1.0, 1.2, 0.3), abs=1e-12)
+
+
+@pytest.mark.parametrize(('knee', 'step', 'reference'), [
+    (-0.62, 0.0, -0.05), (-0.62, 0.25, -0.37), (-0.2, 0.25, -0.05), (0.4, 0.25, 0.15)])
+def test_the_front_knee_reference_steps_at_most_front_knee_step(make_obs, dynamics, knee, step,
+                                                                reference):
+    """In double support the front knee is held near straight (-0.05 rad); with
+    ``front_knee_step`` its reference lies at most that far from the current angle, so a knee
+    bent by a short landing straightens with a bounded torque rather than vaulting the body."""
+    q = standing_posture('bent_knees', 0.05, 0.0)[0]
+    q[6] = knee
+    obs = make_obs(t=2.0, q=q, mode=7, t_exchange=1.5, t_touchdown=1.9)
+    cmd = balance_command(obs, dynamics, BalanceParameters(front_knee_step=step), 20.0, 2.0)
+    assert cmd.reference[6] == pytest.approx(reference, abs=1e-12)

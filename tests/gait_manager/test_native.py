@@ -47,6 +47,8 @@ VARIANTS = {
         'balance': {'com_stiffness': 0.0, 'com_damping': 0.0, 'blend': 0.0, 'push_ramp': 0.0}},
     'balance with a glide': {
         'posture': {'reference': 'balance'}, 'balance': {'glide_time': 0.2}},
+    'balance with a bounded front knee step': {
+        'posture': {'reference': 'balance'}, 'balance': {'front_knee_step': 0.05}},
     'balance with drive and pace': {
         'posture': {'reference': 'balance'}, 'balance': {'drive': 15.0, 'pace_gain': 120.0}},
     'balance with drive and a bounded pace': {
