@@ -119,29 +119,42 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
     assert np.all(braked_end < 0.7 * free_end), (free_end, braked_end)
 
 
-@pytest.mark.parametrize('force', [150.0, -150.0])
-def test_a_chest_push_after_the_fourth_step_is_survived(tmp_path, force):
-    """A 150 N x 0.1 s (15 N s) chest push at 6.5 s, forward or backward: no fall to the end
-    of the 15 s run, and the gait steps on after it (forward: the bounded speed feedback lets
-    the robot keep the speed it got instead of braking its support foot out from under it)."""
+def _pushed_skate(start: float, force: float, duration: float = 15.0) -> dict:
+    """The shipped skate scene (no bag) with a 150 N x 0.1 s chest push of ``force`` [N]."""
     raw = read_yaml(scene_path('skate'), 'scene')
-    raw['record'] = {'bag': False}
-    raw['disturbances'] = [{'start': 6.5, 'duration': 0.1, 'frame': 'chest',
+    raw['duration'], raw['record'] = duration, {'bag': False}
+    raw['disturbances'] = [{'start': start, 'duration': 0.1, 'frame': 'chest',
                             'force': [0.0, force, 0.0]}]
-    metrics = run(parse_scene(raw), tmp_path, progress=False)
+    return raw
+
+
+@pytest.mark.parametrize(('start', 'force'), [(6.5, 150.0), (6.5, -150.0), (6.35, -150.0)])
+def test_a_chest_push_after_the_fourth_step_is_survived(tmp_path, start, force):
+    """A 150 N x 0.1 s (15 N s) chest push, forward or backward (at 6.35 s: mid-glide, the
+    robot then lands short, in double support): no fall to the end of the 15 s run, and the
+    gait steps on after it (forward: the bounded speed feedback lets the robot keep the speed
+    it got instead of braking its support foot out from under it)."""
+    metrics = run(parse_scene(_pushed_skate(start, force)), tmp_path, progress=False)
     assert not metrics['fell'], metrics['failure']
     assert metrics['sim_time_s'] == pytest.approx(15.0, abs=1e-9)
     events = json.loads((tmp_path / 'events.json').read_text())
-    assert sum(e['event'] in ('E6', 'E7') and e['t'] > 6.6 for e in events) >= 8
+    assert sum(e['event'] in ('E6', 'E7') and e['t'] > start + 0.1 for e in events) >= 8
+
+
+def test_without_the_front_knee_bound_a_short_landing_leaves_the_floor(tmp_path):
+    """The backward push at 6.35 s with the front knee's reference step unbounded
+    (front_knee_step 0): the knee, bent by the short landing, straightens at once and vaults
+    the body off both feet (flight) before 7 s."""
+    raw = _pushed_skate(6.35, -150.0, duration=7.0)
+    raw['inputs']['gait_manager']['balance']['front_knee_step'] = 0.0
+    metrics = run(parse_scene(raw), tmp_path, progress=False)
+    assert metrics['fell'] and metrics['failure'].startswith('flight'), metrics['failure']
 
 
 def test_without_the_feedback_bound_a_forward_push_is_a_fall(tmp_path):
     """The same forward push with the speed and pace terms unbounded (feedback_limit 0): the
     braking drives the support foot out and the robot falls before 9 s."""
-    raw = read_yaml(scene_path('skate'), 'scene')
-    raw['duration'], raw['record'] = 9.0, {'bag': False}
+    raw = _pushed_skate(6.5, 150.0, duration=9.0)
     raw['inputs']['gait_manager']['balance']['feedback_limit'] = 0.0
-    raw['disturbances'] = [{'start': 6.5, 'duration': 0.1, 'frame': 'chest',
-                            'force': [0.0, 150.0, 0.0]}]
     metrics = run(parse_scene(raw), tmp_path, progress=False)
     assert metrics['fell'], 'survived without the bound'
