@@ -28,9 +28,10 @@ the search did not see, and prints one JSON line per case.
 
 The shipped skate values (``skate``, ``skate_no_yaw``) are run 68 of the last of five CMA-ES
 searches, rounded to 4 significant digits, and one value set after them, not searched:
-``balance.front_knee_step`` 0.25 rad, the middle of the bounds 0.22-0.3 rad that survived 640-642
-of the 644 pushes of ``sweep push_robustness`` (0.2 and 0.35 did worse). The first starts from the skate values of commit
-8559d86 with the then new bound of the speed feedback (``balance.feedback_limit``) at 10 N;
+``balance.front_knee_step`` 0.25 rad, the middle of the bounds 0.22-0.3 rad that survived
+640-642 of the 644 pushes of ``sweep push_robustness`` (0.2 and 0.35 did worse). The first
+search starts from the skate values of commit 8559d86 with the then new bound of the speed
+feedback (``balance.feedback_limit``) at 10 N;
 the second and third each start from the run of the one before that did best on cases outside
 its set (a push both ways every quarter second from 4 to 12 s, frictions 0.002-0.02, 60 s
 runs); their values (run 60 of the third) were shipped at commit 8736950. A push every 0.05 s
