@@ -120,7 +120,8 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
 
 
 def _pushed_skate(start: float, force: float, duration: float = 15.0) -> dict:
-    """The shipped skate scene (no bag) with a 150 N x 0.1 s chest push of ``force`` [N]."""
+    """The shipped skate scene (no bag, ``duration`` [s]) with a 0.1 s chest push of ``force``
+    [N] (> 0: forward) from ``start`` [s]."""
     raw = read_yaml(scene_path('skate'), 'scene')
     raw['duration'], raw['record'] = duration, {'bag': False}
     raw['disturbances'] = [{'start': start, 'duration': 0.1, 'frame': 'chest',

@@ -30,8 +30,8 @@ chain):
   after the exchange (the support foot glides alone), then moves forward over ``swing_time``
   and descends from ``descent_start`` of it to ``press`` below the floor, so the heel strikes;
   a 2-link IK (thigh, shank) gives the hip and knee references;
-* double support (swing foot on the floor): the front knee is held straight-ish, the front
-  hip is held at its angle of the control instant, and from the heel strike over
+* double support (swing foot on the floor): the front knee is held straight-ish (its
+  reference at most ``front_knee_step`` from the current angle, if set), the front hip is held at its angle of the control instant, and from the heel strike over
   ``push_ramp`` s the rear ankle PD gives way to a push-off torque ``push`` while the rear
   knee flexes to ``toe_off_flex``.
 """
