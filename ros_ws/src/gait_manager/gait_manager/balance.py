@@ -31,9 +31,10 @@ chain):
   and descends from ``descent_start`` of it to ``press`` below the floor, so the heel strikes;
   a 2-link IK (thigh, shank) gives the hip and knee references;
 * double support (swing foot on the floor): the front knee is held straight-ish (its
-  reference at most ``front_knee_step`` from the current angle, if set), the front hip is held at its angle of the control instant, and from the heel strike over
-  ``push_ramp`` s the rear ankle PD gives way to a push-off torque ``push`` while the rear
-  knee flexes to ``toe_off_flex``.
+  reference at most ``front_knee_step`` from the current angle, if set), the front hip is held
+  at its angle of the control instant, and from the heel strike over ``push_ramp`` s the rear
+  ankle PD gives way to a push-off torque ``push`` while the rear knee flexes to
+  ``toe_off_flex``.
 """
 
 from __future__ import annotations
