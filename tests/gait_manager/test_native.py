@@ -89,20 +89,10 @@ def kinematics():
     return native_kinematics(load_robot())
 
 
-def with_sliding_twins(observations: list) -> list:
-    """The observations, and each one with a flat stuck swing sole (Fp) once more as sliding
-    (Fs, mode number - 4): the shipped runs never slide a flat swing sole."""
-    return [twin for obs in observations
-            for twin in ([obs, replace(obs, mode=obs.mode - 4)] if obs.gait_mode.swing == 'Fp'
-                         else [obs])]
-
-
 def test_the_runs_pass_through_every_kind_of_state(scene_observations):
     observations = [obs for run in scene_observations.values() for obs in run]
     swings = {obs.gait_mode.swing for obs in observations}
-    assert swings == {'A', 'Hs', 'Hp', 'Fp'}
-    assert {obs.gait_mode.swing for obs in with_sliding_twins(observations)} == {
-        'A', 'Hs', 'Hp', 'Fs', 'Fp'}
+    assert swings == {'A', 'Hs', 'Hp', 'Fs', 'Fp'}
     assert {obs.gait_mode.q1_active for obs in observations} == {False, True}
     assert {obs.gait_mode.y0_active for obs in observations} == {False, True}
     assert {obs.side for obs in observations} == {'right', 'left'}
@@ -118,7 +108,7 @@ def test_the_native_sources_equal_the_reference_on_real_runs(scene, name, scene_
                                                              dynamics, kinematics):
     params = variant(scene, name)
     controller = GaitManagerController(params)
-    for obs in with_sliding_twins(scene_observations[scene]):
+    for obs in scene_observations[scene]:
         got = native_command(controller, obs, kinematics)
         expected = ControllerCommand.of(
             gait_manager_commands(obs, dynamics, params, controller.head_start_y), obs.q, obs.v)

@@ -232,7 +232,7 @@ def test_interval_accelerations_are_the_integrators_velocity_steps(tmp_path):
     quiet[:-1] &= ~np.array([np.any((events > t[k]) & (events <= t[k + 1]))
                              for k in range(len(t) - 1)])
     rows = np.flatnonzero(quiet)
-    assert rows.size > 1000 and len(events) > 0  # eventful, and mostly quiet
+    assert rows.size > 500 and len(events) > 0  # eventful, with many quiet intervals
     for k in rows:
         active = bag.active[k]
         error = np.abs(a[k, active] - bag.qdd[k, active])

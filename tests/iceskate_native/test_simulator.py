@@ -19,8 +19,9 @@ import pytest
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel
+from iceskate_sim.hybrid import FrictionModel, rerooted_command
 from iceskate_sim.scene import Push, Scene
 from iceskate_sim.session import Session
 
@@ -76,6 +77,28 @@ def test_native_periods_follow_the_python_reference(name: str, duration: float) 
     runs = [_run(_scene(name, duration, engine)) for engine in ('python', 'native')]
     assert len(runs[0].sim.events) > (10 if name != 'stand' else -1)
     _assert_same_run(*runs, tolerance=1e-7)
+
+
+@pytest.mark.parametrize('engine', ['python', 'native'])
+def test_a_command_held_across_an_exchange_is_rerooted_with_the_tree(engine: str) -> None:
+    """The period of the first support exchange: at its end the simulator applies the
+    controllers' command re-rooted (the same motors), and says so (``Simulator.command``)."""
+    scene = _scene('skate', 2.0, engine)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    side = session.sim.state.contact.side
+    while session.sim.state.contact.side == side:
+        assert not session.done, 'no exchange in the run'
+        commands = stack.commands(session.observation())
+        session.step(commands)
+        session.flush()
+    sim = session.sim
+    held = rerooted_command(HeldCommand.of_controllers(commands.values()))
+    np.testing.assert_array_equal(sim.command.torque(sim.state.q, sim.state.v),
+                                  held.torque(sim.state.q, sim.state.v))
+    result = sim.result
+    np.testing.assert_allclose(result.applied - result.passive,
+                               held.torque(sim.state.q, sim.state.v), rtol=0.0, atol=1e-9)
 
 
 @pytest.mark.parametrize(('method', 'step', 'duration'), [

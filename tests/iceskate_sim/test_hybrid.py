@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
@@ -25,6 +26,7 @@ from iceskate_sim.hybrid import (
     guards_of,
     project_positions,
     reroot,
+    rerooted_command,
 )
 from iceskate_sim.modes import MODES, get_mode, mode_for
 from iceskate_sim.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
@@ -220,6 +222,29 @@ def test_reroot_of_a_sliding_swing_foot_carries_its_speed_into_y0(robot, dynamic
         assert new.mode.y0_active
         assert new.v[Y0] == pytest.approx(heel_vy, abs=1e-14)
         assert new.contact.support_slide_dir == np.sign(heel_vy)
+
+
+@pytest.mark.parametrize('swing', SWING_CONTACT_CODES)
+def test_a_rerooted_command_does_the_same_work_on_every_motor(robot, dynamics, swing):
+    """A command held over a period that re-roots keeps driving the same motors: on the motion
+    of any one joint, carried into the new coordinates by the re-root's velocity map, the
+    re-rooted command at the re-rooted state does the work the old one did at the old state.
+    Its y0 and q1 entries, floor reactions on the old support foot, do no work any more."""
+    rng = np.random.default_rng([424242, SWING_CONTACT_CODES.index(swing)])
+    for support in SUPPORT_CODES:
+        old = _double_support(dynamics, robot, rng, support, swing, 'right')
+        command = HeldCommand(rng.uniform(-50.0, 50.0, N_COORDINATES),
+                              rng.uniform(0.0, 500.0, N_COORDINATES),
+                              rng.uniform(0.0, 30.0, N_COORDINATES))
+        new = reroot(dynamics, old)
+        before = command.torque(old.q, old.v)
+        after = rerooted_command(command).torque(new.q, new.v)
+        for j in range(N_COORDINATES):
+            motion = np.zeros(N_COORDINATES)
+            motion[j] = 1.0
+            carried = reroot(dynamics, replace(old, v=motion)).v
+            work = before[j] if j not in (Y0, Q1) else 0.0
+            assert after @ carried == pytest.approx(work, abs=1e-9), (support, j)
 
 
 def test_reroot_needs_a_swing_contact(dynamics):

@@ -239,6 +239,9 @@ void HybridSimulator::transition(Guard guard)
   instant_modes_.insert(key);
   events_.push_back({t, state_.contact.mode, next.contact.mode, name_of(guard), name_of(guard),
                      std::move(outcome.impulse), next.step_index, next.contact.side});
+  if (next.contact.side != state_.contact.side) {
+    inputs_ = rerooted(inputs_);
+  }
   state_ = next;
   result_ = evaluate(state_);
 }

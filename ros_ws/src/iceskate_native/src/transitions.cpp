@@ -358,6 +358,20 @@ std::pair<Vector18, double> project_positions(
   return {out, worst};
 }
 
+Inputs rerooted(const Inputs & inputs)
+{
+  Inputs out = inputs;
+  for (const int i : {kY0, kQ1}) {  // between the floor and the old support foot: they end
+    out.tau[i] = out.stiffness[i] = out.damping[i] = 0.0;
+  }
+  for (int i = 0; i < 6; ++i) {  // the sign of an effort follows its coordinate's; gains do not
+    out.tau[2 + i] = -inputs.tau[7 - i];
+    out.stiffness[2 + i] = inputs.stiffness[7 - i];
+    out.damping[2 + i] = inputs.damping[7 - i];
+  }
+  return out;
+}
+
 TransitionOutcome apply_transition(
   Dynamics & dynamics, const Friction & friction, const GuardConstants & constants,
   const HybridState & state, Guard guard, const DynamicsResult & result)

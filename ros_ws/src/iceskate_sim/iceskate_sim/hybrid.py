@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsResult, GaitDynamics
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import GaitMode, mode_for
@@ -251,8 +252,8 @@ def reroot(dynamics: GaitDynamics, state: HybridState) -> HybridState:
     v_new = v.copy()
     q_new[Q1] = q[_LEG].sum() if mode.q1_active else 0.0
     v_new[Q1] = v[_LEG].sum() if mode.q1_active else 0.0
-    q_new[2:8] = -q[7:1:-1]
-    v_new[2:8] = -v[7:1:-1]
+    q_new[2:8] = _other_legs(q)
+    v_new[2:8] = _other_legs(v)
     heel = dynamics.frame_placement(old, q, 'swing_heel').translation
     heel_velocity = dynamics.frame_velocity(old, q, v, 'swing_heel').linear
     q_new[Y0] = heel[1] - SOLE_HEEL_Y
@@ -262,6 +263,27 @@ def reroot(dynamics: GaitDynamics, state: HybridState) -> HybridState:
     contact = ContactState(mode, side, pivot, 0.0, support_slide_dir=old.heel_slide_dir)
     return HybridState(state.t, q_new, v_new, contact, state.step_index + 1, state.t,
                        float('nan'))
+
+
+def _other_legs(x: np.ndarray, sign: float = -1.0) -> np.ndarray:
+    """Entries 2..7 of ``x`` in the other support foot's coordinates: q2'..q7' = -q7..-q2
+    (``sign`` +1 for gains, whose sign does not follow the coordinate's)."""
+    return sign * x[7:1:-1]
+
+
+def rerooted_command(command: HeldCommand) -> HeldCommand:
+    """The same physical command in the coordinates of the other support foot: a command held
+    over a control period keeps acting on the same motors when the tree re-roots inside it.
+    Its y0 and q1 entries act between the floor and the old support foot, which has left the
+    floor: they end."""
+    bias, stiffness, damping = command.bias.copy(), command.stiffness.copy(), \
+        command.damping.copy()
+    for x in (bias, stiffness, damping):
+        x[[Y0, Q1]] = 0.0
+    bias[2:8] = _other_legs(command.bias)
+    stiffness[2:8] = _other_legs(command.stiffness, 1.0)
+    damping[2:8] = _other_legs(command.damping, 1.0)
+    return HeldCommand(bias, stiffness, damping)
 
 
 def _swapped(mode: GaitMode, support: str | None = None, swing: str | None = None) -> GaitMode:

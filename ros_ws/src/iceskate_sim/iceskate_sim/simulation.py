@@ -31,6 +31,7 @@ from iceskate_sim.hybrid import (
     guard_values,
     guards_of,
     project_positions,
+    rerooted_command,
     resolve_contact_mode,
     resolved_cause,
 )
@@ -214,7 +215,8 @@ class Simulator:
     # -------------------------------------------------------------- accessors
     @property
     def command(self) -> HeldCommand:
-        """The input held over the last period (zero torque before the first)."""
+        """The input held over the last period (zero torque before the first), in the
+        coordinates of the current support foot."""
         return self._command
 
     @property
@@ -295,10 +297,14 @@ class Simulator:
         self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         if self._periods is not None:
+            side, first = self.state.contact.side, len(self.events)
             try:
                 self._periods.advance(command, self._push)
             finally:
                 self._mirror_periods()
+                for event in self.events[first:]:  # the native periods re-root it likewise
+                    if event.side != side:
+                        self._command, side = rerooted_command(self._command), event.side
             return self.result
         self.result = self._evaluate(self.state.q, self.state.v)
         self._start = (self.state, self.result)
@@ -443,6 +449,8 @@ class Simulator:
             return
         self._instant[1].add(key)
         self.events.append(record)
+        if new.contact.side != self.state.contact.side:
+            self._command = rerooted_command(self._command)
         self.state = new
         self.result = self._evaluate(new.q, new.v)
 

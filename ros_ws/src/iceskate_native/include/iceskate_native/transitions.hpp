@@ -89,6 +89,13 @@ std::pair<Vector18, Eigen::VectorXd> impact(
 std::pair<Vector18, double> project_positions(
   Dynamics & dynamics, const Contact & contact, const Vector18 & q, int iterations = 4);
 
+/// The same physical input in the coordinates of the other support foot (the support
+/// exchange's map q2'..q7' = -q7..-q2 applied to the leg joints' inputs): a command held over a
+/// control period keeps acting on the same motors when the tree re-roots inside the period;
+/// its y0 and q1 entries act between the floor and the old support foot, which has left it, and
+/// end.
+Inputs rerooted(const Inputs & inputs);
+
 /// The reset of `guard` at `state` (located on the guard's zero) with its dynamics `result`.
 TransitionOutcome apply_transition(
   Dynamics & dynamics, const Friction & friction, const GuardConstants & constants,
