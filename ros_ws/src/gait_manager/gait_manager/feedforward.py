@@ -25,7 +25,8 @@ pressure at the rear toe and front one at the front heel (tau_n,des = 0): f_des 
 (y_x - y_rear_toe) / (y_front_heel - y_rear_toe), clipped to [share_min ramp, share], with
 y_x = y_com + capture_gain v_com sqrt(z_com / g) (the capture point for a gain of 1). The rear
 normal force reaches 0 (the exchange) when y_x passes the front heel, without pushing the
-rear centre of pressure off its sole.
+rear centre of pressure off its sole. A swing foot down behind the support heel (the old
+support foot touching again after an exchange) gets no load: f_des = 0.
 """
 
 from __future__ import annotations
@@ -210,6 +211,8 @@ def capture_split_force(obs: Observation, dynamics: GaitDynamics,
     com, com_v = data.com[0], data.vcom[0]
     rear_toe = data.oMf[sm.frame_ids['support_toe']].translation[1]
     front_heel = data.oMf[sm.frame_ids['swing_heel']].translation[1]
+    if front_heel <= data.oMf[sm.frame_ids['support_heel']].translation[1]:
+        return 0.0  # the swing foot is down behind the support: no load goes onto it
     y_x = com[1] + params.capture_gain * com_v[1] * math.sqrt(max(com[2], 0.0) / GRAVITY)
     share = min(max((y_x - rear_toe) / max(front_heel - rear_toe, 0.02), 0.0), params.share)
     since = obs.t - obs.t_touchdown

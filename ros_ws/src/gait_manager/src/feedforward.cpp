@@ -89,6 +89,10 @@ double capture_split_force(
     kinematics.frame_position(state, obs.q, iceskate_native::Frame::kSupportToe)[1];
   const double front_heel =
     kinematics.frame_position(state, obs.q, iceskate_native::Frame::kSwingHeel)[1];
+  if (front_heel
+      <= kinematics.frame_position(state, obs.q, iceskate_native::Frame::kSupportHeel)[1]) {
+    return 0.0;  // the swing foot is down behind the support: no load goes onto it
+  }
   const double y_x = com.position[1] + params.capture_gain * com.velocity[1]
                                          * std::sqrt(std::max(com.position[2], 0.0) / kGravity);
   const double share = std::min(

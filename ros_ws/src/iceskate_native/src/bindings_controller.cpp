@@ -44,10 +44,11 @@ Vector18 vector18(const Vector & value, const char * name)
 
 Frame frame_named(const std::string & name)
 {
-  static const std::array<std::pair<const char *, Frame>, 4> frames{{
+  static const std::array<std::pair<const char *, Frame>, 5> frames{{
     {"head_top", Frame::kHeadTop},
     {"swing_heel", Frame::kSwingHeel},
     {"support_toe", Frame::kSupportToe},
+    {"support_heel", Frame::kSupportHeel},
     {"pelvis_centre", Frame::kPelvisCentre}}};
   for (const auto & [known, frame] : frames) {
     if (name == known) {

@@ -34,6 +34,8 @@ const char * frame_name(Frame frame)
       return "swing_heel";
     case Frame::kSupportToe:
       return "support_toe";
+    case Frame::kSupportHeel:
+      return "support_heel";
     case Frame::kPelvisCentre:
       return "pelvis_centre";
   }

@@ -29,6 +29,7 @@ enum class Frame
   kHeadTop,       // head_top
   kSwingHeel,     // swing_heel
   kSupportToe,    // support_toe
+  kSupportHeel,   // support_heel
   kPelvisCentre   // pelvis_centre
 };
 
