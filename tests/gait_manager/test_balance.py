@@ -91,6 +91,29 @@ def test_com_rule_is_the_static_two_foot_split(make_obs, dynamics):
     assert capture_split_force(make_obs(t=1.0, q=q, mode=1), dynamics, params) == 0.0
 
 
+def test_com_rule_puts_no_load_on_a_swing_foot_behind_the_support(make_obs, dynamics):
+    """The old support foot touching again behind the new support after an exchange: its
+    heel lies behind the support heel and gets f_des = 0 whatever the capture point, while the
+    same feet the other way round (the swing foot ahead) get the floor share."""
+    q, pivot = standing_posture('staggered', 0.0, 0.7)
+    params = WeightTransferParameters(rule='com', share=1.0, share_min=0.5, ramp_time=0.0)
+    weight = dynamics.robot.total_mass * GRAVITY
+    for sign, expected_at_least in ((1.0, None), (-1.0, 0.5 * weight)):
+        feet = q.copy()
+        feet[2:8] = sign * q[2:8]
+        obs = make_obs(t=1.0, q=feet, v=np.full(18, 0.5), mode=17, pivot=pivot,
+                       t_exchange=0.0, t_touchdown=0.5)
+        contact = obs.contact()
+        behind = (dynamics.frame_placement(contact, feet, 'swing_heel').translation[1]
+                  < dynamics.frame_placement(contact, feet, 'support_heel').translation[1])
+        assert behind == (sign > 0.0)
+        force = capture_split_force(obs, dynamics, params)
+        if expected_at_least is None:
+            assert force == 0.0
+        else:
+            assert force >= expected_at_least
+
+
 def test_walk_scene_walks(tmp_path):
     """The shipped walk scene: several clean support exchanges in 3 s, moving forward."""
     scene = replace(load_scene('walk'), duration=3.0, record_bag=False)

@@ -65,7 +65,7 @@ def test_the_queries_equal_the_python_model(robot, kinematics):
         row = pin.getFrameJacobian(model, data, heel, pin.LOCAL_WORLD_ALIGNED)[2].copy()
         row[[i for i in (0, 1) if not (mode.y0_active, mode.q1_active)[i]]] = 0.0
         np.testing.assert_allclose(kinematics.swing_heel_z_row(*key, q), row, **TOLERANCE)
-        for frame in ('head_top', 'swing_heel', 'support_toe', 'pelvis_centre'):
+        for frame in ('head_top', 'swing_heel', 'support_toe', 'support_heel', 'pelvis_centre'):
             np.testing.assert_allclose(kinematics.frame_position(*key, q, frame),
                                        data.oMf[support.frame_ids[frame]].translation,
                                        **TOLERANCE)

@@ -21,7 +21,7 @@ namespace
 {
 
 constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
-constexpr int kFrames = 4;
+constexpr int kFrames = static_cast<int>(Frame::kPelvisCentre) + 1;  // the last Frame
 
 using ConstVector = Eigen::Ref<const Eigen::VectorXd>;  // selects Pinocchio's compiled algorithms
 
