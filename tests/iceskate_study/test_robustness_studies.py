@@ -1,8 +1,8 @@
 """The shipped robustness studies, run whole (slow): the skate gait walks 60 s on every friction
 of 0.002-0.02 with and without the yaw input, and survives chest pushes at any time after the
-4th step (every 0.05 s from 4 to 12 s), both ways: every half-force push (7.5 N s) and at least
-99 % of the full-force ones (15 N s). Without the front knee's bounded step in double support
-(balance.front_knee_step 0) the push criterion fails (12 of 644 runs end)."""
+4th step (every 0.05 s from 4 to 12 s), both ways: every push, at half force (7.5 N s) and at
+full force (15 N s). Without the front knee's bounded step in double support
+(balance.front_knee_step 0) the push criterion fails (7 of 644 runs end)."""
 
 from pathlib import Path
 
@@ -37,5 +37,4 @@ def test_the_skate_gait_survives_a_chest_push_at_any_time(tmp_path):
     ended = {force: [r['disturbances[0].start'] for r in rows
                      if r['disturbances[0].force[1]'] == force and r['fell']]
              for force in (-150.0, -75.0, 75.0, 150.0)}
-    assert not ended[-75.0] and not ended[75.0], ended
-    assert len(ended[-150.0]) + len(ended[150.0]) <= 3, ended  # of 322: >= 99 % survived
+    assert not any(ended.values()), ended
