@@ -406,7 +406,7 @@ def _revolute_axis(model: pin.Model, joint: int) -> np.ndarray:
     joint_model = model.joints[joint]
     if joint_model.nq == joint_model.nv == 1:
         data = joint_model.createData()
-        joint_model.calc(data, np.zeros(1))
+        joint_model.calc(data, np.zeros(model.nq))  # it reads its entries of the model's q
         subspace = np.ravel(data.S)  # (linear, angular) velocity of a unit joint speed
         if not np.any(subspace[:3]):
             return subspace[3:]
