@@ -276,14 +276,13 @@ def rerooted_command(command: HeldCommand) -> HeldCommand:
     over a control period keeps acting on the same motors when the tree re-roots inside it.
     Its y0 and q1 entries act between the floor and the old support foot, which has left the
     floor: they end."""
-    bias, stiffness, damping = command.bias.copy(), command.stiffness.copy(), \
-        command.damping.copy()
-    for x in (bias, stiffness, damping):
-        x[[Y0, Q1]] = 0.0
-    bias[2:8] = _other_legs(command.bias)
-    stiffness[2:8] = _other_legs(command.stiffness, 1.0)
-    damping[2:8] = _other_legs(command.damping, 1.0)
-    return HeldCommand(bias, stiffness, damping)
+    entries = []
+    for values, sign in ((command.bias, -1.0), (command.stiffness, 1.0), (command.damping, 1.0)):
+        moved = values.copy()
+        moved[[Y0, Q1]] = 0.0
+        moved[2:8] = _other_legs(values, sign)
+        entries.append(moved)
+    return HeldCommand(*entries)
 
 
 def _swapped(mode: GaitMode, support: str | None = None, swing: str | None = None) -> GaitMode:
