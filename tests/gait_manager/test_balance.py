@@ -114,6 +114,26 @@ def test_com_rule_puts_no_load_on_a_swing_foot_behind_the_support(make_obs, dyna
             assert force >= expected_at_least
 
 
+def test_com_rule_bounds_the_share_while_only_the_front_heel_touches(make_obs, dynamics):
+    """heel_share caps f_des / (m g) in the heel modes (Hs, Hp) only; a flat front sole (Fs,
+    Fp) gets the whole share."""
+    q, pivot = standing_posture('staggered', 0.0, 0.7)
+    q[2:8] = -q[2:8]  # swing (front) foot ahead of the support (rear) one
+    weight = dynamics.robot.total_mass * GRAVITY
+    params = WeightTransferParameters(rule='com', share=1.0, share_min=0.8, ramp_time=0.0,
+                                      heel_share=0.3)
+    for mode, expected in ((9, 0.3), (5, 0.3), (17, None), (13, None)):  # Hp, Hs, Fp, Fs
+        obs = make_obs(t=1.0, q=q, mode=mode, pivot=pivot, t_exchange=0.0, t_touchdown=0.5)
+        force = capture_split_force(obs, dynamics, params)
+        if expected is None:
+            assert force >= 0.8 * weight
+        else:
+            assert force == pytest.approx(expected * weight)
+    unbounded = replace(params, heel_share=WeightTransferParameters().heel_share)
+    assert capture_split_force(make_obs(t=1.0, q=q, mode=9, pivot=pivot, t_exchange=0.0,
+                                        t_touchdown=0.5), dynamics, unbounded) >= 0.8 * weight
+
+
 def test_walk_scene_walks(tmp_path):
     """The shipped walk scene: several clean support exchanges in 3 s, moving forward."""
     scene = replace(load_scene('walk'), duration=3.0, record_bag=False)

@@ -63,6 +63,8 @@ VARIANTS = {
         'weight_transfer': {'rule': 'com', 'share_min': 0.3, 'ramp_time': 0.2}},
     'weight transfer com, no ramp': {
         'weight_transfer': {'rule': 'com', 'share_min': 0.3, 'ramp_time': 0.0}},
+    'weight transfer com, heel share': {
+        'weight_transfer': {'rule': 'com', 'share_min': 0.6, 'heel_share': 0.3}},
     'feedforward without q1, heel without ramp': {
         'enabled': ALL, 'feedforward': {'joint1_torque': False}, 'heel': {'ramp_time': 0.0}},
     'arm release': {'enabled': ALL, 'arm_assist': {'release_time': 0.5,

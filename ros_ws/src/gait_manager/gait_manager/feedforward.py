@@ -25,8 +25,10 @@ pressure at the rear toe and front one at the front heel (tau_n,des = 0): f_des 
 (y_x - y_rear_toe) / (y_front_heel - y_rear_toe), clipped to [share_min ramp, share], with
 y_x = y_com + capture_gain v_com sqrt(z_com / g) (the capture point for a gain of 1). The rear
 normal force reaches 0 (the exchange) when y_x passes the front heel, without pushing the
-rear centre of pressure off its sole. A swing foot down behind the support heel (the old
-support foot touching again after an exchange) gets no load: f_des = 0.
+rear centre of pressure off its sole. While only the front heel touches (Hs, Hp) the share is
+at most ``heel_share`` (the rear foot stays loaded until the front sole is flat). A swing foot
+down behind the support heel (the old support foot touching again after an exchange) gets no
+load: f_des = 0.
 """
 
 from __future__ import annotations
@@ -113,6 +115,8 @@ class WeightTransferParameters:
                                   'capture point)', low=0.0, high=5.0)
     share_min: float = setting(0.0, "'com' rule: lower bound of the share, reached linearly "
                                'over ramp_time after the heel strike', low=0.0, high=2.0)
+    heel_share: float = setting(2.0, "'com' rule: upper bound of the share while only the "
+                                'front heel touches (2: none)', low=0.0, high=2.0)
 
     def __post_init__(self) -> None:
         """Check and normalise every field (GaitManagerError naming the key)."""
@@ -218,6 +222,8 @@ def capture_split_force(obs: Observation, dynamics: GaitDynamics,
     since = obs.t - obs.t_touchdown
     floor = params.share_min * (min(since / params.ramp_time, 1.0) if params.ramp_time > 0.0
                                 else 1.0)
+    if obs.gait_mode.swing in ('Hs', 'Hp'):
+        return min(max(share, floor), params.heel_share) * dynamics.robot.total_mass * GRAVITY
     return max(share, floor) * dynamics.robot.total_mass * GRAVITY
 
 

@@ -117,7 +117,7 @@ gm::WeightTransferParameters weight_transfer_of(const Fields & f)
           f.flag("joint1_torque"), f.number("start_share"), f.number("start_ramp"),
           f.choice<gm::WeightRule>("rule", {{"ramp", gm::WeightRule::kRamp},
                                             {"com", gm::WeightRule::kCom}}),
-          f.number("capture_gain"), f.number("share_min")};
+          f.number("capture_gain"), f.number("share_min"), f.number("heel_share")};
 }
 
 gm::Parameters parameters_of(nb::handle object)

@@ -46,6 +46,7 @@ struct WeightTransferParameters
   WeightRule rule = WeightRule::kRamp;
   double capture_gain = 0.0;
   double share_min = 0.0;    ///< of m g
+  double heel_share = 2.0;   ///< of m g
 };
 
 /// The feed-forward torques [N m] on joints 1, 2, 3 (push-off), 5, 6 (swing).
