@@ -222,9 +222,10 @@ def capture_split_force(obs: Observation, dynamics: GaitDynamics,
     since = obs.t - obs.t_touchdown
     floor = params.share_min * (min(since / params.ramp_time, 1.0) if params.ramp_time > 0.0
                                 else 1.0)
-    if obs.gait_mode.swing in ('Hs', 'Hp'):
-        return min(max(share, floor), params.heel_share) * dynamics.robot.total_mass * GRAVITY
-    return max(share, floor) * dynamics.robot.total_mass * GRAVITY
+    fraction = max(share, floor)
+    if obs.gait_mode.swing in ('Hs', 'Hp'):  # only the front heel touches
+        fraction = min(fraction, params.heel_share)
+    return fraction * dynamics.robot.total_mass * GRAVITY
 
 
 def weight_transfer_torque(obs: Observation, dynamics: GaitDynamics,

@@ -100,10 +100,11 @@ double capture_split_force(
   const double since = obs.t - obs.t_touchdown;
   const double floor =
     params.share_min * (params.ramp_time > 0.0 ? std::min(since / params.ramp_time, 1.0) : 1.0);
-  const bool heel_only =
-    iceskate_native::swing_contact(kinematics.mode(obs.mode)) == SwingContact::kHeel;
-  return (heel_only ? std::min(std::max(share, floor), params.heel_share) : std::max(share, floor))
-         * kinematics.total_mass() * kGravity;
+  double fraction = std::max(share, floor);
+  if (iceskate_native::swing_contact(kinematics.mode(obs.mode)) == SwingContact::kHeel) {
+    fraction = std::min(fraction, params.heel_share);  // only the front heel touches
+  }
+  return fraction * kinematics.total_mass() * kGravity;
 }
 
 Vector18 weight_transfer_torque(
