@@ -2,7 +2,7 @@
 # Build the native core (ros_ws/src/iceskate_native) under AddressSanitizer and
 # UndefinedBehaviorSanitizer and run with it
 #   1. the native tests, tests/iceskate_native, and
-#   2. one short run of the `skate` scene on the native engine (run_scene ... --engine native).
+#   2. one short run of the `skate` scene (run_scene).
 # Exit status 0 only when the build, the tests and the run pass and no sanitizer reported
 # anything; non-zero otherwise. A sanitizer report aborts the process it happens in (exit 86),
 # and is also looked for at the end, in ASan's report files and in the logged output of every
@@ -150,7 +150,7 @@ for runtime in libasan libubsan; do
   grep -q "$runtime" <<<"$needed" || die "$kernel does not link $runtime: not a sanitized build"
 done
 
-# --- 3. the native tests, then the skate scene on the native engine ---------------------------
+# --- 3. the native tests, then the skate scene -------------------------------------------------
 # Each step's output (stdout and stderr) is shown and kept in $REPORTS/<step>.log.
 status=0
 run_start=$SECONDS
@@ -169,8 +169,8 @@ log "tests: exit $status, ${tests_time} s"
 
 if [ "$status" = 0 ]; then
   scene_start=$SECONDS
-  log "run_scene skate --engine native --duration $DURATION (sanitized) into $OUT/skate"
-  sanitized run_scene skate --engine native --duration "$DURATION" --out "$OUT/skate" --quiet \
+  log "run_scene skate --duration $DURATION (sanitized) into $OUT/skate"
+  sanitized run_scene skate --duration "$DURATION" --out "$OUT/skate" --quiet \
     2>&1 | tee "$REPORTS/skate.log" || status=$?
   log "skate: exit $status, $((SECONDS - scene_start)) s"
 fi

@@ -1,12 +1,11 @@
 """Many control periods in one native call (``iceskate_native.ControlLoop``, through
-``Session.run_periods``) against the same session stepped period by period (``Session.step``
-with ``ControlStack.commands``), and the commands of controller nodes held one period at a
-time by the same loop (``Session.hold``, the path of the ROS simulator node on the native
-engine).
+``Session.run_periods``) against the same session advanced one period per call, and the
+commands of controller nodes (``ControlStack.commands``, as values) held one period at a time
+by the same loop (``Session.hold``, the path of the ROS simulator node).
 
 All run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
 bit: every trajectory column, the event log, the counters, the bag's messages and the way a run
-stops on a failure of the physics or of a controller.
+stops on a failure of the physics or of a controller, whatever the block size.
 """
 
 from __future__ import annotations
@@ -25,10 +24,12 @@ from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
 from iceskate_sim.command import CommandValues, HeldCommand
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.hybrid import Transition
 from iceskate_sim.recording import Sample, bag_record
 from iceskate_sim.robot import PIVOTS, SIDES
 from iceskate_sim.scene import Push, Scene
-from iceskate_sim.session import Session, last_event_before
+from iceskate_sim.session import Session
+from iceskate_sim.simulation import Simulator
 
 
 def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -> Scene:
@@ -37,14 +38,14 @@ def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -
                    simulator=replace(scene.simulator, **simulator))
 
 
+def _last_event_before(sim: Simulator, t: float) -> Transition | None:
+    """The latest transition at or before time t (None before the first)."""
+    return next((event for event in reversed(sim.events) if event.t <= t), None)
+
+
 def _stepped(scene: Scene, out: pathlib.Path | None = None) -> Session:
-    session = Session(scene, out, out / 'bag' if out is not None and scene.record_bag else None)
-    stack = ControlStack(scene, session.robot, session.observation())
-    while not session.done:
-        session.step(stack.commands(session.observation()))
-        session.flush()
-    session.finish()
-    return session
+    """The session advanced one period per native call."""
+    return _blocks(scene, 1, out)
 
 
 def _blocks(scene: Scene, block: int, out: pathlib.Path | None = None) -> Session:
@@ -128,7 +129,7 @@ def test_the_live_view_is_the_record_of_the_current_state_under_the_held_command
             placement = sim.head_placement()
             expected = bag_record(Sample(state, sim.result, {'held': held},
                                          placement.translation, placement.rotation,
-                                         last_event_before(sim, state.t)))
+                                         _last_event_before(sim, state.t)))
             values, mode, side, pivot, step_index, last = inbox.live()
             assert np.array_equal(values, expected.values, equal_nan=True)
             assert (mode, SIDES[side], PIVOTS[pivot], step_index) == (
@@ -157,9 +158,10 @@ def test_the_inbox_refuses_bad_commands_and_forgets_on_request() -> None:
             inbox.receive(1, bad)
     with pytest.raises(SimulationError, match='controller index 2 is not below the 2'):
         inbox.receive(2, good)
-    # nothing kept: the period holds no command, as a session stepped without commands
+    # nothing kept: the period holds no command, as a session that never received one
     reference = Session(scene)
-    reference.step({})
+    reference.command_inbox(tuple(scene_sources(scene).values()))
+    assert reference.hold()
     reference.flush()
     inbox.receive(1, good)
     inbox.forget()
@@ -183,15 +185,6 @@ def test_the_bag_of_blocks_holds_the_same_messages(tmp_path: pathlib.Path) -> No
     assert len(blocks) == 1 + 6 * 2150 and blocks == stepped
 
 
-def test_the_python_engine_runs_the_blocks_period_by_period() -> None:
-    scene = _scene('walk', 0.3, engine='python')
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    assert session.run_periods(stack, 120) == 120
-    assert session._loop is False  # no native loop on the Python engine
-    _assert_identical(_stepped(scene), _blocks(scene, 120))
-
-
 def test_a_physics_failure_ends_both_paths_alike() -> None:
     # a residual bound below the projection's round-off: the first constrained period fails
     scene = _scene('walk', 1.5, residual_bound=1e-18)
@@ -212,10 +205,7 @@ def test_a_controller_error_comes_after_the_samples_before_it() -> None:
         q[2:4] = 1e308
         session.sim.set_state(replace(session.sim.state, q=q))
         with pytest.raises(GaitManagerError, match='balance command is not finite'):
-            if run == 'stepped':
-                session.step(stack.commands(session.observation()))
-            else:
-                session.run_periods(stack, 10)
+            session.run_periods(stack, 1 if run == 'stepped' else 10)
         assert len(session.trajectory) == 0 and session.sim.stats.control_periods == 0
 
 
@@ -240,27 +230,3 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
     with pytest.raises(ValueError, match='number of periods must be >= 0'):
         loop._kernel.run(-1)
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize('name', ['skate', 'skate_no_yaw', 'walk', 'stand'])
-def test_the_shipped_scenes_give_the_same_figures_on_both_engines(name: str) -> None:
-    """The whole scene as ``run_scene`` runs it (no bag) on each engine: the same steps and
-    transitions, and distance and arm-swing figures equal to what round-off grows to over the
-    run (measured: 4e-9 m, 3e-9 rad, 1.5e-9 in the correlation)."""
-    from iceskate_bringup.runner import run
-    figures = []
-    for engine in ('python', 'native'):
-        scene = load_scene(name)
-        scene = replace(scene, simulator=replace(scene.simulator, engine=engine),
-                        record_bag=False)
-        figures.append(run(scene, None, progress=False))
-    python, native = figures
-    for key in ('sim_time_s', 'steps', 'transitions', 'physics_steps', 'failure'):
-        assert native[key] == python[key], key
-    assert native['forward_distance_m'] == pytest.approx(python['forward_distance_m'], abs=1e-7)
-    if name == 'stand':
-        assert native['arm_swing'] is None and python['arm_swing'] is None
-        return
-    for key, value in python['arm_swing'].items():
-        assert native['arm_swing'][key] == pytest.approx(value, abs=1e-7), key

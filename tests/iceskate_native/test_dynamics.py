@@ -173,7 +173,8 @@ def test_a_bad_mode_table_is_refused(robot):
 @pytest.mark.parametrize('rule', ['ice', 'coulomb'])
 def test_guard_values_agree(engines, number, side, pivot, rule):
     from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values, guards_of
+    from iceskate_sim.hybrid import FrictionModel, HybridState, guards_of
+    from oracle.automaton import guard_values
     reference, native = engines
     mode = get_mode(number)
     rng = np.random.default_rng([SEED, number, 13])
@@ -193,9 +194,10 @@ def test_guard_values_agree(engines, number, side, pivot, rule):
 def _heel_lift(robot):
     """Mode 17 (double support) with the swing hip pushed so that the heel lifts (guard S5 or
     the like fires about 2 ms in): the engines, the start state, the held command and the
-    Python right-hand side and guards for ``Integrator.integrate_segment``."""
+    Python right-hand side and guards for the oracle's ``Integrator.integrate_segment``."""
     from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values
+    from iceskate_sim.hybrid import FrictionModel, HybridState
+    from oracle.automaton import guard_values
     params = DynamicsParameters()
     reference, native = GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
     q = np.zeros(18)
@@ -227,7 +229,8 @@ def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
     """The segment stops at the same guard, at the same time (to the event tolerance), in the
     same state."""
     from iceskate_sim.hybrid import guards_of
-    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    from iceskate_sim.integrators import IntegratorConfig
+    from oracle.integrators import Integrator
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     config = IntegratorConfig(method=method, step=1e-4, event_tolerance=1e-10)
     x0 = np.concatenate([start.q, start.v])
@@ -248,10 +251,12 @@ def test_native_rk45_locates_the_event_of_a_tight_reference(robot):
     """Dormand-Prince 5(4) natively (Boost.Odeint's stepper and step-size control, the event
     on its dense output) against DOP853 at 1e-12 in Python: the same guard, its time and the
     state there to what the tolerance leaves (measured: 1.3e-13 s, 3.4e-13 at rtol 1e-9)."""
-    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    from iceskate_sim.integrators import IntegratorConfig
+    from oracle.integrators import Integrator, ReferenceIntegratorConfig
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     x0 = np.concatenate([start.q, start.v])
-    tight = IntegratorConfig('dop853', step=1.0, rtol=1e-12, atol=1e-12, event_tolerance=1e-13)
+    tight = ReferenceIntegratorConfig('dop853', step=1.0, rtol=1e-12, atol=1e-12,
+                                      event_tolerance=1e-13)
     expected = Integrator(tight).integrate_segment(rhs, guards, 0.0, x0, 0.2)
     assert expected.fired is not None and expected.t < 0.01
     for rtol, bound in ((1e-6, 1e-9), (1e-9, 2e-12)):
@@ -266,11 +271,12 @@ def test_native_rk45_error_follows_its_tolerance(robot):
     """On a smooth stretch (stopping before the event) the global error of the native rk45 is
     proportional to the tolerance (log-log slope 1) and the step count grows as tol^(-1/5), the
     signature of an error estimate of local order 5."""
-    from iceskate_sim.integrators import Integrator, IntegratorConfig
+    from iceskate_sim.integrators import IntegratorConfig
+    from oracle.integrators import Integrator, ReferenceIntegratorConfig
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     x0 = np.concatenate([start.q, start.v])
     t_end = 1.9e-3  # the heel lifts at about 2.15 ms
-    tight = IntegratorConfig('dop853', step=1.0, rtol=1e-13, atol=1e-13)
+    tight = ReferenceIntegratorConfig('dop853', step=1.0, rtol=1e-13, atol=1e-13)
     expected = Integrator(tight).integrate_segment(rhs, guards, 0.0, x0, t_end)
     assert expected.fired is None
     tolerances = np.array([1e-6, 1e-7, 1e-8, 1e-9, 1e-10])
@@ -302,34 +308,8 @@ def test_a_segment_without_event_reaches_the_end(robot):
         HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
         None, IntegratorConfig(method='implicit_euler', step=1e-3), FrictionModel(), {}, 0.01)
     assert segment.fired is None and segment.t == 0.01 and segment.steps == 10
-    with pytest.raises(SimulationError, match="no native method 'dop853'"):
-        native.integrate_segment(
-            HybridState(0.0, q, np.zeros(18), contact), HeldCommand.torque_only(np.zeros(18)),
-            None, IntegratorConfig(method='dop853'), FrictionModel(), {}, 0.01)
-
-
-def test_two_seconds_of_skate_on_both_engines(tmp_path):
-    """The whole headless loop (laws, 5 sources, pushes of the support exchange, about 70
-    events) on both engines: the same event sequence, event times and positions agreeing to
-    what the event location's tolerance (1e-10 s, found by different root finders) grows to in
-    this hybrid system: ~1e-9 s and ~5e-9 m over 2-3 s."""
-    from dataclasses import replace
-    import json
-
-    from iceskate_bringup.runner import run
-    from iceskate_bringup.scene import load_scene
-    scene = replace(load_scene(FAST_SKATE), duration=2.0, record_bag=False)
-    for engine in ('python', 'native'):
-        run(replace(scene, simulator=replace(scene.simulator, engine=engine)),
-            tmp_path / engine, progress=False)
-    events = {e: json.loads((tmp_path / e / 'events.json').read_text())
-              for e in ('python', 'native')}
-    assert len(events['python']) > 30
-    assert ([(x['event'], x['from_mode'], x['to_mode']) for x in events['python']]
-            == [(x['event'], x['from_mode'], x['to_mode']) for x in events['native']])
-    assert max(abs(a['t'] - b['t']) for a, b in zip(*events.values(), strict=True)) <= 1e-8
-    a, b = (np.load(tmp_path / e / 'trajectory.npz') for e in ('python', 'native'))
-    assert np.max(np.abs(a['q'] - b['q'])) <= 1e-7
+    with pytest.raises(SimulationError, match="integrator method 'dop853' not in"):
+        IntegratorConfig(method='dop853')
 
 
 @pytest.mark.parametrize(('row', 'match'), [

@@ -2,7 +2,7 @@
 
 ``scripts/sanitize.sh`` builds ``iceskate_native`` with ``-fsanitize=address,undefined`` in its
 own colcon bases (``ros_ws/build-sanitize``, ``install-sanitize``), runs ``tests/iceskate_native``
-and 2 s of the ``skate`` scene on the native engine with that module, and exits non-zero on any
+and 2 s of the ``skate`` scene with that module, and exits non-zero on any
 sanitizer report. On 2 cores it takes 105 s from an empty ccache (as in CI; 160 s while other
 work ran) and 16 s with a warm one.
 """

@@ -102,17 +102,17 @@ def random_state(rng: np.random.Generator) -> Callable[..., tuple[np.ndarray, np
 
 
 @pytest.fixture(params=['python', 'native'])
-def engine(request: pytest.FixtureRequest) -> str:
-    """Where eq. (7) is solved: the Python reference, then the native kernel (the physics
-    tests that take this fixture run against both)."""
+def formulation(request: pytest.FixtureRequest) -> str:
+    """Where eq. (7) is solved: as written in Python (``GaitDynamics``), then by the native
+    kernel (the physics tests that take this fixture run against both)."""
     return request.param
 
 
 @pytest.fixture
-def make_dynamics(engine: str, robot: Robot) -> Callable[..., GaitDynamics]:
-    """``make_dynamics(params)`` -> the dynamics routine of the test's engine."""
+def make_dynamics(formulation: str, robot: Robot) -> Callable[..., GaitDynamics]:
+    """``make_dynamics(params)`` -> the dynamics routine of the test's formulation."""
     def make(params: DynamicsParameters | None = None) -> GaitDynamics:
-        if engine == 'native':
+        if formulation == 'native':
             from iceskate_sim.native_dynamics import NativeGaitDynamics
             return NativeGaitDynamics(robot, params)
         return GaitDynamics(robot, params)

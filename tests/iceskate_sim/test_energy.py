@@ -33,7 +33,7 @@ def _initial_state(rng: np.random.Generator) -> np.ndarray:
 def _simulate(robot, damping: bool, x0: np.ndarray, make_dynamics):
     """Integrate mode 1 with zero input; the last state entry is the damping work [J].
 
-    :param make_dynamics: ``make_dynamics(params)`` -> the dynamics routine (an engine's).
+    :param make_dynamics: ``make_dynamics(params)`` -> the dynamics routine (one formulation's).
     """
     dynamics = make_dynamics(DynamicsParameters(damping=damping, joint_limits=False))
     contact = ContactState(MODE, 'right', 'toe')

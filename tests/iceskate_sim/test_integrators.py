@@ -1,7 +1,8 @@
-"""Integrators behind one interface: convergence order, event location, determinism.
+"""The oracle's integrators behind one interface: convergence order, event location, and the
+determinism of whole runs (on the shipped simulator and on the oracle's loop).
 
 The right-hand side is the mode-1 dynamics (support flat and stuck, swing foot in the air) from
-``GaitDynamics.evaluate``; the guards are the automaton's own (``hybrid.guard_values``). The
+``GaitDynamics.evaluate``; the guards are the oracle automaton's (``guard_values``). The
 reference solutions are DOP853 at tolerances far below the errors they judge, and the test
 checks that margin too.
 """
@@ -14,11 +15,14 @@ import pytest
 
 from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, HybridState, guard_values, guards_of
-from iceskate_sim.integrators import GUARD_MARGIN, Integrator, IntegratorConfig
+from iceskate_sim.hybrid import FrictionModel, HybridState, guards_of
+from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig
 from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import N_COORDINATES
 from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from oracle.automaton import guard_values
+from oracle.integrators import Integrator, ReferenceIntegratorConfig
+from oracle.simulator import ReferenceSimulator
 
 N = N_COORDINATES
 MODE = get_mode(1)
@@ -79,10 +83,10 @@ def test_convergence_order_on_a_smooth_segment(robot, rng, method, order):
     x0 = np.concatenate([q, v])
     duration = 0.2
 
-    ref = problem.run(IntegratorConfig('dop853', step=duration, rtol=1e-13, atol=1e-13), x0,
-                      duration)
-    check = problem.run(IntegratorConfig('dop853', step=duration, rtol=1e-12, atol=1e-12), x0,
-                        duration)
+    ref = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-13,
+                                                atol=1e-13), x0, duration)
+    check = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-12,
+                                                  atol=1e-12), x0, duration)
     assert ref.fired is None and check.fired is None  # one smooth mode, no event
     assert np.max(np.abs(ref.x[:N] - q)) > 0.05  # it does move
     ref_error = np.max(np.abs(ref.x - check.x))
@@ -161,7 +165,7 @@ def falling_heel(robot):
     v = np.zeros(N)
     v[5:8] = np.linalg.pinv(jac[1:3, 5:8]) @ np.array([0.0, -0.3])
     x0 = np.concatenate([q, v])
-    ref = problem.run(IntegratorConfig('dop853', step=1.0, rtol=1e-12, atol=1e-12,
+    ref = problem.run(ReferenceIntegratorConfig('dop853', step=1.0, rtol=1e-12, atol=1e-12,
                                        event_tolerance=1e-13), x0, 1.0)
     assert ref.fired is not None and problem.names[ref.fired] == 'S1'
     return problem, x0, ref
@@ -188,7 +192,8 @@ def test_event_reference_locates_the_heel_on_the_floor(falling_heel):
 @pytest.mark.parametrize('method', ['rk45', 'dop853'])
 def test_adaptive_event_time_agrees_with_the_reference(falling_heel, method):
     problem, x0, ref = falling_heel
-    seg = problem.run(IntegratorConfig(method, step=1.0, rtol=1e-9, atol=1e-9), x0, 1.0)
+    seg = problem.run(ReferenceIntegratorConfig(method, step=1.0, rtol=1e-9, atol=1e-9), x0,
+                      1.0)
     _check_located(problem, seg, IntegratorConfig().event_tolerance)
     assert abs(seg.t - ref.t) <= 1e-8, seg.t - ref.t
     assert np.max(np.abs(seg.x[:N] - ref.x[:N])) <= 1e-7
@@ -212,10 +217,15 @@ def test_rk4_event_time_error_is_its_own_integration_error(falling_heel):
 
 
 # --------------------------------------------------------------------------- determinism
-def _simulator(robot, method: str, step: float) -> Simulator:
-    """An unpowered fall from single support, swing leg raised in front (heel strike, slip)."""
+def _simulator(robot, method: str, step: float) -> Simulator | ReferenceSimulator:
+    """An unpowered fall from single support, swing leg raised in front (heel strike, slip):
+    on the shipped simulator, or the oracle's loop for its own method (dop853)."""
     q = np.zeros(N)
     q[2:8] = (-0.05, 0.1, -0.05, 1.2, -0.3, 0.3)
+    if method == 'dop853':
+        config = SimulatorConfig(control_period=1e-2)
+        return ReferenceSimulator(robot, config, initial_state(q, 1),
+                                  ReferenceIntegratorConfig(method, step=step))
     config = SimulatorConfig(control_period=1e-2,
                              integrator=IntegratorConfig(method, step=step))
     return Simulator(robot, config, initial_state(q, 1))
@@ -241,7 +251,7 @@ def _assert_identical(a: Simulator, b: Simulator) -> None:
     assert a.stats == b.stats
 
 
-@pytest.mark.parametrize(('method', 'step'), [('rk4', 1e-4), ('dop853', 1e-2)])
+@pytest.mark.parametrize(('method', 'step'), [('rk4', 1e-4), ('rk45', 1e-2), ('dop853', 1e-2)])
 def test_runs_are_bit_identical(robot, method, step):
     first = _drive(_simulator(robot, method, step))
     second = _drive(_simulator(robot, method, step))

@@ -140,10 +140,10 @@ def test_values_are_normalised():
     ({'palette': ['red', 'pink']},
      "palette entries must be one of ['red', 'green', 'blue'], got 'pink'"),
     ({'palette': 'red'}, "palette must be a list, got 'red'"),
-    ({'inner': 3}, 'inner must be a mapping, got 3'),
+    ({'inner': 3}, 'inner must be a mapping, got int'),
     ({'inner': {'gain': -1}}, 'inner.gain must be >= 0, got -1'),
     ({'inner': {'depth': {'limit': 0.0}}}, 'inner.depth.limit must be > 0, got 0.0'),
-    ({'inner': {'depth': []}}, 'inner.depth must be a mapping, got []'),
+    ({'inner': {'depth': []}}, 'inner.depth must be a mapping, got list'),
 ])
 def test_bad_values_are_refused_with_a_message_naming_the_key(d, message):
     assert _error(d) == message

@@ -1,12 +1,14 @@
 """The hybrid simulation loop: ice glide and toe pick (docs/model.md §5.1, §14.2), run health.
 
-Every simulation of this file goes through the ``runs`` fixture, which records the state after
+Every simulation of this file runs on the shipped ``Simulator`` (native) and on the oracle's
+Python loop (``oracle.simulator.ReferenceSimulator``), the two formulations of the period. It
+goes through the ``runs`` fixture, which records the state after
 each control period and checks at teardown that the support foot never slid backward: y0 never
 decreases within a step (y0 is re-based on the new support foot at an exchange), and a gliding
 support never moves backward.
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -14,23 +16,25 @@ import pytest
 
 from iceskate_sim.dynamics import DynamicsParameters, GaitDynamics
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import GUARDS, FrictionModel, guard_values, guards_of
+from iceskate_sim.hybrid import FrictionModel, guards_of
 from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig
 from iceskate_sim.robot import N_COORDINATES, Y0
 from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from oracle.automaton import GUARD_VALUES, guard_values
+from oracle.simulator import ReferenceSimulator
 
 N = N_COORDINATES
 G = 9.81
 MU = 0.005
 ICE = FrictionModel(MU, 'ice')
-E4 = next(g for g in GUARDS if g.name == 'E4')
+E4 = GUARD_VALUES['E4']
 
 
 @dataclass
 class Run:
     """A simulator and the samples (t, y0, yd0, mode, step) recorded after every period."""
 
-    sim: Simulator
+    sim: Simulator | ReferenceSimulator
     samples: list[tuple[float, float, float, int, int]] = field(default_factory=list)
 
     def record(self) -> None:
@@ -44,14 +48,15 @@ class Run:
         return result
 
 
-@pytest.fixture
-def runs(robot, engine):
-    """``start(config, state)`` -> Run on the test's engine (every test that uses it runs on
-    both); at teardown: no backward slide in any of them."""
+@pytest.fixture(params=['oracle', 'native'])
+def runs(robot, request):
+    """``start(config, state)`` -> Run on the oracle's loop, then on the native simulator (every
+    test that uses it runs on both); at teardown: no backward slide in any of them."""
     made: list[Run] = []
+    simulator = ReferenceSimulator if request.param == 'oracle' else Simulator
 
     def start(config: SimulatorConfig, state) -> Run:
-        run = Run(Simulator(robot, replace(config, engine=engine), state))
+        run = Run(simulator(robot, config, state))
         run.record()
         made.append(run)
         return run
@@ -179,8 +184,8 @@ def test_ice_glide_decelerates_at_mu_g_and_sticks(robot, runs):
         assert sim.state.q[Y0] == y_stuck and sim.state.v[Y0] == 0.0
         assert result.support_tangential > 10.0 * MU * result.support_normal > 0.0
         assert -0.04 < result.cop_y - y_stuck < 0.18
-        assert E4.value(sim.state, result, ICE) < 0.0
-        assert E4.value(sim.state, result, coulomb) > 0.0
+        assert E4(sim.state, result, ICE) < 0.0
+        assert E4(sim.state, result, coulomb) > 0.0
     assert [e.event for e in sim.events] == ['E5']
 
 
@@ -213,7 +218,7 @@ def test_valid_control_periods_are_accepted():
     SimulatorConfig(control_period=1e-3, integrator=IntegratorConfig('rk4', step=1e-4))
     SimulatorConfig(control_period=1e-2, integrator=IntegratorConfig('symplectic_euler',
                                                                      step=2.5e-4))
-    SimulatorConfig(control_period=1e-3, integrator=IntegratorConfig('dop853', step=3e-4))
+    SimulatorConfig(control_period=1e-3, integrator=IntegratorConfig('rk45', step=3e-4))
 
 
 def _spinning(robot, runs, joint: int, rate: float) -> tuple[Run, np.ndarray]:

@@ -11,11 +11,11 @@ import yaml
 # Ray never reports usage statistics from the tests (nor from anything they start).
 os.environ['RAY_USAGE_STATS_ENABLED'] = '0'
 
-#: A 2 x 2 grid of 0.5 s runs of the skate scene (the Python engine, no bag).
+#: A 2 x 2 grid of 0.5 s runs of the skate scene (no bag).
 GRID = {
     'study': 'grid',
     'scene': 'skate',
-    'overrides': {'duration': 0.5, 'engine': 'python'},
+    'overrides': {'duration': 0.5},
     'axes': {'floor.mu': [0.005, 0.01],
              'inputs.gait_manager.yaw.amplitude': {'linspace': [0.0, 30.0, 2]}},
     'metrics': ['steps', 'fell', 'forward_distance_m', 'wall_time_s', 'real_time_factor',

@@ -52,7 +52,7 @@ def _check_interrupted(run, code: int, stderr: str, name: str) -> None:
 
 @pytest.mark.parametrize('name, group', CASES)
 def test_headless_run_ends_cleanly_on_a_signal(launch, proc, name, group):
-    # still running when the signal comes (the native engine runs tens of times real time)
+    # still running when the signal comes (the simulator runs tens of times real time)
     run = launch(str(proc.TINY), '--duration', '3600')
     run.wait_running()
     time.sleep(_delay('headless', name, group))

@@ -43,9 +43,9 @@ from iceskate_sim.shutdown import StopRequest, say
 if TYPE_CHECKING:
     from iceskate_sim.scene import Scene
 
-#: Control periods run per call of ``Session.run_periods`` (one native call on the native
-#: engine, ~30 ms): a signal is answered, and the progress shown, between two such blocks;
-#: the bag writer encodes a block at once (longer blocks: fewer, larger array operations).
+#: Control periods run per call of ``Session.run_periods`` (one native call, ~30 ms): a signal
+#: is answered, and the progress shown, between two such blocks; the bag writer encodes a
+#: block at once (longer blocks: fewer, larger array operations).
 BLOCK_PERIODS = 1000
 
 
@@ -70,12 +70,14 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
 def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
              stop: StopRequest | None = None, picture: bool = True
              ) -> tuple[dict[str, Any], SimulationError | None]:
-    """``run``, but a failure of the physics is returned beside the metrics (which say where
-    the run stopped) instead of raised.
+    """``run``, but a failure of the physics, or of a controller written in Python
+    (``iceskate_native.ControllerError``: it raised or answered a bad command), is returned
+    beside the metrics (which say where the run stopped) instead of raised.
 
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     """
     from iceskate_bringup.composition import ControlStack
+    from iceskate_native import ControllerError
     from iceskate_sim.session import Session
     with contextlib.ExitStack() as signals:
         if stop is None:
@@ -94,6 +96,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         stack = ControlStack(scene, session.robot, session.observation())
         bar = _progress(session.n_periods, scene.name, progress)
         ended: SimulationError | None = None
+        controller_failed = False
 
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
@@ -110,6 +113,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                     ended = stop.error(session.sim.time)
                     break
                 bar.update(session.run_periods(stack, BLOCK_PERIODS))
+        except ControllerError as exc:  # the samples before it are recorded: the run ends here
+            ended = SimulationError(str(exc))
+            controller_failed = True
         except BaseException as exc:  # a bug: the outputs still say where the run stopped
             ended = SimulationError(f'the run stopped on {type(exc).__name__}: {exc}')
             crashed = True
@@ -119,7 +125,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             metrics = session.finish(ended, written=summary)
     if isinstance(ended, RunInterrupted):
         raise ended
-    return metrics, session.error
+    return metrics, ended if controller_failed else session.error
 
 
 def _import_plotting() -> None:
@@ -178,9 +184,6 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('scene', help='shipped scene name (e.g. skate) or path to a YAML file')
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
     parser.add_argument('--duration', type=float, help='override the scene duration [s]')
-    parser.add_argument('--engine', choices=('python', 'native'),
-                        help="where the physics runs (default: the scene's engine, else "
-                             "'native'; 'python' is the reference implementation)")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--ros', action='store_true',
                         help='run through the ROS 2 node graph (iceskate_bringup.graph)')
@@ -203,16 +206,13 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                 raise SimulationError(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
                                       f"limits of a scene's duration), got {args.duration:g}")
             scene = replace(scene, duration=args.duration)
-        if args.engine is not None:
-            scene = replace(scene, simulator=replace(scene.simulator, engine=args.engine))
         prepare_output(args.out, args.out / 'bag' if scene.record_bag else None)
         started = True  # from here on, what is in --out is this run's
         if args.ros:
             from iceskate_bringup.graph import run_graph
-            extra = {'engine': args.engine} if args.engine is not None else {}
             metrics = run_graph(args.scene, args.out, duration=args.duration,
                                 single_process=args.single_process,
-                                rt_priority=args.rt_priority, stop=stop, **extra)
+                                rt_priority=args.rt_priority, stop=stop)
         else:
             metrics = run(scene, args.out, progress=not args.quiet, stop=stop)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code

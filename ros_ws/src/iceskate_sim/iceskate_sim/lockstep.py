@@ -6,9 +6,9 @@ per controller node, its sources summed; checked sender, stamp, content and brea
 every controller the scene runs has answered (``missing()`` is empty) integrates one period
 with the ``Session`` the headless runner uses: the same zero-order hold of the summed
 commands, the same push, the same samples in the same trajectory and bag. So a lockstep ROS run
-gives the headless trajectory and ``metrics.json``. On the native engine the commands go
-straight into the native loop the headless runner uses (``Session.command_inbox``), which
-holds them and keeps the samples, so a period costs no Python objects.
+gives the headless trajectory and ``metrics.json``. The commands go straight into the native
+loop the headless runner uses (``Session.command_inbox``), which holds them and keeps the
+samples, so a period costs no Python objects.
 
 Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
 *starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
@@ -42,10 +42,10 @@ from iceskate_sim.command import CommandValues, ControllerCommand
 from iceskate_sim.effort_cdr import CommandDecoder
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.hybrid import HybridState
-from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder, Sample, bag_record
+from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder
 from iceskate_sim.robot import PIVOTS, SIDES
 from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
-from iceskate_sim.session import Session, last_event_before
+from iceskate_sim.session import Session
 
 #: Live state topics the controllers read, published first, as soon as the state is known: the
 #: state, then /clock (their sim time) at once, while their transport threads are still awake
@@ -84,13 +84,13 @@ class LockstepSession:
         self.recorder = session.recorder
         self.factory = self.recorder.factory if self.recorder else MessageFactory()
         self.encoder = RecordEncoder(self.factory)
-        #: the native loop that holds the commands (None: the periods step in Python)
+        #: the native loop that holds the commands
         self._inbox = session.command_inbox(tuple(controllers.values()))
         self._index = {c: k for k, c in enumerate(self.controllers)}
         self._restart()
 
     def _restart(self) -> None:
-        self._commands: dict[str, ControllerCommand] = {}
+        self._answered: set[str] = set()  # controllers with a command held (free-running)
         self._stamps: dict[str, int] = {}
         self._live: tuple[HybridState, BagRecord] | None = None  # (state, its live record)
 
@@ -134,15 +134,10 @@ class LockstepSession:
         return self.encoder.encode(self._live[1], topics)
 
     def _live_record(self, s: HybridState) -> BagRecord:
-        """The record of the live view of the current state ``s``."""
-        if self._inbox is not None:
-            values, mode, side, pivot, step_index, last = self._inbox.live()
-            return BagRecord(values, mode, SIDES[side], PIVOTS[pivot], step_index, ('held',),
-                             self.sim.events[last].cause if last >= 0 else None)
-        placement = self.sim.head_placement()
-        return bag_record(Sample(s, self.sim.result, {'held': self.sim.command.torque(s.q, s.v)},
-                                 placement.translation, placement.rotation,
-                                 last_event_before(self.sim, s.t)))
+        """The record of the live view of the current state ``s`` (the native loop's)."""
+        values, mode, side, pivot, step_index, last = self._inbox.live()
+        return BagRecord(values, mode, SIDES[side], PIVOTS[pivot], step_index, ('held',),
+                         self.sim.events[last].cause if last >= 0 else None)
 
     # -------------------------------------------------------------------------- commands
     def offer(self, controller: str, stamp_ns: int,
@@ -154,8 +149,8 @@ class LockstepSession:
 
         :raises SimulationError: for an unknown controller, a breakdown that does not name the
             controller's sources in order, a stamp that is stale (before t_k, or in
-            free-running mode before the controller's last command) or in the future, or (on
-            the native engine) values of a wrong size, not finite or negative gains.
+            free-running mode before the controller's last command) or in the future, or
+            values of a wrong size, not finite or negative gains.
         """
         if controller not in self.controllers:
             raise SimulationError(f'command from unknown source {controller!r}; scene '
@@ -185,12 +180,11 @@ class LockstepSession:
             raise SimulationError(f'stale command of {controller!r} stamped '
                                   f'{ns_to_seconds(stamp_ns)} s (simulation at '
                                   f'{ns_to_seconds(now)} s)')
-        if self._inbox is not None:
-            try:
-                self._inbox.receive(self._index[controller], command)
-            except SimulationError as exc:
-                raise SimulationError(f'{exc} (from {controller!r})') from None
-        self._commands[controller] = command
+        try:
+            self._inbox.receive(self._index[controller], command)
+        except SimulationError as exc:
+            raise SimulationError(f'{exc} (from {controller!r})') from None
+        self._answered.add(controller)
         self._stamps[controller] = stamp_ns
         return True
 
@@ -199,30 +193,24 @@ class LockstepSession:
         if self.lockstep:
             now = self.t_ns
             return [c for c in self.controllers if self._stamps.get(c) != now]
-        return [c for c in self.controllers if c not in self._commands]
+        return [c for c in self.controllers if c not in self._answered]
 
     # -------------------------------------------------------------------------- stepping
     def step(self) -> bool:
-        """Integrate one period under the commands in (``Session.hold`` on the native engine,
-        else ``Session.step``); False if done."""
+        """Integrate one period under the commands in (``Session.hold``); False if done."""
         if self.done:
             return False
         if self.lockstep and self.missing():
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
                                   f'{self.missing()}')
-        if self._inbox is not None:
-            taken = self.session.hold(clear=self.lockstep)
-        else:
-            commands = {c: self._commands[c].command() for c in self.controllers
-                        if c in self._commands}
-            taken = self.session.step(commands) is not None
+        taken = self.session.hold(clear=self.lockstep)
         if self.lockstep:
-            self._commands.clear()
+            self._answered.clear()
         return taken
 
     def flush(self, whole: bool = True) -> None:
         """Record the periods stepped (off the lockstep's critical path: call it while the
-        controllers compute); ``whole=False``: the native engine's samples a block at a time
+        controllers compute); ``whole=False``: the samples a block at a time
         (``Session.flush``)."""
         self.session.flush(whole)
 

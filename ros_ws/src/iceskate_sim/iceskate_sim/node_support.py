@@ -4,12 +4,11 @@
   published with: every reader matches it);
   ``LOCKSTEP_READER_QOS``: best effort, keep-last 10, volatile (the lockstep's own readers);
   ``LATCHED_QOS``: transient-local depth 1 (robot_description).
-* ``declare``: one parameter with a default and a ``ParameterDescriptor`` (description, range);
-  a value out of range or of the wrong type raises ``ConfigError`` naming the parameter, and so
-  does a parameter the node does not have (``check_unknown``: a typo in a params file);
-  ``declare_all``: a table of them at once, then ``check_unknown``;
-  ``declare_parameters``: every field of a parameter class (``iceskate_sim.parameters``) as a
-  typed parameter, changes at run time checked by the class's own rules;
+* ``declare_parameters``: every field of a parameter class (``iceskate_sim.parameters``) as a
+  typed parameter with its descriptor (description, unit, range), changes at run time checked
+  by the class's own rules; a value out of range or of the wrong type raises ``ConfigError``
+  naming the parameter, and so does a parameter the node does not have (``check_unknown``: a
+  typo in a params file);
   ``write_parameter_file``: a ROS 2 parameter file of such values.
 * ``run_node``: rclpy.init, construct, spin an ``EventsExecutor`` with a ``spin_once`` loop
   (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop cleanly on SIGINT, SIGTERM
@@ -22,11 +21,10 @@
 from __future__ import annotations
 
 import array
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 import os
 import pathlib
 import sys
-from types import SimpleNamespace
 import typing
 from typing import Any, TypeVar
 
@@ -73,43 +71,6 @@ CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 class ConfigError(ValueError):
     """A node parameter (or the scene it names) is unusable; the message names it."""
-
-
-def declare(node: Node, name: str, default: Any, description: str,
-            low: float | None = None, high: float | None = None) -> Any:
-    """Declare a parameter with a descriptor and return its value.
-
-    :param low: inclusive lower bound of a float parameter (also gives the descriptor range).
-    :param high: inclusive upper bound of a float parameter.
-    :raises ConfigError: wrong type or out of range, naming the parameter.
-    """
-    descriptor = ParameterDescriptor(description=description)
-    if low is not None or high is not None:
-        descriptor.floating_point_range = [FloatingPointRange(
-            from_value=float(low if low is not None else -sys.float_info.max),
-            to_value=float(high if high is not None else sys.float_info.max), step=0.0)]
-    try:
-        value = node.declare_parameter(name, default, descriptor).value
-    except ParameterException as exc:
-        raise ConfigError(f'parameter {name!r}: {exc}') from None
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    return value
-
-
-def declare_all(node: Node, table: Iterable[tuple[str, Any, str, tuple[float, float] | None]],
-                extra: Callable[[], None] | None = None) -> SimpleNamespace:
-    """Declare (name, default, description, float bounds or None) rows, then ``extra()`` (more
-    declarations); refuse unknown ones.
-
-    :returns: the values of the table as attributes named like the parameters.
-    """
-    values = {name: declare(node, name, default, text, *(bounds or ()))
-              for name, default, text, bounds in table}
-    if extra is not None:
-        extra()
-    check_unknown(node)
-    return SimpleNamespace(**values)
 
 
 def _ros_type(tp: Any) -> Parameter.Type:

@@ -115,6 +115,8 @@ def _number(name: str, value: Any, r: Rules, error: type[Exception], kind: type)
 def check_value(name: str, value: Any, tp: Any, r: Rules, error: type[Exception]) -> Any:
     """``value`` checked against type ``tp`` and rules ``r``, normalised (floats, tuples,
     frozensets); raises ``error`` with a message starting with ``name``."""
+    if tp is Any:  # taken as given (checked by whoever reads it)
+        return value
     optional, tp = _is_optional(tp)
     if value is None:
         if optional:
@@ -161,15 +163,17 @@ def check_fields(obj: Any, error: type[Exception]) -> None:
 
 
 def from_mapping(cls: type[T], d: Any, error: type[Exception], prefix: str = '') -> T:
-    """Build parameter class ``cls`` from mapping ``d``: missing keys keep their defaults, nested
-    blocks are built from nested mappings; an unknown key or a bad value raises ``error`` naming
-    its dotted path (``prefix`` + key)."""
+    """Build parameter class ``cls`` from mapping ``d``: missing keys keep their defaults (a
+    field without a default must be given), nested blocks are built from nested mappings; an
+    unknown or missing key or a bad value raises ``error`` naming its dotted path (``prefix`` +
+    key)."""
     if isinstance(d, cls):
         return d
     if d is None:
         d = {}
     if not isinstance(d, Mapping):
-        raise error(f'{prefix.rstrip(".") or "parameters"} must be a mapping, got {d!r}')
+        raise error(f'{prefix.rstrip(".") or "parameters"} must be a mapping, got '
+                    f'{type(d).__name__}')
     types_ = field_types(cls)
     kwargs: dict[str, Any] = {}
     for key, value in d.items():
@@ -178,6 +182,9 @@ def from_mapping(cls: type[T], d: Any, error: type[Exception], prefix: str = '')
         tp = types_[key]
         kwargs[key] = (from_mapping(tp, value, error, f'{prefix}{key}.') if is_dataclass(tp)
                        else value)
+    for f in fields(cls):
+        if f.name not in kwargs and f.default is MISSING and f.default_factory is MISSING:
+            raise error(f'{prefix}{f.name} must be given')
     try:
         return cls(**kwargs)
     except error as exc:

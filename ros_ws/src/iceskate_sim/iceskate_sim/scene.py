@@ -12,10 +12,10 @@ controllers). An unknown key, a wrong type or an out-of-range value is refused w
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, make_dataclass
 import math
 import pathlib
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -23,15 +23,15 @@ from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import FrictionModel, HybridState
 from iceskate_sim.integrators import METHODS, IntegratorConfig
-from iceskate_sim.parameters import Rules, check_value
+from iceskate_sim.parameters import block, check_fields, from_mapping, setting
 from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.simulation import ENGINES, SimulatorConfig, initial_state
+from iceskate_sim.simulation import SimulatorConfig, initial_state
 from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is found here too)
 
 POSTURES = ('bent_knees', 'staggered', 'upright')
 #: The longest run [s] a scene (or ``run_scene --duration``) may ask for.
 MAX_DURATION = 3600.0
-_NUMBER = (int, float)
+T = TypeVar('T')
 
 
 @dataclass(frozen=True)
@@ -71,55 +71,140 @@ class Scene:
 
 
 
-# ---------------------------------------------------------------- validation helpers
+# ------------------------------------------------------------------- the scene's schema
+# Every key of a scene's simulator part is a ``setting`` of these classes (the parameter schema
+# of the project, ``iceskate_sim.parameters``): its default, description, unit and rules.
+def _checked(obj: Any) -> None:
+    check_fields(obj, SimulationError)
+
+
+@dataclass(frozen=True)
+class FloorSettings:
+    """``floor``: the friction rule and coefficient."""
+
+    rule: str = setting('ice', "'ice' (forward sliding only, a foot sliding back is stuck by "
+                        "the toe pick) or 'coulomb' (|F_t| <= mu N both ways)",
+                        choices=('ice', 'coulomb'))
+    mu: float = setting(0.005, 'friction coefficient', low=0.0, high=2.0)
+    __post_init__ = _checked
+
+
+@dataclass(frozen=True)
+class IntegratorSettings:
+    """``integrator``: method, step and tolerances, and the drift projection."""
+
+    method: str = setting('rk4', 'integration method', choices=METHODS)
+    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=0.0,
+                          open_low=True, high=0.1)
+    rtol: float = setting(1e-8, 'relative tolerance (rk45)', low=0.0, open_low=True, high=1.0)
+    atol: float = setting(1e-10, 'absolute tolerance (rk45)', low=0.0, open_low=True, high=1.0)
+    event_tolerance: float = setting(1e-10, 'tolerance of an event time', unit='s', low=0.0,
+                                     open_low=True, high=1e-3)
+    projection: bool = setting(True, 'project onto the active constraints after every period')
+    __post_init__ = _checked
+
+
+@dataclass(frozen=True)
+class DynamicsSettings:
+    """``dynamics``: joint damping, soft joint stops and Baumgarte stabilisation."""
+
+    joint_limits: bool = setting(True, 'soft joint stops on')
+    damping: bool = setting(True, 'joint damping on')
+    baumgarte: float = setting(0.0, 'Baumgarte constant of the swing constraints', unit='1/s',
+                               low=0.0, high=1e4)
+    limit_stiffness: float = setting(1e4, 'stiffness of a soft stop', unit='N m/rad', low=0.0,
+                                     high=1e7)
+    limit_damping: float = setting(100.0, 'damping of a soft stop', unit='N m s/rad', low=0.0,
+                                   high=1e5)
+    __post_init__ = _checked
+
+
+#: ``initial.q`` and ``initial.v``: a value per coordinate name (m, rad; m/s, rad/s), each
+#: optional (unset: the posture's).
+CoordinateSettings = make_dataclass(
+    'CoordinateSettings',
+    [(name, float | None, setting(None, f'{name} of the initial state')) for name in
+     COORDINATE_NAMES], frozen=True, namespace={'__post_init__': _checked})
+
+
+@dataclass(frozen=True)
+class InitialSettings:
+    """``initial``: the initial mode, support, posture and coordinates."""
+
+    mode: int = setting(17, 'Table 2 mode', low=1, high=20)
+    support: str = setting('right', 'support foot', choices=SIDES)
+    posture: str = setting('bent_knees', 'standing posture the coordinates start from',
+                           choices=POSTURES)
+    knee_bend: float = setting(0.05, "knee bend of 'bent_knees'", unit='rad', low=0.0, high=0.6)
+    stagger: float = setting(0.25, "distance of the feet of 'staggered'", unit='m', low=0.0,
+                             high=0.8)
+    q: CoordinateSettings = block(CoordinateSettings, 'coordinates set by name')
+    v: CoordinateSettings = block(CoordinateSettings, 'velocities set by name')
+    __post_init__ = _checked
+
+
+@dataclass(frozen=True, kw_only=True)
+class PushSettings:
+    """An entry of ``disturbances``: a constant force on a link over a time window."""
+
+    start: float = setting(MISSING, 'start time', unit='s', low=0.0)
+    duration: float = setting(MISSING, 'length', unit='s', low=0.0, open_low=True)
+    frame: str = setting(MISSING, 'anatomical link frame', choices=LINK_NAMES)
+    force: tuple[float, float, float] = setting(MISSING, 'world force', unit='N')
+    __post_init__ = _checked
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    """``record``: the bag and the record rate."""
+
+    bag: bool = setting(True, 'record an MCAP bag')
+    rate: float | None = setting(None, 'samples recorded per second, a divisor of the control '
+                                 'rate (unset: every period)', unit='1/s', low=0.0,
+                                 open_low=True)
+    __post_init__ = _checked
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneSettings:
+    """A scene file's top level: the simulator's keys and blocks, the controllers' blocks
+    (``inputs``, validated by the layer that composes the controllers) and the pushes."""
+
+    scene: str = setting(MISSING, 'name of the scene')
+    description: str = setting('', 'what the scene is for')
+    duration: float = setting(MISSING, 'run length', unit='s', low=0.0, open_low=True,
+                              high=MAX_DURATION)
+    control_period: float = setting(MISSING, 'period of the controllers (zero-order hold)',
+                                    unit='s', low=0.0, open_low=True, high=0.1)
+    fall_height: float = setting(1.2, 'head-top height below which the robot has fallen',
+                                 unit='m', low=0.0, high=1.7)
+    floor: FloorSettings = block(FloorSettings, 'floor friction')
+    initial: InitialSettings = block(InitialSettings, 'initial state')
+    integrator: IntegratorSettings = block(IntegratorSettings, 'integrator')
+    dynamics: DynamicsSettings = block(DynamicsSettings, 'contact and joint model')
+    record: RecordSettings = block(RecordSettings, 'what is recorded')
+    inputs: Any = setting(MISSING, 'parameter block of each controller node, by node name')
+    disturbances: Any = setting(None, 'pushes: a list of PushSettings mappings')
+    __post_init__ = _checked
+
+
 def _fail(key: str, message: str) -> SimulationError:
     return SimulationError(f'scene key {key!r}: {message}')
 
 
-def _check_keys(d: Any, key: str, allowed: set[str], required: set[str] = frozenset()
-                ) -> dict[str, Any]:
-    if not isinstance(d, dict):
-        raise _fail(key, f'must be a mapping, got {type(d).__name__}')
-    for k in d:
-        if k not in allowed:
-            raise _fail(f'{key}.{k}' if key else str(k),
-                        f'unknown key; allowed: {sorted(allowed)}')
-    for k in required:
-        if k not in d:
-            raise _fail(f'{key}.{k}' if key else k, 'missing')
-    return d
-
-
-def _setting(d: dict[str, Any], key: str, path: str, default: Any, kind: type,
-             **rules: Any) -> Any:
-    """``d[key]`` (or ``default``) checked by the parameter schema's rules
-    (``iceskate_sim.parameters``, the rules of every parameter of the project), named ``path``."""
+def _settings(cls: type[T], d: Any, key: str) -> T:
+    """``from_mapping(cls, d)`` with its error worded as a scene key's ("scene key 'floor.mu':
+    must be in [0, 2], got -0.1")."""
     try:
-        return check_value(path, d.get(key, default), kind, Rules(path, **rules),
-                           SimulationError)
-    except SimulationError as exc:  # 'path must be ...' -> "scene key 'path': must be ..."
-        raise _fail(path, str(exc).removeprefix(f'{path} ')) from None
-
-
-def _number(d: dict[str, Any], key: str, path: str, default: float, low: float | None = None,
-            high: float | None = None, positive: bool = False) -> float:
-    if positive:
-        return _setting(d, key, path, default, float, low=0.0, high=high, open_low=True)
-    return _setting(d, key, path, default, float, low=low, high=high)
-
-
-def _boolean(d: dict[str, Any], key: str, path: str, default: bool) -> bool:
-    return _setting(d, key, path, default, bool)
-
-
-def _choice(d: dict[str, Any], key: str, path: str, default: str, choices: tuple[str, ...]
-            ) -> str:
-    return _setting(d, key, path, default, str, choices=choices)
-
-
-def _coordinates(d: Any, path: str) -> dict[int, float]:
-    d = _check_keys(d or {}, path, set(COORDINATE_NAMES))
-    return {COORDINATE_NAMES.index(k): _number(d, k, f'{path}.{k}', 0.0) for k in d}
+        return from_mapping(cls, d, SimulationError, f'{key}.' if key else '')
+    except SimulationError as exc:
+        text = str(exc)
+        if text.startswith('unknown key '):  # 'unknown key K; expected one of [...]'
+            where, _, allowed = text.removeprefix('unknown key ').partition(
+                '; expected one of ')
+            raise _fail(where, f'unknown key; allowed: {allowed}') from None
+        where, _, problem = text.partition(' ')  # 'K must be ...'
+        raise _fail(where, problem) from None
 
 
 # ----------------------------------------------------------------------- postures
@@ -143,10 +228,6 @@ def standing_posture(kind: str, knee_bend: float, stagger: float) -> tuple[np.nd
 
 
 # ----------------------------------------------------------------------- loading
-_TOP = {'scene', 'description', 'duration', 'control_period', 'floor', 'initial', 'integrator',
-        'dynamics', 'inputs', 'disturbances', 'record', 'fall_height', 'engine'}
-
-
 def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None] | None = None
                 ) -> Scene:
     """Validate a scene mapping and build a Scene; raise SimulationError naming the key.
@@ -155,68 +236,33 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         controller node (raising SimulationError naming the key); None: blocks are taken as
         given (the simulator needs only their node names).
     """
-    raw = _check_keys(raw, '', _TOP, {'scene', 'duration', 'control_period', 'inputs'})
-    name = raw['scene']
-    if not isinstance(name, str) or not name:
-        raise _fail('scene', f'must be a non-empty name, got {name!r}')
-    description = raw.get('description', '')
-    if not isinstance(description, str):
-        raise _fail('description', 'must be text')
-    duration = _number(raw, 'duration', 'duration', 0.0, positive=True, high=MAX_DURATION)
-    control_period = _number(raw, 'control_period', 'control_period', 0.0, positive=True,
-                             high=0.1)
-
-    floor = _check_keys(raw.get('floor', {}), 'floor', {'rule', 'mu'})
-    friction = FrictionModel(mu=_number(floor, 'mu', 'floor.mu', 0.005, low=0.0, high=2.0),
-                             rule=_choice(floor, 'rule', 'floor.rule', 'ice', ('ice', 'coulomb')))
-
-    integ = _check_keys(raw.get('integrator', {}), 'integrator',
-                        {'method', 'step', 'rtol', 'atol', 'event_tolerance', 'projection'})
-    integrator = IntegratorConfig(
-        method=_choice(integ, 'method', 'integrator.method', 'rk4', METHODS),
-        step=_number(integ, 'step', 'integrator.step', 1e-4, positive=True, high=0.1),
-        rtol=_number(integ, 'rtol', 'integrator.rtol', 1e-8, positive=True, high=1.0),
-        atol=_number(integ, 'atol', 'integrator.atol', 1e-10, positive=True, high=1.0),
-        event_tolerance=_number(integ, 'event_tolerance', 'integrator.event_tolerance', 1e-10,
-                                positive=True, high=1e-3))
-    projection = _boolean(integ, 'projection', 'integrator.projection', True)
-
-    dyn = _check_keys(raw.get('dynamics', {}), 'dynamics',
-                      {'joint_limits', 'damping', 'baumgarte', 'limit_stiffness',
-                       'limit_damping'})
+    if not isinstance(raw, dict):
+        raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__}')
+    top = _settings(SceneSettings, raw, '')
+    if not top.scene:
+        raise _fail('scene', f'must be a non-empty name, got {top.scene!r}')
+    floor, integ, dyn, init = top.floor, top.integrator, top.dynamics, top.initial
+    friction = FrictionModel(mu=floor.mu, rule=floor.rule)
+    integrator = IntegratorConfig(method=integ.method, step=integ.step, rtol=integ.rtol,
+                                  atol=integ.atol, event_tolerance=integ.event_tolerance)
     dynamics = DynamicsParameters(
-        joint_limits=_boolean(dyn, 'joint_limits', 'dynamics.joint_limits', True),
-        damping=_boolean(dyn, 'damping', 'dynamics.damping', True),
-        baumgarte=_number(dyn, 'baumgarte', 'dynamics.baumgarte', 0.0, low=0.0, high=1e4),
-        limit_stiffness=_number(dyn, 'limit_stiffness', 'dynamics.limit_stiffness', 1e4,
-                                low=0.0, high=1e7),
-        limit_damping=_number(dyn, 'limit_damping', 'dynamics.limit_damping', 100.0, low=0.0,
-                              high=1e5))
-    fall_height = _number(raw, 'fall_height', 'fall_height', 1.2, low=0.0, high=1.7)
-    engine = _choice(raw, 'engine', 'engine', 'native', ENGINES)
+        joint_limits=dyn.joint_limits, damping=dyn.damping, baumgarte=dyn.baumgarte,
+        limit_stiffness=dyn.limit_stiffness, limit_damping=dyn.limit_damping)
     try:
-        simulator = SimulatorConfig(control_period=control_period, integrator=integrator,
-                                    friction=friction, dynamics=dynamics, projection=projection,
-                                    fall_height=fall_height, engine=engine)
+        simulator = SimulatorConfig(control_period=top.control_period, integrator=integrator,
+                                    friction=friction, dynamics=dynamics,
+                                    projection=integ.projection, fall_height=top.fall_height)
     except SimulationError as exc:
         raise _fail('control_period', str(exc)) from None
 
-    init = _check_keys(raw.get('initial', {}), 'initial',
-                       {'mode', 'support', 'posture', 'knee_bend', 'stagger', 'q', 'v'})
-    mode = init.get('mode', 17)
-    if isinstance(mode, bool) or not isinstance(mode, int) or not 1 <= mode <= 20:
-        raise _fail('initial.mode', f'must be a Table 2 mode 1-20, got {mode!r}')
-    side = _choice(init, 'support', 'initial.support', 'right', SIDES)
-    posture = _choice(init, 'posture', 'initial.posture', 'bent_knees', POSTURES)
-    q, pivot = standing_posture(
-        posture, _number(init, 'knee_bend', 'initial.knee_bend', 0.05, low=0.0, high=0.6),
-        _number(init, 'stagger', 'initial.stagger', 0.25, low=0.0, high=0.8))
-    for i, value in _coordinates(init.get('q'), 'initial.q').items():
-        q[i] = value
+    q, pivot = standing_posture(init.posture, init.knee_bend, init.stagger)
     v = np.zeros(N_COORDINATES)
-    for i, value in _coordinates(init.get('v'), 'initial.v').items():
-        v[i] = value
-    initial = initial_state(q, mode, side, pivot, v)
+    for values, given in ((q, init.q), (v, init.v)):
+        for i, name in enumerate(COORDINATE_NAMES):
+            if getattr(given, name) is not None:
+                values[i] = getattr(given, name)
+    mode = init.mode
+    initial = initial_state(q, mode, init.support, pivot, v)
     if 1 not in initial.mode.active and q[1] != 0.0:  # the sole is flat: q1 is not free
         raise _fail('initial.q.q1', f'q1 (the support sole on its edge) is not a coordinate of '
                     f'mode {mode}, whose support sole is flat; leave it out or start in a mode '
@@ -227,43 +273,33 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         raise _fail(f'initial.v.{name}', f'{name} is not a coordinate of mode {mode}; its '
                     'velocity must be 0')
 
-    if not isinstance(raw['inputs'], dict):
-        raise _fail('inputs', f'must be a mapping, got {type(raw["inputs"]).__name__}')
+    if not isinstance(top.inputs, dict):
+        raise _fail('inputs', f'must be a mapping, got {type(top.inputs).__name__}')
     inputs: dict[str, dict[str, Any]] = {}
-    for node, block in raw['inputs'].items():
-        block = {} if block is None else block
-        if not isinstance(block, dict):
-            raise _fail(f'inputs.{node}', f'must be a mapping, got {type(block).__name__}')
+    for node, block_ in top.inputs.items():
+        block_ = {} if block_ is None else block_
+        if not isinstance(block_, dict):
+            raise _fail(f'inputs.{node}', f'must be a mapping, got {type(block_).__name__}')
         if validate_inputs is not None:
-            validate_inputs(str(node), block)
-        inputs[str(node)] = block
+            validate_inputs(str(node), block_)
+        inputs[str(node)] = block_
 
-    pushes = []
-    for k, item in enumerate(raw.get('disturbances', []) or []):
-        path = f'disturbances[{k}]'
-        item = _check_keys(item, path, {'start', 'duration', 'frame', 'force'},
-                           {'start', 'duration', 'frame', 'force'})
-        frame = item['frame']
-        if frame not in LINK_NAMES:
-            raise _fail(f'{path}.frame', f'unknown link {frame!r}; one of {list(LINK_NAMES)}')
-        force = item['force']
-        if (not isinstance(force, list) or len(force) != 3
-                or not all(isinstance(f, _NUMBER) and not isinstance(f, bool) for f in force)):
-            raise _fail(f'{path}.force', f'must be 3 numbers [N], got {force!r}')
-        pushes.append(Push(_number(item, 'start', f'{path}.start', 0.0, low=0.0),
-                           _number(item, 'duration', f'{path}.duration', 0.0, positive=True),
-                           frame, tuple(float(f) for f in force)))
-    record = _check_keys(raw.get('record', {}), 'record', {'bag', 'rate'})
-    return Scene(name, description, duration, simulator, initial, inputs, tuple(pushes),
-                 _boolean(record, 'bag', 'record.bag', True),
-                 _record_every(record, simulator.control_period), raw)
+    items = top.disturbances or []
+    if not isinstance(items, list):
+        raise _fail('disturbances', f'must be a list, got {type(items).__name__}')
+    pushes = tuple(Push(p.start, p.duration, p.frame, p.force) for p in (
+        _settings(PushSettings, item, f'disturbances[{k}]') for k, item in enumerate(items)))
+    return Scene(top.scene, top.description, top.duration, simulator, initial, inputs, pushes,
+                 top.record.bag, _record_every(top.record.rate, simulator.control_period),
+                 raw)
 
 
-def _record_every(record: dict[str, Any], control_period: float) -> int:
+def _record_every(rate: float | None, control_period: float) -> int:
     """Control periods per recorded sample from ``record.rate`` [samples/s], which must divide
-    the control rate (default: the control rate, every period)."""
+    the control rate (None: the control rate, every period)."""
     control_rate = 1.0 / control_period
-    rate = _number(record, 'rate', 'record.rate', control_rate, positive=True)
+    if rate is None:
+        return 1
     every = round(control_rate / rate)
     if every < 1 or abs(every * rate - control_rate) > 1e-9 * control_rate:
         raise _fail('record.rate', f'{rate:g} samples/s does not divide the control rate '

@@ -1,13 +1,14 @@
 """One run of a scene, ROS-free: the loop that the headless runner and the simulator node share.
 
-A ``Session`` owns the simulator, the period count, the recorder (bag) and the trajectory. At
-every control instant t_k the caller gives it the controllers' commands for t_k (computed from
-``observation()``, in-process by the headless runner, or received as messages by the simulator
-node) and ``step`` holds their sum over [t_k, t_k+1] (zero-order hold), applies the scene's
-push, advances the hybrid simulation and returns the sample of t_k. ``flush`` hands the samples
-stepped to the trajectory and the bag (the node calls it while the controllers compute);
-``finish`` closes the bag, computes the metrics and writes ``metrics.json``, ``events.json`` and
-``trajectory.npz``. Both paths run exactly this code, so they give the same trajectory.
+A ``Session`` owns the simulator, the period count, the recorder (bag) and the trajectory. The
+periods themselves run in the native control loop, which at every control instant t_k holds
+the sum of the controllers' commands for t_k over [t_k, t_k+1] (zero-order hold), applies the
+scene's push, advances the hybrid simulation and keeps the sample of t_k: ``run_periods``
+with the laws answering in C++ (the headless runner), ``hold`` with the commands that arrived
+as messages (the simulator node, ``command_inbox``). Blocks of samples go to the trajectory and
+the bag (``flush``; the node calls it while the controllers compute); ``finish`` closes the
+bag, computes the metrics and writes ``metrics.json``, ``events.json`` and ``trajectory.npz``.
+Both paths run exactly this code, so they give the same trajectory.
 """
 
 from __future__ import annotations
@@ -22,13 +23,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from iceskate_sim.command import ControllerCommand, HeldCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import Transition
 from iceskate_sim.metrics import Trajectory, compute_metrics
 from iceskate_sim.modes import MODES
 from iceskate_sim.observation import Observation
-from iceskate_sim.recording import BagRecorder, RecordBlock, Sample
+from iceskate_sim.recording import BagRecorder, RecordBlock
 from iceskate_sim.robot import Robot, load_robot
 from iceskate_sim.scene import Scene
 from iceskate_sim.simulation import Simulator
@@ -45,14 +44,10 @@ _Q1_ACTIVE = np.array([False] + [MODES[k].q1_active for k in range(1, len(MODES)
 
 class Controllers(Protocol):
     """The controllers of a run in one process (``iceskate_bringup.composition.ControlStack``):
-    the native laws by node name in summing order, their kinematics, and their commands at an
-    observation (what each node would send)."""
+    the native laws by node name in summing order and their kinematics."""
 
     controllers: Mapping[str, Controller]
     kinematics: Kinematics
-
-    def commands(self, obs: Observation) -> Mapping[str, ControllerCommand]:
-        """What each controller node sends at ``obs``, by node name."""
 
 
 def scene_metadata(scene: Scene) -> dict[str, str]:
@@ -98,14 +93,6 @@ def _reason(exc: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
-def last_event_before(sim: Simulator, t: float) -> Transition | None:
-    """The latest transition at or before time t (None before the first)."""
-    for event in reversed(sim.events):
-        if event.t <= t:
-            return event
-    return None
-
-
 class Session:
     """One run of ``scene``.
 
@@ -146,10 +133,9 @@ class Session:
                                      else pathlib.Path(tempfile.gettempdir()))
         self.periods = 0
         self.error: SimulationError | None = None
-        self._unrecorded: list[tuple[Sample, np.ndarray]] = []  # (sample, head target)
         self._wall_start: float | None = None
-        #: the native loop of ``run_periods`` (None: not made yet; False: none for this engine)
-        self._loop: NativeControlLoop | bool | None = None
+        #: the native loop of ``run_periods`` (None: not made yet)
+        self._loop: NativeControlLoop | None = None
         if self._inbox is not None:  # the samples and commands of the run left behind
             self._inbox.take_block()
             self._inbox.forget()
@@ -164,54 +150,19 @@ class Session:
         """What the controllers see at t_k (times at the stamps' nanosecond resolution)."""
         return self.sim.observation()
 
-    def step(self, commands: Mapping[str, ControllerCommand]) -> Sample | None:
-        """Hold the controllers' ``commands`` for t_k (and the scene's push, if one acts) over
-        one control period, advance, and return the sample of t_k; None if the run is done.
-
-        The sample holds the state at t_k (after the transitions due then), the dynamics under
-        the held commands, each source's effort as its controller reported it and the push. A
-        SimulationError of the physics ends the run (``error``) instead of propagating.
-        """
-        if self.done:
-            return None
-        if self._wall_start is None:
-            self._wall_start = time.perf_counter()
-        sim = self.sim
-        t = sim.state.t
-        placement = sim.head_placement()
-        push = next(((p.frame, np.array(p.force)) for p in self.scene.pushes if p.active(t)),
-                    None)
-        try:
-            sim.advance(HeldCommand.of_controllers(commands.values()), push)
-        except SimulationError as exc:
-            self.error = exc
-            return None
-        state = sim.start_state
-        efforts = {source: tau for c in commands.values()
-                   for source, tau in c.source_efforts.items()}
-        if push is not None:
-            efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
-        sample = Sample(state, sim.start_result, efforts, placement.translation.copy(),
-                        placement.rotation.copy(), last_event_before(sim, state.t))
-        target = next((c.head_target for c in commands.values() if c.head_target is not None),
-                      self.psi_initial)
-        if self.periods % self.scene.record_every == 0:  # record.rate
-            self._unrecorded.append((sample, target))
-        self.periods += 1
-        return sample
-
-    def command_inbox(self, inbox: tuple[tuple[str, ...], ...]) -> NativeControlLoop | None:
+    def command_inbox(self, inbox: tuple[tuple[str, ...], ...]) -> NativeControlLoop:
         """The native loop that holds commands received from outside (``hold``): ``inbox`` has
         the sources of each controller node in summing order; ``receive`` a node's command by
-        its index. None where periods do not run natively (then ``step`` the commands)."""
+        its index."""
         if self._inbox is None:
             self._inbox = self.sim.control_loop(None, [], self.scene.pushes, self.psi_initial,
                                                 inbox)
         return self._inbox
 
     def hold(self, clear: bool = True) -> bool:
-        """``step`` for the commands received by the ``command_inbox`` loop: one period in C++
-        (the same sum, hold, push and sample), its sample recorded by a later ``flush``;
+        """One control period holding the commands received by the ``command_inbox`` loop (the
+        same sum, hold, push and sample as ``run_periods``), its sample recorded by a later
+        ``flush``;
         ``clear``: forget the commands afterwards. False if the run is done; a SimulationError
         of the physics ends the run (``error``)."""
         if self.done:
@@ -227,14 +178,14 @@ class Session:
         return True
 
     def run_periods(self, stack: Controllers, count: int) -> int:
-        """Advance up to ``count`` control periods with ``stack`` answering each observation
-        in-process (the headless runner), recording every sample; return how many were taken.
+        """Advance up to ``count`` control periods with ``stack``'s laws answering each
+        observation in C++ (the headless runner), recording every sample; return how many were
+        taken.
 
-        On the native engine with a fixed-step method or rk45 the whole block runs in C++
-        (``Simulator.control_loop``: the same laws, sums, hold and periods as ``step``, with no
-        Python in between); otherwise period by period through ``step``. A failure of the
-        physics ends the run (``error``) as in ``step``; a controller's own error is raised once
-        the samples before it are recorded.
+        The whole block is one call of the native control loop (``Simulator.control_loop``:
+        the laws, the sum of their commands, the hold, the push and the period, with no Python
+        in between). A failure of the physics ends the run (``error``); a controller's own
+        error is raised once the samples before it are recorded.
         """
         if self.done:
             return 0
@@ -242,13 +193,7 @@ class Session:
             self._wall_start = time.perf_counter()
         if self._loop is None:
             self._loop = self.sim.control_loop(stack.kinematics, list(stack.controllers.values()),
-                                               self.scene.pushes, self.psi_initial) or False
-        if self._loop is False:  # period by period
-            taken = 0
-            while taken < count and not self.done:
-                taken += self.step(stack.commands(self.observation())) is not None
-                self.flush()
-            return taken
+                                               self.scene.pushes, self.psi_initial)
         block, error = self.sim.run_loop(self._loop, min(count, self.n_periods - self.periods))
         taken = len(block['t'])
         if taken:
@@ -296,18 +241,13 @@ class Session:
         return np.flatnonzero((first + np.arange(count)) % every == 0)
 
     def flush(self, whole: bool = True) -> None:
-        """Append the samples stepped since the last flush to the trajectory and the bag
-        (``whole``: all of them; else the samples ``hold`` took wait until a block of
-        ``HELD_BLOCK`` has gathered: one block of arrays costs what a few samples do)."""
+        """Append the samples held since the last flush to the trajectory and the bag
+        (``whole``: all of them; else only once a block of ``HELD_BLOCK`` has gathered: one
+        block of arrays costs what a few samples do)."""
         inbox = self._inbox
         if inbox is not None and inbox.block_size >= (1 if whole else HELD_BLOCK):
             first = self.periods - inbox.block_size
             self._record_block(inbox.take_block(), first)
-        for sample, target in self._unrecorded:
-            self.trajectory.append(sample, target)
-            if self.recorder is not None:
-                self.recorder.write(sample)
-        self._unrecorded.clear()
 
     def reset(self) -> None:
         """Back to the scene's initial state (refused while recording a bag)."""

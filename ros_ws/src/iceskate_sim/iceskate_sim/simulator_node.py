@@ -15,7 +15,7 @@ node. The bag is written while the controllers compute.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 import pathlib
 import sys
@@ -41,30 +41,42 @@ from iceskate_sim.node_support import (
     LOCKSTEP_READER_QOS,
     STATE_QOS,
     ConfigError,
-    declare_all,
+    check_unknown,
+    declare_parameters,
     run_node,
 )
+from iceskate_sim.parameters import check_fields, setting
 from iceskate_sim.ros_conversions import set_stamp
-from iceskate_sim.scene import Scene, load_scene
+from iceskate_sim.scene import MAX_DURATION, Scene, load_scene
 from iceskate_sim.session import Session
 
-#: name, default, description (units), bounds of a float (see config/simulator.yaml).
-PARAMETERS = (
-    ('scene', '', 'path of the scene YAML (its simulator part: floor, initial state, '
-     'integrator, disturbances, duration, recording)', None),
-    ('duration', 0.0, 'run length [s]; 0: the scene duration', (0.0, 3600.0)),
-    ('engine', '', "where the physics runs: 'native' or 'python' ('': the scene's)", None),
-    ('lockstep', True, 'wait for every command stamped t_k (else free-running)', None),
-    ('realtime_factor', 1.0, 'free-running pace [simulated s per wall s]', (1e-3, 1e3)),
-    ('control_timeout', 5.0, 'a controller silent this long ends the run [s]', (1e-3, 3600.0)),
-    ('startup_timeout', 60.0, 'wait for the controller nodes [s]', (0.0, 3600.0)),
-    ('record_bag', '', 'path of the MCAP bag to write; empty: none', None),
-    ('out_dir', '', 'directory for metrics.json, events.json, trajectory.npz; empty: none',
-     None),
-    ('start_paused', False, 'start paused (~/step, ~/resume)', None),
-    ('exit_on_end', True, 'exit when the run is over', None),
-    ('stats_file', '', 'JSON file for the loop timings; empty: none', None),
-)
+
+@dataclass(frozen=True)
+class SimulatorNodeParameters:
+    """The simulator node's ROS parameters (see config/simulator.yaml); each field is a
+    ``setting`` with its description, unit and range."""
+
+    scene: str = setting('', 'path of the scene YAML (its simulator part: floor, initial state, '
+                         'integrator, disturbances, duration, recording)')
+    duration: float = setting(0.0, 'run length; 0: the scene duration', unit='s', low=0.0,
+                              high=MAX_DURATION)
+    lockstep: bool = setting(True, 'wait for every command stamped t_k (else free-running)')
+    realtime_factor: float = setting(1.0, 'free-running pace [simulated s per wall s]',
+                                     low=1e-3, high=1e3)
+    control_timeout: float = setting(5.0, 'a controller silent this long ends the run',
+                                     unit='s', low=1e-3, high=3600.0)
+    startup_timeout: float = setting(60.0, 'wait for the controller nodes', unit='s', low=0.0,
+                                     high=3600.0)
+    record_bag: str = setting('', 'path of the MCAP bag to write; empty: none')
+    out_dir: str = setting('', 'directory for metrics.json, events.json, trajectory.npz; '
+                           'empty: none')
+    start_paused: bool = setting(False, 'start paused (~/step, ~/resume)')
+    exit_on_end: bool = setting(True, 'exit when the run is over')
+    stats_file: str = setting('', 'JSON file for the loop timings; empty: none')
+
+    def __post_init__(self) -> None:
+        """Check every field by its rules."""
+        check_fields(self, SimulationError)
 
 
 class SimulatorNode(Node):
@@ -72,15 +84,15 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **kwargs)
-        c = self.config = declare_all(self, PARAMETERS, extra=self._declare_controllers)
+        c = self.config = declare_parameters(self, SimulatorNodeParameters, SimulationError)
+        self._declare_controllers()
+        check_unknown(self)
         if not c.scene:
             raise ConfigError('parameter scene: the path of a scene YAML is needed (run_scene '
                               'SCENE --ros writes it into DIR/params/simulator.yaml)')
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
-            if c.engine:
-                scene = replace(scene, simulator=replace(scene.simulator, engine=c.engine))
             session = Session(scene, pathlib.Path(c.out_dir) if c.out_dir else None,
                               pathlib.Path(c.record_bag) if c.record_bag else None)
         except SimulationError as exc:  # its message names the scene, bag or folder

@@ -23,8 +23,7 @@ Every generated scene is validated (``iceskate_bringup.scene.parse_scene``) befo
 starts; anything wrong is a ``StudyError`` naming the SPEC key (``SPEC key 'axes.floor.mu':
 ...``), with the scene's own message when a value makes a bad scene. Each run is keyed by a
 hash of its whole scene mapping and its repeat index, so the same run has the same key in
-every sweep (a scene without ``engine`` gets the default one written in, so it is in the key
-too).
+every sweep.
 """
 
 from __future__ import annotations
@@ -559,8 +558,7 @@ def expand(spec: Spec) -> list[Point]:
         bag = spec.bags is None or selected[index]
         set_key(raw, 'record.bag', bag, 'bags')
         where = ', '.join(f'{k}={v!r}' for k, v in zip(keys, combo, strict=True))
-        scene = _check_scene(raw, 'axes', f'the point {where}')
-        raw.setdefault('engine', scene.simulator.engine)  # the default engine is in the key
+        _check_scene(raw, 'axes', f'the point {where}')
         for repeat in range(spec.repeats):
             points.append(Point(index, repeat, dict(zip(keys, combo, strict=True)), raw,
                                 run_key(raw, repeat), bag))

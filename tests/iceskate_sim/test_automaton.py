@@ -1,4 +1,5 @@
-"""The hybrid gait automaton (docs/model.md §5-§7): re-rooting, impacts, the ice rule, the guards.
+"""The oracle's hybrid gait automaton (docs/model.md §5-§7): re-rooting, impacts, the ice rule,
+the guards.
 
 Expectations are derived here from docs/model.md, not from the code under test: link poses and
 velocities come from Pinocchio on the support-rooted models, constraint rows are built from the
@@ -16,20 +17,18 @@ import pytest
 from iceskate_sim.command import HeldCommand
 from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import (
+from iceskate_sim.hybrid import GUARDS, FrictionModel, HybridState, guards_of
+from iceskate_sim.modes import MODES, get_mode, mode_for
+from iceskate_sim.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
+from oracle.automaton import (
     EPS_V,
-    GUARDS,
-    FrictionModel,
-    HybridState,
+    GUARD_VALUES,
     apply_transition,
     guard_values,
-    guards_of,
     project_positions,
     reroot,
     rerooted_command,
 )
-from iceskate_sim.modes import MODES, get_mode, mode_for
-from iceskate_sim.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
 
 LWA = pin.LOCAL_WORLD_ALIGNED
 G = 9.81
@@ -487,12 +486,12 @@ def test_support_slip_guard_e4(ratio, ice_due, coulomb_due):
     for mode in (1, 2, 9, 18):
         result = _result(support_normal=N_S, support_tangential=ratio * MU_ICE * N_S)
         state = _state(mode)
-        ice = GUARD['E4'].value(state, result, ICE)
-        coulomb = GUARD['E4'].value(state, result, FrictionModel(MU_ICE, 'coulomb'))
+        ice = GUARD_VALUES['E4'](state, result, ICE)
+        coulomb = GUARD_VALUES['E4'](state, result, FrictionModel(MU_ICE, 'coulomb'))
         assert (ice > 0.0) == ice_due, (mode, ratio, ice)
         assert (coulomb > 0.0) == coulomb_due, (mode, ratio, coulomb)
         mirrored = _result(support_normal=N_S, support_tangential=-ratio * MU_ICE * N_S)
-        assert GUARD['E4'].value(state, mirrored, FrictionModel(MU_ICE, 'coulomb')) == \
+        assert GUARD_VALUES['E4'](state, mirrored, FrictionModel(MU_ICE, 'coulomb')) == \
             pytest.approx(coulomb, abs=1e-12)  # symmetric
 
 
@@ -503,9 +502,9 @@ def test_heel_slip_guard_s3(ratio, ice_due, coulomb_due):
     for mode in (9, 10, 17, 18):
         result = _result(multipliers=np.array([f_nz, ratio * MU_ICE * f_nz, 0.0]))
         state = _state(mode)
-        assert (GUARD['S3'].value(state, result, ICE) > 0.0) == ice_due
+        assert (GUARD_VALUES['S3'](state, result, ICE) > 0.0) == ice_due
         coulomb = FrictionModel(MU_ICE, 'coulomb')
-        assert (GUARD['S3'].value(state, result, coulomb) > 0.0) == coulomb_due
+        assert (GUARD_VALUES['S3'](state, result, coulomb) > 0.0) == coulomb_due
 
 
 @pytest.mark.parametrize(('mode', 'glide_mode'), [(1, 3), (2, 4), (9, 11), (18, 20)])
@@ -542,7 +541,7 @@ def test_glide_stop_guard_e5(dynamics, direction, speed, due):
     v = state.v.copy()
     v[Y0] = speed
     state = replace(state, v=v)
-    assert (GUARD['E5'].value(state, _result(), ICE) > 0.0) == due
+    assert (GUARD_VALUES['E5'](state, _result(), ICE) > 0.0) == due
     new, _ = apply_transition(dynamics, ICE, state, GUARD['E5'], _result())
     assert new.mode.number == 1 and new.v[Y0] == 0.0 and new.q[Y0] == state.q[Y0]
 
@@ -566,8 +565,8 @@ def test_ice_rule_with_real_reactions(robot, dynamics):
         a_com = jcom @ result.qdd  # v = 0: no velocity-product term
         assert result.support_tangential == pytest.approx(mass * a_com[1], rel=1e-9, abs=1e-9)
         assert result.support_normal == pytest.approx(mass * (G + a_com[2]), rel=1e-9)
-        e4_ice = GUARD['E4'].value(_state(1), result, ICE) > 0.0
-        e4_coulomb = GUARD['E4'].value(_state(1), result,
+        e4_ice = GUARD_VALUES['E4'](_state(1), result, ICE) > 0.0
+        e4_coulomb = GUARD_VALUES['E4'](_state(1), result,
                                        FrictionModel(MU_ICE, 'coulomb')) > 0.0
         limit = MU_ICE * mass * (G + a_com[2])  # mu N_s
         push_back, push_forward = -mass * a_com[1] - limit, mass * a_com[1] - limit
@@ -664,7 +663,7 @@ def test_guard_signs(name, mode, contact, changes, fields, due):
         q[i] = value
     state = replace(state, q=q)
     result = _result(**{'support_normal': N_S, **fields})
-    value = GUARD[name].value(state, result, ICE)
+    value = GUARD_VALUES[name](state, result, ICE)
     assert (value > 0.0) == due, (name, value)
     position = [g.name for g in guards_of(state.mode)].index(name)
     assert guard_values(state, result, ICE)[position] == value
