@@ -114,8 +114,8 @@ def ros_context(ros_domain_id: int) -> Iterator[object]:
 @pytest.fixture(scope='session')
 def dynamics() -> object:
     """GaitDynamics of the shipped URDF (one per test session)."""
-    from iceskate_sim.dynamics import GaitDynamics
     from iceskate_sim.robot import load_robot
+    from oracle.dynamics import GaitDynamics
     return GaitDynamics(load_robot())
 
 

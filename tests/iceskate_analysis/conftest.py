@@ -20,11 +20,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState, GaitDynamics
+from iceskate_sim.dynamics import ContactState
 from iceskate_sim.hybrid import HybridState
 from iceskate_sim.modes import get_mode
 from iceskate_sim.recording import BagRecorder, Sample
 from iceskate_sim.robot import N_COORDINATES, Q1, Y0, load_robot
+from oracle.dynamics import GaitDynamics
 
 #: A tiny version of the skate scene: ice, visual lifting, posture and the torso-yaw input.
 TINY_SKATE = {

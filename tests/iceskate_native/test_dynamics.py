@@ -13,11 +13,12 @@ import pathlib
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MODES, get_mode
 from iceskate_sim.native_dynamics import NativeGaitDynamics
 from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, load_robot
+from oracle.dynamics import GaitDynamics
 
 #: a fast-stepping skate gait (test data): many events in a short window
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'

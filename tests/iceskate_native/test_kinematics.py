@@ -8,10 +8,11 @@ import pinocchio as pin
 import pytest
 
 import iceskate_native
-from iceskate_sim.dynamics import ContactState, GaitDynamics
+from iceskate_sim.dynamics import ContactState
 from iceskate_sim.modes import MODES
 from iceskate_sim.native_control import native_kinematics
 from iceskate_sim.robot import PIVOTS, SIDES, load_robot
+from oracle.dynamics import GaitDynamics
 
 TOLERANCE = {'rtol': 1e-13, 'atol': 1e-13}
 #: one mode of each support state: F-S, R-S, F-G, R-G (locked y0 and q1 columns differ)

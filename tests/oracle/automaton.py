@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsResult, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
     COP_BAND,
@@ -34,6 +34,7 @@ from iceskate_sim.hybrid import (
 )
 from iceskate_sim.modes import GaitMode, mode_for
 from iceskate_sim.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
+from oracle.dynamics import GaitDynamics
 
 _LEG = slice(1, 8)
 _LEG_JOINTS = np.arange(2, 8)

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.command import ControllerCommand, HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsResult, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
     Guard,
@@ -42,6 +42,7 @@ from oracle.automaton import (
     rerooted_command,
     resolve_contact_mode,
 )
+from oracle.dynamics import GaitDynamics
 from oracle.integrators import Integrator
 
 

@@ -46,7 +46,7 @@ import pinocchio as pin
 
 from iceskate_analysis._progress import progress_bar
 from iceskate_analysis.bag_io import PASSIVE, BagData
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
@@ -125,8 +125,8 @@ def robot_for_bag(bag: BagData) -> Robot:
     return load_robot(str(path))
 
 
-def dynamics_for_bag(bag: BagData, robot: Robot | None = None) -> GaitDynamics:
-    """GaitDynamics with the run's friction coefficient and joint-damping switch.
+def dynamics_for_bag(bag: BagData, robot: Robot | None = None) -> ModelTerms:
+    """ModelTerms with the run's friction coefficient and joint-damping switch.
 
     Both come from the bag's scene parameters (floor.mu, dynamics.damping); a bag without them
     gets the scene defaults (mu 0.005, damping on).
@@ -136,7 +136,7 @@ def dynamics_for_bag(bag: BagData, robot: Robot | None = None) -> GaitDynamics:
     dyn = scene.get('dynamics') or {}
     params = DynamicsParameters(mu=float(floor.get('mu', DynamicsParameters.mu)),
                                 damping=bool(dyn.get('damping', True)))
-    return GaitDynamics(robot or robot_for_bag(bag), params)
+    return ModelTerms(robot or robot_for_bag(bag), params)
 
 
 # ------------------------------------------------------------------------ the decomposition
@@ -254,7 +254,7 @@ def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
     return out, defined
 
 
-def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q: np.ndarray,
+def _constraint_force(dyn: ModelTerms, robot: Robot, contact: ContactState, q: np.ndarray,
                       v: np.ndarray, multipliers: np.ndarray,
                       data: dict[tuple[str, str], pin.Data]) -> np.ndarray:
     """Generalized force of the active swing constraints (18,), heel friction included."""
@@ -276,7 +276,7 @@ def _constraint_force(dyn: GaitDynamics, robot: Robot, contact: ContactState, q:
 
 
 def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
-              dynamics: GaitDynamics | None = None, progress: bool = False,
+              dynamics: ModelTerms | None = None, progress: bool = False,
               ) -> dict[int, JointDecomposition]:
     """Evaluate eq. (11) at each of ``joints`` for every sample of ``bag``.
 

@@ -1,14 +1,14 @@
-"""Eq. (7) on the native (C++) kernel: ``GaitDynamics`` with ``evaluate`` and
-``implicit_acceleration`` computed by ``iceskate_native.Dynamics``, the fixed-step
-integration of a mode with its guards and event location (``integrate_segment``), and whole
-control periods with their transitions, projection and health checks (``NativePeriods``).
+"""The native (C++) kernel seen from Python: eq. (7) (``NativeGaitDynamics``: ``evaluate`` and
+``implicit_acceleration`` by ``iceskate_native.Dynamics`` beside the model terms of
+``ModelTerms``), the integration of a mode with its guards and event location
+(``integrate_segment``), whole control periods with their transitions, projection and health
+checks (``NativePeriods``) and many periods with the controllers (``NativeControlLoop``).
 
-The same four support models (sent as Pinocchio archives), the same mode table
-(``iceskate_sim.modes``), damping, soft stops and physical options as the Python routine, which
-stays the readable reference the native one is tested against (``tests/iceskate_native``). Every
-other method (head pose, mass matrix, frames, energy, ...) is inherited. Errors come back as
-``SimulationError``: bad input as the kernel's ``ValueError``, a singular or rank-deficient
-system as its ``NativeError``.
+The kernel gets the four support models (sent as Pinocchio archives), the mode table
+(``iceskate_sim.modes``), the guard table (``iceskate_sim.hybrid``), damping, soft stops and the
+physical options; the test oracle's Python formulation (``tests/oracle``) is checked against it.
+Errors come back as ``SimulationError``: bad input as the kernel's ``ValueError``, a singular or
+rank-deficient system as its ``NativeError``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 import iceskate_native
 from iceskate_sim.command import CommandValues, HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, ModelTerms
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import (
     COP_BAND,
@@ -50,8 +50,8 @@ def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
     return models, frames
 
 
-class NativeGaitDynamics(GaitDynamics):
-    """``GaitDynamics`` whose eq. (7) runs natively (one kernel per instance: not thread-safe)."""
+class NativeGaitDynamics(ModelTerms):
+    """Eq. (7) in C++ beside the model terms (one kernel per instance: not thread-safe)."""
 
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         super().__init__(robot, params)
@@ -87,7 +87,8 @@ class NativeGaitDynamics(GaitDynamics):
                  tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
                  stiffness: np.ndarray | None = None, damping: np.ndarray | None = None,
                  ) -> DynamicsResult:
-        """Eq. (7) of ``contact.mode`` at (q, v) (see ``GaitDynamics.evaluate``), natively."""
+        """Eq. (7) of ``contact.mode`` at (q, v) natively: the accelerations, multipliers and
+        support wrench (docs/model.md §4)."""
         try:
             (qdd, multipliers, wrench, normal, tangential, cop_y, heel_friction, applied, heel,
              heel_velocity, toe_z, passive) = self._kernel.evaluate(
@@ -101,7 +102,8 @@ class NativeGaitDynamics(GaitDynamics):
                               tau: np.ndarray, push: tuple[str, np.ndarray] | None,
                               stiffness: np.ndarray | None, damping: np.ndarray | None,
                               step: float) -> np.ndarray:
-        """Accelerations of an implicit step (see ``GaitDynamics.implicit_acceleration``),
+        """Accelerations of an implicit step ((M + h D) a = f - D v, D the joint, impedance
+        and soft-stop damping),
         natively."""
         try:
             return self._kernel.implicit_acceleration(

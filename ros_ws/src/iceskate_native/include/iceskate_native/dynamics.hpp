@@ -6,7 +6,7 @@
 //
 // with Coulomb friction on a sliding swing heel and on a gliding support foot (N_s from the
 // vertical momentum balance), on Pinocchio's algorithms. The native counterpart of
-// iceskate_sim.dynamics.GaitDynamics.evaluate and .implicit_acceleration, tested against them.
+// the Python formulation of the test oracle (tests/oracle/dynamics.py), tested against it.
 // Units: SI (m, rad, s, kg, N, N m).
 #pragma once
 

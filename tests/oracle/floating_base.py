@@ -1,4 +1,4 @@
-"""A second, independent formulation of the gait dynamics, used as a cross-check.
+"""Test oracle: a second, independent formulation of the gait dynamics, used as a cross-check.
 
 The URDF is loaded as it is (rooted at the pelvis) on a 6-dof free-flyer base, so the robot has
 22 velocity coordinates and no notion of support foot. Every contact of a Table 2 mode becomes
@@ -21,9 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
+from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import N_COORDINATES, Q1, Y0, Robot, anatomical_map
+from oracle.dynamics import GaitDynamics
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LIN_X, _LIN_Y, _LIN_Z, _ANG_X, _ANG_Y, _ANG_Z = range(6)
