@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
-"""Speed of the dynamics core: one ``GaitDynamics.evaluate`` per Table 2 mode, Python and native.
+"""Speed of eq. (7): one evaluation per Table 2 mode, the Python test oracle and the native core.
 
-For every mode (grouped by coordinate count 16/17/18) it times one evaluation at a
-representative random state (bent stance plus noise, seeded; a new state every call, so the
-state terms ``evaluate`` keeps are never reused), the same state evaluated again ("kept": what
-a period's second and third evaluations cost), the free-flyer cross-check
-``FloatingBaseDynamics.evaluate`` at the same state, and the individual Pinocchio calls and
-the linear solve that ``evaluate`` is made of; and the native engine at the same states:
-``NativeGaitDynamics.evaluate`` (the C++ kernel behind the same Python interface) and the
+For every mode (grouped by coordinate count 16/17/18) it times one evaluation of the Python
+eq. (7) the native core is tested against (``GaitDynamics.evaluate``, the test oracle
+``tests/oracle/dynamics.py``) at a representative random state (bent stance plus noise, seeded;
+a new state every call, so the state terms ``evaluate`` keeps are never reused), the same state
+evaluated again ("kept": what a period's second and third evaluations cost), the free-flyer
+cross-check ``FloatingBaseDynamics.evaluate`` (``tests/oracle/floating_base.py``) at the same
+state, and the individual Pinocchio calls and the linear solve that ``evaluate`` is made of;
+and the native core at the same states: ``NativeGaitDynamics.evaluate`` (the C++ kernel behind
+the same Python interface) and the
 kernel's own binding call (``kernel``: argument checks, eq. (7), the result's arrays), with the
 ratio Python / native measured in this run. Figures are the median over ``--repeat`` runs
 of ``--number`` calls each, in microseconds per call. The 18-coordinate modes are compared with
@@ -42,10 +44,15 @@ def _import_core():
         sys.path.insert(0, str(REPO_ROOT / 'ros_ws' / 'src' / 'iceskate_sim'))
     import pinocchio as pin
 
-    from iceskate_sim.dynamics import ContactState, DynamicsParameters, GaitDynamics
-    from iceskate_sim.floating_base import FloatingBaseDynamics
+    # eq. (7) in Python and the free-flyer cross-check are test oracles (tests/oracle), imported
+    # as the tests do
+    if str(REPO_ROOT / 'tests') not in sys.path:
+        sys.path.append(str(REPO_ROOT / 'tests'))
+    from iceskate_sim.dynamics import ContactState, DynamicsParameters
     from iceskate_sim.modes import MODES
     from iceskate_sim.robot import JOINT_LIMITS, load_robot
+    from oracle.dynamics import GaitDynamics
+    from oracle.floating_base import FloatingBaseDynamics
     return (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
             JOINT_LIMITS, load_robot)
 
@@ -84,8 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
      JOINT_LIMITS, load_robot) = _import_core()
-    from iceskate_sim.dynamics import _solve  # the linear solve of evaluate
     from iceskate_sim.native_dynamics import NativeGaitDynamics
+    from oracle.dynamics import _solve  # the linear solve of evaluate
 
     robot = load_robot()
     params = DynamicsParameters(mu=0.005)

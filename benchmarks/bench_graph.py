@@ -251,12 +251,13 @@ def _echo(name: str, scene_arg: str) -> int:
 
     from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
-    from iceskate_sim.command import ControllerCommand, JointCommand
+    from iceskate_sim.command import CommandValues, ControllerCommand, JointCommand
     from iceskate_sim.effort_cdr import CommandEncoder
     from iceskate_sim.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
     sources = scene_sources(load_scene(scene_arg))[name]
     zero = JointCommand(np.zeros(18))
-    command = ControllerCommand.of(dict.fromkeys(sources, zero), np.zeros(18), np.zeros(18))
+    command = CommandValues.of(ControllerCommand.of(dict.fromkeys(sources, zero), np.zeros(18),
+                                                    np.zeros(18)))
     encoder = CommandEncoder(name)
     rclpy.init()
     node = rclpy.create_node(name, parameter_overrides=[

@@ -114,8 +114,8 @@ def compare_projection(scene: Scene, duration: float, repeat: int, robot: Any, l
 def per_source_cost(scene: Scene, robot: Any, number: int, log) -> dict[str, float]:
     """Microseconds per evaluation of each control source at the initial observation: the
     native law with that source alone, its command built as the nodes send it."""
-    from gait_manager.law import SOURCES
     from gait_manager.native import GaitManagerController
+    from gait_manager.parameters import SOURCES
     from iceskate_bringup.scene import node_parameters
     from iceskate_sim.native_control import native_command
     obs = _obs(scene, robot)

@@ -10,28 +10,29 @@ Everything is measured in one run, so the ratios hold for one machine and one ho
   1 ms. Microseconds per ``mj_step`` with the ``implicitfast`` and the ``RK4`` integrator, from
   the joint angles and speeds of the states below (our support-rooted coordinates mapped to the
   URDF joints with ``anatomical_map``), ``--number`` steps per timing run from each state.
-* **Our native engine** at the shipped settings of the ``skate`` scene (implicit Euler, 1 ms
-  step, 1 ms control period, so a period is one step): the scene runs for ``--warmup`` s on the
-  native engine with its controllers, then ``--states`` states are taken one every
+* **Our simulator** at the shipped settings of the ``skate`` scene (implicit Euler, 1 ms
+  step, 1 ms control period, so a period is one step): the scene runs for ``--warmup`` s with
+  its controllers, then ``--states`` states are taken one every
   ``--spacing`` periods, each with the command the controllers held over its period. From each
   state whose period fires no event: (a) ``NativeGaitDynamics.integrate_segment`` to the period
   end (the native segment call: one implicit-Euler step, three eq. (7) solves (start, implicit
   step, end), the guards at both ends) and the kernel's own binding call; (b) the whole
   control period: the kernel's ``HybridSimulator.advance`` (the period in C++: the start
   evaluation, settle, the segment, the end-of-period projection, the health checks; the
-  binding call alone), ``Simulator.advance`` on the native engine (that call plus the Python
-  that mirrors the state, events and counters) and on the Python engine; one eq. (7) solve
-  (``NativeGaitDynamics.evaluate`` and the kernel's ``evaluate``).
+  binding call alone) and ``Simulator.advance`` (that call plus the Python that mirrors the
+  state, events and counters); one eq. (7) solve (``NativeGaitDynamics.evaluate`` and the
+  kernel's ``evaluate``).
 
-Before each timed ``advance`` the simulator is put back to the state (``Simulator.set_state``;
-the dynamics' kept state terms as the previous period leaves them); the advance from every
-state is checked to reproduce the recorded run. The timings take turns, so that a change of
-the machine's load during the run weighs on all of them alike: from each state MuJoCo's two
-integrators, then the native calls; the three advances alternate, state by state. Figures
-are microseconds per call: per state the median over ``--repeat`` timings (after one to warm
-up), then the median over the states (with their range). The ratios are ours / ``mj_step``
-implicitfast; the goal compared with is physics alone <= 4x MuJoCo's ``mj_step`` at the same
-step.
+Before each timed ``advance`` the simulator is put back to the state (``Simulator.set_state``:
+the kernel continues from it as after a period that ended there; the dynamics' kept state terms
+as the previous period leaves them: a solve at this state under the previous command); the
+advance from every state is checked to reproduce the recorded run. The timings take turns, so
+that a change of the machine's load during the run weighs on all of them alike: from each state
+MuJoCo's two integrators, then the native calls; the two advances alternate, state by state.
+Figures are microseconds per call: per state the median over ``--repeat`` timings (after one to
+warm up), then the median over the states (with their range). The ratios are ours /
+``mj_step`` implicitfast; the goal compared with is physics alone <= 4x MuJoCo's ``mj_step`` at
+the same step.
 
 Usage (from the repository root, environment sourced):
     python benchmarks/bench_physics.py [--states 20] [--repeat 25] [--number 200] [--json PATH]
@@ -40,7 +41,7 @@ Usage (from the repository root, environment sourced):
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import json
 import pathlib
 import statistics
@@ -55,9 +56,8 @@ import numpy as np
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.hybrid import HybridState
-from iceskate_sim.robot import anatomical_map, load_robot
+from iceskate_sim.robot import N_COORDINATES, anatomical_map, load_robot
 from iceskate_sim.simulation import Simulator
 
 GOAL_RATIO = 4.0  # physics alone <= 4 x mj_step (implicitfast) at the same step
@@ -68,41 +68,36 @@ class Snapshot:
     """A simulator state at the end of a period, and what the next period holds."""
 
     state: HybridState
-    result: DynamicsResult
     previous: HeldCommand  # the command held over the period that ended here
     command: HeldCommand  # the command the controllers give for the next period
-    events: int
     after: HybridState | None = None  # the state the run reached one period later
     quiet: bool = False  # no transition in the next period, one integration step
-
-
-def take_snapshot(sim: Simulator, command: HeldCommand) -> Snapshot:
-    """The simulator's period-to-period state, before it advances with ``command``."""
-    return Snapshot(sim.state, sim.result, sim.command, command, len(sim.events))
 
 
 def restore(sim: Simulator, snap: Snapshot) -> None:
     """Put ``sim`` back where the run was at ``snap``, its dynamics' kept state terms as the
     previous period leaves them (its last solve at this state, under the previous command)."""
-    sim._command, sim._push = snap.previous, None
-    del sim.events[snap.events:]
     sim.set_state(snap.state)
+    sim.dynamics.evaluate(snap.state.contact, snap.state.q, snap.state.v, snap.previous.bias,
+                          None, snap.previous.stiffness, snap.previous.damping)
 
 
 def collect_states(scene, robot, warmup: float, count: int, spacing: int) -> list[Snapshot]:
-    """Run the scene on the native engine and keep ``count`` states after ``warmup`` s."""
+    """Run the scene with its controllers and keep ``count`` states after ``warmup`` s."""
     sim = Simulator(robot, scene.simulator, scene.initial)
     stack = ControlStack(scene, robot, sim.observation())
     period = scene.simulator.control_period
     first = int(round(warmup / period))
     snaps: list[Snapshot] = []
+    previous = HeldCommand.torque_only(np.zeros(N_COORDINATES))
     for k in range(first + count * spacing):
         command = HeldCommand.of_controllers(stack.commands(sim.observation()).values())
         snap = None
         if k >= first and (k - first) % spacing == 0:
-            snap = take_snapshot(sim, command)
+            snap = Snapshot(sim.state, previous, command)
             steps, events, rests = sim.stats.steps, len(sim.events), sim.stats.suppressed_cycles
         sim.advance(command)
+        previous = command
         if sim.ended is not None:
             raise SystemExit(f'the skate run ended at t={sim.time:.3f} s ({sim.ended})')
         if snap is not None:
@@ -126,8 +121,8 @@ def time_calls(func, repeat: int, number: int) -> float:
 
 
 def kernel_advance(sim: Simulator) -> Any:
-    """The native period's binding call alone (``HybridSimulator.advance``), for ``sim`` on the
-    native engine; ``sim.state`` is mirrored after the timing."""
+    """The native period's binding call alone (``HybridSimulator.advance``) of ``sim``'s
+    kernel; ``sim`` mirrors nothing of it (its next ``set_state`` does)."""
     kernel = sim._periods._kernel
 
     def advance(command: HeldCommand) -> None:
@@ -150,9 +145,7 @@ def time_advance(advances: list[tuple[Simulator, Any]], snaps: list[Snapshot], r
                 t0 = clock()
                 advance(snap.command)
                 timings[k][i].append((clock() - t0) * 1e6)
-                if sim._periods is not None:
-                    sim._mirror_periods()
-                end = sim.state
+                end = sim._periods.state()  # the kernel's (the kernel call mirrors nothing)
                 deviation[k] = max(deviation[k], abs(end.t - snap.after.t),
                                    float(np.max(np.abs(end.q - snap.after.q))),
                                    float(np.max(np.abs(end.v - snap.after.v))))
@@ -236,8 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     info = machine_info()
 
     robot = load_robot()
-    shipped = load_scene('skate')
-    scene = replace(shipped, simulator=replace(shipped.simulator, engine='native'))
+    scene = load_scene('skate')
     config = scene.simulator
     snaps = collect_states(scene, robot, args.warmup, args.states, args.spacing)
     quiet = [s for s in snaps if s.quiet]
@@ -290,13 +282,12 @@ def main(argv: list[str] | None = None) -> int:
     nefc_implicitfast = statistics.fmean(nefc_implicitfast)
     nefc_rk4 = statistics.fmean(nefc_rk4)
 
-    # (b) the whole period, on both engines, in turn from each state
-    python_sim = Simulator(robot, replace(config, engine='python'), scene.initial)
+    # (b) the whole period: the kernel call and Simulator.advance, in turn from each state
     kernel_sim = Simulator(robot, config, scene.initial)
-    (advance_kernel, advance_native, advance_python), deviations = time_advance(
-        [(kernel_sim, kernel_advance(kernel_sim)), (native_sim, native_sim.advance),
-         (python_sim, python_sim.advance)], quiet, rep)
-    deviation_kernel, deviation_native, deviation_python = deviations
+    (advance_kernel, advance_native), deviations = time_advance(
+        [(kernel_sim, kernel_advance(kernel_sim)), (native_sim, native_sim.advance)], quiet,
+        rep)
+    deviation_kernel, deviation_native = deviations
 
     rows = {
         'mj_step implicitfast': per_state(mj_implicitfast),
@@ -304,8 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         '(a) NativeGaitDynamics.integrate_segment': per_state(segment),
         '    kernel integrate_segment (binding call)': per_state(kernel_segment),
         '(b) kernel HybridSimulator.advance': per_state(advance_kernel),
-        '(b) Simulator.advance, native engine': per_state(advance_native),
-        '(b) Simulator.advance, Python engine': per_state(advance_python),
+        '(b) Simulator.advance': per_state(advance_native),
         'eq. (7): NativeGaitDynamics.evaluate': per_state(evaluate),
         'eq. (7): kernel evaluate (binding call)': per_state(kernel_evaluate),
     }
@@ -333,8 +323,8 @@ def main(argv: list[str] | None = None) -> int:
           f'{args.spacing} periods from t = {args.warmup:g} s: {len(quiet)} of {len(snaps)} '
           f'fire no event in their period (modes '
           f'{sorted({s.state.mode.number for s in quiet})}); the advance from them reproduces '
-          f'the run to {deviation_kernel:.1e} (kernel), {deviation_native:.1e} (native), '
-          f'{deviation_python:.1e} (Python engine)')
+          f'the run to {deviation_kernel:.1e} (kernel call), {deviation_native:.1e} '
+          '(Simulator.advance)')
     print(f'timings: per state the median of {rep} runs (short calls: {num} calls per run, '
           f'advance: one period per run), then the median over the {len(quiet)} states')
     print()
@@ -347,14 +337,12 @@ def main(argv: list[str] | None = None) -> int:
     print()
     a = rows['(a) NativeGaitDynamics.integrate_segment']['median'] / base
     b_kernel = rows['(b) kernel HybridSimulator.advance']['median'] / base
-    b = rows['(b) Simulator.advance, native engine']['median'] / base
-    b_py = rows['(b) Simulator.advance, Python engine']['median'] / base
+    b = rows['(b) Simulator.advance']['median'] / base
     verdict = {True: 'meets', False: 'misses'}
     print(f'ratios ours / mj_step implicitfast: (a) native segment {a:.1f}x, (b) native period '
-          f'{b_kernel:.1f}x (kernel call), {b:.1f}x (Simulator.advance), Python advance '
-          f'{b_py:.1f}x; goal <= {GOAL_RATIO:g}x: the native period '
-          f'{verdict[b_kernel <= GOAL_RATIO]}')
-    python_part = (rows['(b) Simulator.advance, native engine']['median']
+          f'{b_kernel:.1f}x (kernel call), {b:.1f}x (Simulator.advance); goal <= '
+          f'{GOAL_RATIO:g}x: the native period {verdict[b_kernel <= GOAL_RATIO]}')
+    python_part = (rows['(b) Simulator.advance']['median']
                    - rows['(b) kernel HybridSimulator.advance']['median'])
     print(f'Simulator.advance - kernel advance, the Python mirror of a native period: '
           f'{python_part:.1f} us; benchmark wall time {elapsed:.0f} s')
@@ -367,8 +355,7 @@ def main(argv: list[str] | None = None) -> int:
             'spacing': args.spacing, 'states': len(snaps), 'quiet_states': len(quiet),
             'repeat': rep, 'number': num, 'nefc_mean': {'implicitfast': nefc_implicitfast,
                                                         'rk4': nefc_rk4},
-            'deviation': {'kernel': deviation_kernel, 'native': deviation_native,
-                          'python': deviation_python},
+            'deviation': {'kernel': deviation_kernel, 'simulator': deviation_native},
             'us': {name.strip(): row for name, row in rows.items()},
             'ratio_to_mj_step_implicitfast': {name.strip(): row['median'] / base
                                               for name, row in rows.items()},

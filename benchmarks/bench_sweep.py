@@ -2,7 +2,7 @@
 """Throughput of parameter sweeps: runs per minute on 1 and on 2 local workers, and the per-run
 overhead beyond the simulation itself.
 
-The sweep: ``--runs`` points of the ``skate`` scene (``--duration`` s each, no bag, ``--engine``),
+The sweep: ``--runs`` points of the ``skate`` scene (``--duration`` s each, no bag),
 one axis over the friction so that every run is a different scene. Each round runs it with one
 worker, then with two, into fresh folders (``iceskate_study.sweep.run_sweep``, the whole
 sweep: validation, pool start-up, the runs, the table); ``--repeat`` rounds, and the medians
@@ -16,7 +16,7 @@ are compared:
   validation, session set-up, metrics) is also shown.
 
 Usage (from the repository root, environment sourced; under the machine's CPU lock):
-    python benchmarks/bench_sweep.py [--runs 16] [--duration 2] [--engine native] [--repeat 2]
+    python benchmarks/bench_sweep.py [--runs 16] [--duration 2] [--repeat 2]
 """
 
 from __future__ import annotations
@@ -52,11 +52,10 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', type=int, default=16, help='runs per sweep')
     parser.add_argument('--duration', type=float, default=2.0, help='simulated s per run')
-    parser.add_argument('--engine', choices=('python', 'native'), default='native')
     parser.add_argument('--repeat', type=int, default=2, help='rounds (1 then 2 workers)')
     args = parser.parse_args()
     spec_raw = {'study': 'bench', 'scene': 'skate',
-                'overrides': {'duration': args.duration, 'engine': args.engine},
+                'overrides': {'duration': args.duration},
                 'axes': {'floor.mu': {'linspace': [0.004, 0.006, args.runs]}},
                 'metrics': ['steps', 'wall_time_s']}
     rates: dict[int, list[float]] = {1: [], 2: []}
@@ -76,7 +75,7 @@ def main() -> int:
     one, two = statistics.median(rates[1]), statistics.median(rates[2])
     print(f'runs/min: 1 worker {one:.1f}, 2 workers {two:.1f}; ratio {two / one:.2f} '
           f'(goal >= 1.8)')
-    print(f'per-run overhead beyond the simulation ({args.duration:g} s {args.engine} runs, '
+    print(f'per-run overhead beyond the simulation ({args.duration:g} s runs, '
           f'1 worker): {100 * statistics.median(overhead):.1f} % of the loop (goal <= 10 %), '
           f'of which {100 * statistics.median(inside):.1f} % in the worker')
     return 0

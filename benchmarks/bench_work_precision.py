@@ -1,12 +1,17 @@
 #!/usr/bin/env python3
 """Work-precision benchmark of the integrators: wall time against error.
 
-For every engine (native: the C++ core, whole blocks of periods with the laws in C++ where the
-method runs natively; python: the readable reference engine), every integrator
-(symplectic_euler, implicit_euler, rk4, rk45, dop853) and a sweep of fixed steps or tolerances,
-one closed-loop run (the scene's controllers at every control instant, as ``run_scene`` does,
-without recording) is timed and compared with a reference run of the same case at the tightest
-setting (dop853, rtol 1e-12, atol 1e-14, on the native engine's dynamics). Cases:
+For every integrator of the simulator (symplectic_euler, implicit_euler, rk4, rk45) and a sweep
+of fixed steps or tolerances, one closed-loop run (the scene's controllers at every control
+instant in the native blocks of periods, as ``run_scene`` does, without recording) is timed and
+compared with a reference run of the same case at the tightest setting: rk45 (Dormand-Prince
+5(4)) at rtol 1e-12, atol 1e-2 rtol, or at the case's own tolerance where the kernel's step-size
+control cannot hold 1e-12 over the whole run: it stops with "the step size fell below 1e-14 s"
+on ``walk`` at 1e-12 (its reference is rtol 1e-11) and on ``skate`` at 1e-12, 1e-11 and 1e-10
+within its 15 s (its reference is rtol 1e-9); a reference that fails anyway is run again 10x
+looser, and the log and the outputs say so). That the reference has converged is measured,
+not assumed: the same case at 10x its rtol is run too and its distance from the reference
+printed (it must be well below the errors being compared). Cases:
 
 * ``smooth``: the ``stand`` scene with the soft joint stops off, 0.4 s before the push: one mode
   (17), no events, visual lifting and the posture impedance running (a smooth right-hand side;
@@ -17,8 +22,9 @@ setting (dop853, rtol 1e-12, atol 1e-14, on the native engine's dynamics). Cases
   impact) (the events of the reference run are listed in the outputs);
 * ``passive``: the bent-knee double support (mode 17) with no inputs, joint damping and stops
   off, 0.3 s: a conservative system, so the energy drift is the integrator's;
-* ``skate`` (full mode only): the ``skate`` scene as shipped, 0.9 s, with its events, for the
-  goal figure below (the shipped implicit Euler and the cheap accurate settings of rk4, rk45).
+* ``skate``: the shipped ``skate`` scene, the whole 15 s (``--quick``: 2 s), with its events:
+  the goal figure below (the shipped implicit Euler and the cheap accurate settings of rk4,
+  rk45).
 
 Figures per run, against the reference interpolated onto the run's samples (one per control
 period): ``head_err_max`` = max over the samples of |p_head - p_ref| (head-top y, z) [m];
@@ -27,15 +33,14 @@ period): ``head_err_max`` = max over the samples of |p_head - p_ref| (head-top y
 constraint residual (measured before each end-of-period projection) [m, rad].
 
 Outputs into ``--out`` (default runs/bench): ``work_precision_<case>.png`` (log-log error against
-wall time, one line per method and engine: solid native, dashed python), ``work_precision.md``
-(tables) and ``work_precision.json`` (raw figures, machine). Then the headline: real-time
-factor of the headless ``stand`` and ``skate`` scenes at their shipped settings
-(``iceskate_bringup.runner.run``, no output), and the goal: the cheapest setting of the skate
-case with head-trajectory error <= 1e-6 m at >= 5x real time.
+wall time, one line per method), ``work_precision.md`` (tables) and ``work_precision.json`` (raw
+figures, machine). Then the headline: real-time factor of the headless ``stand`` and ``skate``
+scenes at their shipped settings (``iceskate_bringup.runner.run``, no output), and the goal: the
+cheapest setting of the skate case with head-trajectory error <= 1e-6 m, and its real-time
+factor (goal >= 5x).
 
 Usage (from the repository root, environment sourced):
     python benchmarks/bench_work_precision.py [--out runs/bench] [--quick] [--cases smooth,...]
-        [--engines native,python]
 """
 
 from __future__ import annotations
@@ -56,10 +61,11 @@ from typing import Any
 import numpy as np
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
-METHODS = ('symplectic_euler', 'implicit_euler', 'rk4', 'rk45', 'dop853')
-FIXED = ('symplectic_euler', 'implicit_euler', 'rk4')
-REFERENCE = ('dop853', 1.0e-12)  # method, rtol (atol = 1e-2 rtol)
-ENGINES = ('native', 'python')
+REFERENCE = ('rk45', 1.0e-12)  # method, tightest rtol (atol = 1e-2 rtol)
+REFERENCE_LOOSEST = 1.0e-8  # a reference that fails is tried again 10x looser, down to this
+CHECK_FACTOR = 10.0  # the convergence check runs the reference's rtol times this
+SKATE_REFERENCE_RTOL = 1.0e-9  # the tightest the native rk45 holds over the whole skate scene
+WALK_REFERENCE_RTOL = 1.0e-11  # the same over walk's first step (1e-12 stops at t = 0.14 s)
 GOAL_RTF = 5.0  # real-time factor of the cheapest setting within the head-error goal
 GOAL_HEAD_ERROR = 1.0e-6  # m
 ERROR_FLOOR = 1.0e-16  # plotted in place of an exact zero
@@ -78,10 +84,10 @@ import_core()
 from iceskate_bringup.composition import ControlStack  # noqa: E402
 from iceskate_bringup.runner import BLOCK_PERIODS  # noqa: E402
 from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
-from iceskate_sim.command import HeldCommand  # noqa: E402
 from iceskate_sim.dynamics import ContactState  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
-from iceskate_sim.integrators import IntegratorConfig  # noqa: E402
+from iceskate_sim.integrators import FIXED_STEP as FIXED  # noqa: E402
+from iceskate_sim.integrators import METHODS, IntegratorConfig  # noqa: E402
 from iceskate_sim.modes import MODES  # noqa: E402
 from iceskate_sim.robot import PIVOTS, SIDES, load_robot  # noqa: E402
 from iceskate_sim.scene import Scene  # noqa: E402
@@ -94,7 +100,6 @@ class Run:
     """One timed closed-loop run: samples at every control instant (t_0 = start)."""
 
     label: str
-    engine: str
     method: str
     step: float
     rtol: float
@@ -142,8 +147,8 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
              energy: bool = False, stack_class: type = ControlStack,
              **config_changes: Any) -> Run:
     """Run ``scene`` for ``duration`` [s] the way ``run_scene`` does (same control stack,
-    pushes, zero-order hold; on the native engine the same native blocks of periods), without
-    recording; stop after ``max_wall`` s of wall time.
+    pushes, zero-order hold, the same native blocks of periods), without recording; stop after
+    ``max_wall`` s of wall time.
 
     :param integrator: replaces the scene's integrator (None: keep it).
     :param stack_class: the controllers (``ControlStack`` or a variant with its signature).
@@ -158,41 +163,19 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
     sim = Simulator(robot, cfg, scene.initial)
     stack = stack_class(scene, robot, sim.observation())
     n_periods = int(round(duration / cfg.control_period))
-    samples = [(sim.state.t, sim.state.q.copy(), sim.state.v.copy(), sim.state.contact,
-                sim.state.step_index)]
     obs = sim.observation()
     loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
                             sim.dynamics.head_pose(obs.contact(), obs.q)[0])
     start = time.perf_counter()
-    if loop is not None:
-        blocks, error = _native_blocks(sim, loop, n_periods, start, max_wall)
-        wall = time.perf_counter() - start
-        # the state each period started from (after the transitions due then), then the last
-        samples = [(t, q, v, ContactState(MODES[mode], SIDES[side], PIVOTS[pivot]), step)
-                   for b in blocks for t, q, v, mode, side, pivot, step in zip(
-                       b['t'], b['q'], b['v'], b['mode'].tolist(), b['side'].tolist(),
-                       b['pivot'].tolist(), b['step_index'].tolist(), strict=True)]
-        samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(), sim.state.contact,
-                        sim.state.step_index))
-    else:
-        error = None
-        try:
-            for _ in range(n_periods):
-                t = sim.state.t
-                commands = stack.commands(sim.observation())
-                push = next(((p.frame, np.array(p.force)) for p in scene.pushes
-                             if p.active(t)), None)
-                sim.advance(HeldCommand.of_controllers(commands.values()), push)
-                samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(),
-                                sim.state.contact, sim.state.step_index))
-                if sim.ended is not None:
-                    break
-                if time.perf_counter() - start > max_wall:
-                    error = f'wall-time limit {max_wall:g} s reached at t={sim.state.t:.4f} s'
-                    break
-        except SimulationError as exc:
-            error = str(exc).splitlines()[0][:200]
-        wall = time.perf_counter() - start
+    blocks, error = _native_blocks(sim, loop, n_periods, start, max_wall)
+    wall = time.perf_counter() - start
+    # the state each period started from (after the transitions due then), then the last
+    samples = [(t, q, v, ContactState(MODES[mode], SIDES[side], PIVOTS[pivot]), step)
+               for b in blocks for t, q, v, mode, side, pivot, step in zip(
+                   b['t'], b['q'], b['v'], b['mode'].tolist(), b['side'].tolist(),
+                   b['pivot'].tolist(), b['step_index'].tolist(), strict=True)]
+    samples.append((sim.state.t, sim.state.q.copy(), sim.state.v.copy(), sim.state.contact,
+                    sim.state.step_index))
     dyn = sim.dynamics
     head = np.array([dyn.frame_placement(c, q, 'head_top').translation[1:3]
                      for _, q, _, c, _ in samples])
@@ -201,7 +184,7 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
     integ = cfg.integrator
     discrete = np.array([(c.mode.number, c.side == 'left', step) for _, _, _, c, step
                          in samples], dtype=int)
-    return Run(label, cfg.engine, integ.method, integ.step, integ.rtol, wall,
+    return Run(label, integ.method, integ.step, integ.rtol, wall,
                np.array([s[0] for s in samples]), np.array([s[1] for s in samples]),
                np.array([s[2] for s in samples]), head, energies, discrete,
                sim.stats.evaluations,
@@ -263,6 +246,7 @@ class Case:
     duration: float
     sweep: dict[str, tuple[float, ...]]
     energy: bool = False
+    reference_rtol: float = REFERENCE[1]
 
 
 def _scene(name: str, **edits: Any) -> Scene:
@@ -284,72 +268,94 @@ def make_cases(quick: bool) -> list[Case]:
     passive = _scene('stand', dynamics={'joint_limits': False, 'damping': False}, inputs={},
                      disturbances=None)
     walk = load_scene('walk')
+    skate = load_scene('skate')
     if quick:
         return [
             Case('smooth', 'stand, soft stops off, mode 17, 0.1 s (no events)', smooth, 0.1, {
                 'symplectic_euler': (5e-5, 2.5e-5), 'implicit_euler': (1e-3, 2.5e-4),
-                'rk4': (1e-4, 5e-5), 'rk45': (1e-4, 1e-8), 'dop853': (1e-5, 1e-9)}),
+                'rk4': (1e-4, 5e-5), 'rk45': (1e-4, 1e-8)}),
             Case('events', 'walk as shipped, 0.6 s (with events)', walk, 0.6, {
-                'implicit_euler': (1e-3, 2.5e-4), 'rk4': (1e-4,), 'dop853': (1e-7,)}),
+                'implicit_euler': (1e-3, 2.5e-4), 'rk4': (1e-4,), 'rk45': (1e-4,)},
+                 reference_rtol=WALK_REFERENCE_RTOL),
             Case('passive', 'mode 17, no inputs, no damping/stops, 0.2 s', passive, 0.2, {
                 'symplectic_euler': (1e-3, 2.5e-4), 'implicit_euler': (1e-3,),
-                'rk4': (1e-3, 2.5e-4), 'rk45': (1e-6,), 'dop853': (1e-8,)}, energy=True),
+                'rk4': (1e-3, 2.5e-4), 'rk45': (1e-6,)}, energy=True),
+            Case('skate', 'skate as shipped, 2 s (with events)', skate, 2.0, {
+                'implicit_euler': (1e-3,), 'rk4': (2e-4,), 'rk45': (1e-4,)},
+                 reference_rtol=SKATE_REFERENCE_RTOL),
         ]
     return [
         Case('smooth', 'stand, soft stops off, mode 17, 0.4 s (no events)', smooth, 0.4, {
             'symplectic_euler': (1e-4, 5e-5, 2.5e-5, 1e-5),
             'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5),
             'rk4': (1e-4, 5e-5, 2.5e-5),
-            'rk45': (1e-3, 1e-5, 1e-7, 1e-9),
-            'dop853': (1e-4, 1e-6, 1e-8, 1e-10)}),
+            'rk45': (1e-3, 1e-5, 1e-7, 1e-9)}),
         Case('events', 'walk as shipped, 1.28 s (first step, with events)', walk, 1.28, {
                  'symplectic_euler': (5e-5, 2.5e-5),
                  'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
                  'rk4': (1e-4, 5e-5, 2.5e-5),
-                 'rk45': (1e-4, 1e-6, 1e-8),
-                 'dop853': (1e-5, 1e-7, 1e-9)}),
+                 'rk45': (1e-4, 1e-6, 1e-8)}, reference_rtol=WALK_REFERENCE_RTOL),
         Case('passive', 'mode 17, no inputs, joint damping and stops off, 0.3 s', passive, 0.3,
              {'symplectic_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
               'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
               'rk4': (1e-3, 5e-4, 2.5e-4),
-              'rk45': (1e-4, 1e-6, 1e-8),
-              'dop853': (1e-5, 1e-7, 1e-9)}, energy=True),
-        Case('skate', 'skate as shipped, 0.9 s (with events)', load_scene('skate'), 0.9,
+              'rk45': (1e-4, 1e-6, 1e-8)}, energy=True),
+        Case('skate', f'skate as shipped, the whole {skate.duration:g} s (with events)', skate,
+             skate.duration,
              {'implicit_euler': (1e-3, 2.5e-4, 1e-4), 'rk4': (2e-4, 1e-4, 5e-5),
-              'rk45': (1e-2, 1e-3, 1e-4)}),
+              'rk45': (1e-2, 1e-3, 1e-4, 1e-6)}, reference_rtol=SKATE_REFERENCE_RTOL),
     ]
 
 
-def run_case(case: Case, robot: Any, max_wall: float, engines: tuple[str, ...],
-             log) -> dict[str, Any]:
-    """Reference plus sweep of one case on each engine; returns its JSON figures."""
+def run_case(case: Case, robot: Any, max_wall: float, log) -> dict[str, Any]:
+    """Reference, its convergence check and the sweep of one case; returns its JSON figures."""
     period = case.scene.simulator.control_period
-    ref = simulate(case.scene, case.duration, integrator_config(REFERENCE[0], REFERENCE[1],
-                                                                  period),
-                   robot, max_wall * 4, 'reference', case.energy, engine='native')
-    log(f'[{case.name}] reference {REFERENCE[0]} rtol {REFERENCE[1]:g}: {ref.wall:.1f} s wall, '
+    ref_method, ref_rtol = REFERENCE[0], case.reference_rtol
+    failed = []
+    while True:
+        ref = simulate(case.scene, case.duration,
+                       integrator_config(ref_method, ref_rtol, period), robot, max_wall * 4,
+                       'reference', case.energy)
+        if ref.error is None or ref_rtol * 10.0 > REFERENCE_LOOSEST * (1 + 1e-9):
+            break
+        failed.append({'rtol': ref_rtol, 'error': ref.error})
+        log(f'[{case.name}] reference {ref_method} rtol {ref_rtol:g} stopped ({ref.status[:90]}'
+            f'); again at rtol {ref_rtol * 10.0:g}')
+        ref_rtol *= 10.0
+    log(f'[{case.name}] reference {ref_method} rtol {ref_rtol:g}: {ref.wall:.1f} s wall, '
         f'{ref.evaluations} evaluations, {ref.transitions} transitions '
         f'{" ".join(ref.events[:30])}{" ..." if len(ref.events) > 30 else ""}, {ref.status}')
+    check_rtol = ref_rtol * CHECK_FACTOR
+    check = simulate(case.scene, case.duration, integrator_config(ref_method, check_rtol,
+                                                                    period),
+                     robot, max_wall * 4, 'reference check', case.energy)
+    converged = compare(check, ref)
+    converged.update(rtol=check_rtol, wall_s=check.wall, status=check.status,
+                     same_events=check.events == ref.events)
+    log(f'[{case.name}] reference converged: {ref_method} rtol {check_rtol:g} against rtol '
+        f'{ref_rtol:g}: head {converged["head_err_max"]:.2e} m, final q '
+        f'{converged["final_q_err"]:.2e}, same events {converged["same_events"]} '
+        f'({check.wall:.1f} s wall, {check.status})')
     rows = [_row(ref, ref, period)]
-    for engine in engines:
-        for method in METHODS:
-            for setting in case.sweep.get(method, ()):
-                try:
-                    integ = integrator_config(method, setting, period)
-                except SimulationError as exc:
-                    log(f'[{case.name}] {method} {setting:g}: skipped ({exc})')
-                    continue
-                run = simulate(case.scene, case.duration, integ, robot, max_wall,
-                               f'{method} {setting:g}', case.energy, engine=engine)
-                row = _row(run, ref, period)
-                rows.append(row)
-                log(f'[{case.name}] {engine:6s} {method:16s} {_setting(method, setting):>11s} '
-                    f'{run.wall:7.2f} s ({row["rtf"]:6.2f}x)  head {row["head_err_max"]:.2e} m'
-                    f'  final q {row["final_q_err"]:.2e}  residual {run.residual:.1e}  '
-                    f'{run.status}')
+    for method in METHODS:
+        for setting in case.sweep.get(method, ()):
+            try:
+                integ = integrator_config(method, setting, period)
+            except SimulationError as exc:
+                log(f'[{case.name}] {method} {setting:g}: skipped ({exc})')
+                continue
+            run = simulate(case.scene, case.duration, integ, robot, max_wall,
+                           f'{method} {setting:g}', case.energy)
+            row = _row(run, ref, period)
+            rows.append(row)
+            log(f'[{case.name}] {method:16s} {_setting(method, setting):>11s} '
+                f'{run.wall:7.2f} s ({row["rtf"]:6.2f}x)  head {row["head_err_max"]:.2e} m'
+                f'  final q {row["final_q_err"]:.2e}  residual {run.residual:.1e}  '
+                f'{run.status}')
     return {'name': case.name, 'title': case.title, 'duration_s': case.duration,
-            'reference': {'method': REFERENCE[0], 'rtol': REFERENCE[1],
-                          'atol': REFERENCE[1] * 1e-2},
+            'reference': {'method': ref_method, 'rtol': ref_rtol, 'atol': ref_rtol * 1e-2,
+                          'failed_tighter': failed},
+            'reference_converged': converged,
             'events_in_reference': ref.events, 'runs': rows}
 
 
@@ -359,7 +365,7 @@ def _setting(method: str, setting: float) -> str:
 
 def _row(run: Run, ref: Run, period: float) -> dict[str, Any]:
     setting = run.step if run.method in FIXED else run.rtol
-    row = {'engine': run.engine, 'method': run.method,
+    row = {'method': run.method,
            'setting': _setting(run.method, setting),
            'step': run.step, 'rtol': run.rtol, 'reference': run is ref, 'wall_s': run.wall,
            'sim_time_s': run.sim_time,
@@ -381,16 +387,14 @@ def plot_case(case: dict[str, Any], path: pathlib.Path) -> None:
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     colours = {method: f'C{k}' for k, method in enumerate(METHODS)}
-    for engine, method in ((e, m) for e in ENGINES for m in METHODS):
-        rows = [r for r in case['runs'] if r['method'] == method and r['engine'] == engine
-                and not r['reference']]
+    for method in METHODS:
+        rows = [r for r in case['runs'] if r['method'] == method and not r['reference']]
         if not rows:
             continue
         for ax, key in zip(axes, ('head_err_max', 'final_q_err'), strict=True):
             x = [r['wall_s'] for r in rows]
             y = [max(r[key], ERROR_FLOOR) for r in rows]
-            line, = ax.loglog(x, y, 'o-' if engine == 'native' else 's--',
-                              color=colours[method], label=f'{method} ({engine})')
+            line, = ax.loglog(x, y, 'o-', color=colours[method], label=method)
             for r, xi, yi in zip(rows, x, y, strict=True):
                 marker = r['setting'].split('=')[1] + ('' if r['status'] == 'ok' else ' (!)')
                 ax.annotate(marker, (xi, yi), fontsize=7, color=line.get_color(),
@@ -407,7 +411,9 @@ def plot_case(case: dict[str, Any], path: pathlib.Path) -> None:
     axes[0].axvline(case['duration_s'] / GOAL_RTF, color='r', ls='-.', lw=0.8,
                     label=f'goal {GOAL_RTF:g}x real time')
     axes[0].legend(fontsize=7, ncol=2)
-    fig.suptitle(f'work-precision: {case["title"]}; reference dop853 rtol 1e-12', fontsize=10)
+    reference = case['reference']
+    fig.suptitle(f'work-precision: {case["title"]}; reference {reference["method"]} rtol '
+                 f'{reference["rtol"]:g}', fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -428,15 +434,16 @@ def markdown(cases: list[dict[str, Any]], headline: dict[str, Any], machine: dic
                   f'Events in the reference: {shown or "none"}. A * marks a final state in '
                   'another mode, support side or step than in the reference (q is '
                   'support-rooted, so its error there compares relabelled coordinates).',
-                  '', '| engine | method | setting | wall s | RTF | evals/period | transitions | '
+                  '', _convergence(case), '',
+                  '| method | setting | wall s | RTF | evals/period | transitions | '
                   'head err max m | final q err | final v err | energy drift J | residual | '
-                  'status |', '|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|']
+                  'status |', '|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|']
         for r in case['runs']:
             name = r['method'] + (' (reference)' if r['reference'] else '')
             drift = f'{r["energy_drift"]:.2e}' if 'energy_drift' in r else '-'
             mark = '' if r['final_discrete_match'] else ' *'
             lines.append(
-                f'| {r["engine"]} | {name} | {r["setting"]} | {r["wall_s"]:.2f} | '
+                f'| {name} | {r["setting"]} | {r["wall_s"]:.2f} | '
                 f'{r["rtf"]:.3f} | '
                 f'{r["evaluations_per_period"]:.1f} | {r["transitions"]} | '
                 f'{r["head_err_max"]:.2e} | {r["final_q_err"]:.2e}{mark} | '
@@ -500,8 +507,7 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
         for case in cases:
             if case['name'] == case_name:
                 for r in case['runs']:
-                    if (r['method'] == 'implicit_euler' and r['step'] == 1e-3
-                            and r['engine'] == 'native'):
+                    if r['method'] == 'implicit_euler' and r['step'] == 1e-3:
                         return r['head_err_max']
         return None
 
@@ -509,7 +515,7 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
         out = f'{f["sim_time_s"]:.3g} of {f["requested_s"]:g} s'
         return out + (f', stopped: {f["failure"][:70]}' if f['failure'] else '')
 
-    lines = [f'headless {name} ({ran(f)}; shipped settings, native engine): '
+    lines = [f'headless {name} ({ran(f)}; shipped settings): '
              f'{f["rtf_median"]:.2f}x real time' for name, f in figures.items()]
     for case_name in ('skate', 'events', 'smooth'):
         err = default_error(case_name)
@@ -526,34 +532,37 @@ def headline(cases: list[dict[str, Any]], quick: bool, repeat: int, log) -> dict
 
 
 def _cheapest_meeting_goal(cases: list[dict[str, Any]]) -> str | None:
-    """The fastest setting of the eventful cases whose head error meets the goal, per engine,
-    and the ratio of the two engines' figures."""
+    """The fastest setting of the eventful cases whose head error meets the goal, with its
+    real-time factor (and, for skate, the goal on it)."""
     out = []
     for case in cases:
         if case['name'] not in ('skate', 'events'):
             continue
-        rtf = {}
-        for engine in ENGINES:
-            swept = [r for r in case['runs'] if not r['reference'] and r['engine'] == engine]
-            if not swept:
-                continue
-            ok = [r for r in swept if r['status'] == 'ok' and r['head_err_max'] <= GOAL_HEAD_ERROR]
-            if ok:
-                r = min(ok, key=lambda r: r['wall_s'])
-                rtf[engine] = r['rtf']
-                goal = ('' if case['name'] != 'skate' else
-                        f'; goal >= {GOAL_RTF:g}x: '
-                        + ('met' if r['rtf'] >= GOAL_RTF else 'NOT met'))
-                out.append(f'{case["name"]}, {engine} engine: fastest setting with head error '
-                           f'<= 1e-6 m is {r["method"]} {r["setting"]} at {r["rtf"]:.3f}x real '
-                           f'time{goal}')
-            else:
-                out.append(f'{case["name"]}, {engine} engine: no swept setting reaches head '
-                           f'error <= 1e-6 m')
-        if len(rtf) == 2:
-            out.append(f'{case["name"]}: native / python at that goal = '
-                       f'{rtf["native"] / rtf["python"]:.1f}x')
+        swept = [r for r in case['runs'] if not r['reference']]
+        ok = [r for r in swept if r['status'] == 'ok' and r['head_err_max'] <= GOAL_HEAD_ERROR]
+        if ok:
+            r = min(ok, key=lambda r: r['wall_s'])
+            goal = ('' if case['name'] != 'skate' else
+                    f'; goal >= {GOAL_RTF:g}x: ' + ('met' if r['rtf'] >= GOAL_RTF else 'NOT met'))
+            out.append(f'{case["name"]} ({case["duration_s"]:g} s): fastest setting with head '
+                       f'error <= 1e-6 m is {r["method"]} {r["setting"]} (error '
+                       f'{r["head_err_max"]:.1e} m) at {r["rtf"]:.3f}x real time{goal}')
+        elif swept:
+            best = min(r['head_err_max'] for r in swept)
+            out.append(f'{case["name"]} ({case["duration_s"]:g} s): no swept setting reaches '
+                       f'head error <= 1e-6 m (smallest {best:.1e} m)')
     return '; '.join(out) or None
+
+
+def _convergence(case: dict[str, Any]) -> str:
+    """One line: how far the reference has converged (the next looser tolerance's distance)."""
+    ref, c = case['reference'], case['reference_converged']
+    failed = ''.join(f' (rtol {f["rtol"]:g} stopped: {f["error"][:80]})'
+                     for f in ref['failed_tighter'])
+    return (f'Reference: {ref["method"]} rtol {ref["rtol"]:g}, atol {ref["atol"]:g}{failed}; '
+            f'converged to {c["head_err_max"]:.1e} m head-top error, final q '
+            f'{c["final_q_err"]:.1e} (the same run at rtol {c["rtol"]:g}: {c["wall_s"]:.2f} s '
+            f'wall, {"the same" if c["same_events"] else "other"} events, {c["status"]}).')
 
 
 # ------------------------------------------------------------------------------- main
@@ -565,8 +574,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--quick', action='store_true',
                         help='short spans and sparse sweeps (about 1-2 minutes)')
     parser.add_argument('--cases', help='comma-separated subset of the cases')
-    parser.add_argument('--engines', default=','.join(ENGINES),
-                        help='comma-separated engines to sweep (default native,python)')
     parser.add_argument('--max-run-wall', type=float, default=120.0,
                         help='wall-time limit of one swept run [s] (reference: 4x)')
     parser.add_argument('--repeat', type=int, default=1,
@@ -586,14 +593,11 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             parser.error(f'unknown cases {sorted(unknown)}; one of {[c.name for c in cases]}')
         cases = [c for c in cases if c.name in wanted]
-    engines = tuple(args.engines.split(','))
-    if set(engines) - set(ENGINES):
-        parser.error(f'--engines takes a comma-separated subset of {ENGINES}')
     robot = load_robot()
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for case in cases:
-        figures = run_case(case, robot, args.max_run_wall, engines, log)
+        figures = run_case(case, robot, args.max_run_wall, log)
         results.append(figures)
         png = args.out / f'work_precision_{case.name}.png'
         plot_case(figures, png)

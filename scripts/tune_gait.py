@@ -87,7 +87,7 @@ import time
 import cma
 import numpy as np
 
-from gait_manager.law import GaitManagerParameters
+from gait_manager.parameters import GaitManagerParameters
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene, scene_path
 from iceskate_sim.errors import SimulationError

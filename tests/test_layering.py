@@ -138,7 +138,7 @@ def test_the_checks_find_a_cycle_and_a_deferred_import(tmp_path):
     assert _cycle({'a': {'b'}, 'b': {'c'}, 'c': {'a'}}) == ['a', 'b', 'c', 'a']
     assert _cycle({'a': {'b'}, 'b': set()}) is None
     probe = tmp_path / 'probe.py'
-    probe.write_text('def f():\n    from gait_manager.law import SOURCES\n'
+    probe.write_text('def f():\n    from gait_manager.parameters import SOURCES\n'
                      'from .session import Session\n')
     names = _imports(probe, 'iceskate_sim.probe')
-    assert {'gait_manager.law', 'iceskate_sim.session.Session'} <= names
+    assert {'gait_manager.parameters', 'iceskate_sim.session.Session'} <= names

@@ -21,16 +21,19 @@ CASES = {
     'bench_bag_write': (['stand', '--duration', '0.3', '--rounds', '1'],
                         'the two bags are the same file'),
     'bench_dynamics': (['--repeat', '1', '--number', '2'], '18-coordinate modes: worst evaluate'),
-    'bench_period': (['stand', '--duration', '0.05', '--no-bag'], 'real-time factor: native loop'),
+    'bench_period': (['stand', '--duration', '0.05', '--no-picture'],
+                     "the run's own / the native loop's"),
     'bench_physics': (['--states', '2', '--spacing', '2', '--repeat', '1', '--number', '2',
                        '--warmup', '0.05'], 'ratios ours / mj_step implicitfast'),
     'bench_laws': (['stand', '--duration', '0.05'], 'native laws (Controller.compute)'),
     'bench_laziness': (['--quick', '--duration', '0.3', '--no-profile', '--out', '{tmp}'],
                        'identical results where expected: True'),
-    'bench_work_precision': (['--quick', '--cases', 'passive', '--engines', 'native,python',
-                              '--no-headline', '--out', '{tmp}'], 'outputs in'),
+    'bench_work_precision': (['--quick', '--cases', 'passive', '--no-headline', '--out', '{tmp}'],
+                             'reference converged'),
     'bench_sweep': (['--runs', '2', '--duration', '0.05', '--repeat', '1'],
                     'per-run overhead beyond the simulation'),
+    'stress': (['--short', '--cases', 'kp_x10', '--long', '--long-duration', '0.5', '--window',
+                '0.25'], 'long run: completed'),
 }
 
 

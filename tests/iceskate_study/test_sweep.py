@@ -58,7 +58,8 @@ def test_a_failing_point_is_a_row_and_selected_points_get_a_bag(tmp_path, grid):
 
 def test_sigint_mid_sweep_keeps_the_finished_rows_and_the_same_command_resumes(
         tmp_path, grid, write_spec):
-    grid['axes'] = {'floor.mu': {'linspace': [0.004, 0.0155, 24]}}  # ~0.2 s each
+    grid['axes'] = {'floor.mu': {'linspace': [0.004, 0.0155, 24]}}
+    grid['overrides'] = {'duration': 6.0}  # ~0.3 s of wall time each: SIGINT comes mid-sweep
     spec, out = write_spec(grid), tmp_path / 'out'
     command = [sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out', str(out),
                '--workers', '1', '--quiet']

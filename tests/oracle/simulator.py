@@ -33,7 +33,7 @@ from iceskate_sim.observation import Observation
 from iceskate_sim.recording import Sample
 from iceskate_sim.robot import N_COORDINATES, SIDES, Robot
 from iceskate_sim.scene import Scene
-from iceskate_sim.simulation import RunStatistics, SimulatorConfig, observation_of
+from iceskate_sim.simulation import RunStatistics, SimulatorConfig, StateQueries
 from oracle.automaton import (
     RunEnded,
     apply_transition,
@@ -46,7 +46,7 @@ from oracle.dynamics import GaitDynamics
 from oracle.integrators import Integrator
 
 
-class ReferenceSimulator:
+class ReferenceSimulator(StateQueries):
     """The hybrid simulation loop in Python: ``iceskate_sim.simulation.Simulator``'s interface
     (``advance``, ``state``, ``events``, ``stats``, ``ended``, ``result``, ``start_state``,
     ``start_result``) on the oracle's automaton and integrators and ``GaitDynamics``' eq. (7)
@@ -114,27 +114,6 @@ class ReferenceSimulator:
         """The dynamics at ``start_state`` under the last period's input."""
         return self._start[1]
 
-    @property
-    def time(self) -> float:
-        """Simulation time [s]."""
-        return self.state.t
-
-    def observation(self) -> Observation:
-        """The controller's view of the current state."""
-        return observation_of(self.state)
-
-    def head_height(self) -> float:
-        """Height of the head top [m]."""
-        return float(self.head_placement().translation[2])
-
-    def head_placement(self) -> pin.SE3:
-        """World placement of the head-top frame in the current state (kept until the state
-        changes: the health check and the next sample ask for the same one)."""
-        if self._head[0] is not self.state:
-            self._head = (self.state, self.dynamics.frame_placement(
-                self.state.contact, self.state.q, 'head_top'))
-        return self._head[1]
-
     # ---------------------------------------------------------------- stepping
     def _evaluate(self, q: np.ndarray, v: np.ndarray) -> DynamicsResult:
         c = self._command
@@ -171,24 +150,10 @@ class ReferenceSimulator:
 
     def advance(self, command: HeldCommand | np.ndarray,
                 push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
-        """Integrate one control period holding the input command (zero-order hold).
-
-        :param command: a HeldCommand (feed-forward plus joint impedance, evaluated at every
-            physics step) or a plain torque vector (18,) held constant.
-        :param push: optional external force (link frame, world force [N]) held over the
-            period.
-
-        :returns: the dynamics at the end of the period (accelerations, multipliers, ...).
-        :raises SimulationError: on bad input or divergence. A run that ends physically
-            (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
-        """
+        """``Simulator.advance`` in Python: one control period holding ``command`` (and
+        ``push``); returns the dynamics at its end."""
         self._require_running()
-        if not isinstance(command, HeldCommand):
-            tau = np.asarray(command, dtype=float)
-            if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
-                raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
-                                      f'[y0, q1..q17], got shape {tau.shape}')
-            command = HeldCommand.torque_only(tau)
+        command = HeldCommand.of_input(command)
         self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         self.result = self._evaluate(self.state.q, self.state.v)

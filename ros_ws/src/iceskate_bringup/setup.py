@@ -23,7 +23,7 @@ data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
 ]
-for folder in ('scenes', 'launch'):
+for folder in ('scenes', 'launch', 'config'):
     data_files += share_tree(folder)
 
 setup(
@@ -44,6 +44,7 @@ setup(
     entry_points={
         'console_scripts': [
             'run_scene = iceskate_bringup.runner:main',
+            'plugin_controller = iceskate_bringup.plugin_node:main',
         ],
     },
 )

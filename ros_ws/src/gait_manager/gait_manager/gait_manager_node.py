@@ -7,14 +7,14 @@ posture command carries the joint impedance) and each source's share (``source_n
 Its parameters are the fields of ``GaitManagerParameters`` as typed ROS parameters, one per
 field of each block (``posture.stiffness``, ``yaw.amplitude``, ..., ``enabled``); a scene's
 ``inputs.gait_manager`` block becomes a parameter file at launch. The sources run natively
-(``gait_manager.native``; ``law`` and its modules are their readable reference).
+(``gait_manager.native``).
 """
 
 from __future__ import annotations
 
 from gait_manager.errors import GaitManagerError
-from gait_manager.law import GaitManagerParameters
 from gait_manager.native import GaitManagerController
+from gait_manager.parameters import GaitManagerParameters
 import iceskate_native
 from iceskate_sim.command import CommandValues
 from iceskate_sim.controller_node import ControllerNode

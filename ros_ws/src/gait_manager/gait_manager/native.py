@@ -1,10 +1,9 @@
-"""The gait-manager sources in C++ (``src/``), as an ``iceskate_native.Controller``.
+"""The gait-manager sources, in C++ only (``src/``), as an ``iceskate_native.Controller``.
 
-``GaitManagerController(params)`` takes a ``GaitManagerParameters``; its ``compute(obs,
-kinematics)`` gives the command of each enabled source, in ``law.SOURCES`` order (see
-``iceskate_sim.native_control.native_command``). It equals ``law.gait_manager_commands``, the
-readable reference (tests/gait_manager/test_native.py); a command that is not finite raises
-``GaitManagerError``.
+``GaitManagerController(params)`` takes a ``GaitManagerParameters`` (``gait_manager.parameters``);
+its ``compute(obs, kinematics)`` gives the command of each enabled source, in ``SOURCES`` order
+(see ``iceskate_sim.native_control.native_command``); a command that is not finite raises
+``GaitManagerError``. ``parameters`` shows the values the C++ sources hold, by field name.
 """
 
 from gait_manager._law import GaitManagerController

@@ -5,9 +5,15 @@
 namespace gait_manager
 {
 
-GaitManagerController::GaitManagerController(Parameters params) : params_(std::move(params)) {}
+GaitManagerController::GaitManagerController(GaitManagerParameters params)
+: params_(std::move(params))
+{
+}
 
-void GaitManagerController::set_parameters(Parameters params) { params_ = std::move(params); }
+void GaitManagerController::set_parameters(GaitManagerParameters params)
+{
+  params_ = std::move(params);
+}
 
 void GaitManagerController::compute(
   const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics,

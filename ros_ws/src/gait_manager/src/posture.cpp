@@ -61,6 +61,12 @@ void require_finite(const Vector18 & a, const Vector18 & b, const char * what, d
 
 }  // namespace
 
+iceskate_native::StanceSchedule stance_schedule(const PostureParameters & params)
+{
+  return {params.shift_y1, params.shift_z1, params.shift_time1, params.shift_y2,
+          params.shift_time2};
+}
+
 Vector18 standing_posture(double bend)
 {
   Vector18 q = Vector18::Zero();
@@ -78,7 +84,7 @@ Eigen::Vector2d hip_target(
   const Eigen::Vector2d knee = flat_ankle + rot(-a, geo.shank);
   const Eigen::Vector2d hip = knee + rot(a, geo.thigh);
   const Eigen::Vector2d standing = hip + rot(0.0, geo.pelvis);
-  return standing + params.stance.shift(obs);
+  return standing + stance_schedule(params).shift(obs);
 }
 
 Eigen::Vector3d support_leg_ik(
@@ -115,7 +121,7 @@ StanceReference stance_reference(
   }
   out.q_ref.segment<3>(2) =
     support_leg_ik(obs, kinematics, params, hip_target(obs, kinematics, params));
-  out.head_offset = params.stance.shift(obs);
+  out.head_offset = stance_schedule(params).shift(obs);
   return out;
 }
 

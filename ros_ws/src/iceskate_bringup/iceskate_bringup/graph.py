@@ -1,7 +1,8 @@
 """``run_scene <scene> --ros --out DIR``: a scene through the ROS 2 graph (what a launch would do).
 
-Starts the simulator and the controller nodes the scene needs (visual_lifting, gait_manager)
-as separate processes, each in its own process group, on one DDS domain (see
+Starts the simulator and the controller nodes the scene needs (visual_lifting, gait_manager,
+one ``plugin_controller`` named after its scene key per controller written in Python) as
+separate processes, each in its own process group, on one DDS domain (see
 ``ros_environment``) with LOCALHOST discovery and a per-run ROS_LOG_DIR; waits for the
 simulator to end the run; stops the controllers with SIGTERM (SIGKILL after a grace period).
 The nodes never outlive the launcher: they get SIGTERM when it dies, even by SIGKILL
@@ -34,6 +35,7 @@ import tempfile
 import time
 from typing import Any
 
+from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_path, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.node_support import write_parameter_file
@@ -49,18 +51,26 @@ CONTROLLER_CLASSES = {'visual_lifting': 'VisualLiftingNode', 'gait_manager': 'Ga
 
 @dataclass(frozen=True)
 class NodeSpec:
-    """One node of the graph: package, executable (= node name), module, class, and the
-    parameter file of this run (written by ``graph_nodes``)."""
+    """One node of the graph: package, executable, module, class, the parameter file of this
+    run (written by ``graph_nodes``) and the node's name (``name``; '': the executable's)."""
 
     package: str
     executable: str
     module: str
     node_class: str
     parameter_file: pathlib.Path
+    name: str = ''
+
+    @property
+    def node(self) -> str:
+        """The node's name (its log is ``<node>.log``)."""
+        return self.name or self.executable
 
     def ros_args(self) -> list[str]:
         """--ros-args: the node's shipped YAML, then this run's parameter file (which wins)."""
-        return ['--ros-args', '--params-file', str(config_file(self.package, self.executable)),
+        rename = ['-r', f'__node:={self.name}'] if self.name else []
+        return ['--ros-args', *rename, '--params-file',
+                str(config_file(self.package, self.executable)),
                 '--params-file', str(self.parameter_file)]
 
 
@@ -108,7 +118,15 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
                       folder / 'simulator.yaml')]
     composed = node_parameters(scene)
     for node in sorted(controllers, reverse=True):
-        write_parameter_file(folder / f'{node}.yaml', {node: flatten(composed[node])})
+        params = composed[node]
+        if isinstance(params, PluginBlock):  # iceskate_bringup.plugin_node, named after its key
+            write_parameter_file(folder / f'{node}.yaml', {node: {
+                'plugin': params.plugin, 'parameters': json.dumps(params.parameters)}})
+            specs.append(NodeSpec('iceskate_bringup', 'plugin_controller',
+                                  'iceskate_bringup.plugin_node', 'PluginControllerNode',
+                                  folder / f'{node}.yaml', node))
+            continue
+        write_parameter_file(folder / f'{node}.yaml', {node: flatten(params)})
         specs.append(NodeSpec(node, node, f'{node}.{node}_node', CONTROLLER_CLASSES[node],
                               folder / f'{node}.yaml'))
     return specs
@@ -209,7 +227,7 @@ def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
     The node dies with this process: the kernel sends it SIGTERM when this process ends, even
     by SIGKILL (``die_with_parent``), and the node then ends its run cleanly.
     """
-    log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.executable}.log', 'wb')  # noqa: SIM115
+    log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.node}.log', 'wb')  # noqa: SIM115
     parent = os.getpid()
     with log:
         try:
@@ -217,7 +235,7 @@ def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
                                     stderr=subprocess.STDOUT, start_new_session=True,
                                     preexec_fn=lambda: die_with_parent(signal.SIGTERM, parent))
         except OSError as exc:  # e.g. a broken install: the executable cannot be run
-            raise SimulationError(f'node {spec.executable} could not be started: '
+            raise SimulationError(f'node {spec.node} could not be started: '
                                   f'{exc.strerror or exc}') from None
 
 
@@ -269,8 +287,8 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
                     processes.append(start(spec, env))
             why = _wait(processes, specs, timeout,
                         float(simulator_parameters.get('control_timeout', 5.0)) + GRACE, stop)
-            early = {s.executable: p.returncode for p, s in zip(processes, specs, strict=True)
-                     if s.executable != 'simulator' and p.poll() is not None}
+            early = {s.node: p.returncode for p, s in zip(processes, specs, strict=True)
+                     if s.node != 'simulator' and p.poll() is not None}
         finally:
             codes = stop_graph(processes, stop.signum)
         code = codes[0] if codes else None
@@ -403,7 +421,7 @@ def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: flo
         now = time.monotonic()
         if timeout is not None and now - start_time > timeout:
             return f'the run took longer than {timeout} s (stopped)'
-        dead = [s.executable for p, s in zip(processes[1:], specs[1:], strict=True)
+        dead = [s.node for p, s in zip(processes[1:], specs[1:], strict=True)
                 if p.poll() is not None]
         dead_since = (dead_since or now) if dead else None
         if dead and now - dead_since > patience:
@@ -436,7 +454,7 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
             try:
                 nodes.append(cls(context=context, cli_args=spec.ros_args()))
             except ConfigError as exc:
-                raise SimulationError(f'node {spec.executable}: {exc}') from None
+                raise SimulationError(f'node {spec.node}: {exc}') from None
         executor = EventsExecutor(context=context)
         for node in nodes:
             executor.add_node(node)

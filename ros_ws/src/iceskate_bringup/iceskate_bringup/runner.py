@@ -84,16 +84,17 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             stop = signals.enter_context(StopRequest())
         bag = out / 'bag' if out is not None and scene.record_bag else None
         session = Session(scene, out, bag)  # forks the bag writer
+        stack = ControlStack(scene, session.robot, session.observation())
         # The summary's plotting library loads while the run goes on: after the fork (a child
         # forked while a thread imports waits forever for that import's lock) and joined before
-        # this returns (no other fork of this process meets it).
+        # this returns (no other fork of this process meets it). Not beside a controller
+        # written in Python: the import would hold the GIL that controller waits for.
         picture = picture and out is not None
         plotting = (threading.Thread(target=_import_plotting, name='import-plotting')
-                    if picture else None)
+                    if picture and not stack.plugins else None)
         if plotting is not None:
             plotting.start()
             signals.callback(plotting.join)
-        stack = ControlStack(scene, session.robot, session.observation())
         bar = _progress(session.n_periods, scene.name, progress)
         ended: SimulationError | None = None
         controller_failed = False

@@ -2,7 +2,9 @@
 
 ``iceskate_sim.scene`` validates what the simulator uses; here the ``inputs`` blocks are
 validated too, by the controller packages' own parameter classes (``VisualLiftingParameters``,
-``GaitManagerParameters``), so a scene is checked whole before anything starts. Shipped scenes
+``GaitManagerParameters``), and a controller written in Python (a block with ``plugin``,
+``iceskate_bringup.plugin``) by importing its class and building it with its ``parameters``,
+so a scene is checked whole before anything starts. Shipped scenes
 live in ``share/iceskate_bringup/scenes/<name>.yaml`` (the source tree's ``scenes/`` before the
 workspace is built).
 """
@@ -14,21 +16,32 @@ import pathlib
 from typing import Any
 
 from gait_manager.errors import GaitManagerError
-from gait_manager.law import SOURCES, GaitManagerParameters, head_stance
+from gait_manager.parameters import SOURCES, GaitManagerParameters, head_stance
+from iceskate_bringup.plugin import (
+    PluginBlock,
+    checked_block,
+    is_plugin,
+    make_controller,
+    plugin_sources,
+)
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.robot import ament_prefixes
 from iceskate_sim.scene import Scene
 from iceskate_sim.scene import load_scene as load_scene_file
 from iceskate_sim.scene import parse_scene as parse_simulator_scene
 from visual_lifting.errors import VisualLiftingError
-from visual_lifting.law import VisualLiftingParameters
+from visual_lifting.parameters import VisualLiftingParameters
 
-#: The controller nodes a scene may run, in the order their commands are summed.
+#: The shipped controller nodes a scene may run (besides plug-ins); the commands of a scene's
+#: controllers are summed in the order the scene lists them.
 CONTROLLERS = ('visual_lifting', 'gait_manager')
 
 
 def validate_inputs(node: str, block: dict[str, Any]) -> None:
     """Check the parameter block of controller ``node`` (SimulationError naming the key)."""
+    if is_plugin(block):
+        checked_block(node, block)  # imports the class and builds it once
+        return
     try:
         controller_parameters(node, block)
     except (VisualLiftingError, GaitManagerError) as exc:
@@ -36,19 +49,25 @@ def validate_inputs(node: str, block: dict[str, Any]) -> None:
 
 
 def controller_parameters(node: str, block: dict[str, Any]
-                          ) -> VisualLiftingParameters | GaitManagerParameters:
-    """The validated parameters of controller ``node`` from its scene block."""
+                          ) -> VisualLiftingParameters | GaitManagerParameters | PluginBlock:
+    """The validated parameters of controller ``node`` from its scene block (a plug-in's as
+    given: its class is checked by ``validate_inputs`` and when it is built)."""
+    if is_plugin(block):
+        return PluginBlock(block['plugin'], dict(block.get('parameters') or {}))
     if node == 'visual_lifting':
         return VisualLiftingParameters.from_dict(block)
     if node == 'gait_manager':
         return GaitManagerParameters.from_dict(block)
     raise SimulationError(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
-                          f'{list(CONTROLLERS)}')
+                          f"{list(CONTROLLERS)}, or a controller written in Python (a block "
+                          "with 'plugin: package.module:Class')")
 
 
-def node_parameters(scene: Scene) -> dict[str, VisualLiftingParameters | GaitManagerParameters]:
-    """The parameters of each controller node the scene runs, composed: visual lifting's head
-    target follows the gait manager's moving stance when that runs (``head_stance``)."""
+def node_parameters(scene: Scene
+                    ) -> dict[str, VisualLiftingParameters | GaitManagerParameters | PluginBlock]:
+    """The parameters of each controller node the scene runs, in the scene's order, composed:
+    visual lifting's head target follows the gait manager's moving stance when both run
+    (``head_stance``)."""
     params = {node: controller_parameters(node, block) for node, block in scene.inputs.items()}
     vl, gm = params.get('visual_lifting'), params.get('gait_manager')
     if isinstance(vl, VisualLiftingParameters) and isinstance(gm, GaitManagerParameters):
@@ -66,15 +85,19 @@ def parse_scene(raw: Any) -> Scene:
 
 
 def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
-    """The scene's controller nodes, in summing order, each with its command sources in order
-    (an idle gait manager, with no source enabled, is left out)."""
+    """The scene's controller nodes, in summing order (the scene's), each with its command
+    sources in order (an idle gait manager, with no source enabled, is left out)."""
     out: dict[str, tuple[str, ...]] = {}
-    if 'visual_lifting' in scene.inputs:
-        out['visual_lifting'] = ('visual_lifting',)
-    if 'gait_manager' in scene.inputs:
-        enabled = GaitManagerParameters.from_dict(scene.inputs['gait_manager']).enabled
-        if enabled:
-            out['gait_manager'] = tuple(s for s in SOURCES if s in enabled)
+    for node, block in scene.inputs.items():
+        if is_plugin(block):
+            plugin = controller_parameters(node, block)
+            out[node] = plugin_sources(node, make_controller(node, plugin))
+        elif node == 'visual_lifting':
+            out[node] = ('visual_lifting',)
+        elif node == 'gait_manager':
+            enabled = GaitManagerParameters.from_dict(block).enabled
+            if enabled:
+                out[node] = tuple(s for s in SOURCES if s in enabled)
     return out
 
 

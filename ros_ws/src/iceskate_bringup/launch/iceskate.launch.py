@@ -25,7 +25,7 @@ def _nodes(context: LaunchContext) -> list:
     """The nodes of the scene, with the parameter files composed from it."""
     out = LaunchConfiguration('out_dir').perform(context) or tempfile.mkdtemp(prefix='iceskate-')
     specs = graph_nodes(LaunchConfiguration('scene').perform(context), pathlib.Path(out))
-    nodes = [Node(package=s.package, executable=s.executable, name=s.executable,
+    nodes = [Node(package=s.package, executable=s.executable, name=s.node,
                   output='screen', arguments=s.ros_args()) for s in specs]
     return [*nodes, RegisterEventHandler(OnProcessExit(target_action=nodes[0], on_exit=[
         EmitEvent(event=Shutdown(reason='the simulator finished the run'))]))]

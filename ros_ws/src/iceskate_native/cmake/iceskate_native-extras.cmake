@@ -1,6 +1,10 @@
 # CMake helpers of the iceskate C++ packages: loaded by find_package(iceskate_native) (ament's
 # CONFIG_EXTRAS) in the controller packages, and included by iceskate_native's own CMakeLists.
 
+# This file's directory: the generator of the controller packages' parameter headers lies beside
+# it (the source tree's cmake/, or share/iceskate_native/cmake once installed).
+set(ICESKATE_NATIVE_CMAKE_DIR "${CMAKE_CURRENT_LIST_DIR}")
+
 # Release by default (-O3 -DNDEBUG), C++17 without compiler extensions.
 macro(iceskate_cxx_defaults)
   if(NOT CMAKE_BUILD_TYPE AND NOT CMAKE_CONFIGURATION_TYPES)
@@ -25,20 +29,44 @@ endmacro()
 # A controller package (after project() and find_package(iceskate_native)):
 #   <project>_law   static library of SOURCES against iceskate_native's Eigen-only headers and
 #                   include/ (no Pinocchio), warnings are errors
+#   PARAMETERS      the Python module of its parameter dataclasses (e.g. <project>/parameters.py):
+#                   generate_parameters.py writes <project>/parameters.hpp (the structs) and
+#                   <project>/parameter_readers.hpp (their by-name readers, for bindings.cpp)
+#                   from it into the build tree's include path, again whenever it changes
 #   _law            nanobind module <project>._law from src/bindings.cpp (-O3, not -Os)
 # and installs the Python package <project>/, config/, and the executable lib/<project>/<project>
 # (`ros2 run <project> <project>`) that runs <project>.<project>_node:main with this interpreter.
 macro(iceskate_controller_package)
-  cmake_parse_arguments(_controller "" "" "SOURCES" ${ARGN})
+  cmake_parse_arguments(_controller "" "PARAMETERS" "SOURCES" ${ARGN})
   iceskate_cxx_defaults()
   find_package(ament_cmake_python REQUIRED)
   find_package(Eigen3 REQUIRED NO_MODULE)
   iceskate_find_nanobind()
   set(_controller_warnings -Wall -Wextra -Wpedantic -Werror)
 
-  add_library(${PROJECT_NAME}_law STATIC ${_controller_SOURCES})
+  set(_controller_generated "${CMAKE_CURRENT_BINARY_DIR}/generated/include")
+  set(_controller_headers)
+  if(_controller_PARAMETERS)
+    string(REGEX REPLACE "\\.py$" "" _controller_module "${_controller_PARAMETERS}")
+    string(REPLACE "/" "." _controller_module "${_controller_module}")
+    set(_controller_headers
+      "${_controller_generated}/${PROJECT_NAME}/parameters.hpp"
+      "${_controller_generated}/${PROJECT_NAME}/parameter_readers.hpp")
+    add_custom_command(
+      OUTPUT ${_controller_headers}
+      COMMAND "${Python_EXECUTABLE}" "${ICESKATE_NATIVE_CMAKE_DIR}/generate_parameters.py"
+              --path "${CMAKE_CURRENT_SOURCE_DIR}" --module "${_controller_module}"
+              --namespace "${PROJECT_NAME}" --out "${_controller_generated}/${PROJECT_NAME}"
+      DEPENDS "${CMAKE_CURRENT_SOURCE_DIR}/${_controller_PARAMETERS}"
+              "${ICESKATE_NATIVE_CMAKE_DIR}/generate_parameters.py"
+      COMMENT "Generating the C++ parameter structs of ${_controller_PARAMETERS}"
+      VERBATIM)
+  endif()
+
+  add_library(${PROJECT_NAME}_law STATIC ${_controller_SOURCES} ${_controller_headers})
   target_include_directories(${PROJECT_NAME}_law PUBLIC
-    "$<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>" ${iceskate_native_INCLUDE_DIRS})
+    "$<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>"
+    "$<BUILD_INTERFACE:${_controller_generated}>" ${iceskate_native_INCLUDE_DIRS})
   target_link_libraries(${PROJECT_NAME}_law PUBLIC Eigen3::Eigen)
   target_compile_options(${PROJECT_NAME}_law PRIVATE ${_controller_warnings})
   set_target_properties(${PROJECT_NAME}_law PROPERTIES

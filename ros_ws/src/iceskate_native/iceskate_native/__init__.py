@@ -10,7 +10,7 @@ deserialised once into a ``RobotModel`` on the C++ side::
     M = iceskate_native.crba_of(native, q)
 
 ``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.native_dynamics``
-wraps it as a ``GaitDynamics``); ``HybridSimulator`` runs whole control periods on it (events,
+wraps it beside the model terms); ``HybridSimulator`` runs whole control periods on it (events,
 transitions, projection, health checks), wrapped by ``iceskate_sim.native_dynamics.NativePeriods``.
 
 The controller interface: a ``Controller`` (the control laws of visual_lifting and
@@ -19,6 +19,8 @@ gait_manager implement it in C++) answers an ``Observation``, reading the robot 
 (``iceskate_sim.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
 control periods in one call: controllers, zero-order hold, pushes and ``HybridSimulator``
 periods, returning the samples as arrays (``iceskate_sim.native_dynamics.NativeControlLoop``).
+A Python subclass of ``Controller`` implements ``compute(obs, kinematics)`` and runs inside that
+loop too (docs/usage.md, "Your own controller"); its failures are ``ControllerError``.
 
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
 kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
@@ -28,6 +30,7 @@ its kinds for a run that left the physical range), which the simulator wraps in 
 from ._kernel import (
     ChatteringError,
     Controller,
+    ControllerError,
     ControlLoop,
     DivergenceError,
     Dynamics,
@@ -40,9 +43,9 @@ from ._kernel import (
     crba_of,
 )
 
-__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'DivergenceError', 'Dynamics',
-           'HybridSimulator', 'Kinematics', 'ModelKinematics', 'NativeError', 'Observation',
-           'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'ControllerError', 'DivergenceError',
+           'Dynamics', 'HybridSimulator', 'Kinematics', 'ModelKinematics', 'NativeError',
+           'Observation', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
 
 
 def model_bytes(model) -> bytes:

@@ -274,6 +274,7 @@ NB_MODULE(_kernel, m)
     nb::exception<iceskate_native::NativeError>(m, "NativeError", PyExc_RuntimeError);
   nb::exception<iceskate_native::DivergenceError>(m, "DivergenceError", native_error.ptr());
   nb::exception<iceskate_native::ChatteringError>(m, "ChatteringError", native_error.ptr());
+  iceskate_native::bindings::bind_controller_error(m, native_error);
 
   nb::class_<RobotModel>(
     m, "RobotModel",

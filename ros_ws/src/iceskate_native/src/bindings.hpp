@@ -1,7 +1,7 @@
 // What the translation units of the module iceskate_native._kernel share (private: not
 // installed): the Python-side description of the mode table, and the entry point of the
-// controller interface's bindings (bindings_controller.cpp) and of the control loop
-// (bindings_loop.cpp), called from bindings.cpp.
+// controller interface's bindings (bindings_controller.cpp, python_controller.cpp) and of the
+// control loop (bindings_loop.cpp), called from bindings.cpp.
 #pragma once
 
 #include <map>
@@ -52,6 +52,10 @@ inline ModeTable mode_table(const std::vector<ModeRow> & rows)
 
 /// Kinematics, ModelKinematics, Observation and Controller in module `m`.
 void bind_controller(nanobind::module_ & m);
+
+/// iceskate_native.ControllerError (a kind of `native_error`) in module `m`: what a controller
+/// written in Python raises when it fails (python_controller.cpp).
+void bind_controller_error(nanobind::module_ & m, nanobind::handle native_error);
 
 /// ControlLoop in module `m` (after HybridSimulator, Kinematics and Controller).
 void bind_control_loop(nanobind::module_ & m);

@@ -3,6 +3,8 @@
 // controller packages' modules (visual_lifting._law, gait_manager._law) derive from and receive
 // (nanobind shares registered types between modules built with the same nanobind), the
 // Observation a law answers, and the queries of a Kinematics (tested against the Python model).
+// Controller is subclassable in Python (its trampoline PythonController, python_controller.hpp):
+// a controller written in Python runs inside the native ControlLoop.
 #include <array>
 #include <cmath>
 #include <stdexcept>
@@ -19,6 +21,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "bindings.hpp"
+#include "python_controller.hpp"
 #include "iceskate_native/checks.hpp"
 #include "iceskate_native/controller.hpp"
 #include "iceskate_native/kinematics.hpp"
@@ -96,6 +99,37 @@ void construct_observation(
     t, vector18(q, "q"), vector18(v, "v"), mode, side, pivot, step_index, t_exchange,
     heel_anchor_y, t_touchdown};
 }
+
+/// A controller's answer at obs as an EffortCommand carries it (see kCommandDoc).
+std::tuple<Eigen::VectorXd, bool, bool, std::vector<std::string>> command_values(
+  Controller & self, const Observation & obs, Kinematics & kinematics)
+{
+  ControllerOutput out;
+  self.compute(obs, kinematics, out);
+  const JointCommand total = out.total();
+  const Eigen::Index impedance = total.has_impedance ? kCoordinates : 0;
+  const Eigen::Index source_count = static_cast<Eigen::Index>(out.sources.size());
+  Eigen::VectorXd values(
+    kCoordinates + 3 * impedance + kCoordinates * source_count + (out.has_head_target ? 3 : 0));
+  values << total.effort, total.stiffness.head(impedance), total.damping.head(impedance),
+    total.reference.head(impedance), Eigen::VectorXd::Zero(kCoordinates * source_count),
+    out.head_target.head(out.has_head_target ? 3 : 0);
+  std::vector<std::string> names;
+  Eigen::Index at = kCoordinates + 3 * impedance;
+  for (const auto & [source, command] : out.sources) {
+    values.segment<kCoordinates>(at) = command.torque(obs.q, obs.v);
+    at += kCoordinates;
+    names.push_back(source);
+  }
+  return {std::move(values), total.has_impedance, out.has_head_target, std::move(names)};
+}
+
+constexpr const char * kCommandDoc =
+  "The answer at obs as an EffortCommand carries it (iceskate_sim.command.CommandValues), "
+  "in one vector: the sum of the sources' commands (effort, then stiffness, damping and "
+  "reference if it has an impedance), each source's generalized force at (q, v) (18 per "
+  "source), the head target (y, z, pitch) if it steers one; then whether it has an "
+  "impedance, whether it has a head target and the sources' names in order.";
 
 SupportState support_state(int mode, int side, int pivot)
 {
@@ -182,7 +216,61 @@ void bind_controller(nb::module_ & m)
       [](const Kinematics & self, int side, int pivot, const std::string & frame) {
         return Eigen::VectorXd(self.frame_offset(side, pivot, frame_named(frame)));
       },
-      "side"_a, "pivot"_a, "frame"_a, "A frame's position in its parent joint [m].");
+      "side"_a, "pivot"_a, "frame"_a, "A frame's position in its parent joint [m].")
+    // the same queries at an observation's state (a Python controller's compute)
+    .def(
+      "head_pose",
+      [](Kinematics & self, const Observation & obs) {
+        const auto pose = self.head_pose(obs.support(), obs.q);
+        return std::make_tuple(Eigen::VectorXd(pose.psi), Eigen::MatrixXd(pose.jacobian));
+      },
+      "obs"_a, "(psi (3,), J_H (3, 18)) at obs's state.")
+    .def(
+      "gravity",
+      [](Kinematics & self, const Observation & obs) {
+        return Eigen::VectorXd(self.gravity(obs.support(), obs.q));
+      },
+      "obs"_a, "g(q) (18,) [N m, N] at obs's state; locked entries 0.")
+    .def(
+      "swing_heel_z_row",
+      [](Kinematics & self, const Observation & obs) {
+        return Eigen::VectorXd(self.swing_heel_z_row(obs.support(), obs.q));
+      },
+      "obs"_a, "d z_heel / d q of the swing heel (18,) at obs's state.")
+    .def(
+      "centre_of_mass",
+      [](Kinematics & self, const Observation & obs) {
+        const auto com = self.centre_of_mass(obs.support(), obs.q, obs.v);
+        return std::make_tuple(Eigen::VectorXd(com.position), Eigen::VectorXd(com.velocity),
+                               Eigen::VectorXd(com.jacobian_y));
+      },
+      "obs"_a, "(position [m], velocity [m/s], d y_com / d q (18,)) at obs's state.")
+    .def(
+      "frame_position",
+      [](Kinematics & self, const Observation & obs, const std::string & frame) {
+        return Eigen::VectorXd(self.frame_position(obs.support(), obs.q, frame_named(frame)));
+      },
+      "obs"_a, "frame"_a, "World position [m] of a frame at obs's state.")
+    .def(
+      "joint_position",
+      [](Kinematics & self, const Observation & obs, int joint) {
+        return Eigen::VectorXd(self.joint_position(obs.support(), obs.q, joint));
+      },
+      "obs"_a, "joint"_a, "World position [m] of a joint at obs's state.")
+    .def(
+      "joint_velocity",
+      [](Kinematics & self, const Observation & obs, int joint) {
+        return Eigen::VectorXd(self.joint_velocity(obs.support(), obs.q, obs.v, joint));
+      },
+      "obs"_a, "joint"_a, "World-aligned linear velocity [m/s] of a joint's origin at obs.")
+    .def(
+      "active",
+      [](const Kinematics & self, int mode) {
+        const Mode & row = self.mode(mode);
+        return Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(
+          row.active.data(), static_cast<Eigen::Index>(row.active.size())));
+      },
+      "mode"_a, "The coordinates active in Table 2's mode `mode` (increasing; 0: y0, i: q_i).");
 
   nb::class_<ModelKinematics, Kinematics>(
     m, "ModelKinematics",
@@ -208,39 +296,20 @@ void bind_controller(nb::module_ & m)
     .def_ro("heel_anchor_y", &Observation::heel_anchor_y)
     .def_ro("t_touchdown", &Observation::t_touchdown);
 
-  nb::class_<Controller>(
+  nb::class_<Controller, PythonController>(
     m, "Controller",
-    "A control law (abstract; the controller packages implement it in C++).")
-    .def(
-      "compute",
-      [](Controller & self, const Observation & obs, Kinematics & kinematics) {
-        ControllerOutput out;
-        self.compute(obs, kinematics, out);
-        const JointCommand total = out.total();
-        const Eigen::Index impedance = total.has_impedance ? kCoordinates : 0;
-        const Eigen::Index source_count = static_cast<Eigen::Index>(out.sources.size());
-        Eigen::VectorXd values(
-          kCoordinates + 3 * impedance + kCoordinates * source_count +
-          (out.has_head_target ? 3 : 0));
-        values << total.effort, total.stiffness.head(impedance), total.damping.head(impedance),
-          total.reference.head(impedance), Eigen::VectorXd::Zero(kCoordinates * source_count),
-          out.head_target.head(out.has_head_target ? 3 : 0);
-        std::vector<std::string> names;
-        Eigen::Index at = kCoordinates + 3 * impedance;
-        for (const auto & [source, command] : out.sources) {
-          values.segment<kCoordinates>(at) = command.torque(obs.q, obs.v);
-          at += kCoordinates;
-          names.push_back(source);
-        }
-        return std::make_tuple(
-          std::move(values), total.has_impedance, out.has_head_target, std::move(names));
-      },
-      "obs"_a, "kinematics"_a,
-      "The answer at obs as an EffortCommand carries it (iceskate_sim.command.CommandValues), "
-      "in one vector: the sum of the sources' commands (effort, then stiffness, damping and "
-      "reference if it has an impedance), each source's generalized force at (q, v) (18 per "
-      "source), the head target (y, z, pitch) if it steers one; then whether it has an "
-      "impedance, whether it has a head target and the sources' names in order.");
+    "A control law. The controller packages implement it in C++; a Python subclass implements "
+    "compute(obs, kinematics) and runs inside the native control loop (docs/usage.md, 'Your "
+    "own controller'): it returns the generalized force (18,) [N m, N] of its one source, or a "
+    "dict {'effort', 'stiffness', 'damping', 'reference', 'head_target'} (an impedance: all "
+    "three gains or none), or {'sources': {name: torque or command}, 'head_target'}; the "
+    "attribute 'sources' names its sources (default: its 'name', else its class name). A "
+    "wrong answer or an exception in compute is a ControllerError naming it.")
+    .def(nb::init<>(), "For a Python subclass (call it from its __init__).")
+    .def("compute", &command_values, "obs"_a, "kinematics"_a, kCommandDoc)
+    .def("command", &command_values, "obs"_a, "kinematics"_a,
+         "As compute of the C++ laws, for every controller (a Python subclass's compute is "
+         "its own law): the answer as an EffortCommand carries it, checked.");
 }
 
 }  // namespace iceskate_native::bindings

@@ -221,8 +221,9 @@ nb::dict run(BoundControlLoop & self, int periods)
     throw std::invalid_argument("the number of periods must be >= 0");
   }
   {
-    // The loop touches no Python object (the controllers are C++ ones, checked when bound):
-    // other Python threads, e.g. the one that hands the bag's samples to its writer, run.
+    // The loop touches no Python object (a controller written in Python takes the GIL for its
+    // own call): other Python threads, e.g. the one that hands the bag's samples to its
+    // writer, run.
     nb::gil_scoped_release released;
     self.loop.run(periods, self.block);
   }

@@ -207,6 +207,20 @@ class HeldCommand:
         zeros = np.zeros(N_COORDINATES)
         return cls(_vector('effort', tau), zeros, zeros.copy())
 
+    @classmethod
+    def of_input(cls, command: HeldCommand | np.ndarray) -> HeldCommand:
+        """``command`` itself, or a plain torque vector (18,) held as it is.
+
+        :raises SimulationError: for a vector that is not 18 finite values.
+        """
+        if isinstance(command, HeldCommand):
+            return command
+        tau = np.asarray(command, dtype=float)
+        if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
+            raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
+                                  f'[y0, q1..q17], got shape {tau.shape}')
+        return cls.torque_only(tau)
+
     def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The generalized force at (q, v) [N m]."""
         return self.bias - self.stiffness * q - self.damping * v

@@ -40,7 +40,9 @@ def native_values(controller: iceskate_native.Controller, obs: iceskate_native.O
     """What ``controller`` sends at ``obs`` (a native observation), as an EffortCommand carries
     it: the sum of its sources' commands (``JointCommand.total``, summed natively), each
     source's generalized force at (q, v) and its head target (if it steers one)."""
-    values, impedance, steers, sources = controller.compute(obs, kinematics)
+    # ``command``, not ``compute``: a controller written in Python overrides ``compute`` with
+    # its own law; ``command`` is the checked answer of every controller
+    values, impedance, steers, sources = controller.command(obs, kinematics)
     n = N_COORDINATES
     m = 4 * n if impedance else n  # the end of the total command
     head = m + n * len(sources)

@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult
+from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, ModelTerms
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.hybrid import FrictionModel, HybridState, Transition
 from iceskate_sim.integrators import FIXED_STEP, IntegratorConfig
@@ -115,7 +115,37 @@ class RunStatistics:
     resolved_cycles: int = 0
 
 
-class Simulator:
+class StateQueries:
+    """What a simulator answers about its current ``state`` (with its ``dynamics``' model
+    terms): the time, the controllers' observation, the head-top placement."""
+
+    state: HybridState
+    dynamics: ModelTerms
+    _head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return self.state.t
+
+    def observation(self) -> Observation:
+        """The controller's view of the current state."""
+        return observation_of(self.state)
+
+    def head_height(self) -> float:
+        """Height of the head top [m]."""
+        return float(self.head_placement().translation[2])
+
+    def head_placement(self) -> pin.SE3:
+        """World placement of the head-top frame in the current state (kept until the state
+        changes)."""
+        if self._head[0] is not self.state:
+            self._head = (self.state, self.dynamics.frame_placement(
+                self.state.contact, self.state.q, 'head_top'))
+        return self._head[1]
+
+
+class Simulator(StateQueries):
     """A hybrid simulation of the humanoid from an initial state, run by the native simulator.
 
     :param robot: the robot model. :param config: the run's settings.
@@ -138,7 +168,6 @@ class Simulator:
 
     def reset(self) -> None:
         """Return to the initial state; clear the event log and the statistics."""
-        self._head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
         self.events: list[Transition] = []
         self.stats = RunStatistics()
         self._periods.reset()
@@ -151,27 +180,6 @@ class Simulator:
         self._mirror_periods()
 
     # -------------------------------------------------------------- accessors
-    @property
-    def time(self) -> float:
-        """Simulation time [s]."""
-        return self.state.t
-
-    def observation(self) -> Observation:
-        """The controller's view of the current state."""
-        return observation_of(self.state)
-
-    def head_height(self) -> float:
-        """Height of the head top [m]."""
-        return float(self.head_placement().translation[2])
-
-    def head_placement(self) -> pin.SE3:
-        """World placement of the head-top frame in the current state (kept until the state
-        changes)."""
-        if self._head[0] is not self.state:
-            self._head = (self.state, self.dynamics.frame_placement(
-                self.state.contact, self.state.q, 'head_top'))
-        return self._head[1]
-
     @property
     def result(self) -> DynamicsResult:
         """The dynamics at the current state under the last input."""
@@ -208,12 +216,7 @@ class Simulator:
             (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
         """
         self._require_running()
-        if not isinstance(command, HeldCommand):
-            tau = np.asarray(command, dtype=float)
-            if tau.shape != (N_COORDINATES,) or not np.all(np.isfinite(tau)):
-                raise SimulationError(f'input torque must be {N_COORDINATES} finite values '
-                                      f'[y0, q1..q17], got shape {tau.shape}')
-            command = HeldCommand.torque_only(tau)
+        command = HeldCommand.of_input(command)
         push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         try:
             self._periods.advance(command, push)

@@ -1,8 +1,9 @@
 // The module visual_lifting._law: VisualLiftingController, the C++ law as an
 // iceskate_native.Controller (the base type comes from iceskate_native, imported first), built
-// from a VisualLiftingParameters object (the one schema); a bad field is a ValueError naming it.
+// from a VisualLiftingParameters object (the one schema): read_visual_lifting, generated from
+// visual_lifting/parameters.py, reads every field by its name; a bad field is a ValueError
+// naming it.
 #include <optional>
-#include <utility>
 
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
@@ -11,6 +12,7 @@
 #include "iceskate_native/binding_parameters.hpp"
 #include "iceskate_native/controller.hpp"
 #include "visual_lifting/law.hpp"
+#include "visual_lifting/parameter_readers.hpp"
 
 namespace nb = nanobind;
 using nb::literals::operator""_a;
@@ -18,25 +20,9 @@ using nb::literals::operator""_a;
 namespace
 {
 
-visual_lifting::Parameters parameters_of(nb::handle object)
+visual_lifting::VisualLiftingParameters parameters_of(nb::handle object)
 {
-  const iceskate_native::binding::Fields fields(object);
-  visual_lifting::Parameters p;
-  const auto kp = fields.numbers("kp", 3);
-  p.kp = Eigen::Vector3d(kp[0], kp[1], kp[2]);
-  p.joints = fields.joints("joints", 1, iceskate_native::kCoordinates - 1);
-  p.joint1_torque = fields.flag("joint1_torque");
-  p.desired_y = fields.choice<visual_lifting::DesiredY>(
-    "desired_y", {{"moving", visual_lifting::DesiredY::kMoving},
-                  {"follow", visual_lifting::DesiredY::kFollow},
-                  {"fixed", visual_lifting::DesiredY::kFixed}});
-  p.v_d = fields.number("v_d");
-  p.z_d = fields.optional_number("z_d");
-  p.pitch_d = fields.number("pitch_d");
-  p.max_dy = fields.optional_number("max_dy");
-  p.stance = {fields.number("shift_y1"), fields.number("shift_z1"), fields.number("shift_time1"),
-              fields.number("shift_y2"), fields.number("shift_time2")};
-  return p;
+  return visual_lifting::read_visual_lifting(iceskate_native::binding::Fields(object));
 }
 
 }  // namespace
@@ -66,6 +52,12 @@ NB_MODULE(_law, m)
     .def(
       "latch_origin", &VisualLiftingController::latch_origin, "obs"_a, "kinematics"_a,
       "Take the head pose at obs as psi(0), the target's origin.")
+    .def_prop_ro(
+      "parameters",
+      [](const VisualLiftingController & self) {
+        return visual_lifting::as_dict(self.parameters());
+      },
+      "The parameters the law runs with, as C++ holds them: {field: value}.")
     .def_prop_ro(
       "origin",
       [](const VisualLiftingController & self) -> std::optional<Eigen::Vector3d> {

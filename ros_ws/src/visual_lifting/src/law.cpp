@@ -8,19 +8,25 @@ namespace visual_lifting
 
 using iceskate_native::Vector18;
 
+iceskate_native::StanceSchedule stance_schedule(const VisualLiftingParameters & params)
+{
+  return {params.shift_y1, params.shift_z1, params.shift_time1, params.shift_y2,
+          params.shift_time2};
+}
+
 Eigen::Vector3d desired_head_pose(
-  const Parameters & params, double t, const Eigen::Vector3d & psi,
+  const VisualLiftingParameters & params, double t, const Eigen::Vector3d & psi,
   const Eigen::Vector3d & origin, const Eigen::Vector2d & offset)
 {
   double y_d = 0.0;
   switch (params.desired_y) {
-    case DesiredY::kMoving:
+    case DesiredYOption::kMoving:
       y_d = origin[0] + params.v_d * t + offset[0];
       break;
-    case DesiredY::kFixed:
+    case DesiredYOption::kFixed:
       y_d = origin[0] + offset[0];
       break;
-    case DesiredY::kFollow:
+    case DesiredYOption::kFollow:
       y_d = psi[0];
       break;
   }
@@ -29,7 +35,8 @@ Eigen::Vector3d desired_head_pose(
 }
 
 Eigen::Vector3d head_error(
-  const Parameters & params, const Eigen::Vector3d & psi_d, const Eigen::Vector3d & psi)
+  const VisualLiftingParameters & params, const Eigen::Vector3d & psi_d,
+  const Eigen::Vector3d & psi)
 {
   Eigen::Vector3d error = psi_d - psi;
   if (params.max_dy) {
@@ -38,11 +45,15 @@ Eigen::Vector3d head_error(
   return error;
 }
 
-VisualLiftingController::VisualLiftingController(Parameters params) : params_(std::move(params))
+VisualLiftingController::VisualLiftingController(VisualLiftingParameters params)
+: params_(std::move(params))
 {
 }
 
-void VisualLiftingController::set_parameters(Parameters params) { params_ = std::move(params); }
+void VisualLiftingController::set_parameters(VisualLiftingParameters params)
+{
+  params_ = std::move(params);
+}
 
 void VisualLiftingController::latch_origin(
   const iceskate_native::Observation & obs, iceskate_native::Kinematics & kinematics)
@@ -59,8 +70,9 @@ void VisualLiftingController::compute(
     origin_ = pose.psi;
   }
   const Eigen::Vector3d psi_d =
-    desired_head_pose(params_, obs.t, pose.psi, *origin_, params_.stance.shift(obs));
-  const Eigen::Vector3d pull = params_.kp.cwiseProduct(head_error(params_, psi_d, pose.psi));
+    desired_head_pose(params_, obs.t, pose.psi, *origin_, stance_schedule(params_).shift(obs));
+  const Eigen::Vector3d kp(params_.kp[0], params_.kp[1], params_.kp[2]);
+  const Eigen::Vector3d pull = kp.cwiseProduct(head_error(params_, psi_d, pose.psi));
   const Vector18 all = pose.jacobian.transpose() * pull;
   Vector18 tau = Vector18::Zero();
   const bool joint1 = kinematics.mode(obs.mode).q1_active && params_.joint1_torque;

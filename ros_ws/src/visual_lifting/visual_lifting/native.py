@@ -1,9 +1,10 @@
-"""The visual-lifting law in C++ (``src/law.cpp``), as an ``iceskate_native.Controller``.
+"""The visual-lifting law, eqs. (8)-(9), in C++ only (``src/law.cpp``), as an
+``iceskate_native.Controller``.
 
-``VisualLiftingController(params)`` takes a ``VisualLiftingParameters``; its ``compute(obs,
-kinematics)`` gives the command of source 'visual_lifting' and the head target psi_d (see
-``iceskate_sim.native_control.native_command``). It equals ``law.visual_lifting``, the
-readable reference (tests/visual_lifting/test_native.py).
+``VisualLiftingController(params)`` takes a ``VisualLiftingParameters``
+(``visual_lifting.parameters``); its ``compute(obs, kinematics)`` gives the command of source
+'visual_lifting' and the head target psi_d (see ``iceskate_sim.native_control.native_command``).
+``parameters`` shows the values the C++ law holds, by field name.
 """
 
 from visual_lifting._law import VisualLiftingController

@@ -6,7 +6,7 @@ head target psi_d it steers to (``head_target``, recorded beside the head pose).
 are the fields of ``VisualLiftingParameters`` as typed ROS parameters (``ros2 param list
 /visual_lifting``; a scene's ``inputs.visual_lifting`` block becomes a parameter file at launch).
 The target's origin psi(0) is the head pose of the state at t = 0 (latched again after a reset).
-The law runs natively (``visual_lifting.native``; ``law`` is its readable reference).
+The law runs natively (``visual_lifting.native``).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from iceskate_sim.controller_node import ControllerNode
 from iceskate_sim.native_control import native_values
 from iceskate_sim.node_support import run_node
 from visual_lifting.errors import VisualLiftingError
-from visual_lifting.law import VisualLiftingParameters
 from visual_lifting.native import VisualLiftingController
+from visual_lifting.parameters import VisualLiftingParameters
 
 
 class VisualLiftingNode(ControllerNode[VisualLiftingParameters]):

@@ -2,13 +2,12 @@
 // gravity compensation and the torso-yaw centring spring, optionally projected into the null
 // space of the head Jacobian. The reference is the bent-knee standing posture, or the moving
 // stance: the pelvis centre follows the stance schedule, reached by a planar 2-link IK of the
-// support leg. The counterpart of gait_manager/posture.py.
+// support leg. Its parameters: PostureParameters (gait_manager/parameters.hpp, generated).
 #pragma once
-
-#include <vector>
 
 #include <Eigen/Core>
 
+#include "gait_manager/parameters.hpp"
 #include "iceskate_native/controller.hpp"
 #include "iceskate_native/kinematics.hpp"
 #include "iceskate_native/stance.hpp"
@@ -16,31 +15,8 @@
 namespace gait_manager
 {
 
-/// The reference posture: the moving stance, the fixed standing posture, or 'balance' (the
-/// walking stabiliser, balance.hpp; only the yaw spring of this block is used then).
-enum class PostureReference
-{
-  kMoving,
-  kStanding,
-  kBalance
-};
-
-/// PostureParameters (gait_manager/posture.py, the one schema).
-struct PostureParameters
-{
-  PostureReference reference = PostureReference::kMoving;
-  std::vector<int> joints;           ///< driven by the PD (2-17)
-  double stiffness = 0.0;            ///< K_q [N m/rad]
-  double damping = 0.0;              ///< B_q [N m s/rad]
-  bool gravity_compensation = false;
-  std::vector<int> gravity_joints;   ///< joints that get g(q) (2-17)
-  double yaw_stiffness = 0.0;        ///< K_8 [N m/rad]
-  double yaw_damping = 0.0;          ///< B_8 [N m s/rad]
-  bool null_space = false;           ///< project the PD into the null space of J_H
-  double bend = 0.0;                 ///< knee bend a of the standing posture [rad]
-  double pelvis_pitch = 0.0;         ///< phi_4 kept by the moving reference [rad]
-  iceskate_native::StanceSchedule stance;  ///< the shift_* fields
-};
+/// The moving stance of the shift_* fields.
+iceskate_native::StanceSchedule stance_schedule(const PostureParameters & params);
 
 /// q_ref (18 entries [m, rad]) and the head offset (dy, dz) [m] for visual lifting.
 struct StanceReference

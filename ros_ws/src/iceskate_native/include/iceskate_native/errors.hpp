@@ -7,6 +7,10 @@
 //       a failure inside a kernel on valid input (a singular matrix, a diverging solve, ...).
 //       Registered in bindings.cpp as a subclass of RuntimeError; iceskate_sim (a layer above)
 //       catches it and raises its own SimulationError with the time, mode and state.
+//   iceskate_native::ControllerError                               -> iceskate_native.ControllerError
+//       a controller written in Python (a subclass of iceskate_native.Controller) that raised
+//       or answered a command of the wrong size or not finite; its message names the
+//       controller. A kind of NativeError.
 //
 // Never let any other exception type or a crash cross the boundary: an unknown C++ exception
 // reaches Python as a bare RuntimeError without context.
@@ -22,6 +26,12 @@ class NativeError : public std::runtime_error
 {
 public:
   using std::runtime_error::runtime_error;
+};
+
+class ControllerError : public NativeError
+{
+public:
+  using NativeError::NativeError;
 };
 
 }  // namespace iceskate_native

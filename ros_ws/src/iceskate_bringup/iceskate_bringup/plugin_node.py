@@ -1,0 +1,102 @@
+"""``plugin_controller``: a controller written in Python (``iceskate_bringup.plugin``) as a ROS
+node, as ``visual_lifting`` and ``gait_manager`` run theirs::
+
+    plugin_controller --ros-args -r __node:=lifting -p use_sim_time:=true \\
+        -p plugin:=iceskate_bringup.examples.visual_lifting_numpy:VisualLifting \\
+        -p parameters:='{"desired_y": "fixed"}'
+
+It answers every ``gait_state`` with one ``EffortCommand`` (source: the node's name, set with
+``-r __node:=NAME``; its sources: the controller's) through the same checked conversion as the
+headless loop (``iceskate_native.Controller.command``), so both paths give the same run.
+``run_scene SCENE --ros`` starts one per plug-in the scene names, with its scene block as the
+parameters ``plugin`` and ``parameters`` (the class's keyword arguments as a JSON mapping).
+A failing controller logs its error and sends nothing at that instant (the simulator's timeout
+then names the node); ``ros2 param set`` of either parameter builds a new instance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import sys
+from typing import Any
+
+from iceskate_bringup.plugin import PluginBlock, make_controller
+import iceskate_native
+from iceskate_sim.command import CommandValues
+from iceskate_sim.controller_node import ControllerNode
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.native_control import native_values
+from iceskate_sim.node_support import run_node
+from iceskate_sim.parameters import check_fields, setting
+
+#: The node's name unless remapped (``-r __node:=NAME``).
+DEFAULT_NAME = 'plugin_controller'
+
+
+@dataclass(frozen=True)
+class PluginNodeParameters:
+    """The parameters of a plug-in controller node."""
+
+    plugin: str = setting('', "the controller class, 'package.module:Class'")
+    parameters: str = setting('{}', "the class's keyword arguments, a JSON mapping")
+
+    def __post_init__(self) -> None:
+        """Check the types (SimulationError naming the field)."""
+        check_fields(self, SimulationError)
+
+    def block(self) -> PluginBlock:
+        """The plug-in these parameters name (SimulationError if ``parameters`` is no JSON
+        mapping)."""
+        try:
+            parameters = json.loads(self.parameters)
+        except ValueError as exc:
+            raise SimulationError(f'parameters is no JSON mapping: {exc}') from None
+        if not isinstance(parameters, dict):
+            raise SimulationError(f'parameters must be a JSON mapping, got '
+                                  f'{type(parameters).__name__}')
+        return PluginBlock(self.plugin, parameters)
+
+
+def node_name(args: list[str] | None) -> str:
+    """The node's name from a ``__node:=NAME`` remapping in ``args`` (else DEFAULT_NAME)."""
+    for arg in args or ():
+        if arg.startswith('__node:='):
+            return arg.removeprefix('__node:=')
+    return DEFAULT_NAME
+
+
+class PluginControllerNode(ControllerNode[PluginNodeParameters]):
+    """A plug-in controller as a node."""
+
+    parameter_class = PluginNodeParameters
+    parameter_error = SimulationError
+    law_errors = (iceskate_native.ControllerError,)
+
+    def __init__(self, name: str | None = None, **kwargs: Any) -> None:
+        super().__init__(name or node_name(kwargs.get('cli_args')), **kwargs)
+        self.controller = make_controller(self.get_name(), self.params.block())
+
+    def _on_parameters(self, params: PluginNodeParameters) -> None:
+        """A new instance of the controller the parameters name, from the next state on."""
+        try:
+            controller = make_controller(self.get_name(), params.block())
+        except SimulationError as exc:
+            self.get_logger().error(f'parameters not applied: {exc}')
+            return
+        super()._on_parameters(params)
+        self.controller = controller
+
+    def compute(self, obs: iceskate_native.Observation) -> CommandValues:
+        """The controller's checked answer at ``obs``."""
+        return native_values(self.controller, obs, self.kinematics)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point."""
+    name = node_name(sys.argv if args is None else args)
+    return run_node(lambda: PluginControllerNode(name), name, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
