@@ -28,9 +28,9 @@ from bench_work_precision import machine_info
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
-from iceskate_sim import recording
-from iceskate_sim.recording import RecordBlock
-from iceskate_sim.session import Session, scene_metadata
+from iceskate_sim.recording import bag as recording
+from iceskate_sim.recording.bag import RecordBlock
+from iceskate_sim.run.session import Session, scene_metadata
 
 WAYS = ('Writer.write, message by message', 'write_many, block by block')
 

@@ -48,9 +48,9 @@ def _import_core():
     # as the tests do
     if str(REPO_ROOT / 'tests') not in sys.path:
         sys.path.append(str(REPO_ROOT / 'tests'))
-    from iceskate_sim.dynamics import ContactState, DynamicsParameters
-    from iceskate_sim.modes import MODES
-    from iceskate_sim.robot import JOINT_LIMITS, load_robot
+    from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+    from iceskate_sim.model.modes import MODES
+    from iceskate_sim.model.robot import JOINT_LIMITS, load_robot
     from oracle.dynamics import GaitDynamics
     from oracle.floating_base import FloatingBaseDynamics
     return (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
      JOINT_LIMITS, load_robot) = _import_core()
-    from iceskate_sim.native_dynamics import NativeGaitDynamics
+    from iceskate_sim.physics.native import NativeGaitDynamics
     from oracle.dynamics import _solve  # the linear solve of evaluate
 
     robot = load_robot()

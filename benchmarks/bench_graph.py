@@ -52,9 +52,9 @@ def controller_compute_ms(scene) -> dict[str, float]:
     """Median time [ms] of each controller node's law (the native one the nodes call, with the
     command values they send) at the scene's initial observation."""
     from iceskate_bringup.composition import ControlStack
-    from iceskate_sim.native_control import native_observation, native_values
-    from iceskate_sim.robot import load_robot
-    from iceskate_sim.simulation import Simulator
+    from iceskate_sim.model.robot import load_robot
+    from iceskate_sim.physics.native_control import native_observation, native_values
+    from iceskate_sim.physics.simulation import Simulator
     robot = load_robot()
     obs = Simulator(robot, scene.simulator, scene.initial).observation()
     stack = ControlStack(scene, robot, obs)
@@ -190,9 +190,9 @@ def messaging_floor(scene_arg: str, periods: int) -> float:
     from iceskate_bringup.graph import ros_environment, stop
     from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
-    from iceskate_sim.lockstep import CONTROL_TOPICS, LockstepSession
-    from iceskate_sim.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
-    from iceskate_sim.session import Session
+    from iceskate_sim.ros.lockstep import CONTROL_TOPICS, LockstepSession
+    from iceskate_sim.ros.node_support import CLOCK_QOS, LOCKSTEP_READER_QOS, STATE_QOS
+    from iceskate_sim.run.session import Session
     scene = load_scene(scene_arg)
     session = LockstepSession(Session(scene), scene_sources(scene))
     payloads = list(session.state_bytes(CONTROL_TOPICS).values())
@@ -251,9 +251,9 @@ def _echo(name: str, scene_arg: str) -> int:
 
     from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
-    from iceskate_sim.command import CommandValues, ControllerCommand, JointCommand
-    from iceskate_sim.effort_cdr import CommandEncoder
-    from iceskate_sim.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
+    from iceskate_sim.model.command import CommandValues, ControllerCommand, JointCommand
+    from iceskate_sim.ros.effort_cdr import CommandEncoder
+    from iceskate_sim.ros.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
     sources = scene_sources(load_scene(scene_arg))[name]
     zero = JointCommand(np.zeros(18))
     command = CommandValues.of(ControllerCommand.of(dict.fromkeys(sources, zero), np.zeros(18),

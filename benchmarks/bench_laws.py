@@ -26,8 +26,8 @@ from bench_work_precision import machine_info
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.native_control import native_observation
-from iceskate_sim.session import Session
+from iceskate_sim.physics.native_control import native_observation
+from iceskate_sim.run.session import Session
 
 STACK, COMPUTE = 'native laws (ControlStack.commands)', 'native laws (Controller.compute)'
 

@@ -39,8 +39,8 @@ import numpy as np
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene, scene_sources
-from iceskate_sim.robot import load_robot
-from iceskate_sim.scene import Scene
+from iceskate_sim.model.robot import load_robot
+from iceskate_sim.run.scene import Scene
 
 
 def _median(values: list[float]) -> float:
@@ -48,7 +48,7 @@ def _median(values: list[float]) -> float:
 
 
 def _obs(scene: Scene, robot: Any):
-    from iceskate_sim.simulation import Simulator
+    from iceskate_sim.physics.simulation import Simulator
     return Simulator(robot, scene.simulator, scene.initial).observation()
 
 
@@ -117,7 +117,7 @@ def per_source_cost(scene: Scene, robot: Any, number: int, log) -> dict[str, flo
     from gait_manager.native import GaitManagerController
     from gait_manager.parameters import SOURCES
     from iceskate_bringup.scene import node_parameters
-    from iceskate_sim.native_control import native_command
+    from iceskate_sim.physics.native_control import native_command
     obs = _obs(scene, robot)
     stack = ControlStack(scene, robot, obs)
     costs: dict[str, float] = {}

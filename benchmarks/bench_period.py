@@ -47,11 +47,11 @@ from bench_work_precision import machine_info
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.command import CommandValues
-from iceskate_sim.robot import Robot, load_robot
-from iceskate_sim.scene import Scene
-from iceskate_sim.session import Session
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.model.command import CommandValues
+from iceskate_sim.model.robot import Robot, load_robot
+from iceskate_sim.physics.simulation import Simulator
+from iceskate_sim.run.scene import Scene
+from iceskate_sim.run.session import Session
 
 GOAL = 0.8  # the run's own real-time factor over the native loop's
 WARMUP = 0.1  # s simulated of each variant before the timed runs

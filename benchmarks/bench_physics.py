@@ -55,10 +55,10 @@ import numpy as np
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.command import HeldCommand
-from iceskate_sim.hybrid import HybridState
-from iceskate_sim.robot import N_COORDINATES, anatomical_map, load_robot
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.model.robot import N_COORDINATES, anatomical_map, load_robot
+from iceskate_sim.physics.hybrid import HybridState
+from iceskate_sim.physics.simulation import Simulator
 
 GOAL_RATIO = 4.0  # physics alone <= 4 x mj_step (implicitfast) at the same step
 

@@ -84,14 +84,14 @@ import_core()
 from iceskate_bringup.composition import ControlStack  # noqa: E402
 from iceskate_bringup.runner import BLOCK_PERIODS  # noqa: E402
 from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
-from iceskate_sim.dynamics import ContactState  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
-from iceskate_sim.integrators import FIXED_STEP as FIXED  # noqa: E402
-from iceskate_sim.integrators import METHODS, IntegratorConfig  # noqa: E402
-from iceskate_sim.modes import MODES  # noqa: E402
-from iceskate_sim.robot import PIVOTS, SIDES, load_robot  # noqa: E402
-from iceskate_sim.scene import Scene  # noqa: E402
-from iceskate_sim.simulation import Simulator  # noqa: E402
+from iceskate_sim.model.dynamics import ContactState  # noqa: E402
+from iceskate_sim.model.modes import MODES  # noqa: E402
+from iceskate_sim.model.robot import PIVOTS, SIDES, load_robot  # noqa: E402
+from iceskate_sim.physics.integrators import FIXED_STEP as FIXED  # noqa: E402
+from iceskate_sim.physics.integrators import METHODS, IntegratorConfig  # noqa: E402
+from iceskate_sim.physics.simulation import Simulator  # noqa: E402
+from iceskate_sim.run.scene import Scene  # noqa: E402
 
 
 # ------------------------------------------------------------------------------ driver

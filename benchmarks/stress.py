@@ -61,13 +61,13 @@ for _package in ('iceskate_sim', 'visual_lifting', 'gait_manager'):
 from iceskate_bringup.composition import ControlStack  # noqa: E402
 from iceskate_bringup.runner import BLOCK_PERIODS  # noqa: E402
 from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
-from iceskate_sim.command import HeldCommand, JointCommand  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
-from iceskate_sim.hybrid import FrictionModel  # noqa: E402
-from iceskate_sim.integrators import IntegratorConfig  # noqa: E402
-from iceskate_sim.robot import N_COORDINATES, load_robot  # noqa: E402
-from iceskate_sim.scene import Scene  # noqa: E402
-from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state  # noqa: E402
+from iceskate_sim.model.command import HeldCommand, JointCommand  # noqa: E402
+from iceskate_sim.model.robot import N_COORDINATES, load_robot  # noqa: E402
+from iceskate_sim.physics.hybrid import FrictionModel  # noqa: E402
+from iceskate_sim.physics.integrators import IntegratorConfig  # noqa: E402
+from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state  # noqa: E402
+from iceskate_sim.run.scene import Scene  # noqa: E402
 
 OUTCOMES = ('completed', 'ended', 'error', 'nan', 'hang', 'crash')
 GOOD = ('completed', 'ended', 'error')

@@ -114,7 +114,7 @@ def ros_context(ros_domain_id: int) -> Iterator[object]:
 @pytest.fixture(scope='session')
 def dynamics() -> object:
     """GaitDynamics of the shipped URDF (one per test session)."""
-    from iceskate_sim.robot import load_robot
+    from iceskate_sim.model.robot import load_robot
     from oracle.dynamics import GaitDynamics
     return GaitDynamics(load_robot())
 
@@ -122,8 +122,8 @@ def dynamics() -> object:
 @pytest.fixture
 def make_obs() -> Callable[..., object]:
     """Return a factory of Observations; defaults: bent-knee stance, mode 1, right support."""
-    from iceskate_sim.observation import Observation
-    from iceskate_sim.scene import standing_posture
+    from iceskate_sim.model.observation import Observation
+    from iceskate_sim.run.scene import standing_posture
 
     def make(t: float = 0.0, q: np.ndarray | None = None, v: np.ndarray | None = None,
              mode: int = 1, side: str = 'right', pivot: str = 'toe', step_index: int = 0,
@@ -165,7 +165,7 @@ def scene_observations() -> dict[str, list[object]]:
 
     from iceskate_bringup.composition import ControlStack
     from iceskate_bringup.scene import load_scene
-    from iceskate_sim.session import Session
+    from iceskate_sim.run.session import Session
 
     out: dict[str, list[object]] = {}
     for name, seconds, every in SCENE_RUNS:

@@ -134,6 +134,48 @@ def test_no_cycle_between_the_modules_of_a_package(package):
     assert _cycle(graph) is None
 
 
+#: The layers of the core (``iceskate_sim``), bottom up: the package root (errors, the parameter
+#: schema, YAML reading, signals), the robot model, the physics on the native core, recording,
+#: one run, the ROS side. A module imports only from its own layer and those below it.
+CORE_LAYERS = ('', 'model', 'physics', 'recording', 'run', 'ros')
+
+
+def _core_layer(module: str) -> str:
+    """'iceskate_sim.physics.simulation' -> 'physics'; a module at the package root -> ''."""
+    parts = module.split('.')
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in CORE_LAYERS) else ''
+
+
+def _layer_violations(modules: dict[str, Path]) -> list[str]:
+    """'importer -> imported' for every import of a core module from a higher layer."""
+    found = set()
+    for module, path in modules.items():
+        for name in _imports(path, module):
+            while name and name not in modules:  # 'pkg.mod.Name' -> 'pkg.mod'
+                name = name.rpartition('.')[0]
+            if name and name != 'iceskate_sim' and (
+                    CORE_LAYERS.index(_core_layer(name)) > CORE_LAYERS.index(_core_layer(module))):
+                found.add(f'{module} -> {name}')
+    return sorted(found)
+
+
+def test_the_core_shows_its_layers_and_imports_downward_only():
+    modules = _modules('iceskate_sim')
+    folders = {module.split('.')[1] for module in modules if module.count('.') >= 2}
+    assert folders == set(CORE_LAYERS) - {''}, 'every folder of iceskate_sim is a named layer'
+    assert _layer_violations(modules) == []
+
+
+def test_the_layer_check_finds_an_upward_import(tmp_path):
+    model = tmp_path / 'robot.py'
+    model.write_text('def f():\n    from iceskate_sim.run.session import Session\n')
+    session = tmp_path / 'session.py'
+    session.write_text('from iceskate_sim.model.robot import Robot\n')
+    assert _layer_violations({'iceskate_sim.model.robot': model,
+                              'iceskate_sim.run.session': session}) == [
+        'iceskate_sim.model.robot -> iceskate_sim.run.session']
+
+
 def test_the_checks_find_a_cycle_and_a_deferred_import(tmp_path):
     assert _cycle({'a': {'b'}, 'b': {'c'}, 'c': {'a'}}) == ['a', 'b', 'c', 'a']
     assert _cycle({'a': {'b'}, 'b': set()}) is None

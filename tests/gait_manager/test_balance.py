@@ -12,8 +12,8 @@ import pytest
 
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.robot import GRAVITY, SOLE_HEEL_Y
-from iceskate_sim.scene import standing_posture
+from iceskate_sim.model.robot import GRAVITY, SOLE_HEEL_Y
+from iceskate_sim.run.scene import standing_posture
 
 ANKLE_HEIGHT = 0.07  # m, ankle above the sole (docs/model.md §2.4)
 BALANCE = {'reference': 'balance'}

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from iceskate_sim.robot import GRAVITY
+from iceskate_sim.model.robot import GRAVITY
 
 
 def test_swing_hip_pulse_only_in_its_window_and_in_the_air(make_obs, torque):

@@ -20,11 +20,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState
-from iceskate_sim.hybrid import HybridState
-from iceskate_sim.modes import get_mode
-from iceskate_sim.recording import BagRecorder, Sample
-from iceskate_sim.robot import N_COORDINATES, Q1, Y0, load_robot
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, load_robot
+from iceskate_sim.physics.hybrid import HybridState
+from iceskate_sim.recording.bag import BagRecorder, Sample
 from oracle.dynamics import GaitDynamics
 
 #: A tiny version of the skate scene: ice, visual lifting, posture and the torso-yaw input.

@@ -14,7 +14,7 @@ from iceskate_analysis.animation import (
 )
 from iceskate_analysis.bag_io import read_bag
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import SOLE_HEEL_Y, load_robot
+from iceskate_sim.model.robot import SOLE_HEEL_Y, load_robot
 
 
 @pytest.fixture(scope='module')

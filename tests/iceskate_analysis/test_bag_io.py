@@ -10,7 +10,7 @@ import pytest
 
 from iceskate_analysis.bag_io import read_bag, resolve_bag_path
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
 
 def test_read_bag_aligns_every_sample_of_a_run(sim_bag, spec):
@@ -108,7 +108,7 @@ def _write(path: pathlib.Path, topics: dict[str, tuple[str, object]], typestore)
 
 
 def test_read_bag_refuses_a_topic_of_the_wrong_type(tmp_path):
-    from iceskate_sim.bag_types import make_typestore
+    from iceskate_sim.recording.bag_types import make_typestore
     ts = make_typestore()
     string = ts.types['std_msgs/msg/String']
     path = tmp_path / 'wrong_type'

@@ -15,10 +15,10 @@ from iceskate_analysis.coupling import (
     interval_accelerations,
     parse_joint,
 )
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import N_COORDINATES
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import N_COORDINATES
 from oracle.dynamics import GaitDynamics
 
 CLOSURE = 1e-9  # relative closure residual the decomposition must reach

@@ -14,8 +14,8 @@ from iceskate_bringup.runner import main, simulate
 from iceskate_bringup.scene import node_parameters, parse_scene, scene_path, scene_sources
 import iceskate_native
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.native_control import native_kinematics
-from iceskate_sim.robot import load_robot
+from iceskate_sim.model.robot import load_robot
+from iceskate_sim.physics.native_control import native_kinematics
 from iceskate_sim.yaml_io import read_yaml
 
 EXAMPLE = 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'

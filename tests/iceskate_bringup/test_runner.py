@@ -9,10 +9,10 @@ import pytest
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import main, run
 from iceskate_bringup.scene import load_scene, scene_sources
-from iceskate_sim.dynamics import ContactState
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import SIDES, load_robot
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import SIDES, load_robot
+from iceskate_sim.physics.simulation import Simulator
 from oracle.dynamics import GaitDynamics
 
 SHORT_SKATE = 5.0  # s: the first steps of the skate scene (past the arm assist's release)

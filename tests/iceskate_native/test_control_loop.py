@@ -22,14 +22,14 @@ from gait_manager.errors import GaitManagerError
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
-from iceskate_sim.command import CommandValues, HeldCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import Transition
-from iceskate_sim.recording import Sample, bag_record
-from iceskate_sim.robot import PIVOTS, SIDES
-from iceskate_sim.scene import Push, Scene
-from iceskate_sim.session import Session
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.model.command import CommandValues, HeldCommand
+from iceskate_sim.model.robot import PIVOTS, SIDES
+from iceskate_sim.physics.hybrid import Transition
+from iceskate_sim.physics.simulation import Simulator
+from iceskate_sim.recording.bag import Sample, bag_record
+from iceskate_sim.run.scene import Push, Scene
+from iceskate_sim.run.session import Session
 
 
 def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -> Scene:

@@ -1,7 +1,7 @@
 """The native eq. (7) against the Python reference: every mode, side, pivot and friction case.
 
-``iceskate_sim.dynamics.GaitDynamics`` is the readable reference; ``NativeGaitDynamics`` solves
-the same system in C++ (``iceskate_native.Dynamics``). The two factorise the same matrix with
+``oracle.dynamics.GaitDynamics`` is the readable reference; ``NativeGaitDynamics`` solves the
+same system in C++ (``iceskate_native.Dynamics``). The two factorise the same matrix with
 LU of partial pivoting in different operation orders, so they agree to rounding: each quantity
 to 1e-11 of its scale (the dynamics matrix has condition numbers up to ~1e4 here, and most
 entries agree to ~1e-13).
@@ -13,11 +13,11 @@ import pathlib
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MODES, get_mode
-from iceskate_sim.native_dynamics import NativeGaitDynamics
-from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, load_robot
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+from iceskate_sim.model.modes import MODES, get_mode
+from iceskate_sim.model.robot import JOINT_LIMITS, PIVOTS, SIDES, load_robot
+from iceskate_sim.physics.native import NativeGaitDynamics
 from oracle.dynamics import GaitDynamics
 
 #: a fast-stepping skate gait (test data): many events in a short window
@@ -159,7 +159,7 @@ def test_an_unknown_mode_is_refused_by_the_kernel(engines):
 
 def test_a_bad_mode_table_is_refused(robot):
     import iceskate_native
-    from iceskate_sim.native_dynamics import _native_robot
+    from iceskate_sim.physics.native import _native_robot
     models, frames = _native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]
@@ -173,8 +173,8 @@ def test_a_bad_mode_table_is_refused(robot):
 @pytest.mark.parametrize(('number', 'side', 'pivot'), CASES[::2])
 @pytest.mark.parametrize('rule', ['ice', 'coulomb'])
 def test_guard_values_agree(engines, number, side, pivot, rule):
-    from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState, guards_of
+    from iceskate_sim.model.command import HeldCommand
+    from iceskate_sim.physics.hybrid import FrictionModel, HybridState, guards_of
     from oracle.automaton import guard_values
     reference, native = engines
     mode = get_mode(number)
@@ -196,8 +196,8 @@ def _heel_lift(robot):
     """Mode 17 (double support) with the swing hip pushed so that the heel lifts (guard S5 or
     the like fires about 2 ms in): the engines, the start state, the held command and the
     Python right-hand side and guards for the oracle's ``Integrator.integrate_segment``."""
-    from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState
+    from iceskate_sim.model.command import HeldCommand
+    from iceskate_sim.physics.hybrid import FrictionModel, HybridState
     from oracle.automaton import guard_values
     params = DynamicsParameters()
     reference, native = GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
@@ -229,8 +229,8 @@ def _heel_lift(robot):
 def test_a_native_segment_equals_the_python_one_with_its_event(robot, method):
     """The segment stops at the same guard, at the same time (to the event tolerance), in the
     same state."""
-    from iceskate_sim.hybrid import guards_of
-    from iceskate_sim.integrators import IntegratorConfig
+    from iceskate_sim.physics.hybrid import guards_of
+    from iceskate_sim.physics.integrators import IntegratorConfig
     from oracle.integrators import Integrator
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     config = IntegratorConfig(method=method, step=1e-4, event_tolerance=1e-10)
@@ -252,7 +252,7 @@ def test_native_rk45_locates_the_event_of_a_tight_reference(robot):
     """Dormand-Prince 5(4) natively (Boost.Odeint's stepper and step-size control, the event
     on its dense output) against DOP853 at 1e-12 in Python: the same guard, its time and the
     state there to what the tolerance leaves (measured: 1.3e-13 s, 3.4e-13 at rtol 1e-9)."""
-    from iceskate_sim.integrators import IntegratorConfig
+    from iceskate_sim.physics.integrators import IntegratorConfig
     from oracle.integrators import Integrator, ReferenceIntegratorConfig
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     x0 = np.concatenate([start.q, start.v])
@@ -272,7 +272,7 @@ def test_native_rk45_error_follows_its_tolerance(robot):
     """On a smooth stretch (stopping before the event) the global error of the native rk45 is
     proportional to the tolerance (log-log slope 1) and the step count grows as tol^(-1/5), the
     signature of an error estimate of local order 5."""
-    from iceskate_sim.integrators import IntegratorConfig
+    from iceskate_sim.physics.integrators import IntegratorConfig
     from oracle.integrators import Integrator, ReferenceIntegratorConfig
     native, start, command, friction, rhs, guards = _heel_lift(robot)
     x0 = np.concatenate([start.q, start.v])
@@ -296,9 +296,9 @@ def test_native_rk45_error_follows_its_tolerance(robot):
 
 
 def test_a_segment_without_event_reaches_the_end(robot):
-    from iceskate_sim.command import HeldCommand
-    from iceskate_sim.hybrid import FrictionModel, HybridState
-    from iceskate_sim.integrators import IntegratorConfig
+    from iceskate_sim.model.command import HeldCommand
+    from iceskate_sim.physics.hybrid import FrictionModel, HybridState
+    from iceskate_sim.physics.integrators import IntegratorConfig
     native = NativeGaitDynamics(robot)
     q = np.zeros(18)
     q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
@@ -319,7 +319,7 @@ def test_a_segment_without_event_reaches_the_end(robot):
 ])
 def test_a_mode_table_that_contradicts_itself_is_refused(robot, row, match):
     import iceskate_native
-    from iceskate_sim.native_dynamics import _native_robot
+    from iceskate_sim.physics.native import _native_robot
     models, frames = _native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]
@@ -331,7 +331,7 @@ def test_a_mode_table_that_contradicts_itself_is_refused(robot, row, match):
 
 def test_non_finite_physical_options_are_refused(robot):
     import iceskate_native
-    from iceskate_sim.native_dynamics import _native_robot
+    from iceskate_sim.physics.native import _native_robot
     models, frames = _native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]

@@ -1,7 +1,7 @@
 """The native kernel (iceskate_native._kernel, C++ on Pinocchio's C++ API, nanobind bindings).
 
 Needs the built workspace (``make setup``; ``. ./env.sh`` puts it on the path). The models are
-the ones Python builds (iceskate_sim.robot), handed to C++ as Pinocchio's binary archive.
+the ones Python builds (iceskate_sim.model.robot), handed to C++ as Pinocchio's binary archive.
 """
 
 import itertools
@@ -13,7 +13,7 @@ import pytest
 
 import iceskate_native
 from iceskate_native import NativeError, RobotModel, crba_of
-from iceskate_sim.robot import PIVOTS, SIDES, load_robot
+from iceskate_sim.model.robot import PIVOTS, SIDES, load_robot
 
 SEED = 20190605
 DRAWS = 20

@@ -8,10 +8,10 @@ import pinocchio as pin
 import pytest
 
 import iceskate_native
-from iceskate_sim.dynamics import ContactState
-from iceskate_sim.modes import MODES
-from iceskate_sim.native_control import native_kinematics
-from iceskate_sim.robot import PIVOTS, SIDES, load_robot
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.robot import PIVOTS, SIDES, load_robot
+from iceskate_sim.physics.native_control import native_kinematics
 from oracle.dynamics import GaitDynamics
 
 TOLERANCE = {'rtol': 1e-13, 'atol': 1e-13}

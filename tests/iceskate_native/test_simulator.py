@@ -19,12 +19,12 @@ import pytest
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.command import HeldCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel
-from iceskate_sim.integrators import IntegratorConfig
-from iceskate_sim.scene import Push, Scene
-from iceskate_sim.session import Session
+from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.physics.hybrid import FrictionModel
+from iceskate_sim.physics.integrators import IntegratorConfig
+from iceskate_sim.run.scene import Push, Scene
+from iceskate_sim.run.session import Session
 from oracle.automaton import rerooted_command
 from oracle.simulator import ReferenceRun, run_reference
 

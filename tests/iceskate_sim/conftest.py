@@ -10,9 +10,9 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import DynamicsParameters
-from iceskate_sim.modes import GaitMode, get_mode
-from iceskate_sim.robot import JOINT_LIMITS, N_COORDINATES, Q1, Y0, Robot, load_robot
+from iceskate_sim.model.dynamics import DynamicsParameters
+from iceskate_sim.model.modes import GaitMode, get_mode
+from iceskate_sim.model.robot import JOINT_LIMITS, N_COORDINATES, Q1, Y0, Robot, load_robot
 from oracle.dynamics import GaitDynamics
 
 SEED = 20190605  # ROBOMECH 2019
@@ -114,7 +114,7 @@ def make_dynamics(formulation: str, robot: Robot) -> Callable[..., GaitDynamics]
     """``make_dynamics(params)`` -> the dynamics routine of the test's formulation."""
     def make(params: DynamicsParameters | None = None) -> GaitDynamics:
         if formulation == 'native':
-            from iceskate_sim.native_dynamics import NativeGaitDynamics
+            from iceskate_sim.physics.native import NativeGaitDynamics
             return NativeGaitDynamics(robot, params)
         return GaitDynamics(robot, params)
     return make

@@ -14,12 +14,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import GUARDS, FrictionModel, HybridState, guards_of
-from iceskate_sim.modes import MODES, get_mode, mode_for
-from iceskate_sim.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
+from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.model.dynamics import ContactState, DynamicsResult
+from iceskate_sim.model.modes import MODES, get_mode, mode_for
+from iceskate_sim.model.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
+from iceskate_sim.physics.hybrid import GUARDS, FrictionModel, HybridState, guards_of
 from oracle.automaton import (
     EPS_V,
     GUARD_VALUES,

@@ -7,9 +7,9 @@ import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.writer import CompressionFormat, CompressionMode
 
-from iceskate_sim.bag_bulk import write_many
-from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.recording.bag_bulk import write_many
+from iceskate_sim.recording.bag_types import make_typestore
 
 TOPICS = {'/clock': 'rosgraph_msgs/msg/Clock', '/chatter': 'std_msgs/msg/String',
           '/big': 'std_msgs/msg/String'}

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from iceskate_sim.command import ControllerCommand, HeldCommand, JointCommand
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.command import ControllerCommand, HeldCommand, JointCommand
 
 RNG = np.random.default_rng(7)
 

@@ -10,14 +10,14 @@ pytestmark = [pytest.mark.ros]
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
 from gait_manager.native import GaitManagerController  # noqa: E402
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
-from iceskate_sim.command import ControllerCommand, JointCommand  # noqa: E402
-from iceskate_sim.effort_cdr import CommandDecoder  # noqa: E402
-from iceskate_sim.lockstep import LockstepSession  # noqa: E402
-from iceskate_sim.native_control import native_command, native_kinematics  # noqa: E402
-from iceskate_sim.node_support import write_parameter_file  # noqa: E402
+from iceskate_sim.model.command import ControllerCommand, JointCommand  # noqa: E402
+from iceskate_sim.model.robot import load_robot  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
-from iceskate_sim.robot import load_robot  # noqa: E402
-from iceskate_sim.session import Session  # noqa: E402
+from iceskate_sim.physics.native_control import native_command, native_kinematics  # noqa: E402
+from iceskate_sim.ros.effort_cdr import CommandDecoder  # noqa: E402
+from iceskate_sim.ros.lockstep import LockstepSession  # noqa: E402
+from iceskate_sim.ros.node_support import write_parameter_file  # noqa: E402
+from iceskate_sim.run.session import Session  # noqa: E402
 
 
 def skate_session() -> LockstepSession:

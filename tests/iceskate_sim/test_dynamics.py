@@ -13,10 +13,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MODES, get_mode
-from iceskate_sim.robot import N_COORDINATES
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, DynamicsResult
+from iceskate_sim.model.modes import MODES, get_mode
+from iceskate_sim.model.robot import N_COORDINATES
 from oracle.dynamics import GaitDynamics
 
 LWA = pin.LOCAL_WORLD_ALIGNED

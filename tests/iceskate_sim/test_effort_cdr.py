@@ -7,13 +7,13 @@ from rclpy's (what a controller written against the message class publishes).
 import numpy as np
 import pytest
 
-from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.command import CommandValues, ControllerCommand, JointCommand
-from iceskate_sim.effort_cdr import CommandDecoder, CommandEncoder, read_effort_command
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.recording import MessageFactory
-from iceskate_sim.robot import COORDINATE_NAMES
-from iceskate_sim.ros_conversions import command_fields, command_from_message
+from iceskate_sim.model.command import CommandValues, ControllerCommand, JointCommand
+from iceskate_sim.model.robot import COORDINATE_NAMES
+from iceskate_sim.recording.bag import MessageFactory
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.ros.conversions import command_fields, command_from_message
+from iceskate_sim.ros.effort_cdr import CommandDecoder, CommandEncoder, read_effort_command
 
 TYPE = 'iceskate_interfaces/msg/EffortCommand'
 STAMP = 1_234_567_890_123  # ns

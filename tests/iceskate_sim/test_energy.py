@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import N_COORDINATES
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import N_COORDINATES
 from oracle.dynamics import GaitDynamics
 
 DURATION = 5.0  # s

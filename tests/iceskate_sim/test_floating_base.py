@@ -11,9 +11,9 @@ import zlib
 import numpy as np
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters
-from iceskate_sim.modes import MODES, get_mode
-from iceskate_sim.robot import JOINT_LIMITS, N_COORDINATES
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+from iceskate_sim.model.modes import MODES, get_mode
+from iceskate_sim.model.robot import JOINT_LIMITS, N_COORDINATES
 from oracle.dynamics import GaitDynamics
 from oracle.floating_base import FloatingBaseDynamics
 

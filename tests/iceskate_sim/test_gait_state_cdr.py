@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from iceskate_bringup.scene import load_scene, scene_sources
-from iceskate_sim.bag_types import make_typestore
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.gait_state_cdr import read_observation
-from iceskate_sim.lockstep import LockstepSession
-from iceskate_sim.native_control import native_observation
-from iceskate_sim.ros_conversions import observation_from_gait_state, stamp_to_ns
-from iceskate_sim.session import Session
+from iceskate_sim.model.stamps import stamp_to_ns
+from iceskate_sim.physics.native_control import native_observation
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.ros.conversions import observation_from_gait_state
+from iceskate_sim.ros.gait_state_cdr import read_observation
+from iceskate_sim.ros.lockstep import LockstepSession
+from iceskate_sim.run.session import Session
 
 TYPE = 'iceskate_interfaces/msg/GaitState'
 FAST_SKATE = Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'

@@ -13,13 +13,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, HybridState, guards_of
-from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import N_COORDINATES
-from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import N_COORDINATES
+from iceskate_sim.physics.hybrid import FrictionModel, HybridState, guards_of
+from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
+from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from oracle.automaton import guard_values
 from oracle.dynamics import GaitDynamics
 from oracle.integrators import Integrator, ReferenceIntegratorConfig

@@ -14,11 +14,12 @@ import pytest
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene, scene_sources
-from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import LockstepSession
-from iceskate_sim.ros_conversions import observation_from_gait_state, seconds_to_ns
-from iceskate_sim.session import Session
+from iceskate_sim.model.command import ControllerCommand, JointCommand
+from iceskate_sim.model.stamps import seconds_to_ns
+from iceskate_sim.ros.conversions import observation_from_gait_state
+from iceskate_sim.ros.lockstep import LockstepSession
+from iceskate_sim.run.session import Session
 
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 
@@ -150,7 +151,7 @@ def test_rejected_commands_are_summarised_per_reason(capsys):
     """The run's rejected commands: counted per reason (numbers left out), the first kept whole;
     run_scene --ros prints them at the end."""
     from iceskate_bringup.graph import _report_rejected
-    from iceskate_sim.lockstep import FIRST_REJECTED, LoopMonitor
+    from iceskate_sim.ros.lockstep import FIRST_REJECTED, LoopMonitor
     monitor = LoopMonitor(('gait_manager',), 5.0, 0.001)
     reasons = [f"stale command of 'gait_manager' stamped 0.00{k} s (simulation at 0.009 s)"
                for k in range(7)] + ["command from unknown source 'posture'"]
@@ -172,7 +173,7 @@ def test_rejected_commands_are_summarised_per_reason(capsys):
 
 def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):
     """Nothing to wait for: the loop steps on its timer (it used to wait forever)."""
-    from iceskate_sim.lockstep import LockstepLoop
+    from iceskate_sim.ros.lockstep import LockstepLoop
     scene = replace(load_scene(TINY), inputs={}, duration=0.12)
     loop = LockstepLoop(LockstepSession(Session(scene), {}), lambda *a: None,
                         lambda *a: None)

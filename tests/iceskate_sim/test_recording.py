@@ -13,11 +13,11 @@ from rosbags.rosbag2 import Reader
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene
-from iceskate_sim import recording
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.recording import BATCH, BagRecorder, Sample
-from iceskate_sim.robot import load_robot
-from iceskate_sim.session import Session
+from iceskate_sim.model.robot import load_robot
+from iceskate_sim.recording import bag as recording
+from iceskate_sim.recording.bag import BATCH, BagRecorder, Sample
+from iceskate_sim.run.session import Session
 from oracle.simulator import reference_samples
 
 #: a fast-stepping skate gait (test data): many events in a short window
@@ -294,7 +294,7 @@ def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, samples)
     """Past its memory budget a Trajectory moves its samples to files (a long run's memory stays
     flat): the columns, a source that starts late included, equal the in-memory ones, on
     both ways of growing it, and the files go with the Trajectory."""
-    from iceskate_sim.metrics import Trajectory
+    from iceskate_sim.run.metrics import Trajectory
     kept, spilled = Trajectory(), Trajectory(tmp_path, spill_bytes=20_000)
     psi_d = np.array([0.0, 1.2, 0.0])
     for k, sample in enumerate(samples):

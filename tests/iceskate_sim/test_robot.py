@@ -12,10 +12,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import N_COORDINATES, anatomical_map
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import N_COORDINATES, anatomical_map
 from oracle.floating_base import FloatingBaseDynamics
 
 SIDES = ('right', 'left')

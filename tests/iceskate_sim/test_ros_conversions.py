@@ -10,22 +10,24 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.command import ControllerCommand, JointCommand
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.recording import MessageFactory, Sample
-from iceskate_sim.robot import COORDINATE_NAMES, load_robot
-from iceskate_sim.ros_conversions import (
-    command_fields,
-    command_from_message,
+from iceskate_sim.model.command import ControllerCommand, JointCommand
+from iceskate_sim.model.robot import COORDINATE_NAMES, load_robot
+from iceskate_sim.model.stamps import (
     ns_to_sec_nanosec,
-    observation_from_gait_state,
     seconds_to_ns,
     set_stamp,
     stamp_to_ns,
     stamp_to_seconds,
 )
-from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.recording.bag import MessageFactory, Sample
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.ros.conversions import (
+    command_fields,
+    command_from_message,
+    observation_from_gait_state,
+)
 
 
 @pytest.fixture(scope='module')

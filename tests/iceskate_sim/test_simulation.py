@@ -14,12 +14,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, guards_of
-from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig
-from iceskate_sim.robot import N_COORDINATES, Y0
-from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.model.dynamics import DynamicsParameters
+from iceskate_sim.model.robot import N_COORDINATES, Y0
+from iceskate_sim.physics.hybrid import FrictionModel, guards_of
+from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
+from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from oracle.automaton import GUARD_VALUES, guard_values
 from oracle.dynamics import GaitDynamics
 from oracle.simulator import ReferenceSimulator

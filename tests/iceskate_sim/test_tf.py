@@ -12,15 +12,11 @@ import pinocchio as pin
 import pytest
 from rosbags.highlevel import AnyReader
 
-from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.command import HeldCommand, JointCommand
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, HybridState
-from iceskate_sim.integrators import IntegratorConfig
-from iceskate_sim.modes import MODES
-from iceskate_sim.recording import BagRecorder, LinkTransforms, Sample
-from iceskate_sim.robot import (
+from iceskate_sim.model.command import HeldCommand, JointCommand
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.robot import (
     N_COORDINATES,
     PIVOT_Y,
     PIVOTS,
@@ -30,7 +26,11 @@ from iceskate_sim.robot import (
     anatomical_map,
     load_robot,
 )
-from iceskate_sim.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.physics.hybrid import FrictionModel, HybridState
+from iceskate_sim.physics.integrators import IntegratorConfig
+from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
+from iceskate_sim.recording.bag import BagRecorder, LinkTransforms, Sample
+from iceskate_sim.recording.bag_types import make_typestore
 
 PERIODS = 300  # 0.3 s at 1 ms
 TOLERANCE = 1e-9  # m, and on rotation-matrix entries

@@ -7,7 +7,7 @@ import pytest
 
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene, parse_scene
-from iceskate_sim.metrics import METRIC_NAMES
+from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_study.errors import StudyError
 from iceskate_study.spec import expand, load_spec, parse_spec, run_key, set_key, shipped_studies
 

@@ -21,9 +21,9 @@ from std_srvs.srv import Trigger  # noqa: E402
 from iceskate_bringup.graph import command_of, graph_nodes  # noqa: E402
 from iceskate_interfaces.msg import EffortCommand  # noqa: E402
 from iceskate_interfaces.srv import StepSimulation  # noqa: E402
-from iceskate_sim.node_support import STATE_QOS  # noqa: E402
-from iceskate_sim.robot import COORDINATE_NAMES  # noqa: E402
-from iceskate_sim.ros_conversions import set_stamp, stamp_to_ns  # noqa: E402
+from iceskate_sim.model.robot import COORDINATE_NAMES  # noqa: E402
+from iceskate_sim.model.stamps import set_stamp, stamp_to_ns  # noqa: E402
+from iceskate_sim.ros.node_support import STATE_QOS  # noqa: E402
 
 TINY = Path(__file__).resolve().parent / 'data' / 'tiny_stand.yaml'
 MS = 1_000_000
@@ -163,7 +163,7 @@ def test_bad_parameter_file_exits_non_zero_naming_the_parameter(
 
 def test_node_modules_run_without_an_install(tmp_path, ros_env):
     """python -m works too (what the graph falls back to without ros_ws/install)."""
-    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '-p', 'duration:=-1.0'], env=ros_env, capture_output=True,
                             text=True, timeout=60)
     assert result.returncode == 1 and "parameter 'duration'" in result.stderr

@@ -16,7 +16,7 @@ from std_msgs.msg import String  # noqa: E402
 
 from iceskate_bringup.graph import NodeSpec, command_of, config_file  # noqa: E402
 from iceskate_interfaces.msg import GaitState, JointDynamics  # noqa: E402
-from iceskate_sim.bag_types import make_typestore  # noqa: E402
+from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
 
 TINY = Path(__file__).resolve().parent / 'data' / 'tiny_stand.yaml'
 TYPES = {'/clock': Clock, '/joint_states': JointState, '/head_pose': PoseStamped,
@@ -63,7 +63,7 @@ def test_replay_republishes_the_bags_messages_with_clock(graph_run, listener, ro
 
 
 @pytest.mark.parametrize('package, node, module, cls, name, value', [
-    ('iceskate_sim', 'simulator', 'iceskate_sim.simulator_node', 'SimulatorNode', 'scene',
+    ('iceskate_sim', 'simulator', 'iceskate_sim.ros.simulator_node', 'SimulatorNode', 'scene',
      str(TINY)),
     ('visual_lifting', 'visual_lifting', 'visual_lifting.visual_lifting_node',
      'VisualLiftingNode', 'v_d', 0.5),

@@ -1,6 +1,7 @@
 """Our messages in an MCAP rosbag2 bag: rosbags writes and reads them, mcap_ros2 decodes them.
 
-ROS-free: the types come from the .msg files through iceskate_sim.bag_types, no build needed.
+ROS-free: the types come from the .msg files through iceskate_sim.recording.bag_types, no build
+needed.
 """
 
 import dataclasses
@@ -13,7 +14,7 @@ pytest.importorskip('rosbags')
 
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer  # noqa: E402
 
-from iceskate_sim.bag_types import find_msg_dir, make_typestore, msg_types  # noqa: E402
+from iceskate_sim.recording.bag_types import find_msg_dir, make_typestore, msg_types  # noqa: E402
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
 EFFORT_COMMAND = 'iceskate_interfaces/msg/EffortCommand'

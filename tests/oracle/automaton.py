@@ -2,8 +2,8 @@
 formulation the native transitions (``iceskate_native/src/guards.cpp``, ``transitions.cpp``) are
 checked against.
 
-Each guard of ``iceskate_sim.hybrid.GUARDS`` is a scalar function of the state and its dynamics
-(``GUARD_VALUES``) that becomes positive when its transition should happen. The integrator
+Each guard of ``iceskate_sim.physics.hybrid.GUARDS`` is a scalar function of the state and its
+dynamics (``GUARD_VALUES``) that becomes positive when its transition should happen. The integrator
 locates the first sign change in time; ``apply_transition`` performs the reset: a perfectly
 inelastic impact projected on the new constraint set where contact is made, a change of
 coordinates (add/drop q1 or y0), or the support exchange that re-roots the tree.
@@ -16,10 +16,12 @@ from typing import Callable
 
 import numpy as np
 
-from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import (
+from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.model.dynamics import ContactState, DynamicsResult
+from iceskate_sim.model.modes import GaitMode, mode_for
+from iceskate_sim.model.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
+from iceskate_sim.physics.hybrid import (
     COP_BAND,
     FLIGHT,
     FORCE_BAND,
@@ -32,8 +34,6 @@ from iceskate_sim.hybrid import (
     Transition,
     guards_of,
 )
-from iceskate_sim.modes import GaitMode, mode_for
-from iceskate_sim.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
 from oracle.dynamics import GaitDynamics
 
 _LEG = slice(1, 8)
@@ -66,7 +66,7 @@ def _pinned_heel_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel)
     return abs(f_ny) - f.mu * f_nz - FORCE_BAND
 
 
-#: The value of each guard of ``iceskate_sim.hybrid.GUARDS`` (positive: due), by name.
+#: The value of each guard of ``iceskate_sim.physics.hybrid.GUARDS`` (positive: due), by name.
 GUARD_VALUES: dict[str, Callable[[HybridState, DynamicsResult, FrictionModel], float]] = {
     'E1': lambda s, r, f: r.support_wrench[3] - (SOLE_TOE_Y + COP_BAND) * r.support_normal,
     'E2': lambda s, r, f: (SOLE_HEEL_Y - COP_BAND) * r.support_normal - r.support_wrench[3],

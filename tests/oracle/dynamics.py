@@ -2,7 +2,7 @@
 eq. 7) as written in docs/model.md, the readable formulation the native solve
 (``iceskate_native/src/dynamics.cpp``) is checked against.
 
-One routine serves all 20 modes: the mode (``iceskate_sim.modes``) says which of the 18
+One routine serves all 20 modes: the mode (``iceskate_sim.model.modes``) says which of the 18
 coordinates ``[y0, q1, ..., q17]`` are active and which swing-foot constraints act; the locked
 coordinates keep their value and have zero velocity. For the active coordinates ``a`` and the
 active constraint rows ``J`` it solves
@@ -13,7 +13,7 @@ active constraint rows ``J`` it solves
 with Coulomb friction on a sliding swing heel (f_t = mu f_nz against the heel velocity) and on a
 gliding support foot (F_y = -mu sgn(yd0) N_s, N_s from the vertical momentum balance,
 docs/model.md §4.4), which makes the matrix non-symmetric. The model terms are
-``iceskate_sim.dynamics.ModelTerms``' (Pinocchio's computeAllTerms, which also leaves the
+``iceskate_sim.model.dynamics.ModelTerms``' (Pinocchio's computeAllTerms, which also leaves the
 velocity-product accelerations, and RNEA for the support wrench).
 
 Units: SI (m, rad, s, kg, N, N m).
@@ -29,17 +29,17 @@ from types import ModuleType
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.command import all_finite
-from iceskate_sim.dynamics import (
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.command import all_finite
+from iceskate_sim.model.dynamics import (
     ContactState,
     DynamicsParameters,
     DynamicsResult,
     ModelTerms,
     locked_coordinates,
 )
-from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MULTIPLIER_NAMES, GaitMode
-from iceskate_sim.robot import (
+from iceskate_sim.model.modes import MULTIPLIER_NAMES, GaitMode
+from iceskate_sim.model.robot import (
     GRAVITY,
     JOINT_LIMITS,
     N_COORDINATES,

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import N_COORDINATES, Q1, Y0, Robot, anatomical_map
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
+from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, Robot, anatomical_map
 from oracle.dynamics import GaitDynamics
 
 _LWA = pin.LOCAL_WORLD_ALIGNED

@@ -17,10 +17,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.command import ControllerCommand, HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import (
+from iceskate_sim.model.command import ControllerCommand, HeldCommand
+from iceskate_sim.model.dynamics import ContactState, DynamicsResult
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import N_COORDINATES, SIDES, Robot
+from iceskate_sim.physics.hybrid import (
     Guard,
     HybridState,
     Transition,
@@ -28,12 +30,10 @@ from iceskate_sim.hybrid import (
     guards_of,
     resolved_cause,
 )
-from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig
-from iceskate_sim.observation import Observation
-from iceskate_sim.recording import Sample
-from iceskate_sim.robot import N_COORDINATES, SIDES, Robot
-from iceskate_sim.scene import Scene
-from iceskate_sim.simulation import RunStatistics, SimulatorConfig, StateQueries
+from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
+from iceskate_sim.physics.simulation import RunStatistics, SimulatorConfig, StateQueries
+from iceskate_sim.recording.bag import Sample
+from iceskate_sim.run.scene import Scene
 from oracle.automaton import (
     RunEnded,
     apply_transition,
@@ -47,10 +47,11 @@ from oracle.integrators import Integrator
 
 
 class ReferenceSimulator(StateQueries):
-    """The hybrid simulation loop in Python: ``iceskate_sim.simulation.Simulator``'s interface
-    (``advance``, ``state``, ``events``, ``stats``, ``ended``, ``result``, ``start_state``,
-    ``start_result``) on the oracle's automaton and integrators and ``GaitDynamics``' eq. (7)
-    (or the ``dynamics`` given, e.g. the native eq. (7) behind the same interface).
+    """The hybrid simulation loop in Python: the interface of
+    ``iceskate_sim.physics.simulation.Simulator`` (``advance``, ``state``, ``events``,
+    ``stats``, ``ended``, ``result``, ``start_state``, ``start_result``) on the oracle's
+    automaton and integrators and ``GaitDynamics``' eq. (7) (or the ``dynamics`` given, e.g.
+    the native eq. (7) behind the same interface).
     """
 
     def __init__(self, robot: Robot, config: SimulatorConfig, initial: HybridState,

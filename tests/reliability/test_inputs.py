@@ -133,7 +133,7 @@ def test_a_bad_node_parameter_file_is_refused_in_one_line(tmp_path, ros_env, con
     pytest.importorskip('rclpy')
     params = tmp_path / 'params.yaml'
     params.write_bytes(content)
-    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '--params-file', str(params)], env=ros_env, capture_output=True,
                             text=True, timeout=60)
     assert result.returncode == 1
@@ -152,7 +152,7 @@ def test_node_parameter_files_take_yaml_1_2_exponents(tmp_path, ros_env):
                       f'    scene: {tmp_path / "missing.yaml"}\n')
     assert read_yaml(params, 'parameter file')['simulator']['ros__parameters'][
         'control_timeout'] == 2.0
-    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.simulator_node', '--ros-args',
+    result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '--params-file', str(params)], env=ros_env, capture_output=True,
                             text=True, timeout=60)
     assert result.returncode == 1

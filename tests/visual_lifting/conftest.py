@@ -6,10 +6,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from iceskate_sim.command import ControllerCommand
-from iceskate_sim.native_control import native_command, native_kinematics, native_observation
-from iceskate_sim.observation import Observation
-from iceskate_sim.robot import load_robot
+from iceskate_sim.model.command import ControllerCommand
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import load_robot
+from iceskate_sim.physics.native_control import (
+    native_command,
+    native_kinematics,
+    native_observation,
+)
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters
 

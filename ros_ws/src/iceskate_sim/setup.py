@@ -43,7 +43,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'simulator = iceskate_sim.simulator_node:main',
+            'simulator = iceskate_sim.ros.simulator_node:main',
         ],
     },
 )

@@ -16,10 +16,10 @@ from gait_manager.errors import GaitManagerError
 from gait_manager.native import GaitManagerController
 from gait_manager.parameters import GaitManagerParameters
 import iceskate_native
-from iceskate_sim.command import CommandValues
-from iceskate_sim.controller_node import ControllerNode
-from iceskate_sim.native_control import native_values
-from iceskate_sim.node_support import run_node
+from iceskate_sim.model.command import CommandValues
+from iceskate_sim.physics.native_control import native_values
+from iceskate_sim.ros.controller_node import ControllerNode
+from iceskate_sim.ros.node_support import run_node
 
 
 class GaitManagerNode(ControllerNode[GaitManagerParameters]):

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from typing import Any, Self
 
 from gait_manager.errors import GaitManagerError
+from iceskate_sim.model.stance import StanceSchedule
 from iceskate_sim.parameters import block, check_fields, from_mapping, setting
-from iceskate_sim.stance import StanceSchedule
 
 #: The torque sources, in the order they are computed, sent and summed.
 SOURCES = ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw')

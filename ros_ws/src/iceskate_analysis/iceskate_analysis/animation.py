@@ -17,8 +17,8 @@ import pinocchio as pin
 
 from iceskate_analysis._progress import progress_bar
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import LINK_NAMES, Robot
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import LINK_NAMES, Robot
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist

@@ -2,10 +2,10 @@
 
 The bag is opened with ``rosbags``' ``AnyReader``. Message definitions come from the bag itself
 (MCAP stores them); for a bag without definitions our typestore
-(``iceskate_sim.bag_types.make_typestore``) is the fallback. A bag that was never closed (no
-metadata.yaml: the recording process was killed, or the power went) or whose file was cut is
-rebuilt from its .mcap file: every message of its complete chunks, read with the ``mcap``
-package's stream reader (``open_bag``; ``replay`` reads bags the same way); the data's first
+(``iceskate_sim.recording.bag_types.make_typestore``) is the fallback. A bag that was never closed
+(no metadata.yaml: the recording process was killed, or the power went) or whose file was cut is
+rebuilt from its .mcap file: every message of its complete chunks, read with the ``mcap`` package's
+stream reader (``open_bag``; ``replay`` reads bags the same way); the data's first
 note says so and how much was read. The analysis needs three topics,
 all stamped with the simulation time of the sample (``header.stamp``):
 
@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from iceskate_analysis._progress import progress_bar
-from iceskate_sim.bag_types import PASSIVE
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MULTIPLIER_NAMES
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES
+from iceskate_sim.model.modes import MULTIPLIER_NAMES
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
+from iceskate_sim.recording.bag_types import PASSIVE
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
@@ -435,7 +435,7 @@ def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:
 
 
 def _default_typestore() -> Typestore | None:
-    from iceskate_sim.bag_types import make_typestore
+    from iceskate_sim.recording.bag_types import make_typestore
     try:
         return make_typestore()
     except FileNotFoundError:

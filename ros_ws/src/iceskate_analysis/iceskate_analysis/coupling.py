@@ -46,10 +46,10 @@ import pinocchio as pin
 
 from iceskate_analysis._progress import progress_bar
 from iceskate_analysis.bag_io import PASSIVE, BagData
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MULTIPLIER_NAMES, get_mode
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
+from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
+from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
 
 __all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LEFT_SHOULDER',
            'TERMS', 'analyse_case', 'arm_swing', 'decompose', 'dynamics_for_bag',

@@ -28,8 +28,8 @@ from rosgraph_msgs.msg import Clock
 
 from iceskate_analysis.bag_io import open_bag
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.node_support import CLOCK_QOS, LATCHED_QOS
-from iceskate_sim.ros_conversions import set_stamp
+from iceskate_sim.model.stamps import set_stamp
+from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS
 
 
 def message_class(msgtype: str) -> type:

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 __all__ = ['SUMMARY_NAME', 'write_summary']
 
 SUMMARY_NAME = 'summary.png'
-ARM_SWING_FROM_STEP = 3  # step_index >= 3: the 4th step, as iceskate_sim.metrics
+ARM_SWING_FROM_STEP = 3  # step_index >= 3: the 4th step, as iceskate_sim.run.metrics
 MAX_POINTS = 3000  # per drawn series (decimated above)
 _DPI = 100
 _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # first mode: swing

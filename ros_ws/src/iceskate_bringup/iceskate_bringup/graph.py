@@ -38,10 +38,10 @@ from typing import Any
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_path, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.node_support import write_parameter_file
+from iceskate_sim.model.robot import ament_prefixes
 from iceskate_sim.parameters import flatten
-from iceskate_sim.robot import ament_prefixes
-from iceskate_sim.session import prepare_output
+from iceskate_sim.ros.node_support import write_parameter_file
+from iceskate_sim.run.session import prepare_output
 from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
@@ -114,8 +114,8 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
         params['controllers'] = list(controllers)
         params |= {f'sources.{node}': list(sources) for node, sources in controllers.items()}
     write_parameter_file(folder / 'simulator.yaml', {'simulator': params})
-    specs = [NodeSpec('iceskate_sim', 'simulator', 'iceskate_sim.simulator_node', 'SimulatorNode',
-                      folder / 'simulator.yaml')]
+    specs = [NodeSpec('iceskate_sim', 'simulator', 'iceskate_sim.ros.simulator_node',
+                      'SimulatorNode', folder / 'simulator.yaml')]
     composed = node_parameters(scene)
     for node in sorted(controllers, reverse=True):
         params = composed[node]
@@ -440,7 +440,7 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
     from rclpy.experimental import EventsExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from iceskate_sim.node_support import ConfigError, spin_until
+    from iceskate_sim.ros.node_support import ConfigError, spin_until
     keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE')
     saved = {key: os.environ.get(key) for key in keys}
     os.environ.update({key: env[key] for key in keys})

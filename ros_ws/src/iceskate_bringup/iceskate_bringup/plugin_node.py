@@ -23,12 +23,12 @@ from typing import Any
 
 from iceskate_bringup.plugin import PluginBlock, make_controller
 import iceskate_native
-from iceskate_sim.command import CommandValues
-from iceskate_sim.controller_node import ControllerNode
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.native_control import native_values
-from iceskate_sim.node_support import run_node
+from iceskate_sim.model.command import CommandValues
 from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.physics.native_control import native_values
+from iceskate_sim.ros.controller_node import ControllerNode
+from iceskate_sim.ros.node_support import run_node
 
 #: The node's name unless remapped (``-r __node:=NAME``).
 DEFAULT_NAME = 'plugin_controller'

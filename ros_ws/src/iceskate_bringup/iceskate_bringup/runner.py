@@ -3,10 +3,10 @@
 Runs a scene in one process without ROS transport: at every control instant t_k it gives the
 controllers (``ControlStack``: the same law functions the ROS nodes call) the observation of
 the session, and the session holds their commands over [t_k, t_k+1] (zero-order hold) and
-advances the hybrid simulation (``iceskate_sim.session.Session``, the loop the simulator node
+advances the hybrid simulation (``iceskate_sim.run.session.Session``, the loop the simulator node
 runs too). It writes into DIR:
 
-* ``metrics.json``: the figures of the run (see ``iceskate_sim.metrics``);
+* ``metrics.json``: the figures of the run (see ``iceskate_sim.run.metrics``);
 * ``events.json``: every transition (time, from/to mode, event, cause, impulse);
 * ``trajectory.npz``: the sampled state (t, q, v, qdd, mode, side, pivot, step, multipliers,
   support forces, CoP, head pose and target, torques by source);
@@ -41,7 +41,7 @@ from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.shutdown import StopRequest, say
 
 if TYPE_CHECKING:
-    from iceskate_sim.scene import Scene
+    from iceskate_sim.run.scene import Scene
 
 #: Control periods run per call of ``Session.run_periods`` (one native call, ~30 ms): a signal
 #: is answered, and the progress shown, between two such blocks; the bag writer encodes a
@@ -78,7 +78,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     """
     from iceskate_bringup.composition import ControlStack
     from iceskate_native import ControllerError
-    from iceskate_sim.session import Session
+    from iceskate_sim.run.session import Session
     with contextlib.ExitStack() as signals:
         if stop is None:
             stop = signals.enter_context(StopRequest())
@@ -195,8 +195,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                              'needs root, CAP_SYS_NICE or an rtprio limit; default 0: off)')
     args = parser.parse_args(argv)
     from iceskate_bringup.scene import load_scene
-    from iceskate_sim.scene import MAX_DURATION
-    from iceskate_sim.session import prepare_output
+    from iceskate_sim.run.scene import MAX_DURATION
+    from iceskate_sim.run.session import prepare_output
     started = False
     try:
         if not args.ros and (args.single_process or args.rt_priority):

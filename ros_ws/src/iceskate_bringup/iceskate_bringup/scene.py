@@ -1,6 +1,6 @@
 """Scenes with their controllers: shipped names, validation of every block, the sources.
 
-``iceskate_sim.scene`` validates what the simulator uses; here the ``inputs`` blocks are
+``iceskate_sim.run.scene`` validates what the simulator uses; here the ``inputs`` blocks are
 validated too, by the controller packages' own parameter classes (``VisualLiftingParameters``,
 ``GaitManagerParameters``), and a controller written in Python (a block with ``plugin``,
 ``iceskate_bringup.plugin``) by importing its class and building it with its ``parameters``,
@@ -25,10 +25,10 @@ from iceskate_bringup.plugin import (
     plugin_sources,
 )
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import ament_prefixes
-from iceskate_sim.scene import Scene
-from iceskate_sim.scene import load_scene as load_scene_file
-from iceskate_sim.scene import parse_scene as parse_simulator_scene
+from iceskate_sim.model.robot import ament_prefixes
+from iceskate_sim.run.scene import Scene
+from iceskate_sim.run.scene import load_scene as load_scene_file
+from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
 from visual_lifting.errors import VisualLiftingError
 from visual_lifting.parameters import VisualLiftingParameters
 

@@ -3,22 +3,22 @@
 The C++ code is the static library ``iceskate_native_core`` (``src/``, ``include/``) on
 Pinocchio's C++ API; ``iceskate_native._kernel`` is its nanobind module. Models cross the
 boundary as Pinocchio's binary archive: the same ``pinocchio.Model`` that Python built (for
-instance ``iceskate_sim.robot.load_robot().support_model('right', 'toe').model``) is
+instance ``iceskate_sim.model.robot.load_robot().support_model('right', 'toe').model``) is
 deserialised once into a ``RobotModel`` on the C++ side::
 
     native = iceskate_native.load_model(support.model)
     M = iceskate_native.crba_of(native, q)
 
-``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.native_dynamics``
+``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.physics.native``
 wraps it beside the model terms); ``HybridSimulator`` runs whole control periods on it (events,
-transitions, projection, health checks), wrapped by ``iceskate_sim.native_dynamics.NativePeriods``.
+transitions, projection, health checks), wrapped by ``iceskate_sim.physics.native.NativePeriods``.
 
 The controller interface: a ``Controller`` (the control laws of visual_lifting and
 gait_manager implement it in C++) answers an ``Observation``, reading the robot through a
 ``Kinematics``; ``ModelKinematics`` is that kinematics on the four support models
-(``iceskate_sim.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
+(``iceskate_sim.physics.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
 control periods in one call: controllers, zero-order hold, pushes and ``HybridSimulator``
-periods, returning the samples as arrays (``iceskate_sim.native_dynamics.NativeControlLoop``).
+periods, returning the samples as arrays (``iceskate_sim.physics.native.NativeControlLoop``).
 A Python subclass of ``Controller`` implements ``compute(obs, kinematics)`` and runs inside that
 loop too (docs/usage.md, "Your own controller"); its failures are ``ControllerError``.
 

@@ -22,7 +22,7 @@ using ModeRow = std::tuple<int, bool, bool, bool, std::vector<int>, std::vector<
 /// Frame name -> index of one support model.
 using Frames = std::map<std::string, int>;
 
-/// The mode table of the 20 rows of iceskate_sim.modes.MODES; std::invalid_argument otherwise.
+/// The mode table of the 20 rows of iceskate_sim.model.modes.MODES; std::invalid_argument otherwise.
 inline ModeTable mode_table(const std::vector<ModeRow> & rows)
 {
   if (rows.size() != kModes) {

@@ -125,7 +125,7 @@ std::tuple<Eigen::VectorXd, bool, bool, std::vector<std::string>> command_values
 }
 
 constexpr const char * kCommandDoc =
-  "The answer at obs as an EffortCommand carries it (iceskate_sim.command.CommandValues), "
+  "The answer at obs as an EffortCommand carries it (iceskate_sim.model.command.CommandValues), "
   "in one vector: the sum of the sources' commands (effort, then stiffness, damping and "
   "reference if it has an impedance), each source's generalized force at (q, v) (18 per "
   "source), the head target (y, z, pitch) if it steers one; then whether it has an "
@@ -280,7 +280,7 @@ void bind_controller(nb::module_ & m)
 
   nb::class_<Observation>(
     m, "Observation",
-    "The state a control law answers (iceskate_sim.observation.Observation with side 0 right / "
+    "The state a control law answers (iceskate_sim.model.observation.Observation with side 0 right / "
     "1 left, pivot 0 toe / 1 heel; t_touchdown NaN: none). ValueError for a bad field.")
     .def(
       "__init__", &construct_observation, "t"_a, "q"_a, "v"_a, "mode"_a, "side"_a, "pivot"_a,

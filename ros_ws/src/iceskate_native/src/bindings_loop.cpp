@@ -287,7 +287,7 @@ void bind_control_loop(nb::module_ & m)
       "live", &live,
       "The live view of the current state, what the simulator publishes before the commands "
       "of t_k exist: (values, mode, side, pivot, step_index, last_event); values in the order "
-      "of iceskate_sim.recording.BagRecord with the held input's generalized force at the "
+      "of iceskate_sim.recording.bag.BagRecord with the held input's generalized force at the "
       "state as the one effort; side 0 right / 1 left, pivot 0 toe / 1 heel, last_event: "
       "index of the latest transition at or before t_k (-1: none).")
     .def(

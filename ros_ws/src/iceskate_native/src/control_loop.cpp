@@ -17,7 +17,7 @@ constexpr int kMaxSources = 64;  // SampleBlock::present has one bit per source
 /// t [s] at a ROS stamp's resolution (whole nanoseconds, ties to even), as a message carries it.
 double stamp_time(double t) { return std::nearbyint(t * 1e9) / 1e9; }
 
-/// The controllers' view of a hybrid state (iceskate_sim.simulation.observation_of): times at
+/// The controllers' view of a hybrid state (iceskate_sim.physics.simulation.observation_of): times at
 /// a stamp's resolution, and the pivot 'toe' while the sole is flat (q1 locked).
 Observation observation_of(const HybridState & s, const Mode & mode)
 {
@@ -176,7 +176,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   const HybridState & now = simulator_.state();
   const Placement head = dynamics.frame_placement(now.contact, now.q, "head_top");
 
-  // the held sum of the commands of t_k (iceskate_sim.command.HeldCommand.of_controllers)
+  // the held sum of the commands of t_k (iceskate_sim.model.command.HeldCommand.of_controllers)
   Inputs inputs;
   inputs.has_impedance = true;
   const Eigen::Vector3d * target = &head_origin_;
@@ -289,7 +289,7 @@ void ControlLoop::live(LiveRecord & record)
   for (int i = 0; i < 3; ++i) {  // row-major
     append(values, head.rotation.row(i));
   }
-  // iceskate_sim.command.HeldCommand.torque: bias - stiffness q - damping v
+  // iceskate_sim.model.command.HeldCommand.torque: bias - stiffness q - damping v
   append(values, held.tau - held.stiffness.cwiseProduct(s.q) - held.damping.cwiseProduct(s.v));
   record.mode = s.contact.mode;
   record.side = s.contact.side;

@@ -7,7 +7,7 @@ range, integers, booleans, a choice among names, sequences of a fixed or any len
 entries, optional numbers, nested parameter blocks) and raises ``ErrorType`` with a message that
 starts with the field's name. ``from_mapping`` builds a class from a (YAML) mapping and names an
 unknown key with its dotted path. Scenes, the controllers' parameter classes and the ROS nodes'
-typed parameters (``iceskate_sim.node_support.declare_parameters``) all use these rules, so a
+typed parameters (``iceskate_sim.ros.node_support.declare_parameters``) all use these rules, so a
 value is judged the same way wherever it comes from.
 
 ROS parameters are flat: ``flatten`` turns a (nested) parameter object into ``{dotted name:

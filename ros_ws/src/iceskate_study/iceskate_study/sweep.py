@@ -82,7 +82,7 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
 
     :raises StudyError: a bad output folder, a table of another SPEC, Ray not reached.
     """
-    from iceskate_sim.session import prepare_output
+    from iceskate_sim.run.session import prepare_output
     from iceskate_study.spec import expand
     from iceskate_study.table import ResultTable
     from iceskate_study.worker import Task

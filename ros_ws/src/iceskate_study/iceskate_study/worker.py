@@ -1,7 +1,7 @@
 """One run of a sweep, in a worker process (a local pool's or a Ray task's): its table row.
 
 A worker process keeps everything a run needs loaded between runs (the modules, the robot
-model: ``iceskate_sim.robot.load_robot`` is cached per process). Outside a run it ignores
+model: ``iceskate_sim.model.robot.load_robot`` is cached per process). Outside a run it ignores
 SIGINT, SIGTERM and SIGHUP; during one, ``iceskate_bringup.runner.simulate`` turns them into a
 clean end of the run (``RunInterrupted``), which gives no row: the run is done again when the
 sweep resumes.
@@ -52,7 +52,7 @@ def warm_up(local: bool = True) -> None:
     if local:
         die_with_parent(signal.SIGKILL)
     import iceskate_bringup.composition  # noqa: F401  (the control laws)
-    from iceskate_sim.robot import load_robot
+    from iceskate_sim.model.robot import load_robot
     load_robot()
 
 

@@ -12,10 +12,10 @@ The law runs natively (``visual_lifting.native``).
 from __future__ import annotations
 
 import iceskate_native
-from iceskate_sim.command import CommandValues
-from iceskate_sim.controller_node import ControllerNode
-from iceskate_sim.native_control import native_values
-from iceskate_sim.node_support import run_node
+from iceskate_sim.model.command import CommandValues
+from iceskate_sim.physics.native_control import native_values
+from iceskate_sim.ros.controller_node import ControllerNode
+from iceskate_sim.ros.node_support import run_node
 from visual_lifting.errors import VisualLiftingError
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters

@@ -2,7 +2,7 @@
 // t_k the controllers answer the observation of the current state (reading the robot through a
 // Kinematics), the sum of their commands and the scene's push are held over [t_k, t_k+1]
 // (zero-order hold) while HybridSimulator::advance integrates the period, and the sample of
-// t_k goes into a SampleBlock. The native counterpart of iceskate_sim.session.Session.step
+// t_k goes into a SampleBlock. The native counterpart of iceskate_sim.run.session.Session.step
 // driven by the headless composition of the controllers, tested against it. The same period
 // runs under commands received from outside (hold(): the controller nodes of a ROS graph).
 #pragma once
@@ -74,7 +74,7 @@ struct SampleBlock
 
 /// What the simulator publishes at the current instant t_k before the commands of t_k exist:
 /// the state, the dynamics and the generalized force of the inputs still held from the last
-/// period, evaluated at t_k. `values` in the order of iceskate_sim.recording.BagRecord: t,
+/// period, evaluated at t_k. `values` in the order of iceskate_sim.recording.bag.BagRecord: t,
 /// t_exchange, t_touchdown, heel_anchor_y [s, s, s, m], N_s, F_y [N], CoP y [m], time of the
 /// latest transition [s] (0: none), q, v, qdd, passive (18 each), multipliers (3), head-top
 /// position (3) and rotation (9, row-major), the held input's generalized force (18).

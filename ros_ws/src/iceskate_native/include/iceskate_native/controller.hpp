@@ -1,6 +1,6 @@
 // The controller interface of the native core: what a control law sees (Observation, the
-// counterpart of iceskate_sim.observation.Observation), what it answers (ControllerOutput: one
-// JointCommand per source, as iceskate_sim.command), and the abstract Controller the simulator
+// counterpart of iceskate_sim.model.observation.Observation), what it answers (ControllerOutput: one
+// JointCommand per source, as iceskate_sim.model.command), and the abstract Controller the simulator
 // calls once per control period with a Kinematics it owns. Eigen only: the controller packages
 // (visual_lifting, gait_manager) implement Controller against these headers without Pinocchio.
 // Units: SI (m, rad, s; N, N m; N m/rad, N m s/rad).
@@ -115,7 +115,7 @@ struct ControllerOutput
     return sources.back().command;
   }
 
-  /// One command applying the sum of the sources' (iceskate_sim.command.JointCommand.total,
+  /// One command applying the sum of the sources' (iceskate_sim.model.command.JointCommand.total,
   /// operation for operation): efforts, stiffnesses and dampings add up in order; the reference
   /// is the stiffness-weighted mean (0 where no stiffness acts), or the reference of the one
   /// source with an impedance.

@@ -37,7 +37,7 @@ struct SupportModel
   int frame(const std::string & name) const;
 };
 
-/// Physical options of the contact and joint model (iceskate_sim.dynamics.DynamicsParameters).
+/// Physical options of the contact and joint model (iceskate_sim.model.dynamics.DynamicsParameters).
 struct DynamicsParameters
 {
   double mu = 0.005;               ///< Coulomb coefficient of a sliding foot
@@ -80,7 +80,7 @@ struct Inputs
   Eigen::Vector3d push_force = Eigen::Vector3d::Zero();  ///< world [N]
 };
 
-/// The solution of eq. (7) at one state (iceskate_sim.dynamics.DynamicsResult).
+/// The solution of eq. (7) at one state (iceskate_sim.model.dynamics.DynamicsResult).
 struct DynamicsResult
 {
   Vector18 qdd = Vector18::Zero();

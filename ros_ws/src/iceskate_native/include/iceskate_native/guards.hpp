@@ -1,7 +1,7 @@
 // The transition guards of the hybrid automaton (docs/model.md §6): a guard's value is positive
 // when its transition is due. Which guards apply in which mode is data from Python
-// (iceskate_sim.hybrid.guards_of); their value formulas are here, by name, as in
-// iceskate_sim.hybrid.GUARDS, and tested against them.
+// (iceskate_sim.physics.hybrid.guards_of); their value formulas are here, by name, as in
+// iceskate_sim.physics.hybrid.GUARDS, and tested against them.
 #pragma once
 
 #include <array>
@@ -22,7 +22,7 @@ enum class Guard
 /// The guard called `name` ("E1".."E6", "S1".."S7"); std::invalid_argument otherwise.
 Guard guard_named(const std::string & name);
 
-/// Dead bands and geometry the guards use (iceskate_sim.hybrid, iceskate_sim.robot).
+/// Dead bands and geometry the guards use (iceskate_sim.physics.hybrid, iceskate_sim.model.robot).
 struct GuardConstants
 {
   double cop_band;     ///< [m] the support CoP passes a sole edge by this much (E1, E2)

@@ -4,7 +4,7 @@
 // fixed-step methods by re-taking the step with a shorter size, for the adaptive Dormand-Prince
 // 5(4) pair (Boost.Odeint's runge_kutta_dopri5 under its step-size control,
 // integrators_adaptive.cpp) on the step's dense output. The native counterpart of
-// iceskate_sim.integrators.Integrator.integrate_segment.
+// iceskate_sim.physics.integrators.Integrator.integrate_segment.
 #pragma once
 
 #include <functional>

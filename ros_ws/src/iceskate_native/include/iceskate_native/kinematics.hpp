@@ -23,7 +23,7 @@ struct SupportState
   int pivot = 0;
 };
 
-/// The frames the laws use (named as in iceskate_sim.robot.SupportModel).
+/// The frames the laws use (named as in iceskate_sim.model.robot.SupportModel).
 enum class Frame
 {
   kHeadTop,       // head_top
@@ -73,7 +73,7 @@ public:
   /// Position of `frame` in its parent joint's frame (constant) [m].
   virtual Eigen::Vector3d frame_offset(int side, int pivot, Frame frame) const = 0;
 
-  /// psi and J_H at q (iceskate_sim.dynamics.ModelTerms.head_pose).
+  /// psi and J_H at q (iceskate_sim.model.dynamics.ModelTerms.head_pose).
   virtual HeadPose head_pose(const SupportState & state, const Vector18 & q) = 0;
 
   /// g(q), the generalized gravity [N m, N]; entries of locked coordinates 0.

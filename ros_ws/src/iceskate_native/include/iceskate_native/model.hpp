@@ -1,6 +1,6 @@
 // RobotModel: an immutable Pinocchio model owned by the native side.
 //
-// The models are built in Python (iceskate_sim.robot: the four support-rooted models are
+// The models are built in Python (iceskate_sim.model.robot: the four support-rooted models are
 // assembled joint by joint from the URDF's links, not parsed from a file), so the C++ side gets
 // exactly those models by deserialising Pinocchio's binary archive of them
 // (Python: model.saveToBinary(pinocchio.serialization.StreamBuffer) -> bytes; see

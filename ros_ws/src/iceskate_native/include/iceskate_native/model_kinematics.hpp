@@ -1,7 +1,7 @@
 // ModelKinematics: the Kinematics interface (kinematics.hpp) on Pinocchio, over the same four
 // support models and mode table the Dynamics kernel gets, with a pinocchio::Data of its own per
 // model (the laws never disturb the dynamics' workspaces); its answers equal those of
-// iceskate_sim.dynamics.ModelTerms on the same Pinocchio models. It keeps
+// iceskate_sim.model.dynamics.ModelTerms on the same Pinocchio models. It keeps
 // each support model's answers at the last state asked, so the many queries of one control
 // instant cost one Pinocchio pass of each kind.
 #pragma once

@@ -1,5 +1,5 @@
 // The gait modes of the paper's Table 2 as data (docs/model.md §3): which coordinates are
-// active and which swing-foot constraints act. The table is Python's (iceskate_sim.modes); the
+// active and which swing-foot constraints act. The table is Python's (iceskate_sim.model.modes); the
 // native core receives it when a kernel is made and keeps no copy of its own.
 #pragma once
 

@@ -3,7 +3,7 @@
 // located event, its transition applied (a cascade of due transitions settled at once, a cycle
 // of single switches replaced by the contact-consistent mode, a Zeno burst rested), and at the
 // end the state is projected onto the active constraints and its health checked. The native
-// counterpart of iceskate_sim.simulation.Simulator.advance, tested against it.
+// counterpart of iceskate_sim.physics.simulation.Simulator.advance, tested against it.
 #pragma once
 
 #include <map>
@@ -36,7 +36,7 @@ public:
   using NativeError::NativeError;
 };
 
-/// Settings of a run (iceskate_sim.simulation.SimulatorConfig with a fixed-step integrator).
+/// Settings of a run (iceskate_sim.physics.simulation.SimulatorConfig with a fixed-step integrator).
 struct SimulatorSettings
 {
   double control_period = 1.0e-3;  ///< [s], an integer multiple of step

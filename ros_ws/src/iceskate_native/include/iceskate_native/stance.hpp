@@ -2,7 +2,7 @@
 // dy1 forward and dz1 down over T1, then, once the swing heel has struck at t_touchdown, a
 // further dy2 forward over T2 (smoothstep ramps). Visual lifting shifts its head target by it,
 // the gait manager's posture reference moves the pelvis with it: the counterpart of
-// iceskate_sim.stance, header-only so that both controller packages use it without linking.
+// iceskate_sim.model.stance, header-only so that both controller packages use it without linking.
 #pragma once
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 // The resets of the hybrid automaton (docs/model.md §6-§7): perfectly inelastic impacts
 // projected on the new constraint set, coordinate changes (add or drop q1 or y0), the support
 // exchange that re-roots the tree, and the contact-consistent mode that replaces a cycle of
-// single switches at one instant. The native counterpart of iceskate_sim.hybrid
+// single switches at one instant. The native counterpart of iceskate_sim.physics.hybrid
 // (apply_transition, reroot, impact, project_positions, resolve_contact_mode), tested against it.
 #pragma once
 
@@ -43,7 +43,7 @@ Swing swing_of(const Mode & mode);
 /// The number of the mode made of a support and a swing state.
 int mode_for(const ModeTable & modes, Support support, Swing swing);
 
-/// Continuous and discrete state (iceskate_sim.hybrid.HybridState).
+/// Continuous and discrete state (iceskate_sim.physics.hybrid.HybridState).
 struct HybridState
 {
   double t = 0.0;  ///< [s]

@@ -24,18 +24,18 @@ from rclpy.parameter import Parameter
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
 import iceskate_native
-from iceskate_sim.command import CommandValues
-from iceskate_sim.effort_cdr import CommandEncoder
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.gait_state_cdr import read_observation
-from iceskate_sim.native_control import native_kinematics
-from iceskate_sim.node_support import (
+from iceskate_sim.model.command import CommandValues
+from iceskate_sim.model.robot import load_robot
+from iceskate_sim.physics.native_control import native_kinematics
+from iceskate_sim.ros.effort_cdr import CommandEncoder
+from iceskate_sim.ros.gait_state_cdr import read_observation
+from iceskate_sim.ros.node_support import (
     LOCKSTEP_READER_QOS,
     STATE_QOS,
     check_unknown,
     declare_parameters,
 )
-from iceskate_sim.robot import load_robot
 
 P = TypeVar('P')
 

@@ -5,10 +5,10 @@
 checks (``NativePeriods``) and many periods with the controllers (``NativeControlLoop``).
 
 The kernel gets the four support models (sent as Pinocchio archives), the mode table
-(``iceskate_sim.modes``), the guard table (``iceskate_sim.hybrid``), damping, soft stops and the
-physical options; the test oracle's Python formulation (``tests/oracle``) is checked against it.
-Errors come back as ``SimulationError``: bad input as the kernel's ``ValueError``, a singular or
-rank-deficient system as its ``NativeError``.
+(``iceskate_sim.model.modes``), the guard table (``iceskate_sim.physics.hybrid``), damping, soft
+stops and the physical options; the test oracle's Python formulation (``tests/oracle``) is checked
+against it. Errors come back as ``SimulationError``: bad input as the kernel's ``ValueError``, a
+singular or rank-deficient system as its ``NativeError``.
 """
 
 from __future__ import annotations
@@ -16,10 +16,17 @@ from __future__ import annotations
 import numpy as np
 
 import iceskate_native
-from iceskate_sim.command import CommandValues, HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, ModelTerms
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import (
+from iceskate_sim.model.command import CommandValues, HeldCommand
+from iceskate_sim.model.dynamics import (
+    ContactState,
+    DynamicsParameters,
+    DynamicsResult,
+    ModelTerms,
+)
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
+from iceskate_sim.physics.hybrid import (
     COP_BAND,
     FLIGHT,
     FORCE_BAND,
@@ -34,9 +41,7 @@ from iceskate_sim.hybrid import (
     guards_of,
     resolved_cause,
 )
-from iceskate_sim.integrators import GUARD_MARGIN, IntegratorConfig, Segment
-from iceskate_sim.modes import MODES
-from iceskate_sim.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
+from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig, Segment
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)

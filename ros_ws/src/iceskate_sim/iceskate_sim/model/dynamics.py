@@ -1,6 +1,6 @@
 """The humanoid's model terms in every Table 2 gait mode: what the paper's eq. (7) is made of.
 
-For a mode (``iceskate_sim.modes``: which of the 18 coordinates ``[y0, q1, ..., q17]`` are
+For a mode (``iceskate_sim.model.modes``: which of the 18 coordinates ``[y0, q1, ..., q17]`` are
 active, which swing-foot constraints act) and a support side and pivot, ``ModelTerms`` gives the
 mass matrix M, the Coriolis/centrifugal and gravity terms h and g, the joint damping and soft
 stops, the constraint rows J and residuals, frame placements and velocities, the head-top pose
@@ -8,7 +8,7 @@ psi and its Jacobian, the centre of mass and the energy, on Pinocchio's algorith
 support-rooted models. The coupling analysis of eq. (11) reads them from recorded states.
 
 Eq. (7) itself, the constrained solve with friction, runs in C++ (``iceskate_native.Dynamics``,
-wrapped by ``iceskate_sim.native_dynamics.NativeGaitDynamics``); ``DynamicsResult`` is its
+wrapped by ``iceskate_sim.physics.native.NativeGaitDynamics``); ``DynamicsResult`` is its
 answer at one state.
 
 Units: SI (m, rad, s, kg, N, N m).
@@ -22,8 +22,8 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import MULTIPLIER_NAMES, GaitMode
-from iceskate_sim.robot import (
+from iceskate_sim.model.modes import MULTIPLIER_NAMES, GaitMode
+from iceskate_sim.model.robot import (
     JOINT_LIMITS,
     N_COORDINATES,
     PIVOT_Y,

@@ -12,11 +12,11 @@ import math
 
 import numpy as np
 
-from iceskate_sim.command import all_finite
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import GaitMode, get_mode
-from iceskate_sim.robot import N_COORDINATES, PIVOTS, SIDES
+from iceskate_sim.model.command import all_finite
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import GaitMode, get_mode
+from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES
 
 
 @dataclass(frozen=True)

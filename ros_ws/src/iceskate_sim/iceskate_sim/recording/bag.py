@@ -54,13 +54,10 @@ import pinocchio as pin
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys.store import Typestore
 
-from iceskate_sim.bag_bulk import write_many
-from iceskate_sim.bag_types import PASSIVE, make_typestore
-from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import HybridState, Transition
-from iceskate_sim.modes import get_mode
-from iceskate_sim.robot import (
+from iceskate_sim.model.dynamics import DynamicsResult
+from iceskate_sim.model.modes import get_mode
+from iceskate_sim.model.robot import (
     COORDINATE_NAMES,
     N_COORDINATES,
     PIVOTS,
@@ -71,7 +68,10 @@ from iceskate_sim.robot import (
     anatomical_map,
     load_robot,
 )
-from iceskate_sim.ros_conversions import ns_to_sec_nanosec, seconds_to_ns
+from iceskate_sim.model.stamps import ns_to_sec_nanosec, seconds_to_ns
+from iceskate_sim.physics.hybrid import HybridState, Transition
+from iceskate_sim.recording.bag_bulk import write_many
+from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
 from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
 PROJECT_VERSION = '0.1.0'

@@ -20,8 +20,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from iceskate_sim.dynamics import DynamicsResult
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.dynamics import DynamicsResult
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 METHODS = (*FIXED_STEP, 'rk45')

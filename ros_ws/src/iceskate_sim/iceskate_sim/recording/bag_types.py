@@ -29,9 +29,9 @@ INTERFACES_PACKAGE = 'iceskate_interfaces'
 #: Source name of the joint damping and soft-stop torques in JointDynamics.source_names.
 PASSIVE = 'passive'
 
-# ros_ws/src/iceskate_sim/iceskate_sim/bag_types.py -> ros_ws/src/interfaces/msg
+# ros_ws/src/iceskate_sim/iceskate_sim/recording/bag_types.py -> ros_ws/src/interfaces/msg
 # (resolve() follows colcon's --symlink-install links back to the source tree).
-_SOURCE_MSG_DIR = Path(__file__).resolve().parents[2] / 'interfaces' / 'msg'
+_SOURCE_MSG_DIR = Path(__file__).resolve().parents[3] / 'interfaces' / 'msg'
 
 
 def _candidate_dirs() -> list[Path]:

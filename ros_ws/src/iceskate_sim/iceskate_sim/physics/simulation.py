@@ -19,15 +19,20 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.command import HeldCommand
-from iceskate_sim.dynamics import ContactState, DynamicsParameters, DynamicsResult, ModelTerms
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, HybridState, Transition
-from iceskate_sim.integrators import FIXED_STEP, IntegratorConfig
-from iceskate_sim.native_dynamics import NativeControlLoop, NativeGaitDynamics, NativePeriods
-from iceskate_sim.observation import Observation
-from iceskate_sim.robot import N_COORDINATES, Robot
-from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
+from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.model.dynamics import (
+    ContactState,
+    DynamicsParameters,
+    DynamicsResult,
+    ModelTerms,
+)
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import N_COORDINATES, Robot
+from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
+from iceskate_sim.physics.hybrid import FrictionModel, HybridState, Transition
+from iceskate_sim.physics.integrators import FIXED_STEP, IntegratorConfig
+from iceskate_sim.physics.native import NativeControlLoop, NativeGaitDynamics, NativePeriods
 
 
 def stamp_time(t: float) -> float:
@@ -281,7 +286,7 @@ class Simulator(StateQueries):
 def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 'toe',
                   v: np.ndarray | None = None, t: float = 0.0) -> HybridState:
     """A HybridState at rest (or with velocity ``v``) in Table 2 ``mode``."""
-    from iceskate_sim.modes import get_mode
+    from iceskate_sim.model.modes import get_mode
     gait_mode = get_mode(mode)
     q = np.asarray(q, dtype=float).copy()
     v = np.zeros(N_COORDINATES) if v is None else np.asarray(v, dtype=float).copy()

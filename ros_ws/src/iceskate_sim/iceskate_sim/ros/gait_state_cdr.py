@@ -14,10 +14,11 @@ import struct
 import numpy as np
 
 import iceskate_native
-from iceskate_sim.cdr import STAMP, CdrReader
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, PIVOTS
-from iceskate_sim.ros_conversions import NS_PER_S, PIVOT_OF_CODE, finite_vector
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, PIVOTS
+from iceskate_sim.model.stamps import NS_PER_S
+from iceskate_sim.ros.cdr import STAMP, CdrReader
+from iceskate_sim.ros.conversions import PIVOT_OF_CODE, finite_vector
 
 _CODES = struct.Struct('<3B')         # mode, support_side, pivot
 _STEP = struct.Struct('<I2B')         # step_index, y0_active, q1_active

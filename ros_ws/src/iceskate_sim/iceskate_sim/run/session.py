@@ -24,17 +24,17 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.metrics import Trajectory, compute_metrics
-from iceskate_sim.modes import MODES
-from iceskate_sim.observation import Observation
-from iceskate_sim.recording import BagRecorder, RecordBlock
-from iceskate_sim.robot import Robot, load_robot
-from iceskate_sim.scene import Scene
-from iceskate_sim.simulation import Simulator
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import Robot, load_robot
+from iceskate_sim.physics.simulation import Simulator
+from iceskate_sim.recording.bag import BagRecorder, RecordBlock
+from iceskate_sim.run.metrics import Trajectory, compute_metrics
+from iceskate_sim.run.scene import Scene
 
 if TYPE_CHECKING:
     from iceskate_native import Controller, Kinematics
-    from iceskate_sim.native_dynamics import NativeControlLoop
+    from iceskate_sim.physics.native import NativeControlLoop
 
 #: Samples of held periods (``Session.hold``) recorded at once by a partial ``flush``.
 HELD_BLOCK = 100

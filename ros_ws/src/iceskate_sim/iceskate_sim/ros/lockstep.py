@@ -38,14 +38,14 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import CommandValues, ControllerCommand
-from iceskate_sim.effort_cdr import CommandDecoder
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.hybrid import HybridState
-from iceskate_sim.recording import BagRecord, MessageFactory, RecordEncoder
-from iceskate_sim.robot import PIVOTS, SIDES
-from iceskate_sim.ros_conversions import ns_to_seconds, seconds_to_ns
-from iceskate_sim.session import Session
+from iceskate_sim.model.command import CommandValues, ControllerCommand
+from iceskate_sim.model.robot import PIVOTS, SIDES
+from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
+from iceskate_sim.physics.hybrid import HybridState
+from iceskate_sim.recording.bag import BagRecord, MessageFactory, RecordEncoder
+from iceskate_sim.ros.effort_cdr import CommandDecoder
+from iceskate_sim.run.session import Session
 
 #: Live state topics the controllers read, published first, as soon as the state is known: the
 #: state, then /clock (their sim time) at once, while their transport threads are still awake

@@ -34,8 +34,10 @@ from std_srvs.srv import Trigger
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_interfaces.srv import StepSimulation
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.lockstep import LockstepLoop, LockstepSession
-from iceskate_sim.node_support import (
+from iceskate_sim.model.stamps import set_stamp
+from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.ros.lockstep import LockstepLoop, LockstepSession
+from iceskate_sim.ros.node_support import (
     CLOCK_QOS,
     LATCHED_QOS,
     LOCKSTEP_READER_QOS,
@@ -45,10 +47,8 @@ from iceskate_sim.node_support import (
     declare_parameters,
     run_node,
 )
-from iceskate_sim.parameters import check_fields, setting
-from iceskate_sim.ros_conversions import set_stamp
-from iceskate_sim.scene import MAX_DURATION, Scene, load_scene
-from iceskate_sim.session import Session
+from iceskate_sim.run.scene import MAX_DURATION, Scene, load_scene
+from iceskate_sim.run.session import Session
 
 
 @dataclass(frozen=True)

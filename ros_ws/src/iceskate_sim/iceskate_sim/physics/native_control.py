@@ -12,10 +12,10 @@ the ROS nodes share this one path.
 from __future__ import annotations
 
 import iceskate_native
-from iceskate_sim.command import EMPTY, CommandValues, ControllerCommand
-from iceskate_sim.modes import MODES
-from iceskate_sim.observation import Observation
-from iceskate_sim.robot import N_COORDINATES, PIVOTS, SIDES, Robot
+from iceskate_sim.model.command import EMPTY, CommandValues, ControllerCommand
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
 
 
 def native_kinematics(robot: Robot) -> iceskate_native.ModelKinematics:

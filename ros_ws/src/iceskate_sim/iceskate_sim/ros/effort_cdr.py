@@ -30,12 +30,13 @@ from typing import Any
 import numpy as np
 from rosbags.typesys.store import Typestore
 
-from iceskate_sim.bag_types import make_typestore
-from iceskate_sim.cdr import HEADER, STAMP, CdrReader
-from iceskate_sim.command import CommandValues, ControllerCommand, all_finite
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import COORDINATE_NAMES
-from iceskate_sim.ros_conversions import command_fields, command_from_message, ns_to_sec_nanosec
+from iceskate_sim.model.command import CommandValues, ControllerCommand, all_finite
+from iceskate_sim.model.robot import COORDINATE_NAMES
+from iceskate_sim.model.stamps import ns_to_sec_nanosec
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.ros.cdr import HEADER, STAMP, CdrReader
+from iceskate_sim.ros.conversions import command_fields, command_from_message
 
 #: The float64 sequences of an EffortCommand, in order.
 ARRAYS = ('effort', 'stiffness', 'damping', 'position_reference', 'source_efforts',

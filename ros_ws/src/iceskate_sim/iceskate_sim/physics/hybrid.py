@@ -15,10 +15,10 @@ from typing import Callable
 
 import numpy as np
 
-from iceskate_sim.dynamics import ContactState
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.modes import GaitMode
-from iceskate_sim.robot import Q1, Y0
+from iceskate_sim.model.dynamics import ContactState
+from iceskate_sim.model.modes import GaitMode
+from iceskate_sim.model.robot import Q1, Y0
 
 # Dead bands (hysteresis) of the force-based guards. A guard that is the complement of the
 # transition just made (flat <-> edge, stick <-> slip, flat sole <-> heel only) would otherwise

@@ -2,7 +2,7 @@
 
 A mode is the product of a support-foot state (which optional coordinates y0 and q1 are
 present) and a swing-foot state (which constraints C_hz, C_hy, C_fr act on the swing heel and
-sole). One general routine (``iceskate_sim.dynamics``) solves every mode from this table.
+sole). One general routine (``iceskate_sim.model.dynamics``) solves every mode from this table.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0
 
 # Support-foot states (docs/model.md §3.1): code -> (y0 present, q1 present, meaning)
 SUPPORT_STATES = {

@@ -11,10 +11,10 @@ import zipfile
 
 import numpy as np
 
-from iceskate_sim.dynamics import head_psi
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.recording import Sample
-from iceskate_sim.robot import SOLE_HEEL_Y, SOLE_TOE_Y
+from iceskate_sim.model.dynamics import head_psi
+from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y
+from iceskate_sim.recording.bag import Sample
 
 ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs removed
 SIDE_CODE = {'right': 0, 'left': 1}

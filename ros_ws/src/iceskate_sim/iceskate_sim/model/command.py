@@ -21,7 +21,7 @@ from typing import Iterable, NamedTuple
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.robot import N_COORDINATES
+from iceskate_sim.model.robot import N_COORDINATES
 
 #: An absent array (no impedance, no head target) in ``CommandValues``.
 EMPTY = np.zeros(0)

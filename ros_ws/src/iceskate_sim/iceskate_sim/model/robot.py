@@ -81,8 +81,8 @@ def anatomical_map(side: str) -> list[tuple[int, str, float]]:
 
 def default_urdf_path() -> pathlib.Path:
     """Return the URDF shipped with the package (installed share dir or source tree)."""
-    here = pathlib.Path(__file__).resolve().parent
-    candidates = [here.parent / 'urdf' / 'iceskate_humanoid.urdf']
+    package = pathlib.Path(__file__).resolve().parents[2]  # ros_ws/src/iceskate_sim
+    candidates = [package / 'urdf' / 'iceskate_humanoid.urdf']
     for prefix in ament_prefixes():
         candidates.append(prefix / 'share' / 'iceskate_sim' / 'urdf' / 'iceskate_humanoid.urdf')
     for path in candidates:

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from iceskate_sim.observation import Observation
+from iceskate_sim.model.observation import Observation
 
 
 def smoothstep(x: float) -> float:

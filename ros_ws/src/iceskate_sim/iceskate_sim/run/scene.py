@@ -19,13 +19,13 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from iceskate_sim.dynamics import DynamicsParameters
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.hybrid import FrictionModel, HybridState
-from iceskate_sim.integrators import METHODS, IntegratorConfig
+from iceskate_sim.model.dynamics import DynamicsParameters
+from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.parameters import block, check_fields, from_mapping, setting
-from iceskate_sim.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.simulation import SimulatorConfig, initial_state
+from iceskate_sim.physics.hybrid import FrictionModel, HybridState
+from iceskate_sim.physics.integrators import METHODS, IntegratorConfig
+from iceskate_sim.physics.simulation import SimulatorConfig, initial_state
 from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is found here too)
 
 POSTURES = ('bent_knees', 'staggered', 'upright')

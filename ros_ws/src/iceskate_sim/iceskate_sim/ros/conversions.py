@@ -3,8 +3,6 @@
 Every function is duck-typed on message *fields*, so it accepts rclpy messages (live topics) and
 rosbags message objects (bags) alike:
 
-* stamps: ``builtin_interfaces/Time`` <-> integer nanoseconds <-> seconds; the lockstep compares
-  stamps as integer nanoseconds, never as floats;
 * ``observation_from_gait_state``: the ``Observation`` a control law sees, rebuilt from the
   ``gait_state`` (GaitState) of one instant, which holds the whole hybrid state;
 * ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a
@@ -23,57 +21,20 @@ from __future__ import annotations
 
 from array import array
 from collections.abc import Sequence
-import math
 from typing import Any
 
 import numpy as np
 
-from iceskate_sim.command import ControllerCommand, JointCommand, all_finite
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.observation import Observation
-from iceskate_sim.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+from iceskate_sim.model.command import ControllerCommand, JointCommand, all_finite
+from iceskate_sim.model.observation import Observation
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+from iceskate_sim.model.stamps import stamp_to_seconds
 
-NS_PER_S = 1_000_000_000
 PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
 _NAMES = list(COORDINATE_NAMES)
 _INDEX = {name: i for i, name in enumerate(COORDINATE_NAMES)}
 _IMPEDANCE = ('stiffness', 'damping', 'position_reference')
-
-
-# ------------------------------------------------------------------------------------ stamps
-def seconds_to_ns(t: float) -> int:
-    """Simulation time t [s] as integer nanoseconds (rounded; the stamp of that instant)."""
-    if not math.isfinite(t) or t < 0.0:
-        raise SimulationError(f'a stamp needs a finite time >= 0 s, got {t!r}')
-    return int(round(t * 1e9))
-
-
-def stamp_to_ns(stamp: Any) -> int:
-    """Integer nanoseconds of a builtin_interfaces/Time (fields sec, nanosec)."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-def ns_to_seconds(ns: int) -> float:
-    """Seconds [s] of integer nanoseconds."""
-    return ns / 1e9
-
-
-def stamp_to_seconds(stamp: Any) -> float:
-    """Seconds [s] of a builtin_interfaces/Time."""
-    return ns_to_seconds(stamp_to_ns(stamp))
-
-
-def ns_to_sec_nanosec(ns: int) -> tuple[int, int]:
-    """(sec, nanosec) fields of integer nanoseconds >= 0."""
-    if ns < 0:
-        raise SimulationError(f'a stamp needs a time >= 0, got {ns} ns')
-    return ns // NS_PER_S, ns % NS_PER_S
-
-
-def set_stamp(stamp: Any, ns: int) -> Any:
-    """Write integer nanoseconds into a Time message in place; return it."""
-    stamp.sec, stamp.nanosec = ns_to_sec_nanosec(ns)
-    return stamp
 
 
 # ------------------------------------------------------------------------------ observation
