@@ -68,9 +68,11 @@ def test_an_empty_axis_is_refused(make):
 
 @pytest.mark.parametrize(('changes', 'message'), [
     ({'scene': 'rink'}, r"SPEC key 'scene': unknown scene 'rink'"),
-    ({'study': None}, r"SPEC key 'study': missing"),
+    ({'study': None}, r"SPEC key 'study': must be given"),
     ({'repeat': 2}, r"SPEC key 'repeat': unknown key"),
-    ({'repeats': 0}, r"SPEC key 'repeats': must be an integer >= 1"),
+    ({'repeats': 0}, r"SPEC key 'repeats': must be >= 1, got 0"),
+    ({'repeats': 1.5}, r"SPEC key 'repeats': must be an integer, got 1.5"),
+    ({'sampling': 'random'}, r"SPEC key 'samples': must be given for sampling 'random'"),
     ({'overrides': {'duration': -1.0}}, r"SPEC key 'overrides': the base scene with the "
                                         r"overrides gives a bad scene: scene key 'duration'"),
     ({'metrics': ['arm_swings']}, r"SPEC key 'metrics': 'arm_swings' is not in metrics.json"),

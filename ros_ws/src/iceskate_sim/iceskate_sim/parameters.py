@@ -16,7 +16,7 @@ value}`` with lists for sequences and NaN for an unset optional number; ``unflat
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 import functools
 import math
@@ -191,6 +191,22 @@ def from_mapping(cls: type[T], d: Any, error: type[Exception], prefix: str = '')
         if prefix and not str(exc).startswith(prefix):
             raise error(f'{prefix}{exc}') from None
         raise
+
+
+def keyed_from_mapping(cls: type[T], d: Any, error: type[Exception],
+                       fail: Callable[[str, str], Exception], prefix: str = '') -> T:
+    """``from_mapping`` of a file's block (a scene's, a study's; ``error`` is the classes' own
+    error type) whose error is ``fail(dotted key, problem)``, e.g. "scene key 'floor.mu': must be
+    in [0, 2], got -0.1"."""
+    try:
+        return from_mapping(cls, d, error, f'{prefix}.' if prefix else '')
+    except error as exc:
+        text = str(exc)
+        if text.startswith('unknown key '):  # 'unknown key K; expected one of [...]'
+            key, _, allowed = text.removeprefix('unknown key ').partition('; expected one of ')
+            raise fail(key, f'unknown key; allowed: {allowed}') from None
+        key, _, problem = text.partition(' ')  # 'K must be ...'
+        raise fail(key, problem) from None
 
 
 def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:

@@ -29,7 +29,7 @@ every sweep.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass
 import hashlib
 import itertools
 import json
@@ -44,6 +44,7 @@ import numpy as np
 from iceskate_bringup.scene import parse_scene, scene_path
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import ament_prefixes
+from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_sim.run.scene import Scene
 from iceskate_sim.yaml_io import read_yaml
@@ -61,12 +62,37 @@ RUN_COLUMNS = ('key', 'point', 'repeat', 'status', 'failure', 'run_dir', 'worker
 #: The most runs a SPEC may generate.
 MAX_RUNS = 1_000_000
 
-_TOP = {'study', 'description', 'scene', 'overrides', 'axes', 'sampling', 'samples', 'seed',
-        'repeats', 'metrics', 'bags', 'ratios', 'maps'}
 _NAME = r'[A-Za-z_][A-Za-z0-9_]*'
 _KEY = re.compile(rf'{_NAME}(?:\[\d+\])*(?:\.{_NAME}(?:\[\d+\])*)*')
 _TOKEN = re.compile(rf'({_NAME})|\[(\d+)\]')
 _METRIC = re.compile(r'[A-Za-z0-9_]+(?:\.[A-Za-z0-9_]+)*')
+
+
+def _study_rules(obj: Any) -> None:
+    check_fields(obj, StudyError)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudySettings:
+    """A SPEC file's keys, each a ``setting`` with its rules (the blocks of axes, bags, ratios
+    and maps are read by ``parse_spec``)."""
+
+    study: str = setting(MISSING, 'name of the study (letters, digits, _ . -)')
+    description: str = setting('', 'what the study asks')
+    scene: str = setting(MISSING, 'base scene: a shipped name or a path (relative to the SPEC)')
+    overrides: Any = setting(None, 'dotted scene key -> value, for every run')
+    axes: Any = setting(MISSING, 'dotted scene key -> its values or range')
+    sampling: str = setting('grid', 'every combination of the axes, or points drawn from their '
+                            'ranges', choices=SAMPLINGS)
+    samples: int | None = setting(None, "points to draw (sampling 'random' or "
+                                  "'latin_hypercube')", low=1)
+    seed: int | None = setting(None, 'seed of the draw', low=0)
+    repeats: int = setting(1, 'runs of each point', low=1)
+    metrics: Any = setting(None, 'the entries of metrics.json the table keeps (dotted)')
+    bags: Any = setting(None, "'all' or the axis values of the points recorded with a bag")
+    ratios: Any = setting(None, 'derived metrics: a metric over its value at a baseline')
+    maps: Any = setting(None, 'the heat maps drawn at the end')
+    __post_init__ = _study_rules
 
 
 @dataclass(frozen=True)
@@ -388,65 +414,48 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
     """Validate a SPEC mapping read from ``path`` (StudyError naming the key)."""
     if not isinstance(raw, dict):
         raise StudyError(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
-    for k in raw:
-        if k not in _TOP:
-            raise _fail(str(k), f'unknown key; allowed: {sorted(_TOP)}')
-    for k in ('study', 'scene', 'axes'):
-        if k not in raw:
-            raise _fail(k, 'missing')
-    study = raw['study']
-    if not isinstance(study, str) or not re.fullmatch(r'[A-Za-z0-9_.-]+', study):
+    top = keyed_from_mapping(StudySettings, raw, StudyError, _fail)
+    study = top.study
+    if not re.fullmatch(r'[A-Za-z0-9_.-]+', study):
         raise _fail('study', f'must be a name (letters, digits, _ . -), got {study!r}')
-    description = raw.get('description', '')
-    if not isinstance(description, str):
-        raise _fail('description', 'must be text')
-    scene_file, base = _base_scene(raw['scene'], path)
+    scene_file, base = _base_scene(top.scene, path)
 
-    overrides = raw.get('overrides') or {}
+    overrides = top.overrides or {}
     if not isinstance(overrides, dict):
         raise _fail('overrides', f'must be a mapping of scene keys, got {overrides!r}')
     for key, value in overrides.items():
         set_key(base, key, value, f'overrides.{key}')
     _check_scene(base, 'overrides', 'the base scene with the overrides')
 
-    sampling = raw.get('sampling', 'grid')
-    if sampling not in SAMPLINGS:
-        raise _fail('sampling', f'must be one of {list(SAMPLINGS)}, got {sampling!r}')
-    samples, seed = raw.get('samples'), raw.get('seed', 0)
+    sampling, samples, seed, repeats = top.sampling, top.samples, top.seed, top.repeats
     if sampling == 'grid':
         for k in ('samples', 'seed'):
-            if k in raw:
+            if getattr(top, k) is not None:
                 raise _fail(k, "is for sampling 'random' or 'latin_hypercube'")
-        samples = 0
-    else:
-        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
-            raise _fail('samples', f'must be an integer >= 1 (the points to draw), got '
-                                   f'{samples!r}')
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise _fail('seed', f'must be an integer >= 0, got {seed!r}')
-    repeats = raw.get('repeats', 1)
-    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
-        raise _fail('repeats', f'must be an integer >= 1, got {repeats!r}')
+        samples, seed = 0, 0
+    elif samples is None:
+        raise _fail('samples', f'must be given for sampling {sampling!r} (the points to draw)')
+    seed = seed or 0
 
-    if not isinstance(raw['axes'], dict) or not raw['axes']:
+    if not isinstance(top.axes, dict) or not top.axes:
         raise _fail('axes', f'must map at least one scene key to its values, got '
-                            f'{raw["axes"]!r}')
-    axes = tuple(_axis(str(key), value, sampling) for key, value in raw['axes'].items())
+                            f'{top.axes!r}')
+    axes = tuple(_axis(str(key), value, sampling) for key, value in top.axes.items())
     for axis in axes:  # each axis alone, at each value (or both ends of its range)
         for value in axis.values if axis.values is not None else (axis.low, axis.high):
             scene = copy.deepcopy(base)
             set_key(scene, axis.key, value, f'axes.{axis.key}')
             _check_scene(scene, f'axes.{axis.key}', f'the value {value!r}')
 
-    metrics = raw.get('metrics', list(DEFAULT_METRICS))
+    metrics = list(DEFAULT_METRICS) if top.metrics is None else top.metrics
     if not isinstance(metrics, list) or not metrics:
         raise _fail('metrics', f'must be a list of metric names, got {metrics!r}')
     metrics = tuple(dict.fromkeys(_metric_name(m, 'metrics') for m in metrics))
     keys = tuple(axis.key for axis in axes)
-    ratios = _ratios(raw.get('ratios'), axes, metrics, sampling)
-    spec = Spec(study, description, path, scene_file, base, axes, sampling, int(samples),
-                int(seed), repeats, metrics, _bags(raw.get('bags'), keys), ratios,
-                _maps(raw.get('maps'), keys, metrics, ratios))
+    ratios = _ratios(top.ratios, axes, metrics, sampling)
+    spec = Spec(study, top.description, path, scene_file, base, axes, sampling, int(samples),
+                int(seed), repeats, metrics, _bags(top.bags, keys), ratios,
+                _maps(top.maps, keys, metrics, ratios))
     if len(points_values(spec)) * repeats > MAX_RUNS:
         raise _fail('axes', f'the SPEC generates more than {MAX_RUNS} runs')
     return spec

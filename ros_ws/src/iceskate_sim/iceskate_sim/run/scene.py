@@ -22,7 +22,7 @@ import numpy as np
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.parameters import block, check_fields, from_mapping, setting
+from iceskate_sim.parameters import block, check_fields, keyed_from_mapping, setting
 from iceskate_sim.physics.hybrid import FrictionModel, HybridState
 from iceskate_sim.physics.integrators import METHODS, IntegratorConfig
 from iceskate_sim.physics.simulation import SimulatorConfig, initial_state
@@ -193,18 +193,9 @@ def _fail(key: str, message: str) -> SimulationError:
 
 
 def _settings(cls: type[T], d: Any, key: str) -> T:
-    """``from_mapping(cls, d)`` with its error worded as a scene key's ("scene key 'floor.mu':
-    must be in [0, 2], got -0.1")."""
-    try:
-        return from_mapping(cls, d, SimulationError, f'{key}.' if key else '')
-    except SimulationError as exc:
-        text = str(exc)
-        if text.startswith('unknown key '):  # 'unknown key K; expected one of [...]'
-            where, _, allowed = text.removeprefix('unknown key ').partition(
-                '; expected one of ')
-            raise _fail(where, f'unknown key; allowed: {allowed}') from None
-        where, _, problem = text.partition(' ')  # 'K must be ...'
-        raise _fail(where, problem) from None
+    """Block ``cls`` of the scene at ``key`` ('' for the top level), its errors naming the
+    scene key."""
+    return keyed_from_mapping(cls, d, SimulationError, _fail, key)
 
 
 # ----------------------------------------------------------------------- postures
