@@ -46,7 +46,7 @@ study: setup
 
 # The native core (iceskate_native) built under AddressSanitizer + UndefinedBehaviorSanitizer in
 # ros_ws/build-sanitize and install-sanitize; runs tests/iceskate_native and 2 s of the skate scene
-# on the native engine with it, and fails on any sanitizer report (docs/usage.md, "Tests").
+# with it, and fails on any sanitizer report (docs/usage.md, "Tests").
 sanitize: setup
 	bash $(ROOT)/scripts/sanitize.sh
 

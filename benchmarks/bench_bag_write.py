@@ -2,7 +2,7 @@
 """The bag writer's work per control instant: rosbags' Writer.write one message at a time
 against ``bag_bulk.write_many`` (a whole block at once), on the blocks of a real run.
 
-Runs a scene headless (native engine, no bag) for ``--duration`` s and keeps the blocks of
+Runs a scene headless (no bag) for ``--duration`` s and keeps the blocks of
 samples the runner hands to its bag writer; then, ``--rounds`` times in turn, writes them into a
 fresh MCAP bag in this process the way the writer process does (``_BagFile.write_block``: the
 block encoded, then its messages written), once per message through ``Writer.write`` and once

@@ -2,7 +2,7 @@
 """What skipping saves: the same scene with the skipping on and off.
 
 On the ``stand`` scene (visual lifting plus 2 of the 6 gait-manager sources, a chest push at
-2 s), headless, shipped integrator, native engine (the laws compute only the enabled sources):
+2 s), headless, shipped integrator (the laws compute only the enabled sources):
 
 * **recording**: ``run_scene`` with the bag and ``trajectory.npz`` written against the bag off
   against no output at all (trajectories of the first two compared bit for bit);

@@ -21,7 +21,7 @@ step period's distance to ``CADENCE``, its spread, its head y error beyond ``HEA
 ``--height-weight`` times its head height error beyond ``HEAD_Z_RMS`` (each the larger of the
 nominal case's and its twin's on the same friction); the visual-lifting target then moves at
 the gait's speed (v_d = balance.speed). About 2 s ('robust') to 8 s ('phases') a point with
-``--jobs 2`` on the native engine. ``--start LOG`` starts from the best point of an earlier
+``--jobs 2``. ``--start LOG`` starts from the best point of an earlier
 search's log (``--start-run N``: from its run N), ``--set block.key=value`` from a given value;
 ``--check`` runs the base scene (with ``--start``/``--set``: that point) over ``CHECKS``, cases
 the search did not see, and prints one JSON line per case.

@@ -60,3 +60,16 @@ class PlainLaw:
                 kinematics: iceskate_native.Kinematics) -> list[float]:
         """-gain * v, as a list."""
         return list(-self.gain * obs.v)
+
+
+class NamedSources(iceskate_native.Controller):
+    """No torque, under the source names it is given (``names``)."""
+
+    def __init__(self, names: tuple[str, ...] = ('posture',)) -> None:
+        super().__init__()
+        self.sources = tuple(names)
+
+    def compute(self, obs: iceskate_native.Observation,
+                kinematics: iceskate_native.Kinematics) -> object:
+        """Zero torque from each source."""
+        return {'sources': {name: np.zeros(18) for name in self.sources}}

@@ -200,6 +200,24 @@ def test_a_bad_plugin_is_refused_in_one_sentence(block, message):
     assert '\n' not in str(info.value)
 
 
+@pytest.mark.parametrize(('node', 'names', 'message'), [
+    ('simulator', ['mine'], "scene key 'inputs.simulator': 'simulator' is the simulator node's "
+                            'name'),
+    ('mine', ['posture'], "scene key 'inputs.mine': its source 'posture' is also a source of "
+                          'inputs.gait_manager'),
+    ('mine', ['push'], "scene key 'inputs.mine': its source 'push' is also a source of the "
+                       "scene's push"),
+])
+def test_a_plugin_that_would_share_a_name_is_refused(node, names, message):
+    """Each source is its own column of the record, and the simulator node's name is its own:
+    a plug-in may take neither."""
+    raw = _raw('stand', 0.1)
+    raw['inputs'][node] = {'plugin': 'plugin_controllers:NamedSources',
+                           'parameters': {'names': names}}
+    with pytest.raises(SimulationError, match=message):
+        parse_scene(raw)
+
+
 def test_run_scene_refuses_a_bad_plugin_before_the_run(tmp_path, capsys):
     raw = _raw('stand', 0.1)
     raw['inputs'] = {'mine': {'plugin': 'no_such_package.module:Class'}}
@@ -236,3 +254,20 @@ def test_the_kinematics_answers_an_observation_as_its_state():
     assert 1 in kinematics.active(2) and 0 not in kinematics.active(2)
     with pytest.raises(ValueError):
         kinematics.active(21)
+
+
+@pytest.mark.parametrize('names', [('',), ('', 'a'), ('a', 'a')])
+def test_the_loop_refuses_sources_that_are_empty_or_repeated(names):
+    """A Python controller handed to the native loop directly (no scene in between) still
+    gets its source names checked, the first one included."""
+    from plugin_controllers import NamedSources
+
+    from iceskate_sim.run.scene import load_scene
+    from iceskate_sim.run.session import Session
+    scene = load_scene(scene_path('stand'))
+    session = Session(scene)
+    loop = session.sim.control_loop(native_kinematics(session.robot), [NamedSources(names)], (),
+                                    session.psi_initial)
+    _, error = session.sim.run_loop(loop, 1)
+    assert isinstance(error, iceskate_native.ControllerError)
+    assert "its 'sources' must be distinct non-empty names" in str(error)

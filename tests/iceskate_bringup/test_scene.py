@@ -72,6 +72,7 @@ def test_stand_runs_only_what_it_declares():
     (('inputs', 'gait_manager', 'posture', 'stiffness'), -5.0, r'posture\.stiffness'),
     (('inputs', 'visual_lifting', 'kp'), [1.0, 2.0], r'inputs\.visual_lifting'),
     (('colour',), 'blue', r'colour.*unknown key'),
+    (('engine',), 'python', r"'engine': the physics always runs on the native core now"),
     (('record', 'rate'), 300.0, r'record\.rate.*300 samples/s does not divide the control rate'),
     (('record', 'rate'), 0.0, r'record\.rate'),
     (('record', 'rate'), 2000.0, r'record\.rate.*does not divide'),

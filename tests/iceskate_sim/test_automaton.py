@@ -17,7 +17,7 @@ import pytest
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import ContactState, DynamicsResult
-from iceskate_sim.model.modes import MODES, get_mode, mode_for
+from iceskate_sim.model.modes import MODES, get_mode
 from iceskate_sim.model.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
 from iceskate_sim.physics.hybrid import GUARDS, FrictionModel, HybridState, guards_of
 from oracle.automaton import (
@@ -25,6 +25,7 @@ from oracle.automaton import (
     GUARD_VALUES,
     apply_transition,
     guard_values,
+    mode_for,
     project_positions,
     reroot,
     rerooted_command,

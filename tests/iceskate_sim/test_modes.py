@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.modes import MODES, get_mode, mode_for
+from iceskate_sim.model.modes import MODES, get_mode
+from oracle.automaton import mode_for
 
 # Table 2 as printed (docs/model.md §3.3): number -> (support, swing, coordinates, multipliers,
 # n, n_c, DOF). 'q2..' stands for q2...q17.

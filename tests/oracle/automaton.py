@@ -19,7 +19,7 @@ import numpy as np
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import ContactState, DynamicsResult
-from iceskate_sim.model.modes import GaitMode, mode_for
+from iceskate_sim.model.modes import MODES, SUPPORT_STATES, SWING_STATES, GaitMode
 from iceskate_sim.model.robot import N_COORDINATES, Q1, SOLE_HEEL_Y, SOLE_TOE_Y, Y0
 from iceskate_sim.physics.hybrid import (
     COP_BAND,
@@ -39,6 +39,17 @@ from oracle.dynamics import GaitDynamics
 _LEG = slice(1, 8)
 _LEG_JOINTS = np.arange(2, 8)
 EPS_V = 1.0e-4  # m/s, velocity dead band of docs/model.md §6.3 (heel strike: slide vs. pin, §7.3)
+_BY_CODES = {(m.support, m.swing): m for m in MODES.values()}
+
+
+def mode_for(support: str, swing: str) -> GaitMode:
+    """Return the mode made of a support-foot state and a swing-foot state."""
+    try:
+        return _BY_CODES[(support, swing)]
+    except KeyError:
+        raise SimulationError(
+            f'no gait mode for support {support!r} and swing {swing!r}; support in '
+            f'{tuple(SUPPORT_STATES)}, swing in {tuple(SWING_STATES)}') from None
 
 
 class RunEnded(Exception):

@@ -43,7 +43,10 @@ from iceskate_sim.model.robot import (
     GRAVITY,
     JOINT_LIMITS,
     N_COORDINATES,
+    PIVOT_Y,
     Q1,
+    SOLE_HEEL_Y,
+    SOLE_TOE_Y,
     Y0,
     Robot,
 )
@@ -189,6 +192,11 @@ class GaitDynamics(ModelTerms):
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         super().__init__(robot, params)
         self._mass = robot.total_mass
+        self._damping = robot.damping if self.params.damping else np.zeros(N_COORDINATES)
+        limits = sorted(JOINT_LIMITS.items())
+        self._limit_index = np.array([i for i, _ in limits], dtype=np.intp)
+        self._limit_lower = np.array([lo for _, (lo, _hi) in limits])
+        self._limit_upper = np.array([hi for _, (_lo, hi) in limits])
         self._neg_damping = -self._damping
         self._limit_list = [(int(i), float(lo), float(hi))
                             for i, (lo, hi) in sorted(JOINT_LIMITS.items())]
@@ -217,6 +225,59 @@ class GaitDynamics(ModelTerms):
             engaged = (q[idx] < self._limit_lower) | (q[idx] > self._limit_upper)
             out[idx] = self.params.limit_damping * engaged
         return out
+
+    # ------------------------------------------ model quantities the tests read
+    def passive_forces(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Joint damping and soft-stop torques for all 18 coordinates [N m]."""
+        force = -self._damping * v
+        if self.params.joint_limits:
+            idx = self._limit_index
+            below = np.minimum(q[idx] - self._limit_lower, 0.0)
+            above = np.maximum(q[idx] - self._limit_upper, 0.0)
+            penetration = below + above
+            engaged = penetration != 0.0
+            force[idx] -= (self.params.limit_stiffness * penetration
+                           + self.params.limit_damping * v[idx] * engaged)
+        return force
+
+    def push_force(self, contact: ContactState, q: np.ndarray,
+                   push: tuple[str, np.ndarray]) -> np.ndarray:
+        """Generalized force J^T f of an external force f [N] at a link frame (18,)."""
+        model, data, frames = self._model(contact)
+        pin.computeJointJacobians(model, data, q)
+        force = pin.getFrameJacobian(model, data, frames[push[0]], _LWA)[:3].T @ push[1]
+        force[locked_coordinates(contact.mode)] = 0.0
+        return force
+
+    def frame_velocity(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
+                       name: str) -> pin.Motion:
+        """Spatial velocity (world-aligned at the frame) of a named frame."""
+        model, data, frames = self._model(contact)
+        pin.forwardKinematics(model, data, q, v)
+        return pin.getFrameVelocity(model, data, frames[name], _LWA).copy()
+
+    def center_of_mass(self, contact: ContactState, q: np.ndarray) -> np.ndarray:
+        """Whole-body centre of mass in the world [m]."""
+        model, data, _ = self._model(contact)
+        return pin.centerOfMass(model, data, q).copy()
+
+    def constraint_residuals(self, contact: ContactState, q: np.ndarray,
+                             v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position residuals C(q) [m, rad] and velocity residuals J qd of active constraints."""
+        model, data, frames = self._model(contact)
+        pin.forwardKinematics(model, data, q, v, self._zeros)
+        pin.computeJointJacobians(model, data, q)
+        rows, _, position, _ = self._constraint_rows(contact, data, model, frames, q)
+        return position, rows @ v
+
+    def support_polygon_y(self, contact: ContactState, q: np.ndarray) -> tuple[float, float]:
+        """World y of the heel and toe edges of the support sole when it is flat [m]."""
+        del contact
+        return float(q[Y0] + SOLE_HEEL_Y), float(q[Y0] + SOLE_TOE_Y)
+
+    def pivot_y(self, contact: ContactState, q: np.ndarray) -> float:
+        """World y of the support pivot edge [m]."""
+        return float(q[Y0] + PIVOT_Y[contact.pivot])
 
     # ------------------------------------------------------------- main routine
     def evaluate(self, contact: ContactState, q: np.ndarray, v: np.ndarray,

@@ -314,7 +314,7 @@ class ReferenceSimulator(StateQueries):
             if worst > self.config.residual_bound:
                 self._diverged(f'constraint residual {worst:.3g} beyond '
                                f'{self.config.residual_bound:g}', s)
-        if self.head_height() < self.config.fall_height:
+        if self.head_placement().translation[2] < self.config.fall_height:
             raise RunEnded(fall_reason(self.config.fall_height), s)
 
     def _diverged(self, what: str, state: HybridState) -> None:

@@ -79,9 +79,30 @@ def node_parameters(scene: Scene
     return params
 
 
+#: Names a controller node may not take: the simulator node's.
+RESERVED_NODES = ('simulator',)
+#: Source names the record keeps for itself: the scene's push.
+RESERVED_SOURCES = ('push',)
+
+
 def parse_scene(raw: Any) -> Scene:
-    """Validate a whole scene mapping (simulator part and controller blocks)."""
-    return parse_simulator_scene(raw, validate_inputs)
+    """Validate a whole scene mapping (simulator part, controller blocks, and that no two
+    controllers' sources share a name: each is its own column of the record)."""
+    scene = parse_simulator_scene(raw, validate_inputs)
+    owner: dict[str, str] = {}
+    for node, sources in scene_sources(scene).items():
+        if node in RESERVED_NODES:
+            raise SimulationError(f'scene key {f"inputs.{node}"!r}: {node!r} is the simulator '
+                                  "node's name; name the controller otherwise")
+        for source in sources:
+            if source in RESERVED_SOURCES or source in owner:
+                other = ("the scene's push" if source in RESERVED_SOURCES
+                         else f'inputs.{owner[source]}')
+                raise SimulationError(f'scene key {f"inputs.{node}"!r}: its source {source!r} '
+                                      f'is also a source of {other}; every source needs its '
+                                      'own name')
+            owner[source] = node
+    return scene
 
 
 def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:

@@ -123,6 +123,9 @@ class Field:
         if tp is bool:
             return 'bool'
         if tp is int:
+            if self.rules.high is not None:  # Fields.integer checks a lower bound only
+                raise SystemExit(f'{self.where}: an integer with an upper bound is not '
+                                 'generated yet; bound it in C++ or extend Fields.integer')
             return 'int'
         if tp is str and self.enum is not None:
             return 'choice'
@@ -247,9 +250,14 @@ def choice_enums(module: Any) -> dict[tuple[str, ...], Enum]:
 def paths(classes: list[type], field_types: Any) -> dict[type, str]:
     """The dotted path each class is read at ('' for a top-level class, 'posture.' ...)."""
     out = {cls: '' for cls in classes}
+    seen: set[type] = set()
     for cls in reversed(classes):
         for name, tp in field_types(cls).items():
             if tp in out:
+                if tp in seen:
+                    raise SystemExit(f'{tp.__name__} is the block of two fields; give each its '
+                                     'own class (its readers name one path)')
+                seen.add(tp)
                 out[tp] = f'{out[cls]}{name}.'
     return out
 
@@ -312,10 +320,26 @@ def includes(headers: list[str]) -> list[str]:
     return [f'#include <{h}>' for h in headers]
 
 
-def write_if_changed(path: pathlib.Path, text: str) -> None:
-    """Write ``text`` unless the file holds it already (keeps dependants from rebuilding)."""
-    if not path.is_file() or path.read_text() != text:
-        path.write_text(text)
+def project_sources() -> list[pathlib.Path]:
+    """The Python files of the modules imported so far that belong to the project, not to the
+    interpreter or the installed packages (the generated headers depend on them)."""
+    installed = {pathlib.Path(p).resolve() for p in (sys.prefix, sys.base_prefix)}
+    files = set()
+    for module in list(sys.modules.values()):
+        path = getattr(module, '__file__', None)
+        if path and path.endswith('.py'):
+            resolved = pathlib.Path(path).resolve()
+            if not any(resolved.is_relative_to(root) for root in installed):
+                files.add(resolved)
+    return sorted(files)
+
+
+def write_depfile(path: pathlib.Path, outputs: list[pathlib.Path]) -> None:
+    """A make-style depfile: ``outputs`` depend on every project source imported."""
+    def escaped(p: pathlib.Path) -> str:
+        return str(p).replace(' ', '\\ ')
+    path.write_text(' '.join(escaped(o) for o in outputs) + ': '
+                    + ' \\\n  '.join(escaped(f) for f in project_sources()) + '\n')
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -326,6 +350,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--namespace', required=True, help='C++ namespace, e.g. gait_manager')
     parser.add_argument('--out', required=True, type=pathlib.Path,
                         help='directory of the two headers')
+    parser.add_argument('--depfile', type=pathlib.Path,
+                        help='write the Python sources the headers depend on here (make syntax)')
     args = parser.parse_args(argv)
     sys.path[:0] = args.path
     try:
@@ -334,8 +360,11 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f'cannot import {args.module} ({exc}): iceskate_sim must be importable '
                          'in the build environment') from None
     args.out.mkdir(parents=True, exist_ok=True)
-    write_if_changed(args.out / 'parameters.hpp', structs)
-    write_if_changed(args.out / 'parameter_readers.hpp', readers)
+    outputs = [args.out / 'parameters.hpp', args.out / 'parameter_readers.hpp']
+    for path, text in zip(outputs, (structs, readers), strict=True):
+        path.write_text(text)  # only when a source changed: CMake runs this from the depfile
+    if args.depfile is not None:
+        write_depfile(args.depfile, outputs)
     return 0
 
 

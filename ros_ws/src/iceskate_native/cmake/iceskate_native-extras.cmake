@@ -57,8 +57,11 @@ macro(iceskate_controller_package)
       COMMAND "${Python_EXECUTABLE}" "${ICESKATE_NATIVE_CMAKE_DIR}/generate_parameters.py"
               --path "${CMAKE_CURRENT_SOURCE_DIR}" --module "${_controller_module}"
               --namespace "${PROJECT_NAME}" --out "${_controller_generated}/${PROJECT_NAME}"
+              --depfile "${CMAKE_CURRENT_BINARY_DIR}/generated/parameters.d"
       DEPENDS "${CMAKE_CURRENT_SOURCE_DIR}/${_controller_PARAMETERS}"
               "${ICESKATE_NATIVE_CMAKE_DIR}/generate_parameters.py"
+      # every Python module the generator imported (iceskate_sim's schema among them)
+      DEPFILE "${CMAKE_CURRENT_BINARY_DIR}/generated/parameters.d"
       COMMENT "Generating the C++ parameter structs of ${_controller_PARAMETERS}"
       VERBATIM)
   endif()

@@ -2,6 +2,7 @@
 // ControllerOutput, and its failures as one ControllerError naming it.
 #include "python_controller.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <initializer_list>
 #include <stdexcept>
@@ -234,11 +235,9 @@ const std::vector<std::string> & PythonLaw::sources(const Observation & obs)
                           "names, got " + nb::repr(names).c_str());
   }
   for (std::size_t i = 0; i < out.size(); ++i) {
-    for (std::size_t j = 0; j < i; ++j) {
-      if (out[i] == out[j] || out[i].empty()) {
-        throw ControllerError(who(me, obs.t) + ": its 'sources' must be distinct non-empty "
-                              "names, got " + nb::repr(names).c_str());
-      }
+    if (out[i].empty() || std::find(out.begin(), out.begin() + i, out[i]) != out.begin() + i) {
+      throw ControllerError(who(me, obs.t) + ": its 'sources' must be distinct non-empty "
+                            "names, got " + nb::repr(names).c_str());
     }
   }
   sources_ = std::move(out);

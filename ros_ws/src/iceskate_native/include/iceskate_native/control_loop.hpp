@@ -2,9 +2,9 @@
 // t_k the controllers answer the observation of the current state (reading the robot through a
 // Kinematics), the sum of their commands and the scene's push are held over [t_k, t_k+1]
 // (zero-order hold) while HybridSimulator::advance integrates the period, and the sample of
-// t_k goes into a SampleBlock. The native counterpart of iceskate_sim.run.session.Session.step
-// driven by the headless composition of the controllers, tested against it. The same period
-// runs under commands received from outside (hold(): the controller nodes of a ROS graph).
+// t_k goes into a SampleBlock (iceskate_sim.run.session.Session.run_periods). The same period
+// runs under commands received from outside (hold(): the controller nodes of a ROS graph);
+// both give the same samples bit for bit, whatever the block size.
 #pragma once
 
 #include <cstdint>

@@ -1,7 +1,7 @@
 // The transition guards of the hybrid automaton (docs/model.md §6): a guard's value is positive
 // when its transition is due. Which guards apply in which mode is data from Python
-// (iceskate_sim.physics.hybrid.guards_of); their value formulas are here, by name, as in
-// iceskate_sim.physics.hybrid.GUARDS, and tested against them.
+// (iceskate_sim.physics.hybrid.guards_of); their value formulas are here, by name, tested
+// against the test oracle's (tests/oracle/automaton.py, GUARD_VALUES).
 #pragma once
 
 #include <array>

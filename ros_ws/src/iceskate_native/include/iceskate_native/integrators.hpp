@@ -3,8 +3,8 @@
 // crosses zero from below, located to the event tolerance by TOMS 748 (Boost.Math): for the
 // fixed-step methods by re-taking the step with a shorter size, for the adaptive Dormand-Prince
 // 5(4) pair (Boost.Odeint's runge_kutta_dopri5 under its step-size control,
-// integrators_adaptive.cpp) on the step's dense output. The native counterpart of
-// iceskate_sim.physics.integrators.Integrator.integrate_segment.
+// integrators_adaptive.cpp) on the step's dense output. Tested against the test oracle's
+// Integrator.integrate_segment (tests/oracle/integrators.py).
 #pragma once
 
 #include <functional>

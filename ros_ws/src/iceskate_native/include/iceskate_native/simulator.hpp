@@ -2,8 +2,9 @@
 // (zero-order hold), the mode's dynamics are integrated with a fixed-step method up to the next
 // located event, its transition applied (a cascade of due transitions settled at once, a cycle
 // of single switches replaced by the contact-consistent mode, a Zeno burst rested), and at the
-// end the state is projected onto the active constraints and its health checked. The native
-// counterpart of iceskate_sim.physics.simulation.Simulator.advance, tested against it.
+// end the state is projected onto the active constraints and its health checked.
+// iceskate_sim.physics.simulation.Simulator is its Python facade; tested against the period
+// loop of the test oracle (tests/oracle/simulator.py, ReferenceSimulator.advance).
 #pragma once
 
 #include <map>

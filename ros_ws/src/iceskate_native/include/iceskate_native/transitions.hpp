@@ -1,8 +1,9 @@
 // The resets of the hybrid automaton (docs/model.md §6-§7): perfectly inelastic impacts
 // projected on the new constraint set, coordinate changes (add or drop q1 or y0), the support
 // exchange that re-roots the tree, and the contact-consistent mode that replaces a cycle of
-// single switches at one instant. The native counterpart of iceskate_sim.physics.hybrid
-// (apply_transition, reroot, impact, project_positions, resolve_contact_mode), tested against it.
+// single switches at one instant. Tested against the test oracle's automaton
+// (tests/oracle/automaton.py: apply_transition, reroot, impact, project_positions,
+// resolve_contact_mode).
 #pragma once
 
 #include <limits>

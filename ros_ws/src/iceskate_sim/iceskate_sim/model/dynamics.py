@@ -2,10 +2,10 @@
 
 For a mode (``iceskate_sim.model.modes``: which of the 18 coordinates ``[y0, q1, ..., q17]`` are
 active, which swing-foot constraints act) and a support side and pivot, ``ModelTerms`` gives the
-mass matrix M, the Coriolis/centrifugal and gravity terms h and g, the joint damping and soft
-stops, the constraint rows J and residuals, frame placements and velocities, the head-top pose
-psi and its Jacobian, the centre of mass and the energy, on Pinocchio's algorithms over the four
-support-rooted models. The coupling analysis of eq. (11) reads them from recorded states.
+mass matrix M, the Coriolis/centrifugal and gravity terms h and g, the constraint rows J, frame
+placements, the head-top pose psi and its Jacobian and the energy, on Pinocchio's algorithms
+over the four support-rooted models. The coupling analysis of eq. (11) reads them from recorded
+states.
 
 Eq. (7) itself, the constrained solve with friction, runs in C++ (``iceskate_native.Dynamics``,
 wrapped by ``iceskate_sim.physics.native.NativeGaitDynamics``); ``DynamicsResult`` is its
@@ -23,17 +23,7 @@ import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, GaitMode
-from iceskate_sim.model.robot import (
-    JOINT_LIMITS,
-    N_COORDINATES,
-    PIVOT_Y,
-    Q1,
-    SIDES,
-    SOLE_HEEL_Y,
-    SOLE_TOE_Y,
-    Y0,
-    Robot,
-)
+from iceskate_sim.model.robot import N_COORDINATES, Q1, SIDES, Y0, Robot
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)
@@ -129,11 +119,6 @@ class ModelTerms:
         self.params = params or DynamicsParameters()
         self._data = {key: sm.new_data() for key, sm in robot.models.items()}
         self._zeros = np.zeros(N_COORDINATES)
-        self._damping = robot.damping if self.params.damping else np.zeros(N_COORDINATES)
-        limits = sorted(JOINT_LIMITS.items())
-        self._limit_index = np.array([i for i, _ in limits], dtype=np.intp)
-        self._limit_lower = np.array([lo for _, (lo, _hi) in limits])
-        self._limit_upper = np.array([hi for _, (_lo, hi) in limits])
         self._lower = np.tril_indices(N_COORDINATES, -1)
 
     # ----------------------------------------------------------------- helpers
@@ -143,19 +128,6 @@ class ModelTerms:
         if sm is None:
             raise SimulationError(f'unknown support side/pivot {key}; sides {SIDES}')
         return sm.model, self._data[key], sm.frame_ids
-
-    def passive_forces(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Joint damping and soft-stop torques for all 18 coordinates [N m]."""
-        force = -self._damping * v
-        if self.params.joint_limits:
-            idx = self._limit_index
-            below = np.minimum(q[idx] - self._limit_lower, 0.0)
-            above = np.maximum(q[idx] - self._limit_upper, 0.0)
-            penetration = below + above
-            engaged = penetration != 0.0
-            force[idx] -= (self.params.limit_stiffness * penetration
-                           + self.params.limit_damping * v[idx] * engaged)
-        return force
 
     def _constraint_rows(self, contact: ContactState, data: pin.Data, model: pin.Model,
                          frames: dict[str, int], q: np.ndarray,
@@ -196,15 +168,6 @@ class ModelTerms:
         return rows, drift, position, heel_y_row
 
     # ------------------------------------------------------ derived quantities
-    def push_force(self, contact: ContactState, q: np.ndarray,
-                   push: tuple[str, np.ndarray]) -> np.ndarray:
-        """Generalized force J^T f of an external force f [N] at a link frame (18,)."""
-        model, data, frames = self._model(contact)
-        pin.computeJointJacobians(model, data, q)
-        force = pin.getFrameJacobian(model, data, frames[push[0]], _LWA)[:3].T @ push[1]
-        force[locked_coordinates(contact.mode)] = 0.0
-        return force
-
     def mass_matrix(self, contact: ContactState, q: np.ndarray) -> np.ndarray:
         """M(q) over the active coordinates of ``contact.mode`` (symmetric) [kg m^2]."""
         model, data, _ = self._model(contact)
@@ -250,18 +213,6 @@ class ModelTerms:
         pin.forwardKinematics(model, data, q)
         return pin.updateFramePlacement(model, data, frames[name]).copy()
 
-    def frame_velocity(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
-                       name: str) -> pin.Motion:
-        """Spatial velocity (world-aligned at the frame) of a named frame."""
-        model, data, frames = self._model(contact)
-        pin.forwardKinematics(model, data, q, v)
-        return pin.getFrameVelocity(model, data, frames[name], _LWA).copy()
-
-    def center_of_mass(self, contact: ContactState, q: np.ndarray) -> np.ndarray:
-        """Whole-body centre of mass in the world [m]."""
-        model, data, _ = self._model(contact)
-        return pin.centerOfMass(model, data, q).copy()
-
     def energy(self, contact: ContactState, q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
         """Kinetic and potential energy [J] (potential zero at z = 0)."""
         model, data, _ = self._model(contact)
@@ -275,25 +226,6 @@ class ModelTerms:
         pin.forwardKinematics(model, data, q, self._zeros, self._zeros)
         pin.computeJointJacobians(model, data, q)
         return self._constraint_rows(contact, data, model, frames, q)[0]
-
-    def constraint_residuals(self, contact: ContactState, q: np.ndarray,
-                             v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Position residuals C(q) [m, rad] and velocity residuals J qd of active constraints."""
-        model, data, frames = self._model(contact)
-        pin.forwardKinematics(model, data, q, v, self._zeros)
-        pin.computeJointJacobians(model, data, q)
-        rows, _, position, _ = self._constraint_rows(contact, data, model, frames, q)
-        return position, rows @ v
-
-    def support_polygon_y(self, contact: ContactState, q: np.ndarray) -> tuple[float, float]:
-        """World y of the heel and toe edges of the support sole when it is flat [m]."""
-        del contact
-        return float(q[Y0] + SOLE_HEEL_Y), float(q[Y0] + SOLE_TOE_Y)
-
-    def pivot_y(self, contact: ContactState, q: np.ndarray) -> float:
-        """World y of the support pivot edge [m]."""
-        return float(q[Y0] + PIVOT_Y[contact.pivot])
-
 
 
 def head_psi(translation: np.ndarray, rotation: np.ndarray) -> np.ndarray:

@@ -89,7 +89,6 @@ def _make_mode(number: int, support: str, swing: str) -> GaitMode:
 
 
 MODES: dict[int, GaitMode] = {n: _make_mode(n, sup, sw) for n, (sup, sw) in TABLE_2.items()}
-_BY_CODES = {(m.support, m.swing): m for m in MODES.values()}
 
 
 def get_mode(number: int) -> GaitMode:
@@ -99,13 +98,3 @@ def get_mode(number: int) -> GaitMode:
     if mode is None:
         raise SimulationError(f'unknown gait mode {number!r}; Table 2 has modes 1-20')
     return mode
-
-
-def mode_for(support: str, swing: str) -> GaitMode:
-    """Return the mode made of a support-foot state and a swing-foot state."""
-    try:
-        return _BY_CODES[(support, swing)]
-    except KeyError:
-        raise SimulationError(
-            f'no gait mode for support {support!r} and swing {swing!r}; support in '
-            f'{tuple(SUPPORT_STATES)}, swing in {tuple(SWING_STATES)}') from None

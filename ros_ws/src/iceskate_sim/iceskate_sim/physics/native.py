@@ -79,6 +79,9 @@ class NativeGaitDynamics(ModelTerms):
         if (stiffness is None) != (damping is None):  # a joint impedance needs both
             stiffness = np.zeros(18) if stiffness is None else stiffness
             damping = np.zeros(18) if damping is None else damping
+        if contact.side not in SIDES or contact.pivot not in PIVOTS:
+            raise SimulationError(f'unknown support side/pivot {(contact.side, contact.pivot)}; '
+                                  f'sides {SIDES}, pivots {PIVOTS}')
         return (contact.mode.number, SIDES.index(contact.side), PIVOTS.index(contact.pivot),
                 contact.heel_anchor_y, contact.support_slide_dir, contact.heel_slide_dir,
                 np.asarray(q, dtype=float), np.asarray(v, dtype=float),
@@ -108,8 +111,10 @@ class NativeGaitDynamics(ModelTerms):
                               stiffness: np.ndarray | None, damping: np.ndarray | None,
                               step: float) -> np.ndarray:
         """Accelerations of an implicit step ((M + h D) a = f - D v, D the joint, impedance
-        and soft-stop damping),
-        natively."""
+        and soft-stop damping), natively.
+
+        For tests and benchmarks: the periods run inside ``HybridSimulator``
+        (``NativePeriods``), which takes its implicit steps without this call."""
         try:
             return self._kernel.implicit_acceleration(
                 *self._arguments(contact, q, v, tau, push, stiffness, damping), step)
@@ -126,7 +131,10 @@ class NativeGaitDynamics(ModelTerms):
     def guard_values(self, state: HybridState, command: HeldCommand,
                      push: tuple[str, np.ndarray] | None, friction: FrictionModel,
                      suppressed: dict[str, float]) -> np.ndarray:
-        """Values of the guards of ``state.mode`` (rested ones -1), natively."""
+        """Values of the guards of ``state.mode`` (rested ones -1), natively.
+
+        For tests and benchmarks: the periods run inside ``HybridSimulator``
+        (``NativePeriods``), which evaluates its guards without this call."""
         args = self._arguments(state.contact, state.q, state.v, command.bias, push,
                                command.stiffness, command.damping)
         try:
@@ -142,7 +150,10 @@ class NativeGaitDynamics(ModelTerms):
                           t_end: float) -> Segment:
         """Integrate ``state`` to ``t_end`` or the first guard crossing with a fixed-step
         method or rk45 (``Integrator.integrate_segment``'s counterpart, natively; rk45 starts
-        with ``integrator.step`` and keeps no step history between calls)."""
+        with ``integrator.step`` and keeps no step history between calls).
+
+        For tests and benchmarks: the periods run inside ``HybridSimulator``
+        (``NativePeriods``), which integrates its segments without this call."""
         (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
          frame, force) = self._arguments(state.contact, state.q, state.v, command.bias, push,
                                          command.stiffness, command.damping)
@@ -184,8 +195,8 @@ class NativePeriods:
     """Whole control periods in C++ (``iceskate_native.HybridSimulator``): the integration
     (fixed-step methods, or rk45: Dormand-Prince 5(4) with its step-size control, events on its
     dense output), event location, transitions, projection and health checks of
-    ``Simulator.advance``, with no Python in between. ``Simulator`` uses it for the native
-    engine with those methods and mirrors its state, events and counters.
+    ``Simulator.advance``, with no Python in between. ``Simulator`` runs every period on it and
+    mirrors its state, events and counters.
 
     :param dynamics: the native kernel it integrates (its workspace is shared: one thread).
     :param initial: the initial state. The other parameters are ``SimulatorConfig``'s.
@@ -282,8 +293,8 @@ class NativeControlLoop:
     """Many control periods in one C++ call (``iceskate_native.ControlLoop``): at each control
     instant the native ``controllers`` answer the observation through ``kinematics``, the sum of
     their commands and the active push are held over the period, and ``periods`` advances; the
-    samples come back as arrays. It is what ``Session.step`` does for each period when the
-    headless runner's ``ControlStack`` answers, without Python in between.
+    samples come back as arrays (``Session.run_periods``: the headless runner's
+    ``ControlStack`` answers in C++, without Python in between).
 
     Without controllers it holds the commands of controller nodes received from outside (the
     ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the

@@ -137,10 +137,6 @@ class StateQueries:
         """The controller's view of the current state."""
         return observation_of(self.state)
 
-    def head_height(self) -> float:
-        """Height of the head top [m]."""
-        return float(self.head_placement().translation[2])
-
     def head_placement(self) -> pin.SE3:
         """World placement of the head-top frame in the current state (kept until the state
         changes)."""

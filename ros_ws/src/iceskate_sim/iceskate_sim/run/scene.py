@@ -229,6 +229,8 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
     """
     if not isinstance(raw, dict):
         raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__}')
+    if 'engine' in raw:  # a scene written for the Python engine, which is gone
+        raise _fail('engine', 'the physics always runs on the native core now; remove the key')
     top = _settings(SceneSettings, raw, '')
     if not top.scene:
         raise _fail('scene', f'must be a non-empty name, got {top.scene!r}')
