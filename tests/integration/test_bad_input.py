@@ -3,6 +3,7 @@
 import json
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -45,7 +46,9 @@ def test_killed_controller_ends_the_run_naming_it_and_the_bag_reads(
         codes = graph.stop()
     log = graph.log('simulator')
     assert codes['simulator'] == 1, log
-    assert "no command from node(s) 'gait_manager' within 1.0 s" in log, log
+    # under load the live node may also be late at that instant: it may be named too
+    named = re.search(r'no command from node\(s\) (.*) within 1\.0 s', log)
+    assert named and "'gait_manager'" in named.group(1).split(', '), log
     failure = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['failure']
     assert 'controller timeout' in failure and 'gait_manager' in failure
     with AnyReader([tmp_path / 'out' / 'bag']) as reader:
