@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from iceskate_study.errors import StudyError
-from iceskate_study.plot import draw_maps, main
+from iceskate_study.plot import _ordered, draw_maps, main
 from iceskate_study.spec import expand, parse_spec
 from iceskate_study.table import RESULTS, ResultTable, read_table
 
@@ -63,3 +63,22 @@ def test_sweep_plot_draws_the_default_maps_and_refuses_bad_names(table, capsys):
     assert "--x 'duration' is not an axis" in capsys.readouterr().err
     with pytest.raises(StudyError, match='cannot read the results table'):
         draw_maps(table.parent / 'other.parquet', 'a', 'b', ['steps'], table.parent)
+
+
+def test_a_vector_valued_axis_is_drawn_one_column_per_vector(tmp_path, grid):
+    """An axis whose values are lists (a gain vector) gives one column per distinct vector,
+    in the order of their entries."""
+    grid['axes'] = {'inputs.visual_lifting.kp': [[40, 290, 1100], [30, 290, 1100]],
+                    'floor.mu': [0.005, 0.01]}
+    grid['metrics'] = ['steps']
+    spec = parse_spec(grid, tmp_path / 'spec.yaml')
+    points = expand(spec)
+    results = ResultTable(tmp_path, spec, points)
+    for i, point in enumerate(points):
+        results.add({'key': point.key, 'status': 'ok', 'steps': i})
+    results.write()
+    written = draw_maps(tmp_path / RESULTS, 'inputs.visual_lifting.kp', 'floor.mu', ['steps'],
+                        tmp_path / 'maps')
+    assert [p.name for p in written] == ['steps.png']
+    assert np.std(matplotlib.image.imread(written[0])[..., :3]) > 0.05
+    assert _ordered([[40, 2], None, [30, 2], [40, 2], [30, 1]]) == [[30, 1], [30, 2], [40, 2]]

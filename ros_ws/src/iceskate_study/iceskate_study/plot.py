@@ -52,8 +52,14 @@ def _numbers(values: list[Any]) -> np.ndarray:
     return out
 
 
+def _hashable(value: Any) -> Any:
+    """``value`` with its lists as tuples (a vector-valued axis, e.g. a gain vector)."""
+    return tuple(map(_hashable, value)) if isinstance(value, list) else value
+
+
 def _ordered(values: list[Any]) -> list[Any]:
-    unique = list(dict.fromkeys(v for v in values if v is not None))
+    """The distinct values but None, sorted where they compare (lists by their entries)."""
+    unique = list({_hashable(v): v for v in values if v is not None}.values())
     try:
         return sorted(unique)
     except TypeError:
