@@ -58,6 +58,25 @@ def test_background_writer_writes_the_same_messages(tmp_path, samples):
     assert background == inline
 
 
+def test_the_bag_says_the_urdf_is_latched_and_replay_offers_it_so(tmp_path, samples):
+    """/robot_description is recorded with the QoS the simulator offers it with (transient
+    local, reliable, depth 1), which ``ros2 bag play`` and Foxglove replay; the live and
+    replayed publishers use that profile."""
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    from iceskate_sim.ros.node_support import LATCHED_QOS
+    _record(tmp_path / 'bag', samples[:3], background=False)
+    with Reader(tmp_path / 'bag') as reader:
+        offered = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    (urdf,) = offered.pop('/robot_description')
+    assert (urdf.durability, urdf.reliability, urdf.depth) == (
+        QosDurability.TRANSIENT_LOCAL, QosReliability.RELIABLE, 1)
+    assert offered and not any(offered.values())  # the others: as a plain reliable topic
+    assert (LATCHED_QOS.durability, LATCHED_QOS.reliability, LATCHED_QOS.depth) == (
+        DurabilityPolicy.TRANSIENT_LOCAL, ReliabilityPolicy.RELIABLE, 1)
+
+
 def test_the_background_writer_runs_at_idle_priority(tmp_path, samples):
     """The writer takes only the CPU time the run leaves (SCHED_IDLE), whatever the parent's
     scheduling; the parent's stays as it was."""

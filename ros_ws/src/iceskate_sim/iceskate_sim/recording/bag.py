@@ -71,7 +71,7 @@ from iceskate_sim.model.robot import (
 from iceskate_sim.model.stamps import ns_to_sec_nanosec, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState, Transition
 from iceskate_sim.recording.bag_bulk import write_many
-from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
+from iceskate_sim.recording.bag_types import OFFERED_QOS, PASSIVE, make_typestore
 from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
 PROJECT_VERSION = '0.1.0'
@@ -873,8 +873,9 @@ class _BagFile:
                                          else json.dumps(value, sort_keys=True))
         self._writer.set_custom_data('project_version', PROJECT_VERSION)
         ts = factory.typestore
-        self._connections = {topic: self._writer.add_connection(topic, msgtype, typestore=ts)
-                             for topic, msgtype in TOPICS.items()}
+        self._connections = {topic: self._writer.add_connection(
+            topic, msgtype, typestore=ts, offered_qos_profiles=OFFERED_QOS.get(topic, ()))
+            for topic, msgtype in TOPICS.items()}
         self.write('/robot_description', 0.0, factory.description(urdf))
 
     def write(self, topic: str, t: float, message: Any) -> None:

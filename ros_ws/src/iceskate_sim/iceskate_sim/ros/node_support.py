@@ -39,7 +39,14 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rosbags.interfaces import Qos
 import yaml
 
 from iceskate_sim.errors import SimulationError
@@ -51,6 +58,7 @@ from iceskate_sim.parameters import (
     optional_inner,
     unflatten,
 )
+from iceskate_sim.recording.bag_types import OFFERED_QOS
 from iceskate_sim.shutdown import StopRequest, process_alive
 from iceskate_sim.yaml_io import read_yaml
 
@@ -63,8 +71,17 @@ STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 #: without them); a message lost is recovered by the simulator's resend of an unanswered state.
 LOCKSTEP_READER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                  durability=DurabilityPolicy.VOLATILE)
-LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+def _profile(qos: Qos) -> QoSProfile:
+    """rclpy's profile of a bag's QoS (their policies share the rmw numbers)."""
+    return QoSProfile(history=HistoryPolicy(qos.history.value), depth=qos.depth,
+                      reliability=ReliabilityPolicy(qos.reliability.value),
+                      durability=DurabilityPolicy(qos.durability.value),
+                      liveliness=LivelinessPolicy(qos.liveliness.value))
+
+
+#: /robot_description: latched, as the bag records it (``bag_types.OFFERED_QOS``).
+LATCHED_QOS = _profile(OFFERED_QOS['/robot_description'][0])
 #: /clock: reliable writers match best-effort readers too (rclpy's TimeSource reads it so).
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
