@@ -29,7 +29,9 @@ from bench_work_precision import machine_info
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.recording import bag as recording
-from iceskate_sim.recording.bag import RecordBlock
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages, stamps_ns
 from iceskate_sim.run.session import Session, scene_metadata
 
 WAYS = ('Writer.write, message by message', 'write_many, block by block')
@@ -39,37 +41,38 @@ class _Blocks:
     """Stands in for the session's bag recorder: keeps the blocks it is handed."""
 
     def __init__(self) -> None:
-        self.blocks: list[RecordBlock] = []
+        self.blocks: list[tuple[dict, Events]] = []
 
-    def write_block(self, block: RecordBlock) -> None:
-        self.blocks.append(block)
+    def write_block(self, block: dict, events: Events) -> None:
+        self.blocks.append((block, events))
 
     def close(self) -> None:
         pass
 
 
-def _one_by_one(bag: recording._BagFile, block: RecordBlock) -> None:
+def _one_by_one(bag: recording._BagFile, block: dict, events: Events) -> None:
     """``_BagFile.write_block`` as it was: every message through ``Writer.write``."""
-    stamps = recording.stamps_ns(block.values[:, 0]).tolist()
-    encoded = bag._encoder.encode_block(block)
-    columns = [(bag._connections[topic], encoded[topic]) for topic in recording.RECORDED_TOPICS]
+    stamps = stamps_ns(block['t']).tolist()
+    encoded = bag.messages.encode(block, events)
+    columns = [(bag._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
     for k, ns in enumerate(stamps):
         for connection, column in columns:
             bag._writer.write(connection, ns, column[k])
 
 
-def _write(path: pathlib.Path, scene: object, session: Session, blocks: list[RecordBlock],
-           way: str) -> float:
+def _write(path: pathlib.Path, scene: object, session: Session,
+           blocks: list[tuple[dict, Events]], way: str) -> float:
     """Seconds to write ``blocks`` into a new bag at ``path`` (opening and closing it)."""
     start = time.perf_counter()
     bag = recording._BagFile(path, scene_metadata(scene),
                              session.robot.urdf_path.read_text(encoding='utf-8'),
-                             recording.MessageFactory(robot=session.robot))
+                             SampleMessages(make_typestore(),
+                                            LinkTransforms(session.robot.urdf_model)))
     for block in blocks:
         if way == WAYS[0]:
-            _one_by_one(bag, block)
+            _one_by_one(bag, *block)
         else:
-            bag.write_block(block)
+            bag.write_block(*block)
     bag.close()
     return time.perf_counter() - start
 
@@ -88,7 +91,7 @@ def main() -> None:
     while not session.done:
         session.run_periods(stack, 1000)
     session.finish()
-    samples = sum(len(block) for block in recorder.blocks)
+    samples = sum(len(block['t']) for block, _ in recorder.blocks)
     times: dict[str, list[float]] = {way: [] for way in WAYS}
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(args.rounds):
@@ -101,7 +104,7 @@ def main() -> None:
             if files[0] != files[1]:
                 raise SystemExit('the two ways wrote different bags')
     print(f'{args.scene}, {args.duration:g} s: {samples} control instants, '
-          f'{len(recording.RECORDED_TOPICS)} messages each; median of {args.rounds} rounds, '
+          f'{len(RECORDED_TOPICS)} messages each; median of {args.rounds} rounds, '
           'ways in turn; the two bags are the same file')
     print(f'machine: {info["cpu"]}, {info["cpus"]} CPUs; load average at start '
           f'{info["loadavg_start"]}; {info["date"]}')

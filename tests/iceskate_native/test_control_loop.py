@@ -1,7 +1,9 @@
 """Many control periods in one native call (``iceskate_native.ControlLoop``, through
 ``Session.run_periods``) against the same session advanced one period per call, and the
 commands of controller nodes (``ControlStack.commands``, as values) held one period at a time
-by the same loop (``Session.hold``, the path of the ROS simulator node).
+by the same loop (``Session.hold``, the path of the ROS simulator node). The columns derived for
+the recording (head quaternion and pitch, pivot code, root link pose) and the live view equal
+what Pinocchio gives in Python.
 
 All run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
 bit: every trajectory column, the event log, the counters, the bag's messages and the way a run
@@ -15,6 +17,7 @@ import math
 import pathlib
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from rosbags.rosbag2 import Reader
 
@@ -24,10 +27,11 @@ from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues, HeldCommand
-from iceskate_sim.model.robot import PIVOTS, SIDES
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.robot import PIVOTS, SIDES, Robot
 from iceskate_sim.physics.hybrid import Transition
+from iceskate_sim.physics.native import root_link
 from iceskate_sim.physics.simulation import Simulator
-from iceskate_sim.recording.bag import Sample, bag_record
 from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
 
@@ -112,7 +116,60 @@ def test_commands_held_one_period_at_a_time_equal_the_session_stepped(
     _assert_identical(_stepped(scene), _held(scene))
 
 
-def test_the_live_view_is_the_record_of_the_current_state_under_the_held_command() -> None:
+def _placements(robot: Robot, side: int, pivot: int, q: np.ndarray) -> tuple[pin.SE3, np.ndarray]:
+    """Python's head-top placement and root link pose (x, y, z, qx, qy, qz, qw) in the support
+    model of side and pivot (indices) at q."""
+    support = robot.support_model(SIDES[side], PIVOTS[pivot])
+    data = support.new_data()
+    pin.forwardKinematics(support.model, data, q)
+    head = pin.updateFramePlacement(support.model, data, support.frame_ids['head_top']).copy()
+    root = pin.updateFramePlacement(support.model, data, support.frame_ids[root_link(robot)])
+    return head, pin.SE3ToXYZQUAT(root)
+
+
+def _assert_head(row: dict, k: int, head: pin.SE3) -> None:
+    rotation = head.rotation
+    assert np.array_equal(row['head_position'][k], head.translation)
+    assert np.array_equal(row['head_orientation'][k], pin.Quaternion(rotation).coeffs())
+    assert row['head_pitch'][k] == np.arctan2(-rotation[1, 2], rotation[2, 2])
+
+
+def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_root_pose() -> None:
+    scene = _scene('skate', 2.5)  # toe and heel pivots, support exchanges
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    sim = session.sim
+    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
+                            session.psi_initial)
+    block, error = sim.run_loop(loop, session.n_periods)
+    n = len(block['t'])
+    assert error is None and n == session.n_periods
+    for key, shape, dtype in [('head_orientation', (n, 4), np.float64),
+                              ('head_pitch', (n,), np.float64), ('pivot_code', (n,), np.int32),
+                              ('root_pose', (n, 7), np.float64)]:
+        assert (block[key].shape, block[key].dtype) == (shape, dtype), key
+    assert 'head_rotation' not in block
+    robot = session.robot
+    assert root_link(robot) == 'pelvis'  # the URDF's root link
+    codes = block['pivot_code']
+    assert set(codes.tolist()) == {0, 1, 2}
+    # the head is observed before the transitions due at t_k, the sample's state after them
+    transition_at = np.isin(block['t'], [event.t for event in sim.events])
+    rows = {*range(0, n, 97), *np.flatnonzero(transition_at).tolist(),
+            *(int(np.flatnonzero(codes == code)[0]) for code in (0, 1, 2))}
+    for k in sorted(rows):
+        side, pivot, mode = int(block['side'][k]), int(block['pivot'][k]), int(block['mode'][k])
+        head, root = _placements(robot, side, pivot, block['q'][k])
+        assert np.array_equal(block['root_pose'][k], root), k
+        assert codes[k] == (pivot + 1 if MODES[mode].q1_active else 0), k
+        if not transition_at[k]:
+            _assert_head(block, k, head)
+        rotation = pin.Quaternion(block['head_orientation'][k]).toRotationMatrix()
+        assert block['head_pitch'][k] == pytest.approx(
+            math.atan2(-rotation[1, 2], rotation[2, 2]), abs=1e-12)
+
+
+def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command() -> None:
     scene = _scene('skate', 0.5)
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
@@ -123,18 +180,34 @@ def test_the_live_view_is_the_record_of_the_current_state_under_the_held_command
         for index, command in enumerate(commands.values()):
             inbox.receive(index, CommandValues.of(command))
         session.hold()
+        block = inbox.take_block()
         if period % 50 == 49 or period == 0:
-            state = sim.state
+            live = inbox.live()
+            assert live.keys() == block.keys()
+            assert all(len(value) == 1 for value in live.values() if isinstance(value, np.ndarray))
+            state, result = sim.state, sim.result
+            contact = state.contact
+            side, pivot = SIDES.index(contact.side), PIVOTS.index(contact.pivot)
+            for key, expected in [
+                    ('t', state.t), ('t_exchange', state.t_exchange),
+                    ('t_touchdown', state.t_touchdown), ('heel_anchor_y', contact.heel_anchor_y),
+                    ('mode', contact.mode.number), ('side', side), ('pivot', pivot),
+                    ('pivot_code', pivot + 1 if contact.mode.q1_active else 0),
+                    ('step_index', state.step_index), ('q', state.q), ('v', state.v),
+                    ('qdd', result.qdd), ('passive', result.passive),
+                    ('applied', result.applied), ('multipliers', result.multipliers),
+                    ('support_normal', result.support_normal),
+                    ('support_tangential', result.support_tangential), ('cop_y', result.cop_y),
+                    ('head_target', block['head_target'][-1]), ('present', 1)]:
+                assert np.array_equal(live[key][0], expected, equal_nan=True), key
             held = HeldCommand.of_controllers(commands.values()).torque(state.q, state.v)
-            placement = sim.head_placement()
-            expected = bag_record(Sample(state, sim.result, {'held': held},
-                                         placement.translation, placement.rotation,
-                                         _last_event_before(sim, state.t)))
-            values, mode, side, pivot, step_index, last = inbox.live()
-            assert np.array_equal(values, expected.values, equal_nan=True)
-            assert (mode, SIDES[side], PIVOTS[pivot], step_index) == (
-                expected.mode, expected.side, expected.pivot, expected.step_index)
-            assert (sim.events[last].cause if last >= 0 else None) == expected.last_cause
+            assert live['sources'] == ['held'] and np.array_equal(live['efforts'][0][0], held)
+            head, root = _placements(session.robot, side, pivot, state.q)
+            assert np.array_equal(head.translation, sim.head_placement().translation)
+            _assert_head(live, 0, head)
+            assert np.array_equal(live['root_pose'][0], root)
+            last = int(live['last_event'][0])
+            assert (sim.events[last] if last >= 0 else None) == _last_event_before(sim, state.t)
     assert sim.events  # transitions happened
 
 
@@ -229,4 +302,7 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
     loop = sim.control_loop(stack.kinematics, controllers, (), session.psi_initial)
     with pytest.raises(ValueError, match='number of periods must be >= 0'):
         loop._kernel.run(-1)
+    with pytest.raises(ValueError, match="unknown frame 'nose'"):  # a root link it lacks
+        iceskate_native.ControlLoop(loop._periods._kernel, None, [], [], session.psi_initial,
+                                    'nose')
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)

@@ -32,7 +32,6 @@ from iceskate_sim.physics.hybrid import (
 )
 from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
 from iceskate_sim.physics.simulation import RunStatistics, SimulatorConfig, StateQueries
-from iceskate_sim.recording.bag import Sample
 from iceskate_sim.run.scene import Scene
 from oracle.automaton import (
     RunEnded,
@@ -357,9 +356,28 @@ def run_reference(scene: Scene, robot: Robot,
     return ReferenceRun(sim, q, v, mode, side)
 
 
+@dataclass
+class ReferenceSample:
+    """What the native loop records at one control instant t_k, from the oracle.
+
+    :param state: hybrid state at t_k.
+    :param result: dynamics at t_k under the inputs held over [t_k, t_k+1].
+    :param efforts: input torque of each source over [t_k, t_k+1] (18-vectors, N m).
+    :param head_position: head-top world position (3,) [m]; ``head_rotation`` (3x3).
+    :param last_transition: the latest transition of the event log (None: none yet).
+    """
+
+    state: HybridState
+    result: DynamicsResult
+    efforts: dict[str, np.ndarray]
+    head_position: np.ndarray
+    head_rotation: np.ndarray
+    last_transition: Transition | None
+
+
 def reference_samples(scene: Scene, robot: Robot,
                       commands: Callable[[Observation], Mapping[str, ControllerCommand]],
-                      periods: int) -> list[Sample]:
+                      periods: int) -> list[ReferenceSample]:
     """The samples of the first ``periods`` control periods of ``scene`` on the oracle, as the
     native loop records them: the state at t_k after the transitions due then, the dynamics
     under the held commands, each source's effort as its controller reported it, the push's
@@ -378,6 +396,6 @@ def reference_samples(scene: Scene, robot: Robot,
         if push is not None:
             efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
         last = next((e for e in reversed(sim.events) if e.t <= state.t), None)
-        samples.append(Sample(state, sim.start_result, efforts, placement.translation.copy(),
+        samples.append(ReferenceSample(state, sim.start_result, efforts, placement.translation.copy(),
                               placement.rotation.copy(), last))
     return samples

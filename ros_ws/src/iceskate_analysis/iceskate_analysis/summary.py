@@ -1,7 +1,9 @@
-"""The picture of a run: ``summary.png`` from the files the runner writes (no bag, no ROS).
+"""The picture of a run: ``summary.png`` from its trajectory and metrics (no bag, no ROS).
 
-``write_summary(out_dir)`` reads ``trajectory.npz`` and ``metrics.json`` of a run folder and
-draws one figure whose panels share the time axis:
+``draw_summary(columns, metrics, path)`` draws it from the run's trajectory columns in memory
+(the headless runner); ``write_summary(out_dir)`` from the ``trajectory.npz`` and
+``metrics.json`` of a run folder (a ROS run, whose samples are in the simulator node). One
+figure whose panels share the time axis:
 
 1. head height z [m] against the visual-lifting target;
 2. head pitch [deg] against its target;
@@ -18,6 +20,7 @@ matplotlib (Agg, no pyplot state) is imported on the first call only.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 import json
 import pathlib
 import textwrap
@@ -32,7 +35,7 @@ from iceskate_sim.errors import SimulationError
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ['SUMMARY_NAME', 'write_summary']
+__all__ = ['SUMMARY_NAME', 'draw_summary', 'write_summary']
 
 SUMMARY_NAME = 'summary.png'
 ARM_SWING_FROM_STEP = 3  # step_index >= 3: the 4th step, as iceskate_sim.run.metrics
@@ -44,6 +47,24 @@ _COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
 
 #: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
 _DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
+
+def draw_summary(columns: Iterable[tuple[str, np.ndarray]], metrics: Mapping[str, Any],
+                 path: pathlib.Path) -> pathlib.Path:
+    """Draw ``path`` (a PNG) from a run's trajectory columns, (name, array) pairs as
+    ``Trajectory.columns`` gives them (t, psi, psi_d, mode, side, step_index and q are drawn),
+    and its metrics.
+
+    :return: ``path``.
+    :raises SimulationError: when a column is missing or holds no sample.
+    """
+    a: dict[str, np.ndarray] = {}
+    for key, column in columns:  # one spilled column mapped at a time
+        if key == 'q':
+            a['shoulders'] = np.array(column[:, [11, 14]])
+        elif key in _COLUMNS:
+            a[key] = np.array(column)
+    return _checked_draw(a, metrics, path, f'the trajectory of {path.parent}')
+
 
 def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     """Draw ``out_dir/summary.png`` from ``out_dir/trajectory.npz`` and ``metrics.json``.
@@ -57,15 +78,22 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     if missing:
         raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
     metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
-    with np.load(out_dir / 'trajectory.npz') as npz:
-        absent = [key for key in _COLUMNS if key not in npz.files]
-        if absent:
-            raise SimulationError(f'{out_dir / "trajectory.npz"} lacks the column(s) {absent}')
-        a = {key: npz[key] for key in _COLUMNS if key != 'q'}
-    a['shoulders'] = _shoulders(out_dir / 'trajectory.npz')
+    trajectory = out_dir / 'trajectory.npz'
+    with np.load(trajectory) as npz:
+        a = {key: npz[key] for key in _COLUMNS if key in npz.files and key != 'q'}
+        if 'q' in npz.files:
+            a['shoulders'] = _shoulders(trajectory)
+    return _checked_draw(a, metrics, out_dir / SUMMARY_NAME, str(trajectory))
+
+
+def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pathlib.Path,
+                  source: str) -> pathlib.Path:
+    """``_draw`` once ``a`` (``shoulders`` for q) has every column and a sample."""
+    absent = [key for key in _COLUMNS if key not in a and (key != 'q' or 'shoulders' not in a)]
+    if absent:
+        raise SimulationError(f'{source} lacks the column(s) {absent}')
     if a['t'].size == 0:
-        raise SimulationError(f'{out_dir / "trajectory.npz"} holds no sample')
-    path = out_dir / SUMMARY_NAME
+        raise SimulationError(f'{source} holds no sample')
     _draw(a, metrics, path)
     return path
 

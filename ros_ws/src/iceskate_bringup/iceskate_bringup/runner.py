@@ -104,8 +104,8 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             error, not after a signal or a bug."""
             if (picture and len(session.trajectory)
                     and not isinstance(ended, RunInterrupted) and not crashed):
-                from iceskate_analysis.summary import write_summary
-                write_summary(out)
+                from iceskate_analysis.summary import SUMMARY_NAME, draw_summary
+                draw_summary(session.trajectory.columns(), session.metrics, out / SUMMARY_NAME)
 
         crashed = False
         try:

@@ -67,7 +67,7 @@ using PushRow = std::tuple<double, double, std::string, Eigen::VectorXd>;
 void construct_loop(
   BoundControlLoop * self, nb::object simulator, nb::object kinematics,
   std::vector<nb::object> controllers, const std::vector<PushRow> & pushes,
-  const Eigen::Ref<const Eigen::VectorXd> & head_origin,
+  const Eigen::Ref<const Eigen::VectorXd> & head_origin, const std::string & root_link,
   const std::vector<std::vector<std::string>> & inbox)
 {
   HybridSimulator & sim = native_object<HybridSimulator>(simulator, "the simulator");
@@ -90,8 +90,8 @@ void construct_loop(
   }
   new (self) BoundControlLoop{
     std::move(simulator), std::move(kinematics), std::move(controllers),
-    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin), SampleBlock{},
-    std::move(slots), std::vector<bool>(inbox.size(), false), {}};
+    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin, root_link),
+    SampleBlock{}, std::move(slots), std::vector<bool>(inbox.size(), false), {}};
 }
 
 using Values = Eigen::Ref<const Eigen::VectorXd>;
@@ -188,6 +188,7 @@ nb::dict block_arrays(SampleBlock & b)
   out["mode"] = array_of(std::move(b.mode), {n});
   out["side"] = array_of(std::move(b.side), {n});
   out["pivot"] = array_of(std::move(b.pivot), {n});
+  out["pivot_code"] = array_of(std::move(b.pivot_code), {n});
   out["step_index"] = array_of(std::move(b.step_index), {n});
   out["q"] = array_of(std::move(b.q), {n, m});
   out["v"] = array_of(std::move(b.v), {n, m});
@@ -199,7 +200,9 @@ nb::dict block_arrays(SampleBlock & b)
   out["support_tangential"] = array_of(std::move(b.support_tangential), {n});
   out["cop_y"] = array_of(std::move(b.cop_y), {n});
   out["head_position"] = array_of(std::move(b.head_position), {n, 3});
-  out["head_rotation"] = array_of(std::move(b.head_rotation), {n, 3, 3});
+  out["head_orientation"] = array_of(std::move(b.head_orientation), {n, 4});
+  out["head_pitch"] = array_of(std::move(b.head_pitch), {n});
+  out["root_pose"] = array_of(std::move(b.root_pose), {n, 7});
   out["head_target"] = array_of(std::move(b.head_target), {n, 3});
   out["last_event"] = array_of(std::move(b.last_event), {n});
   out["present"] = array_of(std::move(b.present), {n});
@@ -230,13 +233,11 @@ nb::dict run(BoundControlLoop & self, int periods)
   return block_arrays(self.block);
 }
 
-nb::tuple live(BoundControlLoop & self)
+nb::dict live(BoundControlLoop & self)
 {
-  LiveRecord r;
-  self.loop.live(r);
-  const std::size_t n = r.values.size();
-  return nb::make_tuple(array_of(std::move(r.values), {n}), r.mode, r.side, r.pivot,
-                        r.step_index, r.last_event);
+  SampleBlock sample;
+  self.loop.live(sample);
+  return block_arrays(sample);
 }
 
 }  // namespace
@@ -251,10 +252,12 @@ void bind_control_loop(nb::module_ & m)
     "keeps the simulator, kinematics and controllers alive.")
     .def(
       "__init__", &construct_loop, "simulator"_a, "kinematics"_a.none(), "controllers"_a,
-      "pushes"_a, "head_origin"_a, "inbox"_a = std::vector<std::vector<std::string>>{},
+      "pushes"_a, "head_origin"_a, "root_link"_a,
+      "inbox"_a = std::vector<std::vector<std::string>>{},
       "simulator: a HybridSimulator; kinematics: a Kinematics (None without controllers); "
       "controllers: Controller objects; pushes: [(start [s], duration [s], frame, world force "
       "(3,) [N])]; head_origin: the head target recorded while no controller steers one; "
+      "root_link: the frame of the URDF's root link, whose world pose a sample records; "
       "inbox: the source names of each controller node whose commands come through receive(), "
       "in summing order.")
     .def(
@@ -286,18 +289,22 @@ void bind_control_loop(nb::module_ & m)
     .def(
       "live", &live,
       "The live view of the current state, what the simulator publishes before the commands "
-      "of t_k exist: (values, mode, side, pivot, step_index, last_event); values in the order "
-      "of iceskate_sim.recording.bag.BagRecord with the held input's generalized force at the "
-      "state as the one effort; side 0 right / 1 left, pivot 0 toe / 1 heel, last_event: "
-      "index of the latest transition at or before t_k (-1: none).")
+      "of t_k exist: one sample as take_block() returns it (the same keys, one row): the "
+      "state, its dynamics under the inputs held over the last period, the held input's "
+      "generalized force at the state as the one source 'held' and that period's head "
+      "target.")
     .def(
       "run", &run, "periods"_a,
       "Up to `periods` control periods; returns their samples as a dict of numpy arrays (t, "
-      "t_exchange, t_touchdown, heel_anchor_y, mode, side, pivot, step_index, q, v, qdd, "
-      "passive, applied, multipliers, support_normal, support_tangential, cop_y, "
-      "head_position, head_rotation, head_target, last_event (index in the event log, -1: "
-      "none), present (bit i: source i answered), sources (names), efforts (one (n, 18) array "
-      "per source)). It stops after a period that ends the run, and before a period that "
+      "t_exchange, t_touchdown, heel_anchor_y (n,); mode, side (0 right / 1 left), pivot (0 "
+      "toe / 1 heel), pivot_code (GaitState's: 0 while q1 is locked, else 1 toe / 2 heel), "
+      "step_index (n,) int32; q, v, qdd, passive, applied (n, 18); multipliers (n, 3); "
+      "support_normal, support_tangential, cop_y (n,); head_position (n, 3) [m], "
+      "head_orientation (n, 4) quaternion x, y, z, w, head_pitch (n,) [rad]: the head top "
+      "observed at t_k; root_pose (n, 7): the URDF root link's world x, y, z [m], qx, qy, qz, "
+      "qw; head_target (n, 3); last_event (n,) int64 (index in the event log, -1: none), "
+      "present (n,) uint64 (bit i: source i answered), sources (names), efforts (one (n, 18) "
+      "array per source)). It stops after a period that ends the run, and before a period that "
       "failed: `failed` is then True and raise_error() raises the failure.")
     .def_prop_ro(
       "failed", [](const BoundControlLoop & self) { return self.loop.error() != nullptr; },

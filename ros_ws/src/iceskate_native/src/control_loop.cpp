@@ -4,6 +4,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 #include "iceskate_native/checks.hpp"
 
 namespace iceskate_native
@@ -60,10 +62,11 @@ void SampleBlock::clear()
   count = 0;
   for (auto * column : {&t, &t_exchange, &t_touchdown, &heel_anchor_y, &q, &v, &qdd, &passive,
                         &applied, &multipliers, &support_normal, &support_tangential, &cop_y,
-                        &head_position, &head_rotation, &head_target}) {
+                        &head_position, &head_orientation, &head_pitch, &root_pose,
+                        &head_target}) {
     column->clear();
   }
-  for (auto * column : {&mode, &side, &pivot, &step_index}) {
+  for (auto * column : {&mode, &side, &pivot, &pivot_code, &step_index}) {
     column->clear();
   }
   last_event.clear();
@@ -75,12 +78,14 @@ void SampleBlock::clear()
 
 ControlLoop::ControlLoop(
   HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
-  std::vector<Push> pushes, const Eigen::Vector3d & head_origin)
+  std::vector<Push> pushes, const Eigen::Vector3d & head_origin, const std::string & root_link)
 : simulator_(simulator),
   kinematics_(kinematics),
   controllers_(std::move(controllers)),
   pushes_(std::move(pushes)),
   head_origin_(head_origin),
+  held_target_(head_origin),
+  frames_{"head_top", root_link},
   outputs_(controllers_.size())
 {
   for (const Controller * controller : controllers_) {
@@ -99,6 +104,9 @@ ControlLoop::ControlLoop(
   }
   if (!head_origin_.allFinite()) {
     throw std::invalid_argument("the head origin must be finite");
+  }
+  for (int k = 0; k < 4; ++k) {  // invalid_argument if a support model lacks the root link
+    simulator_.dynamics().support_model(k / 2, k % 2).frame(root_link);
   }
 }
 
@@ -174,7 +182,12 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
 {
   Dynamics & dynamics = simulator_.dynamics();
   const HybridState & now = simulator_.state();
-  const Placement head = dynamics.frame_placement(now.contact, now.q, "head_top");
+  // the head observed at t_k and the root link at the sample's state, in one pass unless a
+  // transition due at t_k changes the support or q (below)
+  dynamics.frame_placements(now.contact, now.q, frames_, placements_);
+  const int observed_side = now.contact.side;
+  const int observed_pivot = now.contact.pivot;
+  const Vector18 observed_q = now.q;
 
   // the held sum of the commands of t_k (iceskate_sim.model.command.HeldCommand.of_controllers)
   Inputs inputs;
@@ -205,6 +218,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
     require_finite_vector(inputs.tau, kCoordinates, "tau", "[y0, q1..q17]");
     require_finite_vector(inputs.stiffness, kCoordinates, "stiffness", "[y0, q1..q17]");
     require_finite_vector(inputs.damping, kCoordinates, "damping", "[y0, q1..q17]");
+    held_target_ = *target;
     simulator_.advance(inputs);
   } catch (...) {
     physics_failed_ = true;
@@ -237,7 +251,19 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
     column.resize((row + 1) * kCoordinates, 0.0);
   }
   block.present.push_back(present);
+  if (s.contact.side != observed_side || s.contact.pivot != observed_pivot
+      || s.q != observed_q) {  // moved at t_k: the root link where the sample's state has it
+    placements_[1] = dynamics.frame_placement(s.contact, s.q, frames_[1]);
+  }
+  sample(block, s, r, placements_[0], placements_[1], held_target_);
+}
 
+void ControlLoop::sample(
+  SampleBlock & block, const HybridState & s, const DynamicsResult & r, const Placement & head,
+  const Placement & root, const Eigen::Vector3d & target) const
+{
+  const bool q1_active = simulator_.dynamics().mode(s.contact.mode).q1_active;
+  const Eigen::Matrix3d & rotation = head.rotation;
   block.t.push_back(s.t);
   block.t_exchange.push_back(s.t_exchange);
   block.t_touchdown.push_back(s.t_touchdown);
@@ -245,6 +271,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   block.mode.push_back(s.contact.mode);
   block.side.push_back(s.contact.side);
   block.pivot.push_back(s.contact.pivot);
+  block.pivot_code.push_back(q1_active ? s.contact.pivot + 1 : 0);
   block.step_index.push_back(s.step_index);
   append(block.q, s.q);
   append(block.v, s.v);
@@ -256,45 +283,28 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   block.support_tangential.push_back(r.support_tangential);
   block.cop_y.push_back(r.cop_y);
   append(block.head_position, head.translation);
-  for (int i = 0; i < 3; ++i) {  // row-major
-    append(block.head_rotation, head.rotation.row(i));
-  }
-  append(block.head_target, *target);
+  append(block.head_orientation, Eigen::Quaterniond(rotation).coeffs());
+  block.head_pitch.push_back(std::atan2(-rotation(1, 2), rotation(2, 2)));
+  append(block.root_pose, root.translation);
+  append(block.root_pose, Eigen::Quaterniond(root.rotation).coeffs());
+  append(block.head_target, target);
   block.last_event.push_back(last_event_at(simulator_.events(), s.t));
   ++block.count;
 }
 
-void ControlLoop::live(LiveRecord & record)
+void ControlLoop::live(SampleBlock & block)
 {
   const HybridState & s = simulator_.state();
-  const DynamicsResult & r = simulator_.result();
   const Inputs & held = simulator_.inputs();
-  const Placement head = simulator_.dynamics().frame_placement(s.contact, s.q, "head_top");
-  record.last_event = last_event_at(simulator_.events(), s.t);
-  const double last_t = record.last_event < 0
-                          ? 0.0
-                          : simulator_.events()[static_cast<std::size_t>(record.last_event)].t;
-  std::vector<double> & values = record.values;
-  values.clear();
-  for (const double x : {s.t, s.t_exchange, s.t_touchdown, s.contact.heel_anchor_y,
-                         r.support_normal, r.support_tangential, r.cop_y, last_t}) {
-    values.push_back(x);
-  }
-  append(values, s.q);
-  append(values, s.v);
-  append(values, r.qdd);
-  append(values, r.passive);
-  append(values, r.multipliers);
-  append(values, head.translation);
-  for (int i = 0; i < 3; ++i) {  // row-major
-    append(values, head.rotation.row(i));
-  }
   // iceskate_sim.model.command.HeldCommand.torque: bias - stiffness q - damping v
-  append(values, held.tau - held.stiffness.cwiseProduct(s.q) - held.damping.cwiseProduct(s.v));
-  record.mode = s.contact.mode;
-  record.side = s.contact.side;
-  record.pivot = s.contact.pivot;
-  record.step_index = s.step_index;
+  const Vector18 tau =
+    held.tau - held.stiffness.cwiseProduct(s.q) - held.damping.cwiseProduct(s.v);
+  block.clear();
+  block.sources.assign(1, "held");
+  block.efforts.assign(1, std::vector<double>(tau.data(), tau.data() + kCoordinates));
+  block.present.push_back(1);
+  simulator_.dynamics().frame_placements(s.contact, s.q, frames_, placements_);
+  sample(block, s, simulator_.result(), placements_[0], placements_[1], held_target_);
 }
 
 }  // namespace iceskate_native

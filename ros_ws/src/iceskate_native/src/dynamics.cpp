@@ -502,6 +502,24 @@ Placement Dynamics::frame_placement(
   return {placement.translation(), placement.rotation()};
 }
 
+void Dynamics::frame_placements(
+  const Contact & contact, const Vector18 & q, const std::vector<std::string> & frames,
+  std::vector<Placement> & placements)
+{
+  const SupportModel & support = support_model(contact.side, contact.pivot);
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
+  w.q = q;
+  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+  placements.resize(frames.size());
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(
+      model, data, static_cast<pinocchio::FrameIndex>(support.frame(frames[i])));
+    placements[i] = {placement.translation(), placement.rotation()};
+  }
+}
+
 Vector18 Dynamics::push_force(
   const Contact & contact, const Vector18 & q, const std::string & frame,
   const Eigen::Vector3d & force)

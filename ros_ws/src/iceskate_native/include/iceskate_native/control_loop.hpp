@@ -48,18 +48,23 @@ struct ReceivedCommand
 /// The samples of consecutive control instants, column by column (row-major per sample). A
 /// sample holds the state at t_k after the transitions due then, its dynamics under the
 /// commands held over the period, each source's generalized force at the observed state, the
-/// head-top placement observed at t_k and the head target steered to.
+/// head-top placement observed at t_k, the world placement of the URDF's root link at the
+/// sample's state and the head target steered to.
 struct SampleBlock
 {
   int count = 0;
   std::vector<double> t, t_exchange, t_touchdown, heel_anchor_y;  ///< [s, s, s (NaN: none), m]
   std::vector<int> mode, side, pivot, step_index;  ///< side 0 right / 1 left, pivot 0 toe / 1 heel
+  /// GaitState's pivot: 0 while the mode's q1 is locked (flat sole), else 1 toe / 2 heel.
+  std::vector<int> pivot_code;
   std::vector<double> q, v, qdd, passive, applied;  ///< 18 per sample
   std::vector<double> multipliers;                  ///< f_nz [N], f_ny [N], tau_n [N m]
   std::vector<double> support_normal, support_tangential, cop_y;  ///< [N, N, m]
-  std::vector<double> head_position;  ///< 3 per sample [m]
-  std::vector<double> head_rotation;  ///< 9 per sample, row-major
-  std::vector<double> head_target;    ///< psi_d: y [m], z [m], pitch [rad]
+  std::vector<double> head_position;     ///< 3 per sample [m]
+  std::vector<double> head_orientation;  ///< quaternion x, y, z, w (Eigen's coeffs())
+  std::vector<double> head_pitch;        ///< atan2(-R(1,2), R(2,2)) [rad] of its rotation R
+  std::vector<double> root_pose;         ///< x, y, z [m], qx, qy, qz, qw
+  std::vector<double> head_target;       ///< psi_d: y [m], z [m], pitch [rad]
   /// Index in the simulator's event log of the latest transition at or before t_k; -1: none.
   std::vector<long> last_event;
   /// The sources in the order they first answered; efforts[i]: 18 per sample, 0 where source i
@@ -72,22 +77,6 @@ struct SampleBlock
   void clear();
 };
 
-/// What the simulator publishes at the current instant t_k before the commands of t_k exist:
-/// the state, the dynamics and the generalized force of the inputs still held from the last
-/// period, evaluated at t_k. `values` in the order of iceskate_sim.recording.bag.BagRecord: t,
-/// t_exchange, t_touchdown, heel_anchor_y [s, s, s, m], N_s, F_y [N], CoP y [m], time of the
-/// latest transition [s] (0: none), q, v, qdd, passive (18 each), multipliers (3), head-top
-/// position (3) and rotation (9, row-major), the held input's generalized force (18).
-struct LiveRecord
-{
-  std::vector<double> values;
-  int mode = 1;
-  int side = 0;   ///< 0 right, 1 left
-  int pivot = 0;  ///< 0 toe, 1 heel
-  int step_index = 0;
-  long last_event = -1;  ///< index in the event log of the latest transition at or before t_k
-};
-
 /// The loop of control periods over a simulator, its controllers (in summing order) and the
 /// scene's pushes. It holds references: the simulator, the kinematics and the controllers
 /// must outlive it (the kinematics may be null for a loop without controllers, which only
@@ -95,10 +84,12 @@ struct LiveRecord
 class ControlLoop
 {
 public:
-  /// head_origin: the head target recorded while no controller steers one (psi at t = 0).
+  /// head_origin: the head target recorded while no controller steers one (psi at t = 0);
+  /// root_link: the frame of the URDF's root link in the support models (std::invalid_argument
+  /// if one lacks it).
   ControlLoop(
     HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
-    std::vector<Push> pushes, const Eigen::Vector3d & head_origin);
+    std::vector<Push> pushes, const Eigen::Vector3d & head_origin, const std::string & root_link);
 
   /// Up to `periods` control periods into `block` (cleared first); returns the samples taken.
   /// It stops after a period in which the run ended physically (HybridSimulator::ended), and
@@ -112,8 +103,12 @@ public:
   /// holds why, as after run().
   bool hold(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
 
-  /// The live view of the current state (LiveRecord), into `record`.
-  void live(LiveRecord & record);
+  /// The live view of the current state, what the simulator publishes at t_k before the
+  /// commands of t_k exist: `block` (cleared) gets one sample of the current state, its
+  /// dynamics under the inputs held over the last period, the held input's generalized force
+  /// at the state as the one source "held" and the head target of that period (head_origin
+  /// before the first).
+  void live(SampleBlock & block);
 
   /// What stopped the last run() or hold() early (null: nothing).
   std::exception_ptr error() const noexcept { return error_; }
@@ -124,14 +119,22 @@ private:
   void step(SampleBlock & block);
   void period(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
   std::size_t source_index(SampleBlock & block, const std::string & name);
+  /// Append a sample but its efforts and `present` to `block`: the state `s`, its dynamics
+  /// `r`, the head-top and root link placements and the head target.
+  void sample(
+    SampleBlock & block, const HybridState & s, const DynamicsResult & r, const Placement & head,
+    const Placement & root, const Eigen::Vector3d & target) const;
 
   HybridSimulator & simulator_;
   Kinematics * kinematics_;
   std::vector<Controller *> controllers_;
   std::vector<Push> pushes_;
   Eigen::Vector3d head_origin_;
-  std::vector<ControllerOutput> outputs_;    // one per controller, reused
-  std::vector<ReceivedCommand> commands_;    // their commands as a node would send them
+  Eigen::Vector3d held_target_;            // the head target of the last period
+  std::vector<std::string> frames_;        // head_top and the root link: a sample's placements
+  std::vector<Placement> placements_;      // theirs, reused
+  std::vector<ControllerOutput> outputs_;  // one per controller, reused
+  std::vector<ReceivedCommand> commands_;  // their commands as a node would send them
   std::exception_ptr error_;
   bool physics_failed_ = false;
 };

@@ -154,6 +154,12 @@ public:
   Placement frame_placement(const Contact & contact, const Vector18 & q,
                             const std::string & frame);
 
+  /// World placements of named frames of the support model of `contact` after one
+  /// forward-kinematics pass: placements[i] of frames[i] (resized).
+  void frame_placements(const Contact & contact, const Vector18 & q,
+                        const std::vector<std::string> & frames,
+                        std::vector<Placement> & placements);
+
   /// J^T f: the generalized force of a world force `force` [N] at a named frame's origin
   /// [N m, N]; entries of locked coordinates 0.
   Vector18 push_force(const Contact & contact, const Vector18 & q, const std::string & frame,

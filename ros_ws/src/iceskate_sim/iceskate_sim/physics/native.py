@@ -14,6 +14,7 @@ singular or rank-deficient system as its ``NativeError``.
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
@@ -53,6 +54,13 @@ def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
     models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
     frames = [dict(robot.models[key].frame_ids) for key in keys]
     return models, frames
+
+
+def root_link(robot: Robot) -> str:
+    """The URDF's root link (the link on its universe frame): a frame of every support model,
+    whose world pose the native loop records (``root_pose``)."""
+    frames = robot.urdf_model.frames
+    return next(f.name for f in frames if f.type == pin.FrameType.BODY and f.parentFrame == 0)
 
 
 class NativeGaitDynamics(ModelTerms):
@@ -200,6 +208,7 @@ class NativePeriods:
 
     :param dynamics: the native kernel it integrates (its workspace is shared: one thread).
     :param initial: the initial state. The other parameters are ``SimulatorConfig``'s.
+    :ivar robot: the robot simulated (``dynamics.robot``).
     """
 
     def __init__(self, dynamics: NativeGaitDynamics, initial: HybridState, *,
@@ -207,6 +216,7 @@ class NativePeriods:
                  projection: bool, residual_bound: float, fall_height: float, max_speed: float,
                  max_instant_transitions: int, zeno_window: float,
                  chatter_dwell: float) -> None:
+        self.robot = dynamics.robot
         self._fall = fall_reason(fall_height)
         guards = [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]
         try:
@@ -299,6 +309,8 @@ class NativeControlLoop:
     Without controllers it holds the commands of controller nodes received from outside (the
     ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the
     block), ``take_block`` the samples held; ``live`` is the live view of the current state.
+    A sample holds what the recording encodes, among it the world pose of the URDF's root link
+    (``root_link``).
 
     :param periods: the native periods it advances (a ``Simulator``'s, which mirrors them after
         each block).
@@ -320,7 +332,8 @@ class NativeControlLoop:
         try:
             self._kernel = iceskate_native.ControlLoop(
                 periods._kernel, kinematics, list(controllers), rows,
-                np.asarray(head_origin, dtype=float), [list(s) for s in inbox])
+                np.asarray(head_origin, dtype=float), root_link(periods.robot),
+                [list(s) for s in inbox])
         except (ValueError, TypeError) as exc:
             raise SimulationError(f'native control loop: {exc}') from None
 
@@ -375,8 +388,9 @@ class NativeControlLoop:
         """The samples held since the last call, as ``run`` returns them."""
         return self._kernel.take_block()
 
-    def live(self) -> tuple[np.ndarray, int, int, int, int, int]:
-        """The live view of the current state: (values in ``BagRecord``'s order with the held
-        input's generalized force as the one effort, mode, side index, pivot index, step index,
-        index of the latest transition or -1)."""
+    def live(self) -> dict:
+        """The live view of the current state, what the simulator publishes at t_k before the
+        commands of t_k exist: one sample with ``take_block``'s keys (one row), its dynamics
+        under the inputs held over the last period, the held input's generalized force at the
+        state as the one source ``held`` and that period's head target."""
         return self._kernel.live()

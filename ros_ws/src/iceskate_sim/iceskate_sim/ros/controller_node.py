@@ -4,13 +4,13 @@ A ``ControllerNode`` declares its law's parameters as typed ROS parameters, gene
 law's parameter class (``declare_parameters``: ``ros2 param list/describe/get/set`` show and
 change them, a change is checked by the class's own rules), subscribes ``gait_state`` (the whole
 hybrid state of an instant: one message in per instant, best effort), taken as CDR bytes and
-read straight into the native observation (``gait_state_cdr.read_observation``: no message
+read straight into the native observation (``gait_state_cdr.GaitStateReader``: no message
 object), asks the subclass's law (``compute``: a native law, reading the robot through
 ``kinematics``) for its command values and publishes them, with the per-source breakdown, as
 one ``EffortCommand`` (source: the node's name)
 on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
-instant and node, published raw (``effort_cdr.CommandEncoder``: the bytes of the previous
-instant with new values, 5 us where an rclpy message costs 15). ``use_sim_time`` is true unless
+instant and node, published raw (``effort_cdr.CommandEncoder``: the values written into the
+message's layout, where an rclpy message costs 15 us). ``use_sim_time`` is true unless
 overridden. A law failing at one instant logs an error and sends nothing: the simulator's
 timeout then names the node.
 """
@@ -28,8 +28,9 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues
 from iceskate_sim.model.robot import load_robot
 from iceskate_sim.physics.native_control import native_kinematics
+from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.ros.effort_cdr import CommandEncoder
-from iceskate_sim.ros.gait_state_cdr import read_observation
+from iceskate_sim.ros.gait_state_cdr import GaitStateReader
 from iceskate_sim.ros.node_support import (
     LOCKSTEP_READER_QOS,
     STATE_QOS,
@@ -57,7 +58,9 @@ class ControllerNode(Node, Generic[P]):
                                             self._on_parameters)
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
-        self._encoder = CommandEncoder(node_name)
+        typestore = make_typestore()
+        self._encoder = CommandEncoder(node_name, typestore)
+        self._gait_states = GaitStateReader(typestore)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
                                  LOCKSTEP_READER_QOS, raw=True)
@@ -81,7 +84,7 @@ class ControllerNode(Node, Generic[P]):
         if not self.active:
             return
         try:
-            ns, obs = read_observation(data)
+            ns, obs = self._gait_states.read(data)
         except SimulationError as exc:
             self.get_logger().error(f'no command: {exc}')
             return

@@ -1,76 +1,69 @@
 """``GaitState`` CDR bytes -> the observation a native control law takes, without message
 objects (the controller nodes' hot path: rosbags' deserialisation and the conversion of its
-message cost 30 us per instant, this reading 10 us).
+message cost 30 us per instant).
 
-``read_observation`` walks the message field by field (``cdr.CdrReader``), skipping what a law
-does not read (frame id, multipliers, forces, ZMP, the last transition), and checks what it
-reads as ``ros_conversions.observation_from_gait_state`` does, with the same words.
+``GaitStateReader.read`` reads the fields a law needs at their places in the message's
+``cdr.Layout`` and checks them as ``ros_conversions.observation_from_gait_state`` does, with
+the same words.
 """
 
 from __future__ import annotations
 
-import struct
-
-import numpy as np
+from rosbags.typesys.store import Typestore
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, PIVOTS
 from iceskate_sim.model.stamps import NS_PER_S
-from iceskate_sim.ros.cdr import STAMP, CdrReader
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.cdr import LayoutCache, LayoutError
 from iceskate_sim.ros.conversions import PIVOT_OF_CODE, finite_vector
 
-_CODES = struct.Struct('<3B')         # mode, support_side, pivot
-_STEP = struct.Struct('<I2B')         # step_index, y0_active, q1_active
-_FORCES = struct.Struct('<5d')        # support normal and friction force, zmp x, y, z
-_FLAG = struct.Struct('<B')           # a bool
-_DOUBLE = struct.Struct('<d')
+_TYPE = 'iceskate_interfaces/msg/GaitState'
 
 
-def _seconds(sec: int, nanosec: int) -> float:
-    return (sec * NS_PER_S + nanosec) / 1e9
+class GaitStateReader:
+    """Reads GaitState messages into native observations (``typestore``: the types, default
+    ``make_typestore()``)."""
 
+    def __init__(self, typestore: Typestore | None = None) -> None:
+        self._layouts = LayoutCache(typestore or make_typestore(), _TYPE)
 
-def read_observation(data: bytes) -> tuple[int, iceskate_native.Observation]:
-    """The stamp [ns] and the observation of one GaitState's CDR bytes, as the native laws take
-    it (``native_control.native_observation`` of ``observation_from_gait_state``'s).
+    def read(self, data: bytes) -> tuple[int, iceskate_native.Observation]:
+        """The stamp [ns] and the observation of one GaitState's CDR bytes, as the native laws
+        take it (``native_control.native_observation`` of ``observation_from_gait_state``'s).
 
-    :raises SimulationError: for bytes that are not a GaitState ('undecodable gait_state ...')
-        or a malformed field (naming it, as ``observation_from_gait_state``).
-    """
-    try:
-        reader = CdrReader(data)
-        sec, nanosec = reader.unpack(STAMP, 4)
-        reader.skip_string()  # frame_id
-        mode, side, pivot = reader.unpack(_CODES, 1)
-        step_index, _, _ = reader.unpack(_STEP, 4)
-        for _ in range(reader.count()):  # multiplier_names
-            reader.skip_string()
-        reader.doubles()  # multipliers
-        reader.unpack(_FORCES, 8)
-        reader.unpack(_FLAG, 1)  # zmp_inside_support
-        reader.skip_string()  # last_transition_cause
-        reader.unpack(STAMP, 4)  # last_transition_stamp
-        exchange = reader.unpack(STAMP, 4)
-        (touched_down,) = reader.unpack(_FLAG, 1)
-        touchdown = reader.unpack(STAMP, 4)
-        (heel_anchor_y,) = reader.unpack(_DOUBLE, 8)
-        position, velocity = reader.doubles(), reader.doubles()
-    except (ValueError, struct.error) as exc:
-        raise SimulationError(f'undecodable gait_state ({len(data)} bytes): {exc}') from None
-    if side not in (0, 1):
-        raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
-    pivot_name = PIVOT_OF_CODE.get(pivot)
-    if pivot_name is None:
-        raise SimulationError(f'gait_state pivot must be 0, 1 or 2, got {pivot}')
-    q, v = (finite_vector(np.frombuffer(data, '<f8', count, offset), COORDINATE_NAMES,
-                          f'gait_state {field}', f'; it needs {N_COORDINATES} (y0, q1..q17)')
-            for field, (offset, count) in (('position', position), ('velocity', velocity)))
-    try:
-        obs = iceskate_native.Observation(
-            _seconds(sec, nanosec), q, v, mode, side, PIVOTS.index(pivot_name), step_index,
-            _seconds(*exchange), heel_anchor_y,
-            _seconds(*touchdown) if touched_down else float('nan'))
-    except ValueError as exc:
-        raise SimulationError(f'gait_state: {exc}') from None
-    return sec * NS_PER_S + nanosec, obs
+        :raises SimulationError: for bytes that are not a GaitState ('undecodable gait_state
+            ...') or a malformed field (naming it, as ``observation_from_gait_state``).
+        """
+        try:
+            layout = self._layouts.layout(data)
+        except LayoutError as exc:
+            raise SimulationError(f'undecodable gait_state ({len(data)} bytes): {exc}') \
+                from None
+
+        def integer(path: str) -> int:
+            return int(layout.read(data, path)[0])
+
+        def stamp_ns(path: str) -> int:
+            return integer(f'{path}.sec') * NS_PER_S + integer(f'{path}.nanosec')
+
+        side, pivot = integer('support_side'), integer('pivot')
+        if side not in (0, 1):
+            raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
+        pivot_name = PIVOT_OF_CODE.get(pivot)
+        if pivot_name is None:
+            raise SimulationError(f'gait_state pivot must be 0, 1 or 2, got {pivot}')
+        q, v = (finite_vector(layout.read(data, field), COORDINATE_NAMES, f'gait_state {field}',
+                              f'; it needs {N_COORDINATES} (y0, q1..q17)')
+                for field in ('position', 'velocity'))
+        stamp = stamp_ns('header.stamp')
+        try:
+            obs = iceskate_native.Observation(
+                stamp / 1e9, q, v, integer('mode'), side, PIVOTS.index(pivot_name),
+                integer('step_index'), stamp_ns('support_exchange_stamp') / 1e9,
+                float(layout.read(data, 'heel_anchor_y')[0]),
+                stamp_ns('touchdown_stamp') / 1e9 if integer('touched_down') else float('nan'))
+        except ValueError as exc:
+            raise SimulationError(f'gait_state: {exc}') from None
+        return stamp, obs

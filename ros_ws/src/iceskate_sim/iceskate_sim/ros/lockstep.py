@@ -40,10 +40,11 @@ import numpy as np
 
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.model.command import CommandValues, ControllerCommand
-from iceskate_sim.model.robot import PIVOTS, SIDES
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState
-from iceskate_sim.recording.bag import BagRecord, MessageFactory, RecordEncoder
+from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import Events, SampleMessages
 from iceskate_sim.ros.effort_cdr import CommandDecoder
 from iceskate_sim.run.session import Session
 
@@ -82,8 +83,8 @@ class LockstepSession:
         self.controllers = tuple(controllers)
         self.sources = tuple(s for sources in controllers.values() for s in sources)
         self.recorder = session.recorder
-        self.factory = self.recorder.factory if self.recorder else MessageFactory()
-        self.encoder = RecordEncoder(self.factory)
+        self.messages = (self.recorder.messages if self.recorder else
+                         SampleMessages(make_typestore(), LinkTransforms(self.robot.urdf_model)))
         #: the native loop that holds the commands
         self._inbox = session.command_inbox(tuple(controllers.values()))
         self._index = {c: k for k, c in enumerate(self.controllers)}
@@ -92,7 +93,8 @@ class LockstepSession:
     def _restart(self) -> None:
         self._answered: set[str] = set()  # controllers with a command held (free-running)
         self._stamps: dict[str, int] = {}
-        self._live: tuple[HybridState, BagRecord] | None = None  # (state, its live record)
+        #: the state, its live sample and the latest event at it
+        self._live: tuple[HybridState, dict[str, Any], Events] | None = None
 
     # ----------------------------------------------------------------------------- state
     @property
@@ -129,15 +131,12 @@ class LockstepSession:
         """CDR bytes of the live ``topics``' messages at t_k (see the module docstring), the
         bag's message types, publishable raw (encoded as the bag's records are)."""
         s = self.sim.state
-        if self._live is None or self._live[0] is not s:  # built once per instant
-            self._live = (s, self._live_record(s))
-        return self.encoder.encode(self._live[1], topics)
-
-    def _live_record(self, s: HybridState) -> BagRecord:
-        """The record of the live view of the current state ``s`` (the native loop's)."""
-        values, mode, side, pivot, step_index, last = self._inbox.live()
-        return BagRecord(values, mode, SIDES[side], PIVOTS[pivot], step_index, ('held',),
-                         self.sim.events[last].cause if last >= 0 else None)
+        if self._live is None or self._live[0] is not s:  # taken once per instant
+            live = self._inbox.live()
+            self._live = (s, live, Events.of(live['last_event'], self.sim.events))
+        _, live, events = self._live
+        return {topic: data[0] for topic, data in self.messages.encode(live, events,
+                                                                        topics).items()}
 
     # -------------------------------------------------------------------------- commands
     def offer(self, controller: str, stamp_ns: int,

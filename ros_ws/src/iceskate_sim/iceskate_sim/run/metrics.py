@@ -12,13 +12,9 @@ import zipfile
 import numpy as np
 
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.model.dynamics import head_psi
 from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y
-from iceskate_sim.recording.bag import Sample
 
 ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs removed
-SIDE_CODE = {'right': 0, 'left': 1}
-PIVOT_CODE = {'toe': 1, 'heel': 2}
 #: The top-level entries of ``metrics.json`` (``compute_metrics``): from ``head_error_rms`` on
 #: only for a run with samples, ``head_error_final_max`` only for a scene with pushes.
 METRIC_NAMES = (
@@ -38,8 +34,7 @@ _SPILL_CHUNK = 65536  # rows written at a time when a column is filled with zero
 
 
 class Trajectory:
-    """Columns of per-control-instant samples, grown one sample at a time (``append``) or by
-    whole blocks of samples (``extend``).
+    """Columns of per-control-instant samples, grown by blocks of samples (``extend``).
 
     :param spill: where to move the samples once more than ``spill_bytes`` are held: a
         private temporary directory made in this one on the first move, one raw file per
@@ -51,39 +46,14 @@ class Trajectory:
     def __init__(self, spill: pathlib.Path | None = None,
                  spill_bytes: int = SPILL_BYTES) -> None:
         self._blocks: dict[str, list[np.ndarray]] = {}  # arrays of whole blocks, in order
-        self._rows: dict[str, list[Any]] = {}  # single samples since the last block
         self._count = 0
         self.sources: list[str] = []
         self._spill_parent = spill
         self._spill_dir: pathlib.Path | None = None  # made on the first move
         self._spill_bytes = spill_bytes
-        self._held = 0  # bytes of the blocks in memory (single rows not counted)
+        self._held = 0  # bytes of the blocks in memory
         self._spilled = 0  # samples moved to the files
         self._layout: dict[str, tuple[np.dtype, tuple[int, ...]]] = {}  # of the spilled columns
-
-    def append(self, sample: Sample, psi_d: np.ndarray) -> None:
-        """Add one sample and the visual-lifting target psi_d at it."""
-        s, r = sample.state, sample.result
-        row = {
-            't': s.t, 'q': s.q, 'v': s.v, 'qdd': r.qdd, 'mode': s.mode.number,
-            'side': SIDE_CODE[s.contact.side],
-            'pivot': PIVOT_CODE[s.contact.pivot] if s.mode.q1_active else 0,
-            'step_index': s.step_index, 'multipliers': r.multipliers,
-            'support_normal': r.support_normal, 'support_tangential': r.support_tangential,
-            'cop_y': r.cop_y,
-            'psi': head_psi(sample.head_position, sample.head_rotation),
-            'psi_d': np.asarray(psi_d, dtype=float), 'applied': r.applied,
-        }
-        self._add_sources(sample.efforts)
-        for source in self.sources:
-            row[f'tau_{source}'] = sample.efforts.get(source, _NO_EFFORT)
-        for key, value in row.items():
-            self._rows.setdefault(key, []).append(value)
-        self._count += 1
-        if self._spill_parent is not None and len(self._rows['t']) >= 1000:
-            for key in list(self._rows):
-                self._close_rows(key)
-            self._maybe_spill()
 
     def extend(self, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray]) -> None:
         """Add a block of samples: ``columns`` holds every column of ``append``'s rows but the
@@ -94,7 +64,6 @@ class Trajectory:
         for source in self.sources:
             columns = {**columns, f'tau_{source}': efforts.get(source, np.zeros((n, 18)))}
         for key, values in columns.items():
-            self._close_rows(key)
             self._blocks.setdefault(key, []).append(np.asarray(values))
             self._held += self._blocks[key][-1].nbytes
         self._count += n
@@ -109,13 +78,6 @@ class Trajectory:
                 if self._spilled:  # the spilled samples' zeros go straight to its file
                     self._write(key, np.zeros((self._spilled, 18)))
                 self._blocks[key] = [np.zeros((self._count - self._spilled, 18))]
-
-    def _close_rows(self, key: str) -> None:
-        """Turn the single samples of column ``key`` into a block."""
-        rows = self._rows.pop(key, None)
-        if rows:
-            self._blocks.setdefault(key, []).append(np.array(rows))
-            self._held += self._blocks[key][-1].nbytes
 
     def _maybe_spill(self) -> None:
         """Move the blocks in memory to the spill files once they pass ``spill_bytes``."""
@@ -159,8 +121,6 @@ class Trajectory:
         """(name, array) of each column in turn, as ``arrays`` gives them: a spilled column
         is mapped only while the caller holds it, so reading them one after the other keeps
         one column resident at a time."""
-        for key in list(self._rows):
-            self._close_rows(key)
         if not self._spilled:
             for key, blocks in self._blocks.items():
                 yield key, np.concatenate(blocks)
@@ -179,9 +139,6 @@ class Trajectory:
                 with archive.open(f'{key}.npy', 'w', force_zip64=True) as stream:
                     np.lib.format.write_array(stream, column, allow_pickle=False)
                 del column  # unmapped before the next one is read
-
-
-_NO_EFFORT = np.zeros(18)  # a source's column where it did not act (never written to)
 
 
 def _rms(x: np.ndarray) -> float:

@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot, load_robot
 from iceskate_sim.physics.simulation import Simulator
-from iceskate_sim.recording.bag import BagRecorder, RecordBlock
+from iceskate_sim.recording.bag import BagRecorder
+from iceskate_sim.recording.messages import Events
 from iceskate_sim.run.metrics import Trajectory, compute_metrics
 from iceskate_sim.run.scene import Scene
 
@@ -38,8 +38,9 @@ if TYPE_CHECKING:
 
 #: Samples of held periods (``Session.hold``) recorded at once by a partial ``flush``.
 HELD_BLOCK = 100
-#: q1_active of each mode number (index 0 unused)
-_Q1_ACTIVE = np.array([False] + [MODES[k].q1_active for k in range(1, len(MODES) + 1)])
+#: The trajectory's columns that are the native block's own (``Trajectory``).
+_BLOCK_COLUMNS = ('t', 'q', 'v', 'qdd', 'mode', 'side', 'step_index', 'multipliers',
+                  'support_normal', 'support_tangential', 'cop_y', 'applied')
 
 
 class Controllers(Protocol):
@@ -208,29 +209,21 @@ class Session:
     def _record_block(self, block: dict[str, Any], first: int) -> None:
         """Append a native block of samples, the first of period ``first``, to the trajectory
         and the bag."""
-        efforts = dict(zip(block['sources'], block['efforts'], strict=True))
-        pivot = np.where(_Q1_ACTIVE[block['mode']], block['pivot'] + 1, 0)  # toe 1, heel 2
-        rotation = block['head_rotation']
-        psi = np.column_stack([block['head_position'][:, 1:],
-                               np.arctan2(-rotation[:, 1, 2], rotation[:, 2, 2])])
-        columns = {
-            't': block['t'], 'q': block['q'], 'v': block['v'], 'qdd': block['qdd'],
-            'mode': block['mode'].astype(np.int64), 'side': block['side'].astype(np.int64),
-            'pivot': pivot.astype(np.int64), 'step_index': block['step_index'].astype(np.int64),
-            'multipliers': block['multipliers'], 'support_normal': block['support_normal'],
-            'support_tangential': block['support_tangential'], 'cop_y': block['cop_y'],
-            'psi': psi, 'psi_d': block['head_target'], 'applied': block['applied']}
         kept = self._recorded_rows(first, len(block['t']))
         if kept is not None:  # record.rate: every n-th sample only
             block = {key: value[kept] if isinstance(value, np.ndarray) else value
                      for key, value in block.items()}
             block['efforts'] = [e[kept] for e in block['efforts']]
-            columns = {key: value[kept] for key, value in columns.items()}
-            efforts = {key: value[kept] for key, value in efforts.items()}
-        self.trajectory.extend(columns, efforts)
+        columns = {key: block[key] for key in _BLOCK_COLUMNS}
+        columns['pivot'] = block['pivot_code']
+        for key in ('mode', 'side', 'pivot', 'step_index'):  # the saved trajectory's integers
+            columns[key] = columns[key].astype(np.int64)
+        columns['psi'] = np.column_stack([block['head_position'][:, 1:], block['head_pitch']])
+        columns['psi_d'] = block['head_target']
+        self.trajectory.extend(columns, dict(zip(block['sources'], block['efforts'],
+                                                 strict=True)))
         if self.recorder is not None and len(block['t']):
-            self.recorder.write_block(RecordBlock.of_columns(block, efforts, block['present'],
-                                                             self.sim.events))
+            self.recorder.write_block(block, Events.of(block['last_event'], self.sim.events))
 
     def _recorded_rows(self, first: int, count: int) -> np.ndarray | None:
         """Which of ``count`` periods' samples from period ``first`` on ``record.rate`` keeps

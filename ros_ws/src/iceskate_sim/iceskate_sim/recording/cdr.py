@@ -1,0 +1,355 @@
+"""Byte layouts of ROS messages in CDR, computed from their ``.msg`` definitions.
+
+The bag writer, the simulator node and the controller nodes move whole blocks of samples
+through messages; building and parsing message objects (rosbags, rclpy) costs more per message
+than a control period. So they work on bytes: ``Layout`` says where each number of a message
+lies, given its strings and sequence lengths, and ``pack``/``read`` move numbers in and out of
+the bytes with numpy. The layout is computed from rosbags' type store (the ``.msg``
+definitions), never guessed from sample bytes.
+
+The encoding is XCDR1 little endian, as rosbags, rclpy and Fast DDS write it: a 4-byte
+encapsulation header; each primitive aligned to its size counted from the end of that header;
+a string as a uint32 length (NUL counted), its bytes and a NUL; a sequence as a uint32 count
+then its elements; a fixed-size array as its elements. Field paths join names with ``.``; the
+elements of a sequence or array of messages or strings are named by their index
+(``transforms.3.header.frame_id``); a sequence or array of numbers is one ``Field``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+import struct
+
+import numpy as np
+from rosbags.interfaces import Nodetype
+from rosbags.typesys.store import Typestore
+
+ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR, little endian, no options
+HEADER = len(ENCAPSULATION)
+#: numpy dtype of each numeric primitive.
+PRIMITIVES = {
+    'bool': '<u1', 'byte': '<u1', 'char': '<u1', 'octet': '<u1', 'uint8': '<u1',
+    'int8': '<i1', 'int16': '<i2', 'uint16': '<u2', 'int32': '<i4', 'uint32': '<u4',
+    'int64': '<i8', 'uint64': '<u8', 'float32': '<f4', 'float64': '<f8'}
+_COUNT = struct.Struct('<I')
+
+
+class LayoutError(ValueError):
+    """Bytes that do not hold a message of the type, or a shape that does not fit it."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """Where the numbers of one field lie: ``count`` values of ``dtype`` from byte ``offset``
+    (from the start of the message's bytes, encapsulation header included)."""
+
+    offset: int
+    dtype: np.dtype
+    count: int
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The byte layout of one message of a type with given strings and sequence lengths.
+
+    :ivar size: bytes of the message.
+    :ivar fields: every numeric field by path (stamps as ``header.stamp.sec`` and ``.nanosec``).
+    :ivar strings: every string by path.
+    :ivar skeleton: (byte offset, bytes) of every count and string: a message whose bytes
+        match them has this layout (``fits``).
+    :ivar template: the message's bytes with every number 0 (what ``pack`` writes into).
+    """
+
+    size: int
+    fields: Mapping[str, Field]
+    strings: Mapping[str, str]
+    skeleton: tuple[tuple[int, bytes], ...]
+    template: bytes
+
+    def fits(self, data: bytes) -> bool:
+        """Whether ``data`` is a message of this layout (its length up to the padding to 4
+        bytes that some writers add, its counts and strings)."""
+        return 0 <= len(data) - self.size < 4 and all(
+            data[offset:offset + len(part)] == part for offset, part in self.skeleton)
+
+    def texts(self, path: str) -> list[str]:
+        """The strings of the sequence or array of strings ``path``."""
+        out = []
+        while f'{path}.{len(out)}' in self.strings:
+            out.append(self.strings[f'{path}.{len(out)}'])
+        return out
+
+    def read(self, data: bytes, path: str) -> np.ndarray:
+        """The values of field ``path`` in ``data`` (a read-only view)."""
+        field = self.fields[path]
+        return np.frombuffer(data, field.dtype, field.count, field.offset)
+
+    def packer(self, paths: Sequence[str]) -> Packer:
+        """A ``Packer`` writing the fields ``paths`` (in this order) into copies of
+        ``template``."""
+        return Packer(self, tuple(paths))
+
+
+class Packer:
+    """Writes the numbers of messages of one layout: ``pack`` takes, per path, an array of
+    shape (m,) or (m, count) and gives (m, size) bytes, row k the k-th message.
+
+    Many messages: the fields are grouped by dtype, each group one scatter of bytes (a few
+    numpy operations whatever the number of messages). One message (a live topic): one
+    ``struct`` call over the whole message, its counts, strings and padding as constants."""
+
+    def __init__(self, layout: Layout, paths: tuple[str, ...]) -> None:
+        self.layout, self.paths = layout, paths
+        groups: dict[np.dtype, list[str]] = {}
+        for path in paths:
+            groups.setdefault(layout.fields[path].dtype, []).append(path)
+        self._groups = []
+        for dtype, members in groups.items():
+            width = dtype.itemsize
+            starts = np.concatenate([
+                layout.fields[p].offset + width * np.arange(layout.fields[p].count)
+                for p in members])
+            columns = (starts[:, None] + np.arange(width)).ravel()
+            self._groups.append((dtype, tuple(members), columns))
+        self._template = np.frombuffer(layout.template, np.uint8)
+        # one message: '<' + constant bytes between the fields + the fields' formats
+        formats, arguments, self._slots = ['<'], [], []
+        position = 0
+        for path in sorted(paths, key=lambda p: layout.fields[p].offset):
+            field = layout.fields[path]
+            if field.offset > position:
+                formats.append(f'{field.offset - position}s')
+                arguments.append(layout.template[position:field.offset])
+            self._slots.append((len(arguments), path, field.count))
+            formats.append(f'{field.count}{_STRUCT[field.dtype.str]}')
+            arguments += [0] * field.count
+            position = field.offset + field.dtype.itemsize * field.count
+        if layout.size > position:
+            formats.append(f'{layout.size - position}s')
+            arguments.append(layout.template[position:])
+        self._struct = struct.Struct(''.join(formats))
+        self._arguments = arguments
+
+    def pack(self, values: Mapping[str, np.ndarray], rows: int) -> np.ndarray:
+        """(rows, size) uint8: ``rows`` messages with ``values`` (each an array of shape
+        (rows,) or (rows, count), cast to the field's type)."""
+        if rows == 1:
+            return np.frombuffer(self.pack_one(values), np.uint8)[None]
+        out = np.repeat(self._template[None], rows, axis=0)
+        for dtype, members, columns in self._groups:
+            numbers = np.concatenate(
+                [x if x.ndim == 2 else x[:, None] for x in (values[path] for path in members)],
+                axis=1, dtype=dtype, casting='unsafe')
+            out[:, columns] = numbers.view(np.uint8)
+        return out
+
+    def pack_one(self, values: Mapping[str, np.ndarray]) -> bytes:
+        """The bytes of one message (``values`` as for ``pack`` with one row)."""
+        arguments = self._arguments.copy()
+        for start, path, count in self._slots:
+            arguments[start:start + count] = values[path].reshape(-1).tolist()
+        return self._struct.pack(*arguments)
+
+
+#: struct format of each numpy dtype of ``PRIMITIVES``
+_STRUCT = {'|u1': 'B', '|i1': 'b', '<u2': 'H', '<i2': 'h', '<u4': 'I', '<i4': 'i', '<u8': 'Q',
+           '<i8': 'q', '<f4': 'f', '<f8': 'd'}
+
+
+def layout_of(typestore: Typestore, msgtype: str, data: bytes) -> Layout:
+    """The layout of the message ``data`` (CDR bytes of a ``msgtype``).
+
+    :raises LayoutError: for bytes that are not little-endian CDR of ``msgtype``.
+    """
+    if len(data) < HEADER or data[:2] != ENCAPSULATION[:2]:
+        raise LayoutError('not little-endian CDR')
+    walk = _Walk(typestore, _Reading(data))
+    walk.message(msgtype, '')
+    if len(data) - walk.pos >= 4:  # up to 3: the padding some writers add
+        raise LayoutError(f'{len(data) - walk.pos} bytes after the end of the message')
+    return walk.layout(bytes(data[:2]) + bytes(data[2:4]))
+
+
+def layout_for(typestore: Typestore, msgtype: str,
+               shape: Mapping[str, int | str | Sequence[str]]) -> Layout:
+    """The layout of a ``msgtype`` whose sequences, arrays of strings and strings are given by
+    path in ``shape``: a length for a sequence of numbers or messages, a list for one of
+    strings, a str for a string (anything not named: empty). ``template`` is then the
+    message's bytes (numbers 0), as rosbags serialises it.
+
+    :raises LayoutError: for a path of ``shape`` that is not in the message.
+    """
+    writing = _Writing(shape)
+    walk = _Walk(typestore, writing)
+    walk.message(msgtype, '')
+    unused = set(shape) - writing.used
+    if unused:
+        raise LayoutError(f'{msgtype} has no field {sorted(unused)[0]!r}')
+    return walk.layout(ENCAPSULATION)
+
+
+class _Reading:
+    """The counts and strings of ``_Walk`` read from a message's bytes."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def count(self, path: str, offset: int) -> int:
+        if offset + 4 > len(self.data):
+            raise LayoutError(f'{len(self.data)} bytes end inside the message')
+        return _COUNT.unpack_from(self.data, offset)[0]
+
+
+class _Writing:
+    """The counts and strings of ``_Walk`` taken from a shape (``layout_for``)."""
+
+    def __init__(self, shape: Mapping[str, int | str | Sequence[str]]) -> None:
+        self.shape, self.used = shape, set()
+
+    def value(self, path: str) -> int | str | Sequence[str] | None:
+        if path in self.shape:
+            self.used.add(path)
+        return self.shape.get(path)
+
+
+class _Walk:
+    """One pass over a message type's definition: offsets of every field, the skeleton, and
+    (when writing) the template bytes."""
+
+    def __init__(self, typestore: Typestore, source: _Reading | _Writing) -> None:
+        self.typestore, self.source = typestore, source
+        self.pos = HEADER
+        self.fields: dict[str, Field] = {}
+        self.strings: dict[str, str] = {}
+        self.skeleton: list[tuple[int, bytes]] = []
+        self.out = bytearray(ENCAPSULATION) if isinstance(source, _Writing) else None
+
+    def layout(self, encapsulation: bytes) -> Layout:
+        template = (bytes(self.out) if self.out is not None
+                    else bytes(self.source.data[:self.pos]))
+        numbers = bytearray(template)
+        for field in self.fields.values():  # the template's numbers are 0
+            numbers[field.offset:field.offset + field.dtype.itemsize * field.count] = bytes(
+                field.dtype.itemsize * field.count)
+        return Layout(self.pos, self.fields, self.strings,
+                      ((0, encapsulation[:2]), *self.skeleton), bytes(numbers))
+
+    def align(self, size: int) -> None:
+        pad = -(self.pos - HEADER) % size
+        if self.out is not None:
+            self.out += bytes(pad)
+        self.pos += pad
+
+    def advance(self, size: int) -> int:
+        start = self.pos
+        self.pos += size
+        if self.out is not None:
+            self.out += bytes(size)
+        elif self.pos > len(self.source.data):
+            raise LayoutError(f'{len(self.source.data)} bytes end inside the message')
+        return start
+
+    def count(self, path: str) -> int:
+        """A sequence's or string's uint32 count at the current position."""
+        self.align(4)
+        start = self.pos
+        if self.out is not None:
+            value = self.source.value(path)
+            count = (len(value) if isinstance(value, (list, tuple)) else int(value or 0))
+            self.out += _COUNT.pack(count)
+            self.pos += 4
+        else:
+            count = self.source.count(path, start)
+            self.pos += 4
+        self.skeleton.append((start, _COUNT.pack(count)))
+        return count
+
+    def string(self, path: str, value: str | None = None) -> None:
+        self.align(4)
+        start = self.pos
+        if self.out is not None:
+            text = value if value is not None else self.source.value(path) or ''
+            self.strings[path] = str(text)
+            encoded = self.strings[path].encode() + b'\0'
+            self.out += _COUNT.pack(len(encoded)) + encoded
+            self.pos += 4 + len(encoded)
+        else:
+            size = self.source.count(path, start)
+            end = start + 4 + size
+            if end > len(self.source.data) or size == 0 or self.source.data[end - 1] != 0:
+                raise LayoutError(f'string {path!r} is cut or lacks its terminating NUL')
+            try:
+                self.strings[path] = bytes(self.source.data[start + 4:end - 1]).decode()
+            except UnicodeDecodeError as exc:
+                raise LayoutError(f'string {path!r} is not UTF-8: {exc}') from None
+            self.pos = end
+        self.skeleton.append((start, bytes(self.out[start:self.pos]) if self.out is not None
+                              else bytes(self.source.data[start:self.pos])))
+
+    def message(self, msgtype: str, prefix: str) -> None:
+        for name, (kind, detail) in self.typestore.fielddefs[msgtype][1]:
+            path = prefix + name
+            if kind == Nodetype.NAME:
+                self.message(detail, path + '.')
+            elif kind == Nodetype.BASE:
+                self.elements(detail, path, 1, array=False)
+            else:  # ARRAY: (element, length); SEQUENCE: (element, bound)
+                element, length = detail
+                if kind == Nodetype.SEQUENCE:
+                    length = self.count(path)
+                self.elements(element, path, length, array=True)
+
+    def elements(self, element: tuple, path: str, count: int, array: bool) -> None:
+        """``count`` elements of type ``element`` (a BASE detail when not ``array``)."""
+        if not array:
+            primitive = element[0]
+            if primitive == 'string':
+                self.string(path)
+            else:
+                self.number(path, primitive, 1)
+            return
+        kind, detail = element
+        if kind == Nodetype.NAME:
+            for k in range(count):
+                self.message(detail, f'{path}.{k}.')
+        elif detail[0] == 'string':
+            given = (self.source.value(path) if self.out is not None else None) or ()
+            for k in range(count):
+                self.string(f'{path}.{k}', given[k] if k < len(given) else None)
+        else:
+            self.number(path, detail[0], count)
+
+    def number(self, path: str, primitive: str, count: int) -> None:
+        dtype = np.dtype(PRIMITIVES[primitive])
+        if count:
+            self.align(dtype.itemsize)
+        self.fields[path] = Field(self.advance(dtype.itemsize * count) if count else self.pos,
+                                  dtype, count)
+
+
+class LayoutCache:
+    """The layouts of the messages of one type seen lately (a message of a known layout costs
+    a comparison of its counts and strings; another one walk of its bytes).
+
+    :param capacity: layouts kept (the least recently used goes first).
+    """
+
+    def __init__(self, typestore: Typestore, msgtype: str, capacity: int = 64) -> None:
+        self.typestore, self.msgtype, self.capacity = typestore, msgtype, capacity
+        self._known: list[Layout] = []
+
+    def layout(self, data: bytes) -> Layout:
+        """The layout of ``data``.
+
+        :raises LayoutError: for bytes that are not a message of the type.
+        """
+        for k, known in enumerate(self._known):
+            if known.fits(data):
+                if k:
+                    self._known.insert(0, self._known.pop(k))
+                return known
+        layout = layout_of(self.typestore, self.msgtype, data)
+        self._known.insert(0, layout)
+        del self._known[self.capacity:]
+        return layout
