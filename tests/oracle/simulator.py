@@ -396,6 +396,7 @@ def reference_samples(scene: Scene, robot: Robot,
         if push is not None:
             efforts['push'] = sim.dynamics.push_force(state.contact, state.q, push)
         last = next((e for e in reversed(sim.events) if e.t <= state.t), None)
-        samples.append(ReferenceSample(state, sim.start_result, efforts, placement.translation.copy(),
-                              placement.rotation.copy(), last))
+        samples.append(ReferenceSample(state, sim.start_result, efforts,
+                                       placement.translation.copy(), placement.rotation.copy(),
+                                       last))
     return samples
