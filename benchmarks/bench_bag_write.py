@@ -60,14 +60,12 @@ def _one_by_one(bag: recording._BagFile, block: dict, events: Events) -> None:
             bag._writer.write(connection, ns, column[k])
 
 
-def _write(path: pathlib.Path, scene: object, session: Session,
+def _write(path: pathlib.Path, scene: object, session: Session, messages: SampleMessages,
            blocks: list[tuple[dict, Events]], way: str) -> float:
     """Seconds to write ``blocks`` into a new bag at ``path`` (opening and closing it)."""
     start = time.perf_counter()
     bag = recording._BagFile(path, scene_metadata(scene),
-                             session.robot.urdf_path.read_text(encoding='utf-8'),
-                             SampleMessages(make_typestore(),
-                                            LinkTransforms(session.robot.urdf_model)))
+                             session.robot.urdf_path.read_text(encoding='utf-8'), messages)
     for block in blocks:
         if way == WAYS[0]:
             _one_by_one(bag, *block)
@@ -92,6 +90,9 @@ def main() -> None:
         session.run_periods(stack, 1000)
     session.finish()
     samples = sum(len(block['t']) for block, _ in recorder.blocks)
+    messages = SampleMessages(make_typestore(), LinkTransforms(session.robot.urdf_model))
+    for block, events in recorder.blocks:  # the layouts of every message, as in a writer
+        messages.encode(block, events)
     times: dict[str, list[float]] = {way: [] for way in WAYS}
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(args.rounds):
@@ -99,7 +100,8 @@ def main() -> None:
             for i, way in enumerate(WAYS):
                 paths[way] = pathlib.Path(tmp) / f'{k}-{i}' / 'bag'
                 paths[way].parent.mkdir()
-                times[way].append(_write(paths[way], scene, session, recorder.blocks, way))
+                times[way].append(_write(paths[way], scene, session, messages, recorder.blocks,
+                                         way))
             files = [(paths[way] / 'bag.mcap').read_bytes() for way in WAYS]
             if files[0] != files[1]:
                 raise SystemExit('the two ways wrote different bags')

@@ -2,8 +2,8 @@
 
 * ``sim_bag``: a short run of a tiny ice-skating scene (torso-yaw input on) through the headless
   runner, i.e. the bag our runs really write.
-* ``synthetic_bag`` / ``synthetic_no_yaw_bag``: bags written with ``BagRecorder`` from
-  prescribed states that visit modes 1, 2 (q1 active, heel pivot), 3 (y0 active) and 5 (sliding
+* ``synthetic_bag`` / ``synthetic_no_yaw_bag``: bags written with ``BagRecorder.write_block``
+  from a native-style block of prescribed states that visit modes 1, 2 (q1 active, heel pivot), 3 (y0 active) and 5 (sliding
   swing heel) on both support sides, four steps long, with the arms swinging as prescribed
   sinusoids (anti-phase with the yaw source, nearly in phase without). Their accelerations are
   ``GaitDynamics.evaluate`` at each state, so eq. (11) must close on them exactly as on a run.
@@ -18,13 +18,15 @@ import shutil
 from types import SimpleNamespace
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
-from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, load_robot
-from iceskate_sim.physics.hybrid import HybridState
-from iceskate_sim.recording.bag import BagRecorder, Sample
+from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, Q1, SIDES, Y0, load_robot
+from iceskate_sim.recording.bag import BagRecorder
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import Events
 from oracle.dynamics import GaitDynamics
 
 #: A tiny version of the skate scene: ice, visual lifting, posture and the torso-yaw input.
@@ -100,29 +102,70 @@ def _synthetic_state(k: int, yaw: bool) -> tuple[float, int, ContactState, np.nd
     return t, step, contact, q, v
 
 
+def synthetic_block(robot, yaw: bool) -> dict:
+    """The synthetic samples as the native loop's block of samples (``ControlLoop.run``'s
+    columns): dynamics by ``GaitDynamics.evaluate``, the head-top placement by its
+    ``frame_placement``, the URDF root link's world pose by Pinocchio in the support model."""
+    dyn = GaitDynamics(robot)
+    root = LinkTransforms(robot.urdf_model).root
+    rows: dict[str, list] = {}
+    sources = ['visual_lifting', 'yaw'] if yaw else ['visual_lifting']
+    efforts = {name: [] for name in sources}
+    joints = np.arange(N_COORDINATES)
+    for k in range(len(SYNTHETIC_STEPS) * SAMPLES_PER_STEP):
+        t, step, contact, q, v = _synthetic_state(k, yaw)
+        if contact.mode.swing_sliding:  # the simulator slides the heel along its velocity
+            heel_vy = dyn.frame_velocity(contact, q, v, 'swing_heel').linear[1]
+            contact.heel_slide_dir = float(np.sign(heel_vy)) or 1.0
+        acting = {'visual_lifting': np.where(joints >= 2, 3.0 * np.sin(40.0 * t + joints), 0.0)}
+        if yaw:
+            acting['yaw'] = np.where(joints == 8, 30.0 * np.sin(20.0 * t), 0.0)
+        result = dyn.evaluate(contact, q, v, np.sum(list(acting.values()), axis=0))
+        head = dyn.frame_placement(contact, q, 'head_top')
+        support = robot.support_model(contact.side, contact.pivot)
+        data = support.new_data()
+        pin.forwardKinematics(support.model, data, q)
+        root_pose = pin.SE3ToXYZQUAT(pin.updateFramePlacement(support.model, data,
+                                                              support.frame_ids[root]))
+        R = head.rotation
+        pitch = np.arctan2(-R[1, 2], R[2, 2])
+        pivot_code = 0 if not contact.mode.q1_active else 1 + PIVOTS.index(contact.pivot)
+        row = {
+            't': t, 't_exchange': 0.0, 't_touchdown': np.nan,
+            'heel_anchor_y': contact.heel_anchor_y, 'mode': contact.mode.number,
+            'side': SIDES.index(contact.side), 'pivot': PIVOTS.index(contact.pivot),
+            'pivot_code': pivot_code, 'step_index': step, 'q': q, 'v': v, 'qdd': result.qdd,
+            'passive': result.passive, 'applied': result.applied,
+            'multipliers': result.multipliers, 'support_normal': result.support_normal,
+            'support_tangential': result.support_tangential, 'cop_y': result.cop_y,
+            'head_position': head.translation.copy(),
+            'head_orientation': pin.Quaternion(R).coeffs().copy(), 'head_pitch': pitch,
+            'root_pose': root_pose, 'head_target': (head.translation[1], head.translation[2],
+                                                    pitch),
+            'last_event': -1, 'present': (1 << len(sources)) - 1}
+        for key, value in row.items():
+            rows.setdefault(key, []).append(value)
+        for name in sources:
+            efforts[name].append(acting[name])
+    integers = {'mode': np.int32, 'side': np.int32, 'pivot': np.int32, 'pivot_code': np.int32,
+                'step_index': np.int32, 'last_event': np.int64, 'present': np.uint64}
+    block = {key: np.array(values, dtype=integers.get(key, np.float64))
+             for key, values in rows.items()}
+    block['sources'] = sources
+    block['efforts'] = [np.array(efforts[name]) for name in sources]
+    return block
+
+
 def write_synthetic_bag(path: pathlib.Path, yaw: bool) -> pathlib.Path:
     """Write the synthetic bag described in the module docstring; return its directory."""
     robot = load_robot()
-    dyn = GaitDynamics(robot)
     scene = 'synthetic_yaw' if yaw else 'synthetic_no_yaw'
     metadata = {'scene': scene, 'scene_parameters': {'scene': scene,
                                                      'floor': {'rule': 'ice', 'mu': 0.005}}}
-    with BagRecorder(path, metadata, robot.urdf_path.read_text(encoding='utf-8')) as recorder:
-        for k in range(len(SYNTHETIC_STEPS) * SAMPLES_PER_STEP):
-            t, step, contact, q, v = _synthetic_state(k, yaw)
-            if contact.mode.swing_sliding:  # the simulator slides the heel along its velocity
-                heel_vy = dyn.frame_velocity(contact, q, v, 'swing_heel').linear[1]
-                contact.heel_slide_dir = float(np.sign(heel_vy)) or 1.0
-            joints = np.arange(N_COORDINATES)
-            efforts = {'visual_lifting': np.where(joints >= 2, 3.0 * np.sin(40.0 * t + joints),
-                                                  0.0)}
-            if yaw:
-                efforts['yaw'] = np.where(joints == 8, 30.0 * np.sin(20.0 * t), 0.0)
-            result = dyn.evaluate(contact, q, v, np.sum(list(efforts.values()), axis=0))
-            head = dyn.frame_placement(contact, q, 'head_top')
-            state = HybridState(t, q, v, contact, step_index=step)
-            recorder.write(Sample(state, result, efforts, head.translation.copy(),
-                                  head.rotation.copy(), None))
+    block = synthetic_block(robot, yaw)
+    with BagRecorder(path, metadata, robot.urdf_path.read_text(encoding='utf-8'),
+                     robot=robot) as recorder:
+        recorder.write_block(block, Events.of(block['last_event'], []))
     return path
 
 

@@ -95,28 +95,48 @@ class Packer:
     """Writes the numbers of messages of one layout: ``pack`` takes, per path, an array of
     shape (m,) or (m, count) and gives (m, size) bytes, row k the k-th message.
 
-    Many messages: the fields are grouped by dtype, each group one scatter of bytes (a few
-    numpy operations whatever the number of messages). One message (a live topic): one
-    ``struct`` call over the whole message, its counts, strings and padding as constants."""
+    Many messages: the numbers of each dtype are gathered into one array, and the rows are
+    joined from its bytes and the constant bytes between the fields (counts, strings,
+    padding) in one concatenation. One message (a live topic): one ``struct`` call over the
+    whole message, its constant bytes as arguments."""
 
     def __init__(self, layout: Layout, paths: tuple[str, ...]) -> None:
         self.layout, self.paths = layout, paths
+        fields = sorted(paths, key=lambda p: layout.fields[p].offset)
         groups: dict[np.dtype, list[str]] = {}
-        for path in paths:
+        for path in fields:
             groups.setdefault(layout.fields[path].dtype, []).append(path)
-        self._groups = []
-        for dtype, members in groups.items():
-            width = dtype.itemsize
-            starts = np.concatenate([
-                layout.fields[p].offset + width * np.arange(layout.fields[p].count)
-                for p in members])
-            columns = (starts[:, None] + np.arange(width)).ravel()
-            self._groups.append((dtype, tuple(members), columns))
-        self._template = np.frombuffer(layout.template, np.uint8)
+        self._groups = [(dtype, tuple(members)) for dtype, members in groups.items()]
+        # the row as pieces in byte order: constant bytes, or bytes [start, stop) of a group's
+        # numbers (fields next to each other in the message and in their group: one piece)
+        group_of, starts = {}, {}
+        for g, (dtype, members) in enumerate(self._groups):
+            byte = 0
+            for path in members:
+                group_of[path], starts[path] = g, byte
+                byte += dtype.itemsize * layout.fields[path].count
+        self._pieces: list[tuple[int, int, int] | np.ndarray] = []
+        position = 0
+        for path in fields:
+            field = layout.fields[path]
+            size = field.dtype.itemsize * field.count
+            if field.offset > position:
+                self._pieces.append(np.frombuffer(layout.template[position:field.offset],
+                                                  np.uint8)[None])
+            group, start = group_of[path], starts[path]
+            last = self._pieces[-1] if self._pieces else None
+            if (field.offset == position and isinstance(last, tuple) and last[0] == group
+                    and last[2] == start):
+                self._pieces[-1] = (group, last[1], start + size)
+            else:
+                self._pieces.append((group, start, start + size))
+            position = field.offset + size
+        if layout.size > position:
+            self._pieces.append(np.frombuffer(layout.template[position:], np.uint8)[None])
         # one message: '<' + constant bytes between the fields + the fields' formats
         formats, arguments, self._slots = ['<'], [], []
         position = 0
-        for path in sorted(paths, key=lambda p: layout.fields[p].offset):
+        for path in fields:
             field = layout.fields[path]
             if field.offset > position:
                 formats.append(f'{field.offset - position}s')
@@ -136,13 +156,13 @@ class Packer:
         (rows,) or (rows, count), cast to the field's type)."""
         if rows == 1:
             return np.frombuffer(self.pack_one(values), np.uint8)[None]
-        out = np.repeat(self._template[None], rows, axis=0)
-        for dtype, members, columns in self._groups:
-            numbers = np.concatenate(
-                [x if x.ndim == 2 else x[:, None] for x in (values[path] for path in members)],
-                axis=1, dtype=dtype, casting='unsafe')
-            out[:, columns] = numbers.view(np.uint8)
-        return out
+        numbers = [np.concatenate(
+            [x if x.ndim == 2 else x[:, None] for x in (values[path] for path in members)],
+            axis=1, dtype=dtype, casting='unsafe').view(np.uint8)
+            for dtype, members in self._groups]
+        return np.concatenate(
+            [numbers[p[0]][:, p[1]:p[2]] if isinstance(p, tuple)
+             else np.broadcast_to(p, (rows, p.shape[1])) for p in self._pieces], axis=1)
 
     def pack_one(self, values: Mapping[str, np.ndarray]) -> bytes:
         """The bytes of one message (``values`` as for ``pack`` with one row)."""
