@@ -1,5 +1,7 @@
-"""The run summary picture: written by the headless runner (also after a fall), refused without
-its input files, the long-run decimation keeps the peaks, and run_scene says where to look."""
+"""The run summary picture: written by the headless runner (also after a fall) from the run's
+trajectory in memory, the same picture ``write_summary`` redraws from the run's folder, refused
+without its input files or columns, the long-run decimation keeps the peaks, and run_scene says
+where to look."""
 
 from __future__ import annotations
 
@@ -9,10 +11,17 @@ import json
 import numpy as np
 import pytest
 
-from iceskate_analysis.summary import MAX_POINTS, _decimate, _shoulders, write_summary
+from iceskate_analysis.summary import (
+    MAX_POINTS,
+    _decimate,
+    _shoulders,
+    draw_summary,
+    write_summary,
+)
 from iceskate_bringup.runner import main, run
 from iceskate_bringup.scene import load_scene, parse_scene, scene_path
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.run.metrics import Trajectory
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 
@@ -50,11 +59,102 @@ def test_write_summary_returns_the_path_and_redraws(stand_run, tmp_path):
     _assert_picture(path)
 
 
+def _pixels(path):
+    from matplotlib.image import imread
+    return imread(path)
+
+
+def assert_same_picture(a, b):
+    """Two PNGs show the same picture (pixel for pixel; their bytes too, Agg being
+    deterministic)."""
+    np.testing.assert_array_equal(_pixels(a), _pixels(b))
+    assert a.read_bytes() == b.read_bytes()
+
+
+def _redrawn(out, folder):
+    """``write_summary`` of a copy of run folder ``out``'s trajectory and metrics."""
+    folder.mkdir()
+    for name in ('trajectory.npz', 'metrics.json'):
+        (folder / name).write_bytes((out / name).read_bytes())
+    return write_summary(folder)
+
+
 def test_a_skate_run_with_support_exchanges_is_summarised(tmp_path):
-    metrics = run(replace(load_scene('skate'), duration=2.5), tmp_path, progress=False)
-    steps = np.load(tmp_path / 'trajectory.npz')['step_index']
+    out = tmp_path / 'run'
+    metrics = run(replace(load_scene('skate'), duration=2.5), out, progress=False)
+    steps = np.load(out / 'trajectory.npz')['step_index']
     assert metrics['steps'] >= 2 and np.count_nonzero(np.diff(steps)) == metrics['steps']
-    _assert_picture(tmp_path / 'summary.png')
+    _assert_picture(out / 'summary.png')
+    # drawn from the trajectory in memory: the picture of the saved files
+    assert_same_picture(out / 'summary.png', _redrawn(out, tmp_path / 'again'))
+
+
+def test_the_runners_picture_from_memory_is_the_one_of_the_saved_run(stand_run, tmp_path):
+    """The headless runner draws summary.png from the run's ``Trajectory`` in memory
+    (``draw_summary``); ``write_summary`` redraws it from trajectory.npz and metrics.json."""
+    out, _metrics = stand_run
+    assert_same_picture(out / 'summary.png', _redrawn(out, tmp_path / 'again'))
+
+
+def _trajectory(out, spill, block: int = 37) -> Trajectory:
+    """A Trajectory holding run ``out``'s saved samples, extended a block at a time."""
+    with np.load(out / 'trajectory.npz') as npz:
+        columns = {key: npz[key] for key in npz.files}
+    efforts = {key[4:]: columns.pop(key) for key in list(columns) if key.startswith('tau_')}
+    trajectory = Trajectory(spill, spill_bytes=10_000 if spill is not None else 2**40)
+    n = len(columns['t'])
+    for start in range(0, n, block):
+        rows = slice(start, min(start + block, n))
+        trajectory.extend({key: value[rows] for key, value in columns.items()},
+                          {key: value[rows] for key, value in efforts.items()})
+    return trajectory
+
+
+@pytest.mark.parametrize('spilled', [False, True])
+def test_draw_summary_from_a_trajectory_draws_the_saved_runs_picture(stand_run, tmp_path,
+                                                                     spilled):
+    """From the columns in memory or from the spill files they were moved to (mapped one
+    at a time), the same picture as from the run's folder."""
+    out, metrics = stand_run
+    trajectory = _trajectory(out, tmp_path / 'spill' if spilled else None)
+    assert bool(list((tmp_path / 'spill').glob('.trajectory-*'))) == spilled
+    path = draw_summary(trajectory.columns(), json.loads((out / 'metrics.json').read_text()),
+                        tmp_path / 'summary.png')
+    assert path == tmp_path / 'summary.png'
+    _assert_picture(path)
+    assert_same_picture(path, _redrawn(out, tmp_path / 'again'))
+    # another run's metrics give another title: the metrics are drawn
+    other = draw_summary(trajectory.columns(), {**metrics, 'steps': 7}, tmp_path / 'other.png')
+    assert not np.array_equal(_pixels(other), _pixels(path))
+
+
+@pytest.mark.parametrize('column', ['t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q'])
+def test_draw_summary_names_a_missing_column_in_one_sentence(stand_run, tmp_path, column):
+    out, metrics = stand_run
+    columns = [(key, value) for key, value in _trajectory(out, None).columns() if key != column]
+    path = tmp_path / 'summary.png'
+    with pytest.raises(SimulationError) as raised:
+        draw_summary(columns, metrics, path)
+    assert str(raised.value) == (f'the trajectory of {tmp_path} lacks the column(s) '
+                                 f"['{column}']")
+    assert not path.exists()
+
+
+def test_draw_summary_of_an_empty_trajectory_is_refused_in_one_sentence(stand_run, tmp_path):
+    out, metrics = stand_run
+    path = tmp_path / 'summary.png'
+    empty = Trajectory()
+    empty.extend({key: value[:0] for key, value in _trajectory(out, None).columns()
+                  if not key.startswith('tau_')}, {})
+    assert len(empty) == 0
+    with pytest.raises(SimulationError) as raised:
+        draw_summary(empty.columns(), metrics, path)
+    assert str(raised.value) == f'the trajectory of {tmp_path} holds no sample'
+    with pytest.raises(SimulationError) as raised:  # nothing ever added: no column at all
+        draw_summary(Trajectory().columns(), metrics, path)
+    message = str(raised.value)
+    assert message.startswith(f'the trajectory of {tmp_path} ') and '\n' not in message
+    assert not path.exists()
 
 
 def test_a_run_that_ends_in_a_fall_is_summarised(tmp_path):

@@ -1,5 +1,6 @@
 """bag_bulk.write_many: the same MCAP bag, byte for byte, as rosbags' Writer.write one by one."""
 
+from dataclasses import replace
 import pathlib
 
 import numpy as np
@@ -7,9 +8,16 @@ import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.writer import CompressionFormat, CompressionMode
 
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag_bulk import write_many
 from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages
+from iceskate_sim.recording.messages import TOPICS as RECORDED_TYPES  # this file has TOPICS
+from iceskate_sim.run.session import Session
 
 TOPICS = {'/clock': 'rosgraph_msgs/msg/Clock', '/chatter': 'std_msgs/msg/String',
           '/big': 'std_msgs/msg/String'}
@@ -30,8 +38,11 @@ def _messages(count: int, seed: int = 0) -> list[tuple[str, int, bytes]]:
 
 
 def _write(folder: pathlib.Path, messages: list[tuple[str, int, bytes]], bulk: bool,
-           blocks: int = 3, **options: object) -> pathlib.Path:
-    """The bag ``folder/bag`` (the same name everywhere: the metadata holds it)."""
+           blocks: int | list[list[int]] = 3, topics: dict[str, str] = TOPICS,
+           **options: object) -> pathlib.Path:
+    """The bag ``folder/bag`` (the same name everywhere: the metadata holds it) of the
+    connections ``topics``; ``bulk``: ``write_many`` of ``blocks`` (that many near-equal
+    blocks, or the indices of each block's messages), else ``Writer.write`` one by one."""
     path = folder / 'bag'
     folder.mkdir()
     writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
@@ -40,10 +51,11 @@ def _write(folder: pathlib.Path, messages: list[tuple[str, int, bytes]], bulk: b
     writer.open()
     ts = make_typestore()
     connections = {topic: writer.add_connection(topic, msgtype, typestore=ts)
-                   for topic, msgtype in TOPICS.items()}
+                   for topic, msgtype in topics.items()}
     rows = [(connections[topic], stamp, data) for topic, stamp, data in messages]
     if bulk:
-        for block in np.array_split(np.arange(len(rows)), blocks):
+        for block in (np.array_split(np.arange(len(rows)), blocks) if isinstance(blocks, int)
+                      else blocks):
             write_many(writer, [rows[k] for k in block])
     else:
         for connection, stamp, data in rows:
@@ -85,6 +97,47 @@ def test_compressed_bags_are_the_same_file_too(tmp_path):
         assert sorted(p.name for p in single.iterdir()) == sorted(p.name for p in bulk.iterdir())
         for path in single.iterdir():
             assert (bulk / path.name).read_bytes() == path.read_bytes(), (mode, path.name)
+
+
+@pytest.fixture(scope='module')
+def sample_messages() -> tuple[list[tuple[str, int, bytes]], list[list[int]]]:
+    """The messages of 400 periods of the stand scene, as the bag writer has them: each native
+    block's samples (blocks of 150 periods), sample by sample, topics in ``RECORDED_TOPICS``
+    order, stamped with the sample's time; and the messages of each block."""
+    scene = replace(load_scene('stand'), duration=0.4, record_bag=False)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    encoder = SampleMessages(make_typestore(), LinkTransforms(session.robot.urdf_model))
+    messages, blocks = [], []
+    record_block = session._record_block
+
+    def record(block: dict, first: int) -> None:
+        record_block(block, first)
+        encoded = encoder.encode(block, Events.of(block['last_event'], session.sim.events))
+        start = len(messages)
+        for k, t in enumerate(block['t'].tolist()):
+            messages.extend((topic, seconds_to_ns(t), encoded[topic][k])
+                            for topic in RECORDED_TOPICS)
+        blocks.append(list(range(start, len(messages))))
+    session._record_block = record
+    while not session.done:
+        session.run_periods(stack, 150)
+    return messages, blocks
+
+
+def test_the_blocks_of_a_run_give_the_same_file_as_one_by_one(tmp_path, sample_messages):
+    """The messages of native blocks (tens of kB a sample with /tf), written a block at a
+    time, make the file ``Writer.write`` makes of them one by one, over several chunks."""
+    messages, blocks = sample_messages
+    assert len(blocks) == 3 and len(messages) == 6 * 400
+    assert sum(len(data) for _, _, data in messages) > 2**20  # two chunks or more
+    single = _write(tmp_path / 'single', messages, bulk=False, topics=RECORDED_TYPES)
+    bulk = _write(tmp_path / 'bulk', messages, bulk=True, blocks=blocks, topics=RECORDED_TYPES)
+    for name in ('bag.mcap', 'metadata.yaml'):
+        assert (bulk / name).read_bytes() == (single / name).read_bytes(), name
+    with Reader(bulk) as reader:
+        got = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+    assert got == messages
 
 
 def test_a_connection_the_bag_does_not_have_is_refused(tmp_path):

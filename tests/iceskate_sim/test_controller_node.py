@@ -1,4 +1,8 @@
-"""The controller nodes' adapter: GaitState CDR bytes in, the law's command out (in process)."""
+"""The controller nodes' adapter: GaitState CDR bytes in, the law's command out (in process).
+
+The bytes are what the simulator sends: ``SampleMessages.encode`` of the native loop's samples
+(the live one of a lockstep session, or a block of a headless run); the expected command is the
+law's at the observation of rosbags' reading of the same bytes."""
 
 import numpy as np
 import pytest
@@ -14,10 +18,16 @@ from iceskate_sim.model.command import ControllerCommand, JointCommand  # noqa: 
 from iceskate_sim.model.robot import load_robot  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.physics.native_control import native_command, native_kinematics  # noqa: E402
+from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
+from iceskate_sim.recording.links import LinkTransforms  # noqa: E402
+from iceskate_sim.recording.messages import Events, SampleMessages  # noqa: E402
+from iceskate_sim.ros.conversions import observation_from_gait_state  # noqa: E402
 from iceskate_sim.ros.effort_cdr import CommandDecoder  # noqa: E402
 from iceskate_sim.ros.lockstep import LockstepSession  # noqa: E402
 from iceskate_sim.ros.node_support import write_parameter_file  # noqa: E402
 from iceskate_sim.run.session import Session  # noqa: E402
+
+GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
 
 
 def skate_session() -> LockstepSession:
@@ -41,6 +51,14 @@ def gait_manager(ros_context, tmp_path):
         node.destroy_node()
 
 
+def assert_command(got, expected) -> None:
+    for field in ('effort', 'stiffness', 'damping', 'reference'):
+        assert np.array_equal(getattr(got.command, field), getattr(expected.command, field))
+    assert list(got.source_efforts) == list(expected.source_efforts)
+    for source, effort in expected.source_efforts.items():
+        assert np.array_equal(got.source_efforts[source], effort), source
+
+
 def _state_bytes(session: LockstepSession) -> bytes:
     return session.state_bytes(('/gait_state',))['/gait_state']
 
@@ -58,15 +76,44 @@ def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_m
         expected = native_command(law, obs, kinematics)
         ns, got = sent[-1]
         assert ns == session.t_ns
-        for field in ('effort', 'stiffness', 'damping', 'reference'):
-            assert np.array_equal(getattr(got.command, field), getattr(expected.command, field))
-        assert list(got.source_efforts) == list(expected.source_efforts)
-        for source, effort in expected.source_efforts.items():
-            assert np.array_equal(got.source_efforts[source], effort), source
+        assert_command(got, expected)
         session.offer('gait_manager', ns, got)
         session.offer('visual_lifting', ns, ControllerCommand(JointCommand(np.zeros(18)), {}))
         session.step()
     assert len(sent) == 3
+
+
+def test_the_answers_to_the_states_of_a_run_are_the_laws_commands(gait_manager):
+    """States of several modes, sides and message layouts (a headless run's block of samples),
+    some padded as Fast DDS may pad them: each answer is the law's command at rosbags' reading
+    of the same bytes, stamped with the state's stamp."""
+    from iceskate_bringup.composition import ControlStack
+    node, sent = gait_manager
+    scene = load_scene('skate')
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    sim = session.sim
+    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
+                            session.psi_initial)
+    block, error = sim.run_loop(loop, 1500)
+    assert error is None
+    typestore = make_typestore()
+    messages = SampleMessages(typestore, LinkTransforms(session.robot.urdf_model))
+    encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
+                              ('/gait_state',))['/gait_state']
+    law = GaitManagerController(node_parameters(scene)['gait_manager'])
+    kinematics = native_kinematics(load_robot())
+    seen = set()
+    for k in range(0, len(encoded), 50):
+        data = encoded[k] + b'\xab' * (k % 4)
+        msg = typestore.deserialize_cdr(encoded[k], GAIT_STATE)
+        node.on_gait_state(data)
+        ns, got = sent[-1]
+        assert ns == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        assert_command(got, native_command(law, observation_from_gait_state(msg), kinematics))
+        seen.add((msg.mode, msg.support_side))
+    assert len(sent) == len(range(0, len(encoded), 50))
+    assert len({mode for mode, _ in seen}) >= 3 and {side for _, side in seen} == {0, 1}
 
 
 def test_undecodable_gait_state_bytes_get_no_answer_and_the_next_state_does(gait_manager):

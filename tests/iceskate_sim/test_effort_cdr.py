@@ -1,7 +1,9 @@
 """effort_cdr: EffortCommand CDR bytes <-> ControllerCommand, against the typestores' own codecs.
 
 Reference bytes come from rosbags' serializer (the bag's codec) and, where rclpy is installed,
-from rclpy's (what a controller written against the message class publishes).
+from rclpy's (what a controller written against the message class publishes). A decoder that
+knows a sender's layout reads its values in place (read-only views of the message's bytes);
+the checked way (a new layout) gives copies: ``writeable`` tells which way a message went.
 """
 
 import numpy as np
@@ -10,10 +12,9 @@ import pytest
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues, ControllerCommand, JointCommand
 from iceskate_sim.model.robot import COORDINATE_NAMES
-from iceskate_sim.recording.bag import MessageFactory
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.ros.conversions import command_fields, command_from_message
-from iceskate_sim.ros.effort_cdr import CommandDecoder, CommandEncoder, read_effort_command
+from iceskate_sim.ros.effort_cdr import CommandDecoder, CommandEncoder
 
 TYPE = 'iceskate_interfaces/msg/EffortCommand'
 STAMP = 1_234_567_890_123  # ns
@@ -37,7 +38,6 @@ def answers() -> dict[str, ControllerCommand]:
 
 def rosbags_bytes(typestore, source: str, stamp_ns: int, **fields) -> bytes:
     """A message of ``fields`` (others empty) serialized by rosbags."""
-    factory = MessageFactory(typestore)
     empty = np.zeros(0)
     values = {'joint_names': list(COORDINATE_NAMES), 'effort': np.zeros(18),
               'stiffness': empty, 'damping': empty, 'position_reference': empty,
@@ -45,7 +45,11 @@ def rosbags_bytes(typestore, source: str, stamp_ns: int, **fields) -> bytes:
     for key, value in fields.items():
         values[key] = value if key in ('joint_names', 'source_names') else np.asarray(
             value, dtype=float)
-    msg = typestore.types[TYPE](header=factory.header(stamp_ns / 1e9), source=source, **values)
+    types = typestore.types
+    header = types['std_msgs/msg/Header'](
+        stamp=types['builtin_interfaces/msg/Time'](sec=stamp_ns // 10**9,
+                                                   nanosec=stamp_ns % 10**9), frame_id='')
+    msg = types[TYPE](header=header, source=source, **values)
     return bytes(typestore.serialize_cdr(msg, TYPE))
 
 
@@ -103,24 +107,54 @@ def test_the_decoder_reads_what_rosbags_writes_the_same_twice(typestore):
             assert_same(got, answer)
 
 
-def test_the_decoder_reads_rclpy_bytes_whose_padding_is_not_zero():
-    """rclpy's serializer leaves its padding bytes (and some trailing bytes) uninitialized."""
+def wire_bytes(serialization, msg, typestore) -> bytes:
+    """What a raw subscription gets of the rclpy EffortCommand ``msg``:
+    ``serialize_message``'s bytes (their padding left uninitialized) cut to the size of
+    rosbags' serialization of the same fields. ``serialize_message`` returns a buffer of the
+    estimated size, up to 16 bytes longer (measured: a Python publisher's EffortCommand of
+    76 bytes arrives as 76 bytes; ``serialize_message`` gives 92)."""
+    size = len(rosbags_bytes(
+        typestore, msg.source, msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
+        joint_names=list(msg.joint_names), source_names=list(msg.source_names),
+        **{key: np.asarray(getattr(msg, key)) for key in (
+            'effort', 'stiffness', 'damping', 'position_reference', 'source_efforts',
+            'head_target')}))
+    return bytes(serialization.serialize_message(msg))[:size]
+
+
+@pytest.mark.parametrize('layout', list(answers()))
+def test_the_decoder_reads_rclpy_bytes_whose_padding_is_not_zero(typestore, layout):
+    """rclpy's serializer leaves its padding bytes uninitialized."""
     serialization = pytest.importorskip('rclpy.serialization')
     from iceskate_interfaces.msg import EffortCommand
-    answer = answers()['breakdown']
+    answer = answers()[layout]
     msg = EffortCommand(source='gait_manager')
     for key, value in command_fields(answer).items():
         setattr(msg, key, value)
     msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 7
-    data = serialization.serialize_message(msg)
+    data = wire_bytes(serialization, msg, typestore)
     decoder = CommandDecoder()
-    for _ in range(2):
+    for _ in range(2):  # the checked way, then the known layout
         source, ns, got = decoder.decode(data)
         assert (source, ns) == ('gait_manager', 3_000_000_007)
         assert_same(got, answer)
     data = CommandEncoder('gait_manager').encode(CommandValues.of(answer), 5)
     back = serialization.deserialize_message(data, EffortCommand)
     assert_same(command_from_message(back), answer)
+
+
+@pytest.mark.parametrize('pad', [1, 2, 3])
+def test_trailing_padding_bytes_read_the_same(typestore, pad):
+    """Fast DDS may pad a message to 4 bytes (bytes of any value): the checked way and the
+    known layout read it as the message."""
+    for layout, answer in answers().items():
+        fields = {key: value for key, value in command_fields(answer).items() if len(value)}
+        data = rosbags_bytes(typestore, layout, STAMP, **fields)
+        decoder = CommandDecoder()
+        for padded in (data + b'\xab' * pad, data + bytes(pad)):  # new layout, then known
+            source, ns, got = decoder.decode(padded)
+            assert (source, ns) == (layout, STAMP)
+            assert_same(got, answer)
 
 
 @pytest.mark.parametrize('change, match', [
@@ -153,14 +187,79 @@ def test_bytes_that_are_not_a_command_are_named(typestore, cut):
         CommandDecoder().decode(data[:cut] if cut != 3 else b'\x01\x00' + data[2:])
 
 
-def test_read_effort_command_gives_the_fields(typestore):
+def test_the_checked_way_gives_the_fields(typestore):
+    """A new layout: every field read from its place (the values copies of the bytes)."""
     data = rosbags_bytes(typestore, 'yaw', STAMP, effort=np.arange(18.0),
-                         source_names=['a', 'b'], source_efforts=np.arange(36.0))
-    msg, _ = read_effort_command(data)
-    assert (msg.source, msg.stamp_ns, msg.frame_id) == ('yaw', STAMP, '')
-    assert msg.joint_names == list(COORDINATE_NAMES) and msg.source_names == ['a', 'b']
-    np.testing.assert_array_equal(msg.source_efforts, np.arange(36.0))
-    assert msg.stiffness.size == 0
+                         stiffness=np.full(18, 2.0), damping=np.full(18, 0.5),
+                         position_reference=np.linspace(0, 1, 18), source_names=['a', 'b'],
+                         source_efforts=np.arange(36.0), head_target=[0.1, 1.2, -0.05])
+    source, ns, got = CommandDecoder().decode_values(data)
+    assert (source, ns, got.sources) == ('yaw', STAMP, ('a', 'b'))
+    for name, want in (('effort', np.arange(18.0)), ('stiffness', np.full(18, 2.0)),
+                       ('damping', np.full(18, 0.5)), ('reference', np.linspace(0, 1, 18)),
+                       ('source_efforts', np.arange(36.0)),
+                       ('head_target', [0.1, 1.2, -0.05])):
+        np.testing.assert_array_equal(getattr(got, name), want, err_msg=name)
+        assert getattr(got, name).flags.writeable, name  # not a view of the message
+
+
+def _values(seed: int, layout: str) -> dict[str, np.ndarray]:
+    """Fields of a command of ``layout`` with values of their own."""
+    rng = np.random.default_rng(seed)
+    fields = {'effort': rng.normal(size=18)}
+    if layout in ('impedance', 'all'):
+        fields |= {'stiffness': rng.uniform(0, 900, 18), 'damping': rng.uniform(0, 90, 18),
+                   'position_reference': rng.normal(size=18)}
+    if layout in ('breakdown', 'all'):
+        fields |= {'source_names': ['posture', 'yaw'], 'source_efforts': rng.normal(size=36)}
+    if layout == 'all':
+        fields['head_target'] = rng.normal(size=3)
+    return fields
+
+
+def test_the_known_layout_way_and_the_checked_way_agree(typestore):
+    """The second message of a sender's layout is read in place; it decodes as a new decoder
+    (the checked way) and rosbags decode it."""
+    known = CommandDecoder()
+    for k, layout in enumerate(('plain', 'impedance', 'breakdown', 'all')):
+        known.decode(rosbags_bytes(typestore, layout, STAMP, **_values(100 + k, layout)))
+        for seed in range(3):
+            data = rosbags_bytes(typestore, layout, STAMP + seed, **_values(seed, layout))
+            fast = known.decode_values(data)
+            checked = CommandDecoder().decode_values(data)
+            assert not fast[2].effort.flags.writeable  # read in place
+            assert fast[:2] == checked[:2] == (layout, STAMP + seed)
+            assert fast[2].sources == checked[2].sources
+            for a, b in zip(fast[2][:6], checked[2][:6], strict=True):
+                np.testing.assert_array_equal(a, b)
+            assert_same(known.decode(data)[2],
+                        command_from_message(typestore.deserialize_cdr(data, TYPE)))
+
+
+def test_a_sender_whose_layout_changes_is_checked_again(typestore):
+    """A sender's message of another layout (sources, impedance, head target or joint names
+    changed) is not read at the places of its former layout: it is checked and decoded as
+    itself, and its bad values are named."""
+    decoder = CommandDecoder()
+    sequence = ('plain', 'plain', 'impedance', 'impedance', 'breakdown', 'all', 'plain')
+    for seed, layout in enumerate(sequence):
+        fields = _values(seed, layout)
+        data = rosbags_bytes(typestore, 'gait_manager', STAMP + seed, **fields)
+        source, ns, got = decoder.decode(data)
+        assert (source, ns) == ('gait_manager', STAMP + seed)
+        assert_same(got, command_from_message(typestore.deserialize_cdr(data, TYPE)))
+    # the names in another order: the same lengths, another layout, another meaning
+    names = list(reversed(COORDINATE_NAMES))
+    data = rosbags_bytes(typestore, 'gait_manager', STAMP, joint_names=names,
+                         effort=np.arange(18.0))
+    got = decoder.decode(data)[2]
+    np.testing.assert_array_equal(got.command.effort, np.arange(18.0)[::-1])
+    # a known layout again, its gains now negative: named
+    fields = _values(1, 'impedance')
+    decoder.decode(rosbags_bytes(typestore, 'gait_manager', STAMP, **fields))
+    fields['damping'] = -fields['damping']
+    with pytest.raises(SimulationError, match="source 'gait_manager'.*must be >= 0"):
+        decoder.decode(rosbags_bytes(typestore, 'gait_manager', STAMP, **fields))
 
 
 def test_the_skeleton_tells_senders_and_source_names_of_one_layout_apart(typestore):

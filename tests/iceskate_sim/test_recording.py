@@ -1,5 +1,6 @@
 """The bag recorder: a background writer process writes the same bag as an in-process one, and
-its failures and the run's failures still leave a closed, readable bag."""
+its failures and the run's failures still leave a closed, readable bag; the native loop's
+samples are what the oracle records of the same run."""
 
 from dataclasses import replace
 import json
@@ -7,6 +8,7 @@ import os
 import pathlib
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from rosbags.rosbag2 import Reader
 
@@ -14,26 +16,43 @@ from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.robot import load_robot
-from iceskate_sim.recording import bag as recording
-from iceskate_sim.recording.bag import BATCH, BagRecorder, Sample
+from iceskate_sim.model.modes import MULTIPLIER_NAMES
+from iceskate_sim.model.robot import PIVOTS, SIDES, load_robot
+from iceskate_sim.model.stamps import seconds_to_ns
+from iceskate_sim.recording.bag import BagRecorder
+from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages
 from iceskate_sim.run.session import Session
 from oracle.simulator import reference_samples
 
 #: a fast-stepping skate gait (test data): many events in a short window
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
 
-PERIODS = 2 * BATCH + 17  # two full batches and a partial one
+BLOCK = 100  # periods per native block
+PERIODS = 2 * BLOCK + 17  # two full blocks and a partial one
+
+
+def _native_blocks(scene, periods: int = BLOCK) -> tuple[list[dict], list]:
+    """The native loop's blocks of ``scene`` (``periods`` each) and the run's event log."""
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    blocks = []
+    record_block = session._record_block
+    session._record_block = lambda block, first: (blocks.append(block),
+                                                  record_block(block, first))
+    while not session.done:
+        session.run_periods(stack, periods)
+    assert session.error is None
+    return blocks, list(session.sim.events)
 
 
 @pytest.fixture(scope='module')
-def samples() -> list[Sample]:
-    """The first periods of the stand scene (push, visual lifting, posture stabiliser), on the
-    oracle."""
-    scene = replace(load_scene('stand'), duration=PERIODS * 1e-3)
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    return reference_samples(scene, session.robot, stack.commands, PERIODS)
+def blocks() -> list[tuple[dict, Events]]:
+    """The first periods of the stand scene (push, visual lifting, posture stabiliser) on the
+    native loop, in blocks of ``BLOCK``, each with its latest events."""
+    scene = replace(load_scene('stand'), duration=PERIODS * 1e-3, record_bag=False)
+    got, events = _native_blocks(scene)
+    assert [len(b['t']) for b in got] == [BLOCK, BLOCK, 17]
+    return [(b, Events.of(b['last_event'], events)) for b in got]
 
 
 def _messages(bag: pathlib.Path) -> list[tuple[str, int, bytes]]:
@@ -41,24 +60,44 @@ def _messages(bag: pathlib.Path) -> list[tuple[str, int, bytes]]:
         return [(c.topic, t, bytes(data)) for c, t, data in reader.messages()]
 
 
-def _record(path: pathlib.Path, samples: list[Sample], background: bool) -> BagRecorder:
+def _record(path: pathlib.Path, blocks: list[tuple[dict, Events]],
+            background: bool) -> BagRecorder:
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
     with BagRecorder(path, {'scene': 'stand'}, urdf, background=background) as recorder:
-        for sample in samples:
-            recorder.write(sample)
+        for block, events in blocks:
+            recorder.write_block(block, events)
     return recorder
 
 
-def test_background_writer_writes_the_same_messages(tmp_path, samples):
-    _record(tmp_path / 'inline', samples, background=False)
-    recorder = _record(tmp_path / 'background', samples, background=True)
+def test_background_writer_writes_the_same_messages(tmp_path, blocks):
+    _record(tmp_path / 'inline', blocks, background=False)
+    recorder = _record(tmp_path / 'background', blocks, background=True)
     inline, background = _messages(tmp_path / 'inline'), _messages(tmp_path / 'background')
     assert recorder.count == PERIODS
     assert len(background) == 1 + 6 * PERIODS  # the URDF, then 6 topics per sample
     assert background == inline
 
 
-def test_the_bag_says_the_urdf_is_latched_and_replay_offers_it_so(tmp_path, samples):
+def test_the_bag_holds_each_samples_messages_in_order(tmp_path, blocks):
+    """After the URDF, each sample's six messages in ``RECORDED_TOPICS`` order, stamped with
+    its time, the bytes ``SampleMessages`` encodes (the bag adds nothing to them)."""
+    recorder = _record(tmp_path / 'bag', blocks, background=False)
+    got = _messages(tmp_path / 'bag')
+    urdf = load_robot().urdf_path.read_text(encoding='utf-8')
+    assert got[0] == ('/robot_description', 0, recorder.messages.description(urdf))
+    t = np.concatenate([b['t'] for b, _ in blocks])
+    assert [(topic, stamp) for topic, stamp, _ in got[1:]] == [
+        (topic, seconds_to_ns(float(time))) for time in t for topic in RECORDED_TOPICS]
+    encoder = SampleMessages(recorder.messages.typestore, recorder.messages.links)
+    expected = []
+    for block, events in blocks:
+        encoded = encoder.encode(block, events)
+        expected += [encoded[topic][k] for k in range(len(block['t']))
+                     for topic in RECORDED_TOPICS]
+    assert [data for _, _, data in got[1:]] == expected
+
+
+def test_the_bag_says_the_urdf_is_latched_and_replay_offers_it_so(tmp_path, blocks):
     """/robot_description is recorded with the QoS the simulator offers it with (transient
     local, reliable, depth 1), which ``ros2 bag play`` and Foxglove replay; the live and
     replayed publishers use that profile."""
@@ -66,7 +105,7 @@ def test_the_bag_says_the_urdf_is_latched_and_replay_offers_it_so(tmp_path, samp
     from rosbags.interfaces import QosDurability, QosReliability
 
     from iceskate_sim.ros.node_support import LATCHED_QOS
-    _record(tmp_path / 'bag', samples[:3], background=False)
+    _record(tmp_path / 'bag', blocks[:1], background=False)
     with Reader(tmp_path / 'bag') as reader:
         offered = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
     (urdf,) = offered.pop('/robot_description')
@@ -77,49 +116,36 @@ def test_the_bag_says_the_urdf_is_latched_and_replay_offers_it_so(tmp_path, samp
         DurabilityPolicy.TRANSIENT_LOCAL, ReliabilityPolicy.RELIABLE, 1)
 
 
-def test_the_background_writer_runs_at_idle_priority(tmp_path, samples):
+def test_the_background_writer_runs_at_idle_priority(tmp_path, blocks):
     """The writer takes only the CPU time the run leaves (SCHED_IDLE), whatever the parent's
     scheduling; the parent's stays as it was."""
     before = os.sched_getscheduler(0)
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
     with BagRecorder(tmp_path / 'bag', {'scene': 'stand'}, urdf,
                      background=True) as recorder:
-        recorder.write(samples[0])
+        recorder.write_block(*blocks[0])
         assert os.sched_getscheduler(recorder._process.pid) == os.SCHED_IDLE
     assert os.sched_getscheduler(0) == before
 
 
-def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, samples,
+def test_a_failing_background_writer_raises_and_leaves_a_closed_bag(tmp_path, blocks,
                                                                     monkeypatch):
-    def broken(self, record):
+    def broken(self, block, events, topics=RECORDED_TOPICS):
         raise OSError('disk full')
-    monkeypatch.setattr(recording.RecordEncoder, 'encode_block', broken)  # forked along
+    monkeypatch.setattr(SampleMessages, 'encode', broken)  # forked along
     with pytest.raises(SimulationError, match='bag writer .* failed: OSError: disk full'):
-        _record(tmp_path / 'bag', samples, background=True)
+        _record(tmp_path / 'bag', blocks, background=True)
     assert [topic for topic, _, _ in _messages(tmp_path / 'bag')] == ['/robot_description']
 
 
-@pytest.fixture(scope='module')
-def skate_records() -> list[recording.BagRecord]:
-    """1.5 s of a fast skate gait: support exchanges, heel strikes, several gait modes (the
-    records of the native loop's blocks)."""
-    scene = replace(load_scene(FAST_SKATE), duration=1.5, record_bag=False)
-    return _native_records(scene)
-
-
-def _native_records(scene) -> list[recording.BagRecord]:
-    """The records the native loop's blocks of ``scene`` pack (``RecordBlock.of_columns``)."""
-    native = Session(scene)
-    stack = ControlStack(scene, native.robot, native.observation())
-    blocks = []
-    record_block = native._record_block
-    native._record_block = lambda block, first: (blocks.append(block), record_block(block, first))
-    while not native.done:
-        native.run_periods(stack, 250)
-    packed = [recording.RecordBlock.of_columns(
-        block, dict(zip(block['sources'], block['efforts'], strict=True)), block['present'],
-        native.sim.events) for block in blocks]
-    return [block.record(k) for block in packed for k in range(len(block))]
+def test_a_closed_recorder_refuses_blocks_and_an_existing_bag_is_refused(tmp_path, blocks):
+    recorder = _record(tmp_path / 'bag', blocks[:1], background=False)
+    with pytest.raises(SimulationError, match='is closed'):
+        recorder.write_block(*blocks[1])
+    recorder.close()  # idempotent
+    assert len(_messages(tmp_path / 'bag')) == 1 + 6 * BLOCK
+    with pytest.raises(SimulationError, match='already exists'):
+        _record(tmp_path / 'bag', blocks, background=False)
 
 
 def test_a_native_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp_path):
@@ -137,111 +163,57 @@ def test_a_native_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp
     assert clock == [k * 1_000_000 for k in range(len(clock))]
 
 
-def _rosbags_bytes(factory: recording.MessageFactory,
-                   record: recording.BagRecord) -> dict[str, bytes]:
-    return {topic: bytes(factory.typestore.serialize_cdr(message, recording.TOPICS[topic]))
-            for topic, message in factory.record_messages(record).items()}
-
-
-def test_the_encoder_writes_what_rosbags_serialises(skate_records):
-    factory = recording.MessageFactory()
-    encoder = recording.RecordEncoder(factory)
-    for record in skate_records:
-        assert encoder.encode(record) == _rosbags_bytes(factory, record)
-    layouts = [layout for by_topic in encoder._layouts.values() for layout in by_topic.values()]
-    assert len(encoder._layouts) >= 10 and len({r.mode for r in skate_records}) >= 3
-    assert all(layout is not None for layout in layouts)  # every key learned, none fell back
-
-
-def test_the_encoder_handles_non_finite_and_missing_values(skate_records):
-    factory = recording.MessageFactory()
-    encoder = recording.RecordEncoder(factory, capacity=2)  # evicts as it goes
-    nan, inf = float('nan'), float('inf')
-    edits = [{6: nan}, {2: nan}, {6: inf, 2: inf}, {10: nan, 11: -inf, 12: -0.0}, {-1: nan}]
-    for record in skate_records[::150]:
-        for edit in edits:
-            values = record.values.copy()
-            for i, value in edit.items():
-                values[i] = value
-            for cause in (record.last_cause, None):
-                changed = record._replace(values=values, last_cause=cause)
-                assert encoder.encode(changed) == _rosbags_bytes(factory, changed)
-
-
-def test_the_encoder_falls_back_to_rosbags_when_no_layout_fits(skate_records, monkeypatch):
-    monkeypatch.setattr(recording, 'sentinels', lambda size: np.full(size, 0.5))  # ambiguous
-    factory = recording.MessageFactory()
-    encoder = recording.RecordEncoder(factory)
-    for record in skate_records[::100]:
-        assert encoder.encode(record) == _rosbags_bytes(factory, record)
-    layouts = [layout for by_topic in encoder._layouts.values() for layout in by_topic.values()]
-    assert layouts and all(layout is None for layout in layouts)
-
-
-def _as_bytes(encoded: dict[str, list]) -> list[dict[str, bytes]]:
-    topics = list(encoded)
-    return [{topic: bytes(encoded[topic][k]) for topic in topics}
-            for k in range(len(encoded[topics[0]]))]
-
-
-def test_a_block_encodes_as_its_records_one_by_one(skate_records):
-    """``encode_block`` gives each record's bytes as ``encode`` and rosbags do, over gait modes,
-    support exchanges, steps and causes, with far fewer layouts than discrete states (the
-    side, pivot and step index are patched, not keyed)."""
-    factory = recording.MessageFactory()
-    block = recording.RecordBlock.of_records(skate_records)
-    for k, record in enumerate(skate_records):
-        got = block.record(k)
-        assert got._replace(values=None) == record._replace(values=None)
-        assert np.array_equal(got.values, record.values, equal_nan=True)
-    by_block = recording.RecordEncoder(factory)
-    got = _as_bytes(by_block.encode_block(block))
-    by_record = recording.RecordEncoder(factory)
-    assert got == [by_record.encode(record) for record in skate_records]
-    for k in range(0, len(skate_records), 50):
-        assert got[k] == _rosbags_bytes(factory, skate_records[k])
-    states = {(r.mode, r.side, r.pivot, r.step_index) for r in skate_records}
-    assert len({r.step_index for r in skate_records}) >= 3 and len(states) >= 10
-    assert len(by_block._layouts) < len(states)
-    layouts = [layout for by_topic in by_block._layouts.values() for layout in by_topic.values()]
-    assert all(layout is not None for layout in layouts)
-    assert any(layout.integers for layout in layouts)  # gait_state's side, pivot, step
-
-
-def test_a_block_with_non_finite_values_encodes_as_its_records(skate_records):
-    """Non-finite numbers, a stamp that cannot be one (then the same error as one record's)."""
-    factory = recording.MessageFactory()
-    nan, inf = float('nan'), float('inf')
-    records = []
-    for k, record in enumerate(skate_records[::60]):
-        values = record.values.copy()
-        values[[6, 2, 10, 11][k % 4]] = [nan, inf, nan, -inf][k % 4]
-        records.append(record._replace(values=values))
-    block = recording.RecordBlock.of_records(records)
-    encoder = recording.RecordEncoder(factory)
-    assert _as_bytes(encoder.encode_block(block)) == [_rosbags_bytes(factory, r)
-                                                      for r in records]
-    values = records[3].values.copy()
-    values[1] = -1.0  # the support exchange's time: a stamp of a negative time
-    broken = records[:3] + [records[3]._replace(values=values)]
-    with pytest.raises(SimulationError, match='a stamp needs a finite time >= 0 s, got -1.0'):
-        encoder.encode_block(recording.RecordBlock.of_records(broken))
-
-
-def test_the_native_block_packs_what_the_oracle_samples_record():
-    """``RecordBlock.of_columns`` (the native loop's samples) holds what ``bag_record`` packs of
-    the oracle's samples of the same run: the same modes, sides, pivots, sources and causes,
-    values equal to the round-off the two formulations of eq. (7) grow over 0.6 s."""
+def test_the_native_block_holds_what_the_oracle_samples_record():
+    """The native loop's block columns of 0.6 s of skating are what the oracle's
+    ``reference_samples`` record of the same run: the same modes, sides, pivots, steps,
+    sources and latest transitions, values equal to the round-off the two formulations of
+    eq. (7) grow over 0.6 s."""
     scene = replace(load_scene('skate'), duration=0.6, record_bag=False)
-    got = _native_records(scene)
+    got, events = _native_blocks(scene, 250)
+    b = {key: np.concatenate([block[key] for block in got])
+         for key in ('t', 'q', 'v', 'qdd', 'passive', 'multipliers', 'support_normal',
+                     'support_tangential', 'mode', 'side', 'pivot', 'step_index',
+                     'head_position', 'head_orientation', 'last_event', 'present')}
+    sources = got[0]['sources']
+    assert all(block['sources'] == sources for block in got)
+    efforts = {name: np.concatenate([block['efforts'][i] for block in got])
+               for i, name in enumerate(sources)}
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
-    records = [recording.bag_record(sample)
-               for sample in reference_samples(scene, session.robot, stack.commands, 600)]
-    assert len(got) == len(records) == 600
-    for a, b in zip(got, records, strict=True):
-        assert a._replace(values=None) == b._replace(values=None)
-        np.testing.assert_allclose(a.values, b.values, rtol=1e-6, atol=1e-6)
+    samples = reference_samples(scene, session.robot, stack.commands, 600)
+    assert len(b['t']) == len(samples) == 600
+    close = {'rtol': 1e-6, 'atol': 1e-6}
+    for k, sample in enumerate(samples):
+        state, result = sample.state, sample.result
+        assert b['t'][k] == pytest.approx(state.t, abs=1e-12)
+        assert (b['mode'][k], b['side'][k], b['pivot'][k], b['step_index'][k]) == (
+            state.mode.number, SIDES.index(state.contact.side),
+            PIVOTS.index(state.contact.pivot), state.step_index), k
+        np.testing.assert_allclose(b['q'][k], state.q, **close)
+        np.testing.assert_allclose(b['v'][k], state.v, **close)
+        np.testing.assert_allclose(b['qdd'][k], result.qdd, **close)
+        np.testing.assert_allclose(b['passive'][k], result.passive, **close)
+        np.testing.assert_allclose(b['multipliers'][k], result.multipliers, **close)
+        np.testing.assert_allclose([b['support_normal'][k], b['support_tangential'][k]],
+                                   [result.support_normal, result.support_tangential], **close)
+        acting = {name for i, name in enumerate(sources) if int(b['present'][k]) >> i & 1}
+        assert acting == set(sample.efforts), k
+        for name in sources:
+            np.testing.assert_allclose(efforts[name][k], sample.efforts.get(name, np.zeros(18)),
+                                       **close)
+        np.testing.assert_allclose(b['head_position'][k], sample.head_position, **close)
+        rotation = pin.Quaternion(*np.roll(b['head_orientation'][k], 1)).toRotationMatrix()
+        np.testing.assert_allclose(rotation, sample.head_rotation, **close)
+        index = int(b['last_event'][k])
+        last = sample.last_transition
+        assert (index >= 0) == (last is not None), k
+        if last is not None:
+            native = events[index]
+            assert (native.cause, native.event, native.from_mode, native.to_mode) == (
+                last.cause, last.event, last.from_mode, last.to_mode), k
+            assert native.t == pytest.approx(last.t, abs=1e-6)
+    assert len(set(b['mode'].tolist())) >= 2 and (b['last_event'] >= 0).any()
+    assert len(MULTIPLIER_NAMES) == b['multipliers'].shape[1]
 
 
 def test_a_run_at_a_record_rate_keeps_every_nth_sample_and_analyses(tmp_path):
@@ -309,32 +281,35 @@ def test_a_bag_that_fails_to_close_is_the_runs_failure(tmp_path, monkeypatch):
     assert json.loads((tmp_path / 'metrics.json').read_text())['failure'] == calls[-1]
 
 
-def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, samples):
+def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, blocks):
     """Past its memory budget a Trajectory moves its samples to files (a long run's memory stays
-    flat): the columns, a source that starts late included, equal the in-memory ones, on
-    both ways of growing it, and the files go with the Trajectory."""
+    flat): the columns, a source that starts late included, equal the in-memory ones, for
+    blocks of any size, and the files go with the Trajectory."""
     from iceskate_sim.run.metrics import Trajectory
     kept, spilled = Trajectory(), Trajectory(tmp_path, spill_bytes=20_000)
-    psi_d = np.array([0.0, 1.2, 0.0])
-    for k, sample in enumerate(samples):
-        if k == 150:  # a source that acts once, after samples were spilled
-            sample = replace(sample, efforts={**sample.efforts, 'late': np.full(18, 0.5)})
+    rows = {key: np.concatenate([b[key] for b, _ in blocks])
+            for key in ('t', 'q', 'v', 'mode', 'side', 'cop_y')}
+    sources = blocks[0][0]['sources']
+    efforts = {name: np.concatenate([b['efforts'][i] for b, _ in blocks])
+               for i, name in enumerate(sources)}
+    edges = [0, 1, 2, 9, 40, 41, 120, 150, 151, 190, PERIODS]  # blocks of 1 to 79 samples
+    for start, stop in zip(edges[:-1], edges[1:], strict=True):
+        columns = {key: value[start:stop] for key, value in rows.items()}
+        block_efforts = {name: value[start:stop] for name, value in efforts.items()}
+        if start == 150:  # a source that acts once, after samples were spilled
+            block_efforts['late'] = np.full((1, 18), 0.5)
         for trajectory in (kept, spilled):
-            trajectory.append(sample, psi_d)
-        if k % 100 == 99:  # blocks too
-            columns = {key: value[-5:] for key, value in kept.arrays().items()
-                       if not key.startswith('tau_')}
-            efforts = {key[4:]: value[-5:] for key, value in kept.arrays().items()
-                       if key.startswith('tau_')}
-            for trajectory in (kept, spilled):
-                trajectory.extend(columns, efforts)
+            trajectory.extend(columns, block_efforts)
     assert spilled._spilled > 0 and spilled._held <= 20_000
     a, b = kept.arrays(), spilled.arrays()
-    assert a.keys() == b.keys() and len(kept) == len(spilled) == len(samples) + 10
+    assert a.keys() == b.keys() == {*rows, *(f'tau_{name}' for name in [*sources, 'late'])}
+    assert len(kept) == len(spilled) == PERIODS
     for key in a:
         assert np.array_equal(a[key], b[key], equal_nan=True), key
+    for key, value in rows.items():
+        assert np.array_equal(b[key], value, equal_nan=True), key
     acted = np.flatnonzero(a['tau_late'].any(axis=1))  # at sample 150 only: 0 elsewhere
-    assert acted.tolist() == [155] and np.all(a['tau_late'][155] == 0.5)
+    assert acted.tolist() == [150] and np.all(a['tau_late'][150] == 0.5)
     folder = spilled._spill_dir
     assert folder.parent == tmp_path and any(folder.iterdir())
     del spilled, trajectory, b

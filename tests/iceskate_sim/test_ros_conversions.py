@@ -1,10 +1,14 @@
 """ros_conversions: stamps, Observation from GaitState, EffortCommand <-> ControllerCommand.
 
 The messages are rosbags objects (the conversions are duck-typed on fields, so rclpy messages
-behave the same; the integration tests feed those).
+behave the same; the integration tests feed those). A GaitState is the one the simulator sends:
+``SampleMessages.encode`` of a native loop's sample (``live()``, or a block of a short run of the
+fast skating gait), deserialized by rosbags.
 """
 
+from dataclasses import replace
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -12,7 +16,7 @@ import pytest
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import ControllerCommand, JointCommand
-from iceskate_sim.model.robot import COORDINATE_NAMES, load_robot
+from iceskate_sim.model.robot import COORDINATE_NAMES, PIVOTS, SIDES, load_robot
 from iceskate_sim.model.stamps import (
     ns_to_sec_nanosec,
     seconds_to_ns,
@@ -21,18 +25,27 @@ from iceskate_sim.model.stamps import (
     stamp_to_seconds,
 )
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
-from iceskate_sim.recording.bag import MessageFactory, Sample
 from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import Events, SampleMessages
 from iceskate_sim.ros.conversions import (
     command_fields,
     command_from_message,
     observation_from_gait_state,
 )
 
+GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
+FAST_SKATE = Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
+
 
 @pytest.fixture(scope='module')
-def factory() -> MessageFactory:
-    return MessageFactory(make_typestore())
+def typestore():
+    return make_typestore()
+
+
+@pytest.fixture(scope='module')
+def messages(typestore) -> SampleMessages:
+    return SampleMessages(typestore, LinkTransforms(load_robot().urdf_model))
 
 
 @pytest.fixture(scope='module')
@@ -42,19 +55,27 @@ def simulator() -> Simulator:
     return Simulator(load_robot(), SimulatorConfig(), initial_state(q, 17))
 
 
-def empty_command(factory, source):
+def header(typestore, stamp_ns: int):
+    """A std_msgs/Header stamped ``stamp_ns`` (rosbags object)."""
+    sec, nanosec = ns_to_sec_nanosec(stamp_ns)
+    return typestore.types['std_msgs/msg/Header'](
+        stamp=typestore.types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
+        frame_id='')
+
+
+def empty_command(typestore, source):
     """An EffortCommand (rosbags object) of ``source`` with every array empty."""
     empty = np.zeros(0)
-    return factory.typestore.types['iceskate_interfaces/msg/EffortCommand'](
-        header=factory.header(0.002), source=source, joint_names=[], effort=empty,
+    return typestore.types['iceskate_interfaces/msg/EffortCommand'](
+        header=header(typestore, 2_000_000), source=source, joint_names=[], effort=empty,
         stiffness=empty, damping=empty, position_reference=empty, source_names=[],
         source_efforts=empty, head_target=empty)
 
 
-def effort_message(factory, source='posture', names=None, effort=None, **impedance):
+def effort_message(typestore, source='posture', names=None, effort=None, **impedance):
     names = list(COORDINATE_NAMES) if names is None else names
     effort = np.arange(len(names), dtype=float) if effort is None else np.asarray(effort)
-    msg = empty_command(factory, source)
+    msg = empty_command(typestore, source)
     msg.joint_names, msg.effort = names, effort
     for key, value in impedance.items():
         setattr(msg, key, np.asarray(value, dtype=float))
@@ -77,26 +98,87 @@ def test_seconds_to_ns_raises_on_negative_or_nan_time():
         seconds_to_ns(float('nan'))
 
 
-def gait_state_message(factory, simulator):
-    """The simulator's gait_state, through CDR (as a subscriber gets it)."""
-    s = simulator.state
-    placement = simulator.dynamics.frame_placement(s.contact, s.q, 'head_top')
-    sample = Sample(s, simulator.result, {}, placement.translation, placement.rotation, None)
-    msg = factory.messages(sample, ('/gait_state',))['/gait_state']
-    ts, kind = factory.typestore, 'iceskate_interfaces/msg/GaitState'
-    return ts.deserialize_cdr(ts.serialize_cdr(msg, kind), kind)
+def decoded(typestore, data: bytes):
+    return typestore.deserialize_cdr(data, GAIT_STATE)
 
 
-def test_observation_from_gait_state_equals_the_simulators(factory, simulator):
-    obs = observation_from_gait_state(gait_state_message(factory, simulator))
-    expected = simulator.observation()
+def gait_state_message(typestore, messages, simulator):
+    """The simulator's gait_state, through CDR (as a subscriber gets it): the message of its
+    native loop's live sample."""
+    live = simulator.control_loop(None, [], (), np.zeros(3)).live()
+    events = Events.of(live['last_event'], simulator.events)
+    return decoded(typestore, messages.encode(live, events, ('/gait_state',))['/gait_state'][0])
+
+
+def assert_observation(obs, expected) -> None:
     assert obs.t == expected.t and obs.mode == expected.mode and obs.side == expected.side
     np.testing.assert_array_equal(obs.q, expected.q)
     np.testing.assert_array_equal(obs.v, expected.v)
-    assert (obs.step_index, obs.t_exchange, obs.heel_anchor_y) == (
-        expected.step_index, expected.t_exchange, expected.heel_anchor_y)
+    assert (obs.pivot, obs.step_index, obs.t_exchange, obs.heel_anchor_y) == (
+        expected.pivot, expected.step_index, expected.t_exchange, expected.heel_anchor_y)
     assert obs.t_touchdown == expected.t_touchdown or (
         math.isnan(obs.t_touchdown) and math.isnan(expected.t_touchdown))
+
+
+def test_observation_from_gait_state_equals_the_simulators(typestore, messages, simulator):
+    obs = observation_from_gait_state(gait_state_message(typestore, messages, simulator))
+    assert_observation(obs, simulator.observation())
+
+
+@pytest.fixture(scope='module')
+def skate_run(messages):
+    """1.5 s of the fast skating gait: (its block of samples and their /gait_state bytes, its
+    final live gait_state bytes and the simulator's observation then)."""
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_bringup.scene import load_scene
+    from iceskate_sim.run.session import Session
+    scene = replace(load_scene(FAST_SKATE), duration=1.5)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    sim = session.sim
+    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
+                            session.psi_initial)
+    block, error = sim.run_loop(loop, 1500)
+    assert error is None and len(block['t']) == 1500
+    encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
+                              ('/gait_state',))['/gait_state']
+    live = loop.live()
+    final = messages.encode(live, Events.of(live['last_event'], sim.events),
+                            ('/gait_state',))['/gait_state'][0]
+    return block, encoded, final, sim.observation()
+
+
+def test_observation_from_gait_state_after_a_run_equals_the_simulators(typestore, skate_run):
+    _, _, final, expected = skate_run
+    assert expected.t == 1.5 and expected.step_index >= 2
+    assert_observation(observation_from_gait_state(decoded(typestore, final)), expected)
+
+
+def test_the_observation_of_every_sample_of_a_run_holds_its_state(typestore, skate_run):
+    """Each sample's GaitState gives back its state: times at the stamps' nanoseconds, the
+    pivot 'toe' while the sole is flat (GaitState's PIVOT_NONE, see ``conversions``)."""
+    block, encoded, _, _ = skate_run
+    seen = set()
+    for k in range(0, len(encoded), 3):
+        obs = observation_from_gait_state(decoded(typestore, encoded[k]))
+        assert seconds_to_ns(obs.t) == seconds_to_ns(block['t'][k])
+        np.testing.assert_array_equal(obs.q, block['q'][k])
+        np.testing.assert_array_equal(obs.v, block['v'][k])
+        mode = int(block['mode'][k])
+        pivot = PIVOTS[block['pivot'][k]] if block['pivot_code'][k] else 'toe'
+        assert (obs.mode, obs.side, obs.pivot, obs.step_index) == (
+            mode, SIDES[block['side'][k]], pivot, block['step_index'][k])
+        assert seconds_to_ns(obs.t_exchange) == seconds_to_ns(block['t_exchange'][k])
+        assert obs.heel_anchor_y == block['heel_anchor_y'][k]
+        touchdown = block['t_touchdown'][k]
+        if math.isnan(touchdown):
+            assert math.isnan(obs.t_touchdown)
+        else:
+            assert seconds_to_ns(obs.t_touchdown) == seconds_to_ns(touchdown)
+        seen.add((mode, obs.pivot, math.isnan(obs.t_touchdown), obs.side))
+    modes = {m for m, *_ in seen}
+    assert len(modes) >= 4 and {s for *_, s in seen} == set(SIDES)
+    assert {t for _, _, t, _ in seen} == {True, False}
 
 
 @pytest.mark.parametrize('field, value, match', [
@@ -107,30 +189,30 @@ def test_observation_from_gait_state_equals_the_simulators(factory, simulator):
     ('support_side', 2, 'support_side must be 0 or 1'),
     ('pivot', 7, 'pivot must be 0, 1 or 2'),
 ])
-def test_observation_from_gait_state_raises_naming_the_field(factory, simulator, field, value,
-                                                             match):
-    msg = gait_state_message(factory, simulator)
+def test_observation_from_gait_state_raises_naming_the_field(typestore, messages, simulator,
+                                                             field, value, match):
+    msg = gait_state_message(typestore, messages, simulator)
     setattr(msg, field, value)
     with pytest.raises(SimulationError, match=match):
         observation_from_gait_state(msg)
 
 
-def test_the_observation_does_not_alias_the_message(factory, simulator):
-    msg = gait_state_message(factory, simulator)
+def test_the_observation_does_not_alias_the_message(typestore, messages, simulator):
+    msg = gait_state_message(typestore, messages, simulator)
     msg.position = msg.position.copy()  # writable, as an rclpy message's array is
     obs = observation_from_gait_state(msg)
     msg.position[:] = 1.0
     assert not np.any(obs.q == 1.0)
 
 
-def test_command_round_trips_with_and_without_impedance_and_breakdown(factory):
+def test_command_round_trips_with_and_without_impedance_and_breakdown(typestore):
     plain = JointCommand(np.linspace(-1, 1, 18))
     pd = JointCommand(np.ones(18), np.full(18, 800.0), np.full(18, 80.0), np.linspace(0, 1, 18))
     q, v = np.linspace(-0.2, 0.3, 18), np.linspace(1.0, -1.0, 18)
     for sources in ({'posture': pd}, {'posture': pd, 'yaw': plain}, {}):
         answer = (ControllerCommand.of(sources, q, v) if sources
                   else ControllerCommand(plain, {}))
-        msg = empty_command(factory, 'gait_manager')
+        msg = empty_command(typestore, 'gait_manager')
         for key, value in command_fields(answer).items():
             setattr(msg, key, value)
         back = command_from_message(msg)
@@ -143,8 +225,8 @@ def test_command_round_trips_with_and_without_impedance_and_breakdown(factory):
             np.testing.assert_array_equal(back.source_efforts[name], tau)
 
 
-def test_command_with_a_subset_of_names_in_any_order(factory):
-    msg = effort_message(factory, names=['q3', 'y0'], effort=[2.0, 5.0])
+def test_command_with_a_subset_of_names_in_any_order(typestore):
+    msg = effort_message(typestore, names=['q3', 'y0'], effort=[2.0, 5.0])
     msg.source_names, msg.source_efforts = ['posture', 'yaw'], np.array([1.0, 2.0, 3.0, 4.0])
     answer = command_from_message(msg)
     command = answer.command
@@ -171,11 +253,11 @@ def test_command_with_a_subset_of_names_in_any_order(factory):
     ({'source_names': ['yaw'], 'source_efforts': [float('inf')] + [0.0] * 17},
      'source_efforts is not finite'),
 ])
-def test_command_from_message_raises_naming_the_problem(factory, change, match):
+def test_command_from_message_raises_naming_the_problem(typestore, change, match):
     names = change.pop('names', None)
     effort = change.pop('effort', None if names is None else [0.0] * len(names))
     breakdown = {k: change.pop(k) for k in ('source_names', 'source_efforts') if k in change}
-    msg = effort_message(factory, names=names, effort=effort, **change)
+    msg = effort_message(typestore, names=names, effort=effort, **change)
     if breakdown:
         msg.source_names = breakdown['source_names']
         msg.source_efforts = np.asarray(breakdown['source_efforts'], dtype=float)

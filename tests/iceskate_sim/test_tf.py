@@ -1,7 +1,9 @@
 """/tf in the bags: at every sample the world pose of every URDF link, read back with the
 ``mcap`` reader (not rosbags) and checked against forward kinematics of the URDF on a free-flyer
-base placed by the support foot, not by the simulator's support-rooted models."""
+base placed by the support foot, not by the simulator's support-rooted models. The samples are
+the native loop's block columns (q, support side and pivot, the root link's ``root_pose``)."""
 
+from dataclasses import replace
 import pathlib
 import xml.etree.ElementTree as ET
 
@@ -12,12 +14,12 @@ import pinocchio as pin
 import pytest
 from rosbags.highlevel import AnyReader
 
+from iceskate_bringup.composition import ControlStack
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import HeldCommand, JointCommand
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import (
-    N_COORDINATES,
     PIVOT_Y,
     PIVOTS,
     Q1,
@@ -26,13 +28,17 @@ from iceskate_sim.model.robot import (
     anatomical_map,
     load_robot,
 )
-from iceskate_sim.physics.hybrid import FrictionModel, HybridState
-from iceskate_sim.physics.integrators import IntegratorConfig
-from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
-from iceskate_sim.recording.bag import BagRecorder, LinkTransforms, Sample
+from iceskate_sim.model.stamps import seconds_to_ns
+from iceskate_sim.physics.native import root_link
+from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.bag_types import make_typestore
+from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.messages import Events, SampleMessages
+from iceskate_sim.run.session import Session
 
-PERIODS = 300  # 0.3 s at 1 ms
+#: a fast-stepping skate gait (test data): both support sides, flat and tipped soles
+FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
+PERIODS = 600  # 0.6 s at 1 ms
 TOLERANCE = 1e-9  # m, and on rotation-matrix entries
 
 
@@ -47,70 +53,70 @@ def _urdf_tree(urdf: str) -> tuple[set[str], set[tuple[str, str]]]:
     return links, pairs | {('world', root)}
 
 
-def _record(path: pathlib.Path, samples: list[Sample], background: bool) -> None:
+def _record(path: pathlib.Path, blocks: list[tuple[dict, Events]], background: bool) -> None:
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
     with BagRecorder(path, {'scene': 'tf-test'}, urdf, background=background) as recorder:
-        for sample in samples:
-            recorder.write(sample)
+        for block, events in blocks:
+            recorder.write_block(block, events)
+
+
+def _concatenated(blocks: list[dict]) -> dict:
+    """One block of the rows of ``blocks`` (the columns the checks read)."""
+    return {key: np.concatenate([b[key] for b in blocks])
+            for key in ('t', 'q', 'side', 'pivot', 'root_pose', 'head_position')}
+
+
+@pytest.fixture(scope='module')
+def run_blocks() -> tuple[list[tuple[dict, Events]], dict]:
+    """0.6 s of the fast skate gait on the native loop, in its blocks of 250 periods (each with
+    its latest events), and all their rows."""
+    scene = replace(load_scene(FAST_SKATE), duration=PERIODS * 1e-3, record_bag=False)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    blocks = []
+    record_block = session._record_block
+    session._record_block = lambda block, first: (blocks.append(block),
+                                                  record_block(block, first))
+    while not session.done:
+        session.run_periods(stack, 250)
+    assert session.error is None and session.sim.ended is None
+    events = session.sim.events
+    return ([(b, Events.of(b['last_event'], events)) for b in blocks],
+            _concatenated(blocks))
 
 
 @pytest.fixture
-def run_samples(robot, random_state) -> list[Sample]:
-    """0.3 s of double support on a Coulomb floor from the bent-knee stance: the legs and trunk
-    held by a joint impedance, the torso yawing and the arms swinging; sampled as the headless
-    runner does."""
-    stance, _ = random_state(17, scale=0.0)
-    config = SimulatorConfig(integrator=IntegratorConfig('implicit_euler', step=1e-3),
-                             friction=FrictionModel(0.8, 'coulomb'))
-    sim = Simulator(robot, config, initial_state(stance, 17))
-    stiffness = np.full(N_COORDINATES, 800.0)
-    stiffness[[Y0, Q1]] = 0.0
-    stiffness[11:17] = 20.0
-    samples = []
-    for _ in range(PERIODS):
-        reference = stance.copy()
-        reference[[8, 11, 14]] = np.array([0.2, 0.5, -0.5]) * np.sin(8 * np.pi * sim.time)
-        command = JointCommand(np.zeros(N_COORDINATES), stiffness, 0.1 * stiffness, reference)
-        head = sim.head_placement()
-        sim.advance(HeldCommand.combine([command]))
-        start = sim.start_state
-        samples.append(Sample(start, sim.start_result, {'posture': command.torque(start.q,
-                                                                                   start.v)},
-                              head.translation.copy(), head.rotation.copy(),
-                              sim.events[-1] if sim.events else None))
-    assert sim.ended is None
-    return samples
-
-
-@pytest.fixture
-def random_samples(dynamics, random_state) -> list[Sample]:
+def random_block(dynamics, random_state) -> dict:
     """One random state of every mode on every support side and pivot (q1 tipped where the
-    mode frees it), 1 ms apart."""
-    samples = []
+    mode frees it), 1 ms apart, the root link placed by the Python support model."""
+    root = root_link(load_robot())
+    rows = []
     for mode in MODES.values():
-        for side in SIDES:
-            for pivot in PIVOTS:
-                q, v = random_state(mode)
+        for s, side in enumerate(SIDES):
+            for p, pivot in enumerate(PIVOTS):
+                q, _ = random_state(mode)
                 contact = ContactState(mode, side, pivot)
-                state = HybridState(len(samples) * 1e-3, q, v, contact)
+                placement = dynamics.frame_placement(contact, q, root)
                 head = dynamics.frame_placement(contact, q, 'head_top')
-                tau = np.zeros(N_COORDINATES)
-                samples.append(Sample(state, dynamics.evaluate(contact, q, v, tau),
-                                      {'none': tau}, head.translation, head.rotation, None))
-    return samples
+                rows.append((q, s, p, pin.SE3ToXYZQUAT(placement), head.translation))
+    q, side, pivot, root_pose, head = (np.array(c) for c in zip(*rows, strict=True))
+    n = len(q)
+    return {'t': np.arange(n) * 1e-3, 't_exchange': np.zeros(n),
+            't_touchdown': np.full(n, np.nan), 'q': q, 'side': side, 'pivot': pivot,
+            'root_pose': root_pose, 'head_position': head,
+            'last_event': np.full(n, -1, dtype=np.int64)}
 
 
-def _decoded(bag: pathlib.Path) -> tuple[list, list]:
-    """(/tf messages, /joint_states messages) of the bag, in order, decoded by mcap_ros2."""
+def _decoded(bag: pathlib.Path) -> list[tuple[int, object]]:
+    """(log time [ns], message) of the bag's /tf messages, in order, decoded by mcap_ros2."""
     (path,) = bag.glob('*.mcap')
-    tf, joint_states = [], []
+    tf = []
     with path.open('rb') as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, channel, message, decoded in reader.iter_decoded_messages(
-                topics=['/tf', '/joint_states']):
-            into = tf if channel.topic == '/tf' else joint_states
-            into.append((message.log_time, decoded))
-    return tf, joint_states
+        for _, channel, message, decoded in reader.iter_decoded_messages(topics=['/tf']):
+            assert channel.topic == '/tf'
+            tf.append((message.log_time, decoded))
+    return tf
 
 
 class _FreeFlyer:
@@ -136,18 +142,18 @@ class _FreeFlyer:
         return {name: base * data.oMf[model.getFrameId(name)] for name in self.links}
 
 
-def _check_tf(bag: pathlib.Path, samples: list[Sample]) -> None:
-    """Every /tf message of the bag against the samples: tree, stamps, link world poses."""
+def _check_tf(tf: list[tuple[int, object]], block: dict) -> None:
+    """/tf messages (stamp [ns], message) against the rows of ``block``: tree, stamps, link
+    world poses, the head on the block's head position."""
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
     links, tree = _urdf_tree(urdf)
-    tf, joint_states = _decoded(bag)
-    assert len(tf) == len(joint_states) == len(samples)
+    assert len(tf) == len(block['t'])
     kinematics = _FreeFlyer()
     assert set(kinematics.links) == links
     worst = 0.0
-    for (log_time, message), (js_time, js), sample in zip(tf, joint_states, samples,
-                                                          strict=True):
-        assert log_time == js_time
+    for k, (log_time, message) in enumerate(tf):
+        ns = seconds_to_ns(float(block['t'][k]))
+        assert log_time == ns
         pairs = [(t.header.frame_id, t.child_frame_id) for t in message.transforms]
         children = [child for _, child in pairs]
         assert sorted(children) == sorted(links)  # each link placed once
@@ -158,37 +164,73 @@ def _check_tf(bag: pathlib.Path, samples: list[Sample]) -> None:
             ready = [t for t in pending if t.header.frame_id in world]
             assert ready, f'links {[t.child_frame_id for t in pending]} not reachable'
             for t in ready:
-                assert (t.header.stamp.sec, t.header.stamp.nanosec) == (
-                    js.header.stamp.sec, js.header.stamp.nanosec)
+                assert t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec == ns
                 r, p = t.transform.rotation, t.transform.translation
                 assert abs(np.linalg.norm([r.x, r.y, r.z, r.w]) - 1.0) < 1e-12
                 local = pin.XYZQUATToSE3(np.array([p.x, p.y, p.z, r.x, r.y, r.z, r.w]))
                 world[t.child_frame_id] = world[t.header.frame_id] * local
                 pending.remove(t)
-        s = sample.state
-        expected = kinematics.link_poses(s.q, s.contact.side, s.contact.pivot)
+        q = block['q'][k]
+        expected = kinematics.link_poses(q, SIDES[int(block['side'][k])],
+                                         PIVOTS[int(block['pivot'][k])])
         for name in links:
             worst = max(worst, float(np.max(np.abs(world[name].translation
                                                    - expected[name].translation))),
                         float(np.max(np.abs(world[name].rotation - expected[name].rotation))))
-        np.testing.assert_allclose(world['head_top'].translation, sample.head_position,
+        np.testing.assert_allclose(world['head_top'].translation, block['head_position'][k],
                                    rtol=0.0, atol=TOLERANCE)
     assert worst <= TOLERANCE, f'link pose error {worst:.3e}'
 
 
-def test_tf_of_a_run_places_every_link_as_urdf_kinematics_does(tmp_path, run_samples):
-    assert len({s.state.q[8] for s in run_samples}) > 100  # the torso turns
-    _record(tmp_path / 'bag', run_samples, background=True)
-    _check_tf(tmp_path / 'bag', run_samples)
+def test_tf_of_a_run_places_every_link_as_urdf_kinematics_does(tmp_path, run_blocks):
+    blocks, rows = run_blocks
+    assert len(rows['t']) == PERIODS and len(blocks) >= 3
+    assert len(set(rows['q'][:, 8].tolist())) > 100  # the torso turns
+    assert set(rows['side'].tolist()) == {0, 1}  # both support feet
+    assert np.ptp(rows['q'][:, Q1]) > 0.01  # the support sole tips
+    _record(tmp_path / 'bag', blocks, background=True)
+    _check_tf(_decoded(tmp_path / 'bag'), rows)
 
 
-def test_tf_of_every_mode_side_and_pivot(tmp_path, random_samples):
-    _record(tmp_path / 'bag', random_samples, background=False)
-    _check_tf(tmp_path / 'bag', random_samples)
+def test_tf_of_every_mode_side_and_pivot(robot, random_block):
+    """The /tf bytes of the encoder, decoded by rosbags, over every contact."""
+    typestore = make_typestore()
+    encoded = SampleMessages(typestore, LinkTransforms(robot.urdf_model)).encode(
+        random_block, Events.of(random_block['last_event'], []), topics=('/tf',))
+    assert list(encoded) == ['/tf']
+    messages = [typestore.deserialize_cdr(data, 'tf2_msgs/msg/TFMessage')
+                for data in encoded['/tf']]
+    assert len(messages) == len(MODES) * len(SIDES) * len(PIVOTS)
+    _check_tf([(seconds_to_ns(float(t)), m) for t, m in
+               zip(random_block['t'], messages, strict=True)], random_block)
 
 
-def test_the_bag_opens_with_rosbags_and_lists_tf(tmp_path, run_samples):
-    _record(tmp_path / 'bag', run_samples[:20], background=True)
+def test_block_rows_of_a_row_and_of_the_block_agree(robot, random_block):
+    """``block_rows`` of the whole block (rows of both sides at once) is its rows' one by one;
+    a row's constant transforms do not depend on q, its revolute ones turn with q."""
+    links = LinkTransforms(robot.urdf_model)
+    b = random_block
+    rows = links.block_rows(b['q'], b['side'], b['root_pose'])
+    assert rows.shape == (len(b['q']), len(links.frames), 7)
+    for k in range(len(b['q'])):
+        one = links.block_rows(b['q'][k:k + 1], b['side'][k:k + 1], b['root_pose'][k:k + 1])
+        np.testing.assert_array_equal(one[0], rows[k])
+    np.testing.assert_array_equal(rows[:, 0], b['root_pose'])
+    moving = np.ptp(rows[:, 1:], axis=0).max(axis=1) > 0
+    urdf = load_robot().urdf_path.read_text(encoding='utf-8')
+    revolute = {(j.find('parent').get('link'), j.find('child').get('link'))
+                for j in ET.fromstring(urdf).iter('joint') if j.get('type') == 'revolute'}
+    assert {pair for pair, m in zip(links.frames[1:], moving, strict=True) if m} == revolute
+
+
+def test_the_bag_opens_with_rosbags_and_lists_tf(tmp_path, run_blocks):
+    blocks, _ = run_blocks
+    block, events = blocks[0]
+    first = {key: value[:20] if isinstance(value, np.ndarray) else value
+             for key, value in block.items()}
+    first['efforts'] = [e[:20] for e in block['efforts']]
+    _record(tmp_path / 'bag', [(first, Events(events.t[:20], events.cause[:20],
+                                              events.causes))], background=True)
     with AnyReader([tmp_path / 'bag'], default_typestore=make_typestore()) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         assert types['/tf'] == 'tf2_msgs/msg/TFMessage'
@@ -205,4 +247,4 @@ def test_a_joint_neither_revolute_nor_fixed_is_refused(tmp_path):
     path.write_text(urdf.replace('<joint name="torso_yaw" type="revolute">',
                                  '<joint name="torso_yaw" type="prismatic">'), encoding='utf-8')
     with pytest.raises(SimulationError, match='torso_yaw .* neither revolute nor fixed'):
-        LinkTransforms(load_robot(str(path)))
+        LinkTransforms(load_robot(str(path)).urdf_model)

@@ -102,7 +102,9 @@ class Packer:
 
     def __init__(self, layout: Layout, paths: tuple[str, ...]) -> None:
         self.layout, self.paths = layout, paths
-        fields = sorted(paths, key=lambda p: layout.fields[p].offset)
+        # in byte order; an empty sequence holds no byte (and shares the next field's offset)
+        fields = sorted((p for p in paths if layout.fields[p].count),
+                        key=lambda p: layout.fields[p].offset)
         groups: dict[np.dtype, list[str]] = {}
         for path in fields:
             groups.setdefault(layout.fields[path].dtype, []).append(path)

@@ -56,8 +56,9 @@ class Trajectory:
         self._layout: dict[str, tuple[np.dtype, tuple[int, ...]]] = {}  # of the spilled columns
 
     def extend(self, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray]) -> None:
-        """Add a block of samples: ``columns`` holds every column of ``append``'s rows but the
-        efforts (first axis: sample), ``efforts`` each source's (n, 18) generalized forces (0
+        """Add a block of samples: ``columns`` holds every column but the efforts (t, q, v,
+        qdd, mode, side, pivot, step_index, multipliers, support forces, cop_y, psi, psi_d,
+        applied; first axis: sample), ``efforts`` each source's (n, 18) generalized forces (0
         where it did not act)."""
         self._add_sources(efforts)
         n = len(columns['t'])
