@@ -2,11 +2,14 @@
 
 * ``sim_bag``: a short run of a tiny ice-skating scene (torso-yaw input on) through the headless
   runner, i.e. the bag our runs really write.
-* ``synthetic_bag`` / ``synthetic_no_yaw_bag``: bags written with ``BagRecorder.write_block``
-  from a native-style block of prescribed states that visit modes 1, 2 (q1 active, heel pivot), 3 (y0 active) and 5 (sliding
-  swing heel) on both support sides, four steps long, with the arms swinging as prescribed
-  sinusoids (anti-phase with the yaw source, nearly in phase without). Their accelerations are
-  ``GaitDynamics.evaluate`` at each state, so eq. (11) must close on them exactly as on a run.
+* ``synthetic_bag`` / ``synthetic_no_yaw_bag``: bags written by ``BagRecorder.write_block``
+  from one block of samples in the native loop's columns (``synthetic_block``), of prescribed
+  states that visit modes 1, 2 (q1 active, heel pivot), 3 (y0 active) and 5 (sliding swing
+  heel) on both support sides, four steps long, with the arms swinging as prescribed sinusoids
+  (anti-phase with the yaw source, nearly in phase without). Their accelerations are
+  ``GaitDynamics.evaluate`` at each state, so eq. (11) must close on them exactly as on a run;
+  the head-top pose is the oracle's, the root link's world pose Pinocchio's in the support
+  model.
 * ``bag_without``: a copy of a bag with one topic left out; ``truncated_bag``: a copy cut short.
 """
 
