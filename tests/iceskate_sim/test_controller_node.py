@@ -21,11 +21,11 @@ from iceskate_sim.physics.native_control import native_command, native_kinematic
 from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
 from iceskate_sim.recording.links import LinkTransforms  # noqa: E402
 from iceskate_sim.recording.messages import Events, SampleMessages  # noqa: E402
-from iceskate_sim.ros.conversions import observation_from_gait_state  # noqa: E402
 from iceskate_sim.ros.effort_cdr import CommandDecoder  # noqa: E402
 from iceskate_sim.ros.lockstep import LockstepSession  # noqa: E402
 from iceskate_sim.ros.node_support import write_parameter_file  # noqa: E402
 from iceskate_sim.run.session import Session  # noqa: E402
+from oracle.messages import observation_from_gait_state  # noqa: E402
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
 

@@ -13,8 +13,9 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues, ControllerCommand, JointCommand
 from iceskate_sim.model.robot import COORDINATE_NAMES
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.ros.conversions import command_fields, command_from_message
+from iceskate_sim.ros.conversions import command_from_message
 from iceskate_sim.ros.effort_cdr import CommandDecoder, CommandEncoder
+from oracle.messages import command_fields
 
 TYPE = 'iceskate_interfaces/msg/EffortCommand'
 STAMP = 1_234_567_890_123  # ns

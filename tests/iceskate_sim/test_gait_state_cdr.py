@@ -13,13 +13,12 @@ import pytest
 
 from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.stamps import stamp_to_ns
 from iceskate_sim.physics.native_control import native_observation
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.ros.conversions import observation_from_gait_state
 from iceskate_sim.ros.gait_state_cdr import GaitStateReader
 from iceskate_sim.ros.lockstep import LockstepSession
 from iceskate_sim.run.session import Session
+from oracle.messages import observation_from_gait_state, stamp_to_ns
 
 TYPE = 'iceskate_interfaces/msg/GaitState'
 FAST_SKATE = Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'

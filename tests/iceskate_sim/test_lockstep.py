@@ -17,9 +17,9 @@ from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import ControllerCommand, JointCommand
 from iceskate_sim.model.stamps import seconds_to_ns
-from iceskate_sim.ros.conversions import observation_from_gait_state
 from iceskate_sim.ros.lockstep import LockstepSession
 from iceskate_sim.run.session import Session
+from oracle.messages import observation_from_gait_state
 
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 
@@ -48,7 +48,7 @@ def zero(scene, controller, value=0.0):
 
 
 def drive(session, answer):
-    ts = session.factory.typestore
+    ts = session.messages.typestore
     while not session.done:
         obs = observation_from_gait_state(ts.deserialize_cdr(
             session.state_bytes(('/gait_state',))['/gait_state'],

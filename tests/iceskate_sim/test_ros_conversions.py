@@ -17,21 +17,17 @@ import pytest
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import ControllerCommand, JointCommand
 from iceskate_sim.model.robot import COORDINATE_NAMES, PIVOTS, SIDES, load_robot
-from iceskate_sim.model.stamps import (
-    ns_to_sec_nanosec,
-    seconds_to_ns,
-    set_stamp,
-    stamp_to_ns,
-    stamp_to_seconds,
-)
+from iceskate_sim.model.stamps import ns_to_sec_nanosec, seconds_to_ns, set_stamp
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events, SampleMessages
-from iceskate_sim.ros.conversions import (
+from iceskate_sim.ros.conversions import command_from_message
+from oracle.messages import (
     command_fields,
-    command_from_message,
     observation_from_gait_state,
+    stamp_to_ns,
+    stamp_to_seconds,
 )
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'

@@ -21,7 +21,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 
 from iceskate_bringup.graph import graph_nodes, ros_environment, start, stop  # noqa: E402
-from iceskate_sim.model.stamps import stamp_to_ns  # noqa: E402
+from oracle.messages import stamp_to_ns  # noqa: E402
 
 DATA = Path(__file__).resolve().parent / 'data'
 TINY = DATA / 'tiny_stand.yaml'  # 30 control periods of 1 ms

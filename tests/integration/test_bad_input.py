@@ -23,8 +23,9 @@ from iceskate_bringup.graph import command_of, graph_nodes  # noqa: E402
 from iceskate_interfaces.msg import EffortCommand  # noqa: E402
 from iceskate_interfaces.srv import StepSimulation  # noqa: E402
 from iceskate_sim.model.robot import COORDINATE_NAMES  # noqa: E402
-from iceskate_sim.model.stamps import set_stamp, stamp_to_ns  # noqa: E402
+from iceskate_sim.model.stamps import set_stamp  # noqa: E402
 from iceskate_sim.ros.node_support import STATE_QOS  # noqa: E402
+from oracle.messages import stamp_to_ns  # noqa: E402
 
 TINY = Path(__file__).resolve().parent / 'data' / 'tiny_stand.yaml'
 MS = 1_000_000

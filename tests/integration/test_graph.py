@@ -29,7 +29,7 @@ from iceskate_bringup.graph import (  # noqa: E402
     run_graph,
 )
 from iceskate_bringup.scene import load_scene, scene_sources  # noqa: E402
-from iceskate_sim.model.stamps import stamp_to_ns  # noqa: E402
+from oracle.messages import stamp_to_ns  # noqa: E402
 
 TESTS = Path(__file__).resolve().parent
 TINY = TESTS / 'data' / 'tiny_stand.yaml'

@@ -22,19 +22,9 @@ def seconds_to_ns(t: float) -> int:
     return int(round(t * 1e9))
 
 
-def stamp_to_ns(stamp: Any) -> int:
-    """Integer nanoseconds of a builtin_interfaces/Time (fields sec, nanosec)."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
 def ns_to_seconds(ns: int) -> float:
     """Seconds [s] of integer nanoseconds."""
     return ns / 1e9
-
-
-def stamp_to_seconds(stamp: Any) -> float:
-    """Seconds [s] of a builtin_interfaces/Time."""
-    return ns_to_seconds(stamp_to_ns(stamp))
 
 
 def ns_to_sec_nanosec(ns: int) -> tuple[int, int]:

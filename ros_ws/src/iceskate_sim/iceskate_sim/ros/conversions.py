@@ -1,16 +1,10 @@
-"""Conversions between our ROS messages and the ROS-free core types (no rclpy import).
+"""Checked conversions of message fields to the ROS-free core types (no rclpy import).
 
-Every function is duck-typed on message *fields*, so it accepts rclpy messages (live topics) and
-rosbags message objects (bags) alike:
-
-* ``observation_from_gait_state``: the ``Observation`` a control law sees, rebuilt from the
-  ``gait_state`` (GaitState) of one instant, which holds the whole hybrid state;
-* ``command_from_message`` / ``command_fields``: an ``EffortCommand`` <-> a
-  ``ControllerCommand`` (the summed command and its per-source breakdown),
-  refusing NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that
-  names the problem and the source (arrays go out as ``array('d')``, which rclpy messages take
-  without a per-element check; all 18 names in order, as the controllers send, skip the
-  reordering).
+* ``command_from_message``: an ``EffortCommand``'s fields (``effort_cdr`` reads them from the
+  bytes) -> a ``ControllerCommand`` (the summed command and its per-source breakdown), refusing
+  NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that names the
+  problem and the source (all 18 names in order, as the controllers send, skip the reordering);
+* ``finite_vector`` and ``PIVOT_OF_CODE``, which the GaitState reader shares.
 
 Known loss: GaitState carries ``pivot = PIVOT_NONE`` while the support sole is flat, so the
 observation then says 'toe'. The support models of either pivot give the same kinematics while
@@ -19,7 +13,6 @@ q1 = 0, which is all a flat-sole law evaluates.
 
 from __future__ import annotations
 
-from array import array
 from collections.abc import Sequence
 from typing import Any
 
@@ -27,9 +20,7 @@ import numpy as np
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import ControllerCommand, JointCommand, all_finite
-from iceskate_sim.model.observation import Observation
-from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.model.stamps import stamp_to_seconds
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
 PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
 _NAMES = list(COORDINATE_NAMES)
@@ -37,7 +28,6 @@ _INDEX = {name: i for i, name in enumerate(COORDINATE_NAMES)}
 _IMPEDANCE = ('stiffness', 'damping', 'position_reference')
 
 
-# ------------------------------------------------------------------------------ observation
 def finite_vector(values: Any, names: Sequence[str], what: str, length: str) -> np.ndarray:
     """``values`` as a new float array of one entry per name, all finite.
 
@@ -51,32 +41,6 @@ def finite_vector(values: Any, names: Sequence[str], what: str, length: str) -> 
         bad = [str(names[i]) for i in np.flatnonzero(~np.isfinite(x))]
         raise SimulationError(f'{what} is not finite at {bad}')
     return x
-
-
-def _state_vector(gait_state: Any, field: str) -> np.ndarray:
-    return finite_vector(getattr(gait_state, field), COORDINATE_NAMES, f'gait_state {field}',
-                          f'; it needs {N_COORDINATES} (y0, q1..q17)')
-
-
-def observation_from_gait_state(gait_state: Any) -> Observation:
-    """The Observation of one instant from its GaitState message (the whole hybrid state).
-
-    :raises SimulationError: when a field is malformed (naming it).
-    """
-    side = int(gait_state.support_side)
-    if side not in (0, 1):
-        raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
-    pivot = PIVOT_OF_CODE.get(int(gait_state.pivot))
-    if pivot is None:
-        raise SimulationError(f'gait_state pivot must be 0, 1 or 2, got {gait_state.pivot}')
-    touchdown = (stamp_to_seconds(gait_state.touchdown_stamp) if gait_state.touched_down
-                 else float('nan'))
-    return Observation(stamp_to_seconds(gait_state.header.stamp),
-                       _state_vector(gait_state, 'position'),
-                       _state_vector(gait_state, 'velocity'), int(gait_state.mode),
-                       SIDES[side], pivot, int(gait_state.step_index),
-                       stamp_to_seconds(gait_state.support_exchange_stamp),
-                       float(gait_state.heel_anchor_y), touchdown)
 
 
 # ---------------------------------------------------------------------------------- commands
@@ -149,24 +113,3 @@ def command_from_message(msg: Any) -> ControllerCommand:
     return ControllerCommand(command, {name: coordinates(row.copy())
                                        for name, row in zip(sources, rows, strict=True)},
                              target if target.size else None)
-
-
-def command_fields(answer: ControllerCommand) -> dict[str, Any]:
-    """EffortCommand fields (joint_names, effort, impedance arrays, breakdown, head target) of a
-    command."""
-    command = answer.command
-    fields = {'joint_names': list(COORDINATE_NAMES), 'effort': _doubles(command.effort),
-              'stiffness': array('d'), 'damping': array('d'), 'position_reference': array('d'),
-              'source_names': list(answer.source_efforts),
-              'source_efforts': _doubles(np.concatenate(list(answer.source_efforts.values()))
-                                         if answer.source_efforts else np.zeros(0)),
-              'head_target': _doubles(answer.head_target if answer.head_target is not None
-                                      else np.zeros(0))}
-    if command.has_impedance:
-        fields.update(stiffness=_doubles(command.stiffness), damping=_doubles(command.damping),
-                      position_reference=_doubles(command.reference))
-    return fields
-
-
-def _doubles(x: np.ndarray) -> array:
-    return array('d', np.ascontiguousarray(x, dtype=np.float64).tobytes())
