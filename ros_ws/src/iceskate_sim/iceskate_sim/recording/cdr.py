@@ -17,9 +17,11 @@ elements of a sequence or array of messages or strings are named by their index
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+import operator
 import struct
+from typing import Any
 
 import numpy as np
 from rosbags.interfaces import Nodetype
@@ -84,6 +86,25 @@ class Layout:
         """The values of field ``path`` in ``data`` (a read-only view)."""
         field = self.fields[path]
         return np.frombuffer(data, field.dtype, field.count, field.offset)
+
+    def unpacker(self, paths: Sequence[str]) -> Callable[[bytes], tuple]:
+        """A function of a message's bytes giving the values of the one-number fields ``paths``
+        (at least two, in this order), read in one ``struct`` call.
+
+        :raises LayoutError: for a path that is not a one-number field.
+        """
+        for path in paths:
+            if path not in self.fields or self.fields[path].count != 1:
+                raise LayoutError(f'{path!r} is not a one-number field')
+        order = sorted(range(len(paths)), key=lambda k: self.fields[paths[k]].offset)
+        formats, position = ['<'], 0
+        for k in order:
+            field = self.fields[paths[k]]
+            formats.append(f'{field.offset - position}x{_STRUCT[field.dtype.str]}')
+            position = field.offset + field.dtype.itemsize
+        unpack = struct.Struct(''.join(formats)).unpack_from
+        back = operator.itemgetter(*(order.index(k) for k in range(len(paths))))
+        return lambda data: back(unpack(data))
 
     def packer(self, paths: Sequence[str]) -> Packer:
         """A ``Packer`` writing the fields ``paths`` (in this order) into copies of
@@ -170,7 +191,10 @@ class Packer:
         """The bytes of one message (``values`` as for ``pack`` with one row)."""
         arguments = self._arguments.copy()
         for start, path, count in self._slots:
-            arguments[start:start + count] = values[path].reshape(-1).tolist()
+            if count == 1:
+                arguments[start] = values[path].item()
+            else:
+                arguments[start:start + count] = values[path].ravel().tolist()
         return self._struct.pack(*arguments)
 
 
@@ -352,26 +376,38 @@ class _Walk:
 
 class LayoutCache:
     """The layouts of the messages of one type seen lately (a message of a known layout costs
-    a comparison of its counts and strings; another one walk of its bytes).
+    a comparison of its counts and strings; another one walk of its bytes), each with what
+    ``prepare`` made of it (e.g. its readers).
 
     :param capacity: layouts kept (the least recently used goes first).
+    :param prepare: made once per layout (default: nothing).
     """
 
-    def __init__(self, typestore: Typestore, msgtype: str, capacity: int = 64) -> None:
+    def __init__(self, typestore: Typestore, msgtype: str, capacity: int = 64,
+                 prepare: Callable[[Layout], Any] = lambda layout: None) -> None:
         self.typestore, self.msgtype, self.capacity = typestore, msgtype, capacity
-        self._known: list[Layout] = []
+        self._prepare = prepare
+        self._known: list[tuple[Layout, Any]] = []
 
     def layout(self, data: bytes) -> Layout:
         """The layout of ``data``.
 
         :raises LayoutError: for bytes that are not a message of the type.
         """
-        for k, known in enumerate(self._known):
-            if known.fits(data):
+        return self.lookup(data)[0]
+
+    def lookup(self, data: bytes) -> tuple[Layout, Any]:
+        """The layout of ``data`` and what ``prepare`` made of it.
+
+        :raises LayoutError: for bytes that are not a message of the type.
+        """
+        for k, entry in enumerate(self._known):
+            if entry[0].fits(data):
                 if k:
                     self._known.insert(0, self._known.pop(k))
-                return known
+                return entry
         layout = layout_of(self.typestore, self.msgtype, data)
-        self._known.insert(0, layout)
+        entry = (layout, self._prepare(layout))
+        self._known.insert(0, entry)
         del self._known[self.capacity:]
-        return layout
+        return entry

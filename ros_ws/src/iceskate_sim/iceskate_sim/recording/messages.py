@@ -60,6 +60,8 @@ _Q1_ACTIVE = np.array([False] + [m.q1_active for m in _MODES[1:]])
 _ACTIVE = np.zeros((len(_MODES), _N), dtype=bool)
 for _mode in _MODES[1:]:
     _ACTIVE[_mode.number, _mode.active] = True
+#: the columns of a block's multipliers that a mode's GaitState holds, by mode number
+_PICKED = [None, *([MULTIPLIER_NAMES.index(name) for name in m.multipliers] for m in _MODES[1:])]
 
 
 def stamps_ns(t: np.ndarray) -> np.ndarray:
@@ -98,9 +100,9 @@ class Stamps(NamedTuple):
 
         :raises SimulationError: for a time that is not finite and >= 0.
         """
-        touchdown = block['t_touchdown']
-        times = np.stack([block['t'], block['t_exchange'],
-                          np.where(touchdown < np.inf, touchdown, 0.0), events.t], axis=1)
+        times = np.empty((len(block['t']), 4))
+        times[:, 0], times[:, 1], times[:, 3] = block['t'], block['t_exchange'], events.t
+        np.fmax(block['t_touchdown'], 0.0, out=times[:, 2])  # NaN before the heel strike: 0
         return cls(*np.divmod(stamps_ns(times), 1_000_000_000))
 
     def fields(self, prefix: str, column: int = 0) -> dict[str, np.ndarray]:
@@ -202,33 +204,33 @@ class SampleMessages:
             **{f'pose.orientation.{axis}': o[:, i] for i, axis in enumerate('xyzw')}}
 
     def _gait_state(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        mode, cop, y0 = block['mode'], block['cop_y'], block['q'][:, 0]
-        known = np.isfinite(cop)
-        inside = known & ~_Q1_ACTIVE[mode] & (y0 + SOLE_HEEL_Y <= cop) & (cop <= y0 + SOLE_TOE_Y)
+        mode, cop, q = block['mode'], block['cop_y'], block['q']
+        y0, q1_active = q[:, 0], _Q1_ACTIVE[mode]
+        inside = ~q1_active & (y0 + SOLE_HEEL_Y <= cop) & (cop <= y0 + SOLE_TOE_Y)  # NaN: no
         values = {
             **stamps.fields('header.stamp'), **stamps.fields('support_exchange_stamp', 1),
             **stamps.fields('touchdown_stamp', 2), **stamps.fields('last_transition_stamp', 3),
             'mode': mode,
             'support_side': block['side'], 'pivot': block['pivot_code'],
             'step_index': block['step_index'], 'y0_active': _Y0_ACTIVE[mode],
-            'q1_active': _Q1_ACTIVE[mode],
+            'q1_active': q1_active,
             'support_normal_force': block['support_normal'],
             'support_friction_force': block['support_tangential'],
-            'zmp.y': np.where(known, cop, np.nan), 'zmp_inside_support': inside,
-            'touched_down': block['t_touchdown'] < np.inf,  # NaN: not yet
-            'heel_anchor_y': block['heel_anchor_y'], 'position': block['q'],
+            'zmp.y': cop,  # NaN: no support force
+            'zmp_inside_support': inside,
+            'touched_down': ~np.isnan(block['t_touchdown']),  # NaN: not yet
+            'heel_anchor_y': block['heel_anchor_y'], 'position': q,
             'velocity': block['v']}
-        key = mode * len(events.causes) + events.cause
-        for code, rows in _groups(key):
-            number, cause = divmod(code, len(events.causes))
+        causes = len(events.causes)
+        for code, rows in _groups(mode * causes + events.cause if causes > 1 else mode):
+            number, cause = divmod(code, causes)
             names = _MODES[number].multipliers
-            picked = [MULTIPLIER_NAMES.index(name) for name in names]
             selected = values if rows is None else {k: x[rows] for k, x in values.items()}
             multipliers = block['multipliers'] if rows is None else block['multipliers'][rows]
             yield (number, events.causes[cause]), rows, {
                 'multiplier_names': names, 'multipliers': len(names),
                 'last_transition_cause': events.causes[cause], 'position': _N, 'velocity': _N}, {
-                **selected, 'multipliers': multipliers[:, picked]}
+                **selected, 'multipliers': multipliers[:, _PICKED[number]]}
 
     def _joint_dynamics(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
         efforts = block['efforts']
