@@ -69,11 +69,17 @@ class Layout:
     skeleton: tuple[tuple[int, bytes], ...]
     template: bytes
 
+    def __post_init__(self) -> None:
+        # the skeleton's places, taken from a message's bytes in one call (``fits``)
+        places = [slice(offset, offset + len(part)) for offset, part in self.skeleton]
+        parts = tuple(part for _, part in self.skeleton)
+        object.__setattr__(self, '_skeleton_of', operator.itemgetter(*places, slice(0, 0)))
+        object.__setattr__(self, '_skeleton_parts', (*parts, b''))
+
     def fits(self, data: bytes) -> bool:
         """Whether ``data`` is a message of this layout (its length up to the padding to 4
         bytes that some writers add, its counts and strings)."""
-        return 0 <= len(data) - self.size < 4 and all(
-            data[offset:offset + len(part)] == part for offset, part in self.skeleton)
+        return 0 <= len(data) - self.size < 4 and self._skeleton_of(data) == self._skeleton_parts
 
     def texts(self, path: str) -> list[str]:
         """The strings of the sequence or array of strings ``path``."""

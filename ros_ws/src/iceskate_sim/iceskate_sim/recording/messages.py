@@ -150,13 +150,15 @@ class SampleMessages:
         self._packers: dict[tuple[str, Any], Packer] = {}
 
     def encode(self, block: Mapping[str, Any], events: Events,
-               topics: Sequence[str] = RECORDED_TOPICS) -> dict[str, list[bytes]]:
-        """Topic -> the bytes of its message at each row of ``block``.
+               topics: Sequence[str] = RECORDED_TOPICS,
+               stamps: Stamps | None = None) -> dict[str, list[bytes]]:
+        """Topic -> the bytes of its message at each row of ``block`` (``stamps``:
+        ``Stamps.of(block, events)`` when already known).
 
         :raises SimulationError: for a time that is not finite and >= 0.
         """
         rows = len(block['t'])
-        stamps = Stamps.of(block, events)
+        stamps = stamps if stamps is not None else Stamps.of(block, events)
         out: dict[str, list[bytes]] = {}
         for topic in topics:
             encoded: list[bytes | None] = [None] * rows
