@@ -194,16 +194,15 @@ def _rows(block: dict, selected) -> dict:
 
 
 def _synthetic(block: dict) -> dict:
-    """Every 7th row of the block, with non-finite CoPs, touchdown times NaN or finite,
+    """Every 7th row of the block, with unknown CoPs (NaN), touchdown times NaN or finite,
     sources that did not act (efforts 0 there) and rows before any transition."""
     out = _rows(block, np.arange(0, len(block['t']), 7))
     out = {key: value.copy() if isinstance(value, np.ndarray) else value
            for key, value in out.items()}
     out['efforts'] = [e.copy() for e in out['efforts']]
     m = len(out['t'])
-    out['cop_y'][0::5] = np.inf
-    out['cop_y'][1::5] = np.nan
-    out['cop_y'][2::5] = -np.inf
+    out['cop_y'][0:3] = np.nan  # no support force (the loop's CoP is NaN then, never inf)
+    out['cop_y'][5::5] = np.nan
     out['t_touchdown'][0::3] = np.nan
     out['t_touchdown'][1::3] = out['t'][1::3] * 0.5
     out['last_event'][:4] = -1

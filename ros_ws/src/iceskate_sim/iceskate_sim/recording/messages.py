@@ -102,7 +102,9 @@ class Stamps(NamedTuple):
         """
         times = np.empty((len(block['t']), 4))
         times[:, 0], times[:, 1], times[:, 3] = block['t'], block['t_exchange'], events.t
-        np.fmax(block['t_touchdown'], 0.0, out=times[:, 2])  # NaN before the heel strike: 0
+        touchdown = times[:, 2]
+        touchdown[:] = block['t_touchdown']
+        touchdown[np.isnan(touchdown)] = 0.0  # before the heel strike
         return cls(*np.divmod(stamps_ns(times), 1_000_000_000))
 
     def fields(self, prefix: str, column: int = 0) -> dict[str, np.ndarray]:
