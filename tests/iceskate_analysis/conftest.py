@@ -27,6 +27,7 @@ import pytest
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, Q1, SIDES, Y0, load_robot
+from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events
@@ -145,13 +146,15 @@ def synthetic_block(robot, yaw: bool) -> dict:
             'head_orientation': pin.Quaternion(R).coeffs().copy(), 'head_pitch': pitch,
             'root_pose': root_pose, 'head_target': (head.translation[1], head.translation[2],
                                                     pitch),
-            'last_event': -1, 'present': (1 << len(sources)) - 1}
+            'last_event': -1, 'present': (1 << len(sources)) - 1,
+            'stamps_ns': [seconds_to_ns(t), 0, 0, 0]}
         for key, value in row.items():
             rows.setdefault(key, []).append(value)
         for name in sources:
             efforts[name].append(acting[name])
     integers = {'mode': np.int32, 'side': np.int32, 'pivot': np.int32, 'pivot_code': np.int32,
-                'step_index': np.int32, 'last_event': np.int64, 'present': np.uint64}
+                'step_index': np.int32, 'last_event': np.int64, 'present': np.uint64,
+                'stamps_ns': np.int64}
     block = {key: np.array(values, dtype=integers.get(key, np.float64))
              for key, values in rows.items()}
     block['sources'] = sources

@@ -104,7 +104,8 @@ def random_block(dynamics, random_state) -> dict:
     return {'t': np.arange(n) * 1e-3, 't_exchange': np.zeros(n),
             't_touchdown': np.full(n, np.nan), 'q': q, 'side': side, 'pivot': pivot,
             'root_pose': root_pose, 'head_position': head,
-            'last_event': np.full(n, -1, dtype=np.int64)}
+            'last_event': np.full(n, -1, dtype=np.int64),
+            'stamps_ns': np.column_stack([np.arange(n) * 1_000_000, np.zeros((n, 3), np.int64)])}
 
 
 def _decoded(bag: pathlib.Path) -> list[tuple[int, object]]:
@@ -229,8 +230,8 @@ def test_the_bag_opens_with_rosbags_and_lists_tf(tmp_path, run_blocks):
     first = {key: value[:20] if isinstance(value, np.ndarray) else value
              for key, value in block.items()}
     first['efforts'] = [e[:20] for e in block['efforts']]
-    _record(tmp_path / 'bag', [(first, Events(events.t[:20], events.cause[:20],
-                                              events.causes))], background=True)
+    _record(tmp_path / 'bag', [(first, Events(events.cause[:20], events.causes))],
+            background=True)
     with AnyReader([tmp_path / 'bag'], default_typestore=make_typestore()) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         assert types['/tf'] == 'tf2_msgs/msg/TFMessage'

@@ -205,6 +205,7 @@ nb::dict block_arrays(SampleBlock & b)
   out["root_pose"] = array_of(std::move(b.root_pose), {n, 7});
   out["head_target"] = array_of(std::move(b.head_target), {n, 3});
   out["last_event"] = array_of(std::move(b.last_event), {n});
+  out["stamps_ns"] = array_of(std::move(b.stamps_ns), {n, 4});
   out["present"] = array_of(std::move(b.present), {n});
   nb::list sources;
   nb::list efforts;
@@ -303,6 +304,8 @@ void bind_control_loop(nb::module_ & m)
       "head_orientation (n, 4) quaternion x, y, z, w, head_pitch (n,) [rad]: the head top "
       "observed at t_k; root_pose (n, 7): the URDF root link's world x, y, z [m], qx, qy, qz, "
       "qw; head_target (n, 3); last_event (n,) int64 (index in the event log, -1: none), "
+      "stamps_ns (n, 4) int64: t, t_exchange, t_touchdown (0 before it) and the latest "
+      "transition's t (0: none) in whole nanoseconds, "
       "present (n,) uint64 (bit i: source i answered), sources (names), efforts (one (n, 18) "
       "array per source)). It stops after a period that ends the run, and before a period that "
       "failed: `failed` is then True and raise_error() raises the failure.")

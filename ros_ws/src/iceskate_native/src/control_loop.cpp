@@ -16,8 +16,11 @@ namespace
 
 constexpr int kMaxSources = 64;  // SampleBlock::present has one bit per source
 
-/// t [s] at a ROS stamp's resolution (whole nanoseconds, ties to even), as a message carries it.
-double stamp_time(double t) { return std::nearbyint(t * 1e9) / 1e9; }
+/// t [s] >= 0 as a ROS stamp's whole nanoseconds (ties to even), as a message carries it.
+std::int64_t stamp_ns(double t) { return static_cast<std::int64_t>(std::nearbyint(t * 1e9)); }
+
+/// t [s] at a stamp's resolution.
+double stamp_time(double t) { return static_cast<double>(stamp_ns(t)) / 1e9; }
 
 /// The controllers' view of a hybrid state (iceskate_sim.physics.simulation.observation_of): times at
 /// a stamp's resolution, and the pivot 'toe' while the sole is flat (q1 locked).
@@ -69,6 +72,7 @@ void SampleBlock::clear()
   for (auto * column : {&mode, &side, &pivot, &pivot_code, &step_index}) {
     column->clear();
   }
+  stamps_ns.clear();
   last_event.clear();
   for (auto & column : efforts) {
     column.clear();
@@ -288,7 +292,13 @@ void ControlLoop::sample(
   append(block.root_pose, root.translation);
   append(block.root_pose, Eigen::Quaterniond(root.rotation).coeffs());
   append(block.head_target, target);
-  block.last_event.push_back(last_event_at(simulator_.events(), s.t));
+  const long last = last_event_at(simulator_.events(), s.t);
+  block.last_event.push_back(last);
+  const double last_t = last >= 0 ? simulator_.events()[static_cast<std::size_t>(last)].t : 0.0;
+  for (const double time : {s.t, s.t_exchange, std::isnan(s.t_touchdown) ? 0.0 : s.t_touchdown,
+                            last_t}) {
+    block.stamps_ns.push_back(stamp_ns(time));
+  }
   ++block.count;
 }
 

@@ -67,6 +67,9 @@ struct SampleBlock
   std::vector<double> head_target;       ///< psi_d: y [m], z [m], pitch [rad]
   /// Index in the simulator's event log of the latest transition at or before t_k; -1: none.
   std::vector<long> last_event;
+  /// 4 per sample, whole nanoseconds (ties to even): t, t_exchange, t_touchdown (0 before the
+  /// heel strike) and the time of the latest transition (0: none).
+  std::vector<std::int64_t> stamps_ns;
   /// The sources in the order they first answered; efforts[i]: 18 per sample, 0 where source i
   /// did not answer, present[k] bit i: it answered at sample k ("push" while a push acts).
   std::vector<std::string> sources;

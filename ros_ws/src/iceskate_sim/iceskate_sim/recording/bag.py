@@ -36,7 +36,6 @@ from iceskate_sim.recording.messages import (
     TOPICS,
     Events,
     SampleMessages,
-    stamps_ns,
 )
 from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
@@ -69,7 +68,7 @@ class _BagFile:
     def write_block(self, block: dict[str, Any], events: Events) -> None:
         """Write the messages of a block of samples, sample by sample, in one go
         (``bag_bulk.write_many``)."""
-        stamps = stamps_ns(block['t']).tolist()
+        stamps = block['stamps_ns'][:, 0].tolist()
         encoded = self.messages.encode(block, events)
         columns = [(self._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
         write_many(self._writer, [(connection, ns, column[k]) for k, ns in enumerate(stamps)

@@ -34,7 +34,6 @@ from rosbags.typesys.store import Typestore
 
 from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SOLE_HEEL_Y, SOLE_TOE_Y
-from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag_types import PASSIVE
 from iceskate_sim.recording.cdr import Layout, Packer, layout_for
 from iceskate_sim.recording.links import LinkTransforms
@@ -64,18 +63,6 @@ for _mode in _MODES[1:]:
 _PICKED = [None, *([MULTIPLIER_NAMES.index(name) for name in m.multipliers] for m in _MODES[1:])]
 
 
-def stamps_ns(t: np.ndarray) -> np.ndarray:
-    """``seconds_to_ns`` of each time in ``t`` [s], as int64 [ns].
-
-    :raises SimulationError: as ``seconds_to_ns`` does, for the first time that is not finite
-        and >= 0.
-    """
-    if not (0.0 <= t.min() and t.max() < np.inf):  # NaN fails both
-        bad = ~(np.isfinite(t) & (t >= 0.0))
-        seconds_to_ns(float(t.ravel()[np.argmax(bad)]))
-    return np.rint(t * 1e9).astype(np.int64)
-
-
 def _groups(key: np.ndarray):
     """(value, rows) for each distinct value of ``key``; rows None when it is every row."""
     first = key[0]
@@ -87,25 +74,17 @@ def _groups(key: np.ndarray):
 
 
 class Stamps(NamedTuple):
-    """The builtin_interfaces/Time fields of a block's samples: (m, 4) sec and nanosec of the
-    sample time t, the last support exchange, the heel strike (0 before it) and the latest
-    transition (0: none)."""
+    """The builtin_interfaces/Time fields of a block's samples: (m, 4) sec and nanosec of its
+    ``stamps_ns``: the sample time t, the last support exchange, the heel strike (0 before
+    it) and the latest transition (0: none)."""
 
     sec: np.ndarray
     nanosec: np.ndarray
 
     @classmethod
-    def of(cls, block: Mapping[str, Any], events: Events) -> Stamps:
-        """The stamps of ``block``'s samples (``events``: their latest transitions).
-
-        :raises SimulationError: for a time that is not finite and >= 0.
-        """
-        times = np.empty((len(block['t']), 4))
-        times[:, 0], times[:, 1], times[:, 3] = block['t'], block['t_exchange'], events.t
-        touchdown = times[:, 2]
-        touchdown[:] = block['t_touchdown']
-        touchdown[np.isnan(touchdown)] = 0.0  # before the heel strike
-        return cls(*np.divmod(stamps_ns(times), 1_000_000_000))
+    def of(cls, block: Mapping[str, Any]) -> Stamps:
+        """The stamps of ``block``'s samples."""
+        return cls(*np.divmod(block['stamps_ns'], 1_000_000_000))
 
     def fields(self, prefix: str, column: int = 0) -> dict[str, np.ndarray]:
         """The sec and nanosec fields of the Time field ``prefix`` from ``column``."""
@@ -114,29 +93,23 @@ class Stamps(NamedTuple):
 
 
 class Events(NamedTuple):
-    """The latest transition at each sample: ``t`` [s] (0: none yet), ``cause`` index into
-    ``causes`` ('' for none)."""
+    """The cause of the latest transition at each sample: ``cause`` index into ``causes`` (''
+    for none yet)."""
 
-    t: np.ndarray
     cause: np.ndarray
     causes: tuple[str, ...]
 
     @classmethod
     def of(cls, last_event: np.ndarray, events: Sequence[Any]) -> Events:
         """From a block's ``last_event`` (index in ``events``, -1: none) and the event log
-        (items with ``t`` and ``cause``)."""
+        (items with a ``cause``)."""
         first = int(last_event[0])
         if len(last_event) == 1 or (last_event == first).all():  # e.g. a live sample
-            return cls(np.full(len(last_event), events[first].t if first >= 0 else 0.0),
-                       np.zeros(len(last_event), dtype=np.intp),
+            return cls(np.zeros(len(last_event), dtype=np.intp),
                        (events[first].cause if first >= 0 else '',))
         indices = np.unique(last_event).tolist()
-        t = np.zeros(len(last_event))
-        for i in indices:
-            if i >= 0:
-                t[last_event == i] = events[i].t
         causes = tuple(events[i].cause if i >= 0 else '' for i in indices)
-        return cls(t, np.searchsorted(indices, last_event), causes)
+        return cls(np.searchsorted(indices, last_event), causes)
 
 
 class SampleMessages:
@@ -152,15 +125,10 @@ class SampleMessages:
         self._packers: dict[tuple[str, Any], Packer] = {}
 
     def encode(self, block: Mapping[str, Any], events: Events,
-               topics: Sequence[str] = RECORDED_TOPICS,
-               stamps: Stamps | None = None) -> dict[str, list[bytes]]:
-        """Topic -> the bytes of its message at each row of ``block`` (``stamps``:
-        ``Stamps.of(block, events)`` when already known).
-
-        :raises SimulationError: for a time that is not finite and >= 0.
-        """
+               topics: Sequence[str] = RECORDED_TOPICS) -> dict[str, list[bytes]]:
+        """Topic -> the bytes of its message at each row of ``block``."""
         rows = len(block['t'])
-        stamps = stamps if stamps is not None else Stamps.of(block, events)
+        stamps = Stamps.of(block)
         out: dict[str, list[bytes]] = {}
         for topic in topics:
             encoded: list[bytes | None] = [None] * rows
