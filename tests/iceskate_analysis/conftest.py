@@ -26,7 +26,16 @@ import pytest
 
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
-from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, Q1, SIDES, Y0, load_robot
+from iceskate_sim.model.robot import (
+    N_COORDINATES,
+    PIVOTS,
+    Q1,
+    SIDES,
+    SOLE_HEEL_Y,
+    SOLE_TOE_Y,
+    Y0,
+    load_robot,
+)
 from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.links import LinkTransforms
@@ -147,14 +156,20 @@ def synthetic_block(robot, yaw: bool) -> dict:
             'root_pose': root_pose, 'head_target': (head.translation[1], head.translation[2],
                                                     pitch),
             'last_event': -1, 'present': (1 << len(sources)) - 1,
-            'stamps_ns': [seconds_to_ns(t), 0, 0, 0]}
+            'stamps_ns': [seconds_to_ns(t), 0, 0, 0],
+            'y0_active': contact.mode.y0_active, 'q1_active': contact.mode.q1_active,
+            'zmp_inside_support': (not contact.mode.q1_active and q[Y0] + SOLE_HEEL_Y
+                                   <= result.cop_y <= q[Y0] + SOLE_TOE_Y),
+            'touched_down': False, 'active': np.isin(joints, contact.mode.active),
+            'effort_total': np.sum(list(acting.values()), axis=0)}
         for key, value in row.items():
             rows.setdefault(key, []).append(value)
         for name in sources:
             efforts[name].append(acting[name])
     integers = {'mode': np.int32, 'side': np.int32, 'pivot': np.int32, 'pivot_code': np.int32,
                 'step_index': np.int32, 'last_event': np.int64, 'present': np.uint64,
-                'stamps_ns': np.int64}
+                'stamps_ns': np.int64, 'y0_active': np.uint8, 'q1_active': np.uint8,
+                'zmp_inside_support': np.uint8, 'touched_down': np.uint8, 'active': np.uint8}
     block = {key: np.array(values, dtype=integers.get(key, np.float64))
              for key, values in rows.items()}
     block['sources'] = sources

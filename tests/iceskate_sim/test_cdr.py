@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from rosbags.interfaces import Nodetype
 
+import iceskate_native
 from iceskate_sim.model.robot import COORDINATE_NAMES
 from iceskate_sim.recording import cdr
 from iceskate_sim.recording.bag_types import make_typestore
@@ -214,71 +215,103 @@ def _messages(typestore, msgtype, shape, rows, seed):
     return expected, values
 
 
+def _column(values: np.ndarray) -> np.ndarray:
+    """A column of samples as the loop gives them: float64, int64 or bool, (rows, count)."""
+    kind = values.dtype.kind
+    dtype = np.float64 if kind == 'f' else bool if kind == 'b' else np.int64
+    return np.ascontiguousarray(values.astype(dtype, casting='unsafe').reshape(len(values), -1))
+
+
+def _written(layout, values: dict, paths: list[str]) -> tuple:
+    """The program writing ``paths`` of ``values`` (column k: path k) and its columns."""
+    program = layout.program({path: [(k, i) for i in range(layout.fields[path].count)]
+                              for k, path in enumerate(paths)})
+    return program, [_column(values[path]) for path in paths]
+
+
 @pytest.mark.parametrize(('msgtype', 'shape'), [c[1:] for c in CASES], ids=IDS)
-def test_pack_writes_rosbags_bytes_one_row_and_many(typestore, msgtype, shape):
+def test_a_program_writes_rosbags_bytes_one_row_and_many(typestore, msgtype, shape):
     layout = layout_for(typestore, msgtype, shape)
     paths = list(layout.fields)[::-1]  # any order of the paths
-    packer = layout.packer(paths)
     expected, values = _messages(typestore, msgtype, shape, 5, seed=len(shape))
-    many = packer.pack(values, 5)
+    program, columns = _written(layout, values, paths)
+    assert program.size == layout.size
+    many = iceskate_native.encode_rows(program, columns, 5)
     assert many.shape == (5, layout.size) and many.dtype == np.uint8
     assert [row.tobytes() for row in many] == expected
     for k in range(5):
-        one = packer.pack({p: v[k:k + 1] for p, v in values.items()}, 1)  # struct path
-        assert one.shape == (1, layout.size)
-        assert one[0].tobytes() == expected[k] == many[k].tobytes()
-        assert packer.pack_one({p: v[k] for p, v in values.items()}) == expected[k]
-    # a packed message is a message of the layout
-    assert all(layout.fits(data) for data in expected)
+        one = iceskate_native.encode_rows(program, [c[k:k + 1] for c in columns], 1)
+        assert one[0].tobytes() == expected[k]
+    assert all(layout.fits(data) for data in expected)  # a message of the layout
 
 
 def test_an_empty_sequence_at_the_offset_of_the_next_field(typestore):
     """A GaitState without multipliers (modes 1-4): the empty float64 sequence has the offset
-    of support_normal_force after it. Packed with the paths in the order the gait-state
-    encoder gives them (``multipliers`` last), the bytes are still rosbags'."""
+    of support_normal_force after it and writes nothing."""
     msgtype, shape = CASES[4][1:]
     layout = layout_for(typestore, msgtype, shape)
     assert layout.fields['multipliers'].count == 0
     assert layout.fields['multipliers'].offset == layout.fields['support_normal_force'].offset
     expected, values = _messages(typestore, msgtype, shape, 3, seed=13)
     paths = [p for p in layout.fields if p != 'multipliers'] + ['multipliers']
-    packer = layout.packer(paths)
-    assert [row.tobytes() for row in packer.pack(values, 3)] == expected
-    assert packer.pack({p: v[:1] for p, v in values.items()}, 1)[0].tobytes() == expected[0]
+    program, columns = _written(layout, values, paths)
+    assert [row.tobytes() for row in iceskate_native.encode_rows(program, columns, 3)] == expected
 
 
-def test_pack_leaves_the_fields_it_does_not_write_at_zero(typestore):
+def test_a_program_leaves_the_fields_it_does_not_write_at_zero(typestore):
     msgtype, shape = CASES[5][1:]
     layout = layout_for(typestore, msgtype, shape)
     expected, values = _messages(typestore, msgtype, shape, 3, seed=7)
     paths = ['mode', 'multipliers', 'zmp.y', 'heel_anchor_y', 'header.stamp.nanosec']
-    packer = layout.packer(paths)
-    for rows in (1, 3):
-        got = packer.pack({p: values[p][:rows] for p in paths}, rows)
-        for k in range(rows):
-            for path in layout.fields:
-                read = layout.read(got[k].tobytes(), path)
-                want = values[path][k] if path in paths else 0
-                assert np.array_equal(read, np.broadcast_to(want, read.shape).astype(read.dtype)
-                                      ), (rows, path)
+    program, columns = _written(layout, values, paths)
+    got = iceskate_native.encode_rows(program, columns, 3)
+    for k in range(3):
+        for path in layout.fields:
+            read = layout.read(got[k].tobytes(), path)
+            want = values[path][k] if path in paths else 0
+            assert np.array_equal(read, np.broadcast_to(want, read.shape).astype(read.dtype)), \
+                path
 
 
-def test_pack_casts_to_the_field_types(typestore):
-    """Bool and small integers come as numpy bool / int32 columns, stamps as int64: both paths
-    cast them to the message's types as rosbags writes them."""
+def test_a_program_casts_to_the_field_types_and_writes_stamps_from_nanoseconds(typestore):
+    """Flags and small integers come as uint8 / int32 columns, stamps as int64 nanoseconds:
+    written as rosbags writes the message's types."""
     shape = {'multiplier_names': [], 'multipliers': 0, 'position': 18, 'velocity': 18}
     layout = layout_for(typestore, 'iceskate_interfaces/msg/GaitState', shape)
     message, _ = build(typestore, 'iceskate_interfaces/msg/GaitState', shape)
     message.mode, message.support_side, message.y0_active = 8, 1, True
     message.header.stamp.sec, message.header.stamp.nanosec = 3, 999_999_999
+    message.touchdown_stamp.sec = 2_000_000_000  # int32: up to 2**31 - 1 s
     expected = _serialize(typestore, message, 'iceskate_interfaces/msg/GaitState')
-    values = {'mode': np.array([8, 8], np.int32), 'support_side': np.array([1, 1], np.int32),
-              'y0_active': np.array([True, True]),
-              'header.stamp.sec': np.array([3, 3], np.int64),
-              'header.stamp.nanosec': np.array([999_999_999] * 2, np.int64)}
-    packer = layout.packer(list(values))
-    assert [row.tobytes() for row in packer.pack(values, 2)] == [expected] * 2
-    assert packer.pack({k: v[:1] for k, v in values.items()}, 1)[0].tobytes() == expected
+    columns = [np.array([8, 8], np.int32), np.array([1, 1], np.int32),
+               np.array([1, 1], np.uint8),
+               np.array([[3_999_999_999, 2_000_000_000 * 1_000_000_000]] * 2, np.int64)]
+    program = layout.program({'mode': [(0, 0)], 'support_side': [(1, 0)],
+                              'y0_active': [(2, 0)], 'header.stamp': [(3, 0)],
+                              'touchdown_stamp': [(3, 1)]})
+    assert [r.tobytes() for r in iceskate_native.encode_rows(program, columns, 2)] == [
+        expected] * 2
+
+
+def test_a_program_refuses_what_it_cannot_write(typestore):
+    layout = layout_for(typestore, 'rosgraph_msgs/msg/Clock', {})
+    with pytest.raises(LayoutError, match="'clock.sec' holds 1 numbers, not 2"):
+        layout.program({'clock.sec': [(0, 0), (0, 1)]})
+    with pytest.raises(LayoutError, match="'header.stamp' is neither a numeric field nor a"):
+        layout.program({'header.stamp': [(0, 0)]})
+    with pytest.raises(ValueError, match='does not fit in a message of 12 bytes'):
+        iceskate_native.CdrProgram(layout.template, np.array([[10, 0, 0, 0]], np.uint32))
+    program = layout.program({'clock': [(1, 2)]})
+    stamps = np.zeros((2, 3), np.int64)
+    with pytest.raises(ValueError, match='reads element 2 of column 1, which 1 columns'):
+        iceskate_native.encode_rows(program, [stamps], 2)
+    with pytest.raises(ValueError, match='element 2 of column 1'):
+        iceskate_native.encode_rows(program, [stamps, stamps[:, :2]], 2)
+    with pytest.raises(ValueError, match='column 1 does not have 2 rows'):
+        iceskate_native.encode_rows(program, [stamps, stamps[:1]], 2)
+    with pytest.raises(ValueError, match='column 0 is not float64'):
+        iceskate_native.encode_rows(program, [stamps.astype(np.float32), stamps], 2)
+    assert iceskate_native.encode_rows(program, [stamps, stamps], 2).shape == (2, 12)
 
 
 @pytest.mark.parametrize(('msgtype', 'shape'), [c[1:] for c in CASES], ids=IDS)

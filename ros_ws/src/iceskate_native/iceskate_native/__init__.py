@@ -22,12 +22,17 @@ periods, returning the samples as arrays (``iceskate_sim.physics.native.NativeCo
 A Python subclass of ``Controller`` implements ``compute(obs, kinematics)`` and runs inside that
 loop too (docs/usage.md, "Your own controller"); its failures are ``ControllerError``.
 
+Messages: a ``CdrProgram`` writes CDR messages of one layout from columns of samples
+(``encode_rows`` for a block of numpy columns, ``ControlLoop.live_messages`` for the live
+sample); ``iceskate_sim.recording.cdr.Layout.program`` makes it from a message definition.
+
 Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
 kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
 its kinds for a run that left the physical range), which the simulator wraps in its own error.
 """
 
 from ._kernel import (
+    CdrProgram,
     ChatteringError,
     Controller,
     ControllerError,
@@ -41,11 +46,13 @@ from ._kernel import (
     Observation,
     RobotModel,
     crba_of,
+    encode_rows,
 )
 
-__all__ = ['ChatteringError', 'ControlLoop', 'Controller', 'ControllerError', 'DivergenceError',
-           'Dynamics', 'HybridSimulator', 'Kinematics', 'ModelKinematics', 'NativeError',
-           'Observation', 'RobotModel', 'crba_of', 'load_model', 'model_bytes']
+__all__ = ['CdrProgram', 'ChatteringError', 'ControlLoop', 'Controller', 'ControllerError',
+           'DivergenceError', 'Dynamics', 'HybridSimulator', 'Kinematics', 'ModelKinematics',
+           'NativeError', 'Observation', 'RobotModel', 'crba_of', 'encode_rows', 'load_model',
+           'model_bytes']
 
 
 def model_bytes(model) -> bytes:

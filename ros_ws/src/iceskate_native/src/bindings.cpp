@@ -480,5 +480,6 @@ NB_MODULE(_kernel, m)
       "0 running, 1 flight, 2 toe-first touchdown, 3 fall.");
 
   iceskate_native::bindings::bind_controller(m);
+  iceskate_native::bindings::bind_cdr(m);
   iceskate_native::bindings::bind_control_loop(m);
 }

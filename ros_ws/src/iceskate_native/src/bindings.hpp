@@ -57,7 +57,10 @@ void bind_controller(nanobind::module_ & m);
 /// written in Python raises when it fails (python_controller.cpp).
 void bind_controller_error(nanobind::module_ & m, nanobind::handle native_error);
 
-/// ControlLoop in module `m` (after HybridSimulator, Kinematics and Controller).
+/// CdrProgram and encode_rows in module `m` (bindings_cdr.cpp).
+void bind_cdr(nanobind::module_ & m);
+
+/// ControlLoop in module `m` (after HybridSimulator, Kinematics, Controller and CdrProgram).
 void bind_control_loop(nanobind::module_ & m);
 
 }  // namespace iceskate_native::bindings

@@ -43,6 +43,7 @@ struct BoundControlLoop
   std::vector<nb::object> controllers;
   ControlLoop loop;
   SampleBlock block;
+  SampleBlock live;                    ///< the live view (live_fill)
   std::vector<ReceivedCommand> inbox;  ///< one per controller node of `receive`
   std::vector<bool> received;          ///< inbox[k] holds a command
   std::vector<ReceivedCommand> held;   ///< the received ones of a period, in order
@@ -91,7 +92,7 @@ void construct_loop(
   new (self) BoundControlLoop{
     std::move(simulator), std::move(kinematics), std::move(controllers),
     ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin, root_link),
-    SampleBlock{}, std::move(slots), std::vector<bool>(inbox.size(), false), {}};
+    SampleBlock{}, SampleBlock{}, std::move(slots), std::vector<bool>(inbox.size(), false), {}};
 }
 
 using Values = Eigen::Ref<const Eigen::VectorXd>;
@@ -206,6 +207,12 @@ nb::dict block_arrays(SampleBlock & b)
   out["head_target"] = array_of(std::move(b.head_target), {n, 3});
   out["last_event"] = array_of(std::move(b.last_event), {n});
   out["stamps_ns"] = array_of(std::move(b.stamps_ns), {n, 4});
+  out["y0_active"] = array_of(std::move(b.y0_active), {n});
+  out["q1_active"] = array_of(std::move(b.q1_active), {n});
+  out["zmp_inside_support"] = array_of(std::move(b.zmp_inside_support), {n});
+  out["touched_down"] = array_of(std::move(b.touched_down), {n});
+  out["active"] = array_of(std::move(b.active), {n, m});
+  out["effort_total"] = array_of(std::move(b.effort_total), {n, m});
   out["present"] = array_of(std::move(b.present), {n});
   nb::list sources;
   nb::list efforts;
@@ -239,6 +246,34 @@ nb::dict live(BoundControlLoop & self)
   SampleBlock sample;
   self.loop.live(sample);
   return block_arrays(sample);
+}
+
+std::tuple<int, long, std::uint64_t> live_fill(BoundControlLoop & self)
+{
+  self.loop.live(self.live);
+  return {self.live.mode[0], self.live.last_event[0], self.live.present[0]};
+}
+
+nb::list live_messages(const BoundControlLoop & self, const std::vector<std::string> & names,
+                       const std::vector<const CdrProgram *> & programs)
+{
+  if (self.live.count != 1) {
+    throw std::invalid_argument("live_messages() needs live_fill() first");
+  }
+  std::vector<Column> columns;
+  columns.reserve(names.size());
+  for (const auto & name : names) {
+    columns.push_back(column_of(self.live, name));
+  }
+  nb::list out;
+  for (const CdrProgram * program : programs) {
+    program->check(columns);
+    nb::bytes data(nullptr, program->size());
+    program->write(columns, 0, static_cast<std::uint8_t *>(
+                                 static_cast<void *>(const_cast<char *>(data.c_str()))));
+    out.append(data);
+  }
+  return out;
 }
 
 }  // namespace
@@ -281,6 +316,15 @@ void bind_control_loop(nb::module_ & m)
         std::fill(self.received.begin(), self.received.end(), false);
       },
       "Drop the commands received (hold() then holds none until the next receive()).")
+    .def(
+      "live_fill", &live_fill,
+      "Take the live view of the current state (live()'s sample) for live_messages(); returns "
+      "its (mode, last_event, present).")
+    .def(
+      "live_messages", &live_messages, "columns"_a, "programs"_a,
+      "The bytes of one message per CdrProgram, of the sample live_fill() took; the programs' "
+      "slots number the `columns` (take_block()'s keys, 'efforts.<i>' for source i's). "
+      "ValueError for an unknown column or one a slot reads beyond.")
     .def(
       "take_block", [](BoundControlLoop & self) { return block_arrays(self.block); },
       "The samples held since the last take_block, as run() returns them; the block is emptied.")

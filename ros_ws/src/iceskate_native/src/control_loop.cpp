@@ -73,6 +73,10 @@ void SampleBlock::clear()
     column->clear();
   }
   stamps_ns.clear();
+  for (auto * column : {&y0_active, &q1_active, &zmp_inside_support, &touched_down, &active}) {
+    column->clear();
+  }
+  effort_total.clear();
   last_event.clear();
   for (auto & column : efforts) {
     column.clear();
@@ -266,7 +270,8 @@ void ControlLoop::sample(
   SampleBlock & block, const HybridState & s, const DynamicsResult & r, const Placement & head,
   const Placement & root, const Eigen::Vector3d & target) const
 {
-  const bool q1_active = simulator_.dynamics().mode(s.contact.mode).q1_active;
+  const Mode & mode = simulator_.dynamics().mode(s.contact.mode);
+  const bool q1_active = mode.q1_active;
   const Eigen::Matrix3d & rotation = head.rotation;
   block.t.push_back(s.t);
   block.t_exchange.push_back(s.t_exchange);
@@ -294,6 +299,24 @@ void ControlLoop::sample(
   append(block.head_target, target);
   const long last = last_event_at(simulator_.events(), s.t);
   block.last_event.push_back(last);
+  const GuardConstants & sole = simulator_.settings().constants;
+  const double y0 = s.q[kY0];
+  block.y0_active.push_back(mode.y0_active);
+  block.q1_active.push_back(q1_active);
+  block.zmp_inside_support.push_back(  // false for a NaN CoP (no support force)
+    !q1_active && y0 + sole.sole_heel_y <= r.cop_y && r.cop_y <= y0 + sole.sole_toe_y);
+  block.touched_down.push_back(!std::isnan(s.t_touchdown));
+  const std::size_t first = block.active.size();
+  block.active.resize(first + kCoordinates, 0);
+  for (const int i : mode.active) {
+    block.active[first + static_cast<std::size_t>(i)] = 1;
+  }
+  block.effort_total.resize(first + kCoordinates, 0.0);
+  for (const auto & column : block.efforts) {
+    for (std::size_t i = 0; i < kCoordinates; ++i) {
+      block.effort_total[first + i] += column[first + i];
+    }
+  }
   const double last_t = last >= 0 ? simulator_.events()[static_cast<std::size_t>(last)].t : 0.0;
   for (const double time : {s.t, s.t_exchange, std::isnan(s.t_touchdown) ? 0.0 : s.t_touchdown,
                             last_t}) {
@@ -315,6 +338,65 @@ void ControlLoop::live(SampleBlock & block)
   block.present.push_back(1);
   simulator_.dynamics().frame_placements(s.contact, s.q, frames_, placements_);
   sample(block, s, simulator_.result(), placements_[0], placements_[1], held_target_);
+}
+
+Column column_of(const SampleBlock & block, const std::string & name)
+{
+  using Type = Column::Type;
+  const auto reals = [](const std::vector<double> & v, std::size_t width) {
+    return Column{v.data(), Type::kFloat64, width};
+  };
+  const auto ints = [](const std::vector<int> & v) { return Column{v.data(), Type::kInt32, 1}; };
+  const auto flags = [](const std::vector<std::uint8_t> & v, std::size_t width) {
+    return Column{v.data(), Type::kUint8, width};
+  };
+  const std::size_t n = kCoordinates;
+  if (name == "t") return reals(block.t, 1);
+  if (name == "t_exchange") return reals(block.t_exchange, 1);
+  if (name == "t_touchdown") return reals(block.t_touchdown, 1);
+  if (name == "heel_anchor_y") return reals(block.heel_anchor_y, 1);
+  if (name == "mode") return ints(block.mode);
+  if (name == "side") return ints(block.side);
+  if (name == "pivot") return ints(block.pivot);
+  if (name == "pivot_code") return ints(block.pivot_code);
+  if (name == "step_index") return ints(block.step_index);
+  if (name == "q") return reals(block.q, n);
+  if (name == "v") return reals(block.v, n);
+  if (name == "qdd") return reals(block.qdd, n);
+  if (name == "passive") return reals(block.passive, n);
+  if (name == "applied") return reals(block.applied, n);
+  if (name == "multipliers") return reals(block.multipliers, 3);
+  if (name == "support_normal") return reals(block.support_normal, 1);
+  if (name == "support_tangential") return reals(block.support_tangential, 1);
+  if (name == "cop_y") return reals(block.cop_y, 1);
+  if (name == "head_position") return reals(block.head_position, 3);
+  if (name == "head_orientation") return reals(block.head_orientation, 4);
+  if (name == "head_pitch") return reals(block.head_pitch, 1);
+  if (name == "root_pose") return reals(block.root_pose, 7);
+  if (name == "head_target") return reals(block.head_target, 3);
+  if (name == "last_event") {
+    static_assert(sizeof(long) == sizeof(std::int64_t), "last_event is read as int64");
+    return Column{block.last_event.data(), Type::kInt64, 1};
+  }
+  if (name == "stamps_ns") return Column{block.stamps_ns.data(), Type::kInt64, 4};
+  if (name == "present") return Column{block.present.data(), Type::kUint64, 1};
+  if (name == "y0_active") return flags(block.y0_active, 1);
+  if (name == "q1_active") return flags(block.q1_active, 1);
+  if (name == "zmp_inside_support") return flags(block.zmp_inside_support, 1);
+  if (name == "touched_down") return flags(block.touched_down, 1);
+  if (name == "active") return flags(block.active, n);
+  if (name == "effort_total") return reals(block.effort_total, n);
+  const std::string prefix = "efforts.";
+  if (name.compare(0, prefix.size(), prefix) == 0) {
+    const std::string index = name.substr(prefix.size());
+    if (!index.empty() && index.find_first_not_of("0123456789") == std::string::npos) {
+      const std::size_t i = std::stoul(index);
+      if (i < block.efforts.size()) {
+        return reals(block.efforts[i], n);
+      }
+    }
+  }
+  throw std::invalid_argument("a sample block has no column '" + name + "'");
 }
 
 }  // namespace iceskate_native

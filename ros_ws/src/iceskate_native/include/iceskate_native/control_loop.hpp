@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include "iceskate_native/cdr_rows.hpp"
 #include "iceskate_native/controller.hpp"
 #include "iceskate_native/kinematics.hpp"
 #include "iceskate_native/simulator.hpp"
@@ -70,6 +71,11 @@ struct SampleBlock
   /// 4 per sample, whole nanoseconds (ties to even): t, t_exchange, t_touchdown (0 before the
   /// heel strike) and the time of the latest transition (0: none).
   std::vector<std::int64_t> stamps_ns;
+  /// 0/1 per sample: the mode's y0 and q1 are free; the CoP lies on the flat support sole;
+  /// the swing heel has struck.
+  std::vector<std::uint8_t> y0_active, q1_active, zmp_inside_support, touched_down;
+  std::vector<std::uint8_t> active;  ///< 18 per sample: the mode's active coordinates (0/1)
+  std::vector<double> effort_total;  ///< 18 per sample: the sum of the sources' efforts
   /// The sources in the order they first answered; efforts[i]: 18 per sample, 0 where source i
   /// did not answer, present[k] bit i: it answered at sample k ("push" while a push acts).
   std::vector<std::string> sources;
@@ -79,6 +85,11 @@ struct SampleBlock
   /// Empty, the source list kept.
   void clear();
 };
+
+/// The column `name` of `block` (its key in take_block()'s dict; "efforts.<i>" for source i's
+/// efforts), for CdrProgram::write.
+/// \throws std::invalid_argument for a name that is no column.
+Column column_of(const SampleBlock & block, const std::string & name);
 
 /// The loop of control periods over a simulator, its controllers (in summing order) and the
 /// scene's pushes. It holds references: the simulator, the kinematics and the controllers

@@ -13,6 +13,8 @@ singular or rank-deficient system as its ``NativeError``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 
@@ -394,3 +396,14 @@ class NativeControlLoop:
         under the inputs held over the last period, the held input's generalized force at the
         state as the one source ``held`` and that period's head target."""
         return self._kernel.live()
+
+    def live_fill(self) -> tuple[int, int, int]:
+        """Take ``live``'s sample in the loop for ``live_messages``; its (mode, index of the
+        latest transition or -1, sources present)."""
+        return self._kernel.live_fill()
+
+    def live_messages(self, columns: Sequence[str],
+                      programs: Sequence[iceskate_native.CdrProgram]) -> list[bytes]:
+        """The bytes of one message per program (``cdr.Layout.program``, numbering
+        ``columns``) of the sample ``live_fill`` took."""
+        return self._kernel.live_messages(list(columns), list(programs))

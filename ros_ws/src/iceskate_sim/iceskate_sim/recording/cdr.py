@@ -3,9 +3,10 @@
 The bag writer, the simulator node and the controller nodes move whole blocks of samples
 through messages; building and parsing message objects (rosbags, rclpy) costs more per message
 than a control period. So they work on bytes: ``Layout`` says where each number of a message
-lies, given its strings and sequence lengths, and ``pack``/``read`` move numbers in and out of
-the bytes with numpy. The layout is computed from rosbags' type store (the ``.msg``
-definitions), never guessed from sample bytes.
+lies, given its strings and sequence lengths. ``program`` writes messages from columns of
+samples in the native core (one call for a block, or for the live sample); ``read`` and
+``unpacker`` take numbers out of received bytes. The layout is computed from rosbags' type
+store (the ``.msg`` definitions), never guessed from sample bytes.
 
 The encoding is XCDR1 little endian, as rosbags, rclpy and Fast DDS write it: a 4-byte
 encapsulation header; each primitive aligned to its size counted from the end of that header;
@@ -26,6 +27,8 @@ from typing import Any
 import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
+
+import iceskate_native
 
 ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR, little endian, no options
 HEADER = len(ENCAPSULATION)
@@ -60,7 +63,7 @@ class Layout:
     :ivar strings: every string by path.
     :ivar skeleton: (byte offset, bytes) of every count and string: a message whose bytes
         match them has this layout (``fits``).
-    :ivar template: the message's bytes with every number 0 (what ``pack`` writes into).
+    :ivar template: the message's bytes with every number 0 (what ``program`` writes into).
     """
 
     size: int
@@ -112,98 +115,38 @@ class Layout:
         back = operator.itemgetter(*(order.index(k) for k in range(len(paths))))
         return lambda data: back(unpack(data))
 
-    def packer(self, paths: Sequence[str]) -> Packer:
-        """A ``Packer`` writing the fields ``paths`` (in this order) into copies of
-        ``template``."""
-        return Packer(self, tuple(paths))
+    def program(self, sources: Mapping[str, Sequence[tuple[int, int]]]
+                ) -> iceskate_native.CdrProgram:
+        """The writer of messages of this layout whose numbers come from columns of samples
+        (``iceskate_native.encode_rows``, ``ControlLoop.live_messages``).
+
+        :param sources: per numeric field path, the (column, element) of each of its numbers;
+            per builtin_interfaces/Time path (e.g. ``header.stamp``), the (column, element) of
+            its nanoseconds. A number not named stays 0.
+        :raises LayoutError: for a path that is no such field or a wrong count of numbers.
+        """
+        slots: list[tuple[int, int, int, int]] = []
+        for path, numbers in sources.items():
+            field = self.fields.get(path)
+            if field is None:
+                sec, nanosec = (self.fields.get(f'{path}.{part}') for part in ('sec', 'nanosec'))
+                if sec is None or nanosec is None or len(numbers) != 1:
+                    raise LayoutError(f'{path!r} is neither a numeric field nor a stamp')
+                slots.append((sec.offset, _STAMP_WRITE, *numbers[0]))
+                continue
+            write = _WRITES[field.dtype.str]
+            if len(numbers) != field.count:
+                raise LayoutError(f'{path!r} holds {field.count} numbers, not {len(numbers)}')
+            slots += [(field.offset + k * field.dtype.itemsize, write, column, element)
+                      for k, (column, element) in enumerate(numbers)]
+        return iceskate_native.CdrProgram(self.template,
+                                          np.array(slots, dtype=np.uint32).reshape(-1, 4))
 
 
-class Packer:
-    """Writes the numbers of messages of one layout: ``pack`` takes, per path, an array of
-    shape (m,) or (m, count) and gives (m, size) bytes, row k the k-th message.
-
-    Many messages: the numbers of each dtype are gathered into one array, and the rows are
-    joined from its bytes and the constant bytes between the fields (counts, strings,
-    padding) in one concatenation. One message (a live topic): one ``struct`` call over the
-    whole message, its constant bytes as arguments."""
-
-    def __init__(self, layout: Layout, paths: tuple[str, ...]) -> None:
-        self.layout, self.paths = layout, paths
-        # in byte order; an empty sequence holds no byte (and shares the next field's offset)
-        fields = sorted((p for p in paths if layout.fields[p].count),
-                        key=lambda p: layout.fields[p].offset)
-        groups: dict[np.dtype, list[str]] = {}
-        for path in fields:
-            groups.setdefault(layout.fields[path].dtype, []).append(path)
-        self._groups = [(dtype, tuple(members)) for dtype, members in groups.items()]
-        # the row as pieces in byte order: constant bytes, or bytes [start, stop) of a group's
-        # numbers (fields next to each other in the message and in their group: one piece)
-        group_of, starts = {}, {}
-        for g, (dtype, members) in enumerate(self._groups):
-            byte = 0
-            for path in members:
-                group_of[path], starts[path] = g, byte
-                byte += dtype.itemsize * layout.fields[path].count
-        self._pieces: list[tuple[int, int, int] | np.ndarray] = []
-        position = 0
-        for path in fields:
-            field = layout.fields[path]
-            size = field.dtype.itemsize * field.count
-            if field.offset > position:
-                self._pieces.append(np.frombuffer(layout.template[position:field.offset],
-                                                  np.uint8)[None])
-            group, start = group_of[path], starts[path]
-            last = self._pieces[-1] if self._pieces else None
-            if (field.offset == position and isinstance(last, tuple) and last[0] == group
-                    and last[2] == start):
-                self._pieces[-1] = (group, last[1], start + size)
-            else:
-                self._pieces.append((group, start, start + size))
-            position = field.offset + size
-        if layout.size > position:
-            self._pieces.append(np.frombuffer(layout.template[position:], np.uint8)[None])
-        # one message: '<' + constant bytes between the fields + the fields' formats
-        formats, arguments, self._slots = ['<'], [], []
-        position = 0
-        for path in fields:
-            field = layout.fields[path]
-            if field.offset > position:
-                formats.append(f'{field.offset - position}s')
-                arguments.append(layout.template[position:field.offset])
-            self._slots.append((len(arguments), path, field.count))
-            formats.append(f'{field.count}{_STRUCT[field.dtype.str]}')
-            arguments += [0] * field.count
-            position = field.offset + field.dtype.itemsize * field.count
-        if layout.size > position:
-            formats.append(f'{layout.size - position}s')
-            arguments.append(layout.template[position:])
-        self._struct = struct.Struct(''.join(formats))
-        self._arguments = arguments
-
-    def pack(self, values: Mapping[str, np.ndarray], rows: int) -> np.ndarray:
-        """(rows, size) uint8: ``rows`` messages with ``values`` (each an array of shape
-        (rows,) or (rows, count), cast to the field's type)."""
-        if rows == 1:
-            return np.frombuffer(self.pack_one(values), np.uint8)[None]
-        numbers = [np.concatenate(
-            [x if x.ndim == 2 else x[:, None] for x in (values[path] for path in members)],
-            axis=1, dtype=dtype, casting='unsafe').view(np.uint8)
-            for dtype, members in self._groups]
-        return np.concatenate(
-            [numbers[p[0]][:, p[1]:p[2]] if isinstance(p, tuple)
-             else np.broadcast_to(p, (rows, p.shape[1])) for p in self._pieces], axis=1)
-
-    def pack_one(self, values: Mapping[str, np.ndarray]) -> bytes:
-        """The bytes of one message (``values`` as for ``pack`` with one row)."""
-        arguments = self._arguments.copy()
-        for start, path, count in self._slots:
-            if count == 1:
-                arguments[start] = values[path].item()
-            else:
-                arguments[start:start + count] = values[path].ravel().tolist()
-        return self._struct.pack(*arguments)
-
-
+#: ``iceskate_native.CdrProgram``'s write code of each field type it writes, and of a stamp
+_WRITES = {'<f8': 0, '<i4': 1, '<u4': 2, '|u1': 3, '<f4': 5, '|i1': 6, '<i2': 7, '<u2': 8,
+           '<i8': 9, '<u8': 10}
+_STAMP_WRITE = 4
 #: struct format of each numpy dtype of ``PRIMITIVES``
 _STRUCT = {'|u1': 'B', '|i1': 'b', '<u2': 'H', '<i2': 'h', '<u4': 'I', '<i4': 'i', '<u8': 'Q',
            '<i8': 'q', '<f4': 'f', '<f8': 'd'}

@@ -3,11 +3,12 @@
 A sample is a row of the native control loop's block (``iceskate_native.ControlLoop.run``,
 ``take_block``, ``live``: columns t, q, v, qdd, passive, mode, side, pivot_code, step_index,
 multipliers, support forces, cop_y, head_position, head_orientation, root_pose, last_event,
-and the efforts of its sources). ``SampleMessages.encode`` turns a block into the bytes of
-every topic's messages, one per row, through the topic's ``cdr.Layout`` (computed once per
-shape: the strings and sequence lengths a message has, e.g. a gait mode's multiplier names):
-a few numpy operations per topic and shape, whatever the number of rows. The bag
-(``bag.BagRecorder``) and the simulator node's live topics send these bytes.
+stamps_ns, the mode's flags, effort_total and the efforts of its sources). What each field of
+each topic's message holds is written once, below: for a message shape (the strings and
+sequence lengths it has, e.g. a gait mode's multiplier names), the column and element of each
+of its numbers. From that and the topic's ``cdr.Layout`` the native core writes the messages:
+``SampleMessages.encode`` those of a block (the bag), ``encode_live`` those of the live sample
+(the simulator node's topics).
 
 Topics (one message per sample, stamped with its simulation time):
 
@@ -26,16 +27,17 @@ and ``/robot_description`` (std_msgs/String) once.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 from rosbags.typesys.store import Typestore
 
+import iceskate_native
 from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
-from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SOLE_HEEL_Y, SOLE_TOE_Y
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 from iceskate_sim.recording.bag_types import PASSIVE
-from iceskate_sim.recording.cdr import Layout, Packer, layout_for
+from iceskate_sim.recording.cdr import layout_for
 from iceskate_sim.recording.links import LinkTransforms
 
 TOPICS = {
@@ -53,43 +55,22 @@ RECORDED_TOPICS = ('/clock', '/joint_states', '/head_pose', '/gait_state', '/joi
 
 _N = N_COORDINATES
 _MODES = [None, *(MODES[k] for k in range(1, len(MODES) + 1))]  # by mode number
-_Y0_ACTIVE = np.array([False] + [m.y0_active for m in _MODES[1:]])
-_Q1_ACTIVE = np.array([False] + [m.q1_active for m in _MODES[1:]])
-#: which coordinates are active, by mode number: (21, 18)
-_ACTIVE = np.zeros((len(_MODES), _N), dtype=bool)
-for _mode in _MODES[1:]:
-    _ACTIVE[_mode.number, _mode.active] = True
-#: the columns of a block's multipliers that a mode's GaitState holds, by mode number
-_PICKED = [None, *([MULTIPLIER_NAMES.index(name) for name in m.multipliers] for m in _MODES[1:])]
+_POSE = ('translation.x', 'translation.y', 'translation.z', 'rotation.x', 'rotation.y',
+         'rotation.z', 'rotation.w')
+
+#: A number's source: (column name, element) of the sample (``efforts.<i>``: source i's
+#: efforts; ``tf``: the /tf rows of ``LinkTransforms``); per field path, one per number.
+Sources = dict[str, list[tuple[str, int]]]
 
 
-def _groups(key: np.ndarray):
-    """(value, rows) for each distinct value of ``key``; rows None when it is every row."""
-    first = key[0]
-    if (key == first).all():
-        yield int(first), None
-        return
-    for value in np.unique(key).tolist():
-        yield value, np.flatnonzero(key == value)
+def _numbers(column: str, count: int, first: int = 0) -> list[tuple[str, int]]:
+    return [(column, first + k) for k in range(count)]
 
 
-class Stamps(NamedTuple):
-    """The builtin_interfaces/Time fields of a block's samples: (m, 4) sec and nanosec of its
-    ``stamps_ns``: the sample time t, the last support exchange, the heel strike (0 before
-    it) and the latest transition (0: none)."""
-
-    sec: np.ndarray
-    nanosec: np.ndarray
-
-    @classmethod
-    def of(cls, block: Mapping[str, Any]) -> Stamps:
-        """The stamps of ``block``'s samples."""
-        return cls(*np.divmod(block['stamps_ns'], 1_000_000_000))
-
-    def fields(self, prefix: str, column: int = 0) -> dict[str, np.ndarray]:
-        """The sec and nanosec fields of the Time field ``prefix`` from ``column``."""
-        return {f'{prefix}.sec': self.sec[:, column],
-                f'{prefix}.nanosec': self.nanosec[:, column]}
+def _stamp(which: int = 0) -> list[tuple[str, int]]:
+    """A builtin_interfaces/Time from ``stamps_ns``: 0 t, 1 exchange, 2 heel strike, 3 latest
+    transition."""
+    return [('stamps_ns', which)]
 
 
 class Events(NamedTuple):
@@ -113,7 +94,7 @@ class Events(NamedTuple):
 
 
 class SampleMessages:
-    """Encodes blocks of samples into the CDR bytes of the recorded topics' messages.
+    """Encodes samples into the CDR bytes of the recorded topics' messages.
 
     :param typestore: the types (``bag_types.make_typestore()``).
     :param links: the /tf transforms of the recorded robot.
@@ -122,25 +103,45 @@ class SampleMessages:
     def __init__(self, typestore: Typestore, links: LinkTransforms) -> None:
         self.typestore = typestore
         self.links = links
-        self._packers: dict[tuple[str, Any], Packer] = {}
+        self._programs: dict[tuple[str, Any], tuple[iceskate_native.CdrProgram,
+                                                    tuple[str, ...]]] = {}
 
     def encode(self, block: Mapping[str, Any], events: Events,
                topics: Sequence[str] = RECORDED_TOPICS) -> dict[str, list[bytes]]:
         """Topic -> the bytes of its message at each row of ``block``."""
         rows = len(block['t'])
-        stamps = Stamps.of(block)
+        columns = {'tf': self.links.block_rows(block['q'], block['side'], block['root_pose'])
+                   .reshape(rows, -1)} if '/tf' in topics else {}
         out: dict[str, list[bytes]] = {}
         for topic in topics:
-            encoded: list[bytes | None] = [None] * rows
-            for key, selected, shape, values in _ENCODERS[topic](self, block, events, stamps):
-                packer = self._packer(topic, key, shape, values)
+            encoded: list[bytes] = [b''] * rows
+            for key, selected in _keys(topic, block, events):
+                program, names = self._program(topic, key)
+                arrays = [columns[name] if name in columns else _column(block, name)
+                          for name in names]
                 if selected is None:
-                    encoded = [row.tobytes() for row in packer.pack(values, rows)]
+                    encoded = [row.tobytes() for row in iceskate_native.encode_rows(
+                        program, arrays, rows)]
                     break
-                for k, row in zip(selected.tolist(), packer.pack(values, len(selected)),
-                                  strict=True):
+                messages = iceskate_native.encode_rows(
+                    program, [np.ascontiguousarray(a[selected]) for a in arrays], len(selected))
+                for k, row in zip(selected.tolist(), messages, strict=True):
                     encoded[k] = row.tobytes()
             out[topic] = encoded
+        return out
+
+    def encode_live(self, loop: Any, taken: tuple[int, int, int], events: Sequence[Any],
+                    topics: Sequence[str]) -> dict[str, bytes]:
+        """Topic -> the bytes of its message of the live sample ``loop`` took (its
+        ``live_fill()``: ``taken``, its mode, latest transition and sources present);
+        ``events``: the event log. Not for /tf."""
+        mode, last, _ = taken
+        out = {}
+        for topic in topics:
+            key = (mode, events[last].cause if last >= 0 else '') if topic == '/gait_state' \
+                else ((0, _LIVE_SOURCE),) if topic == '/joint_dynamics' else None
+            program, names = self._program(topic, key)
+            out[topic] = loop.live_messages(names, [program])[0]
         return out
 
     def description(self, urdf: str) -> bytes:
@@ -148,94 +149,114 @@ class SampleMessages:
         layout = layout_for(self.typestore, TOPICS['/robot_description'], {'data': urdf})
         return layout.template
 
-    def _packer(self, topic: str, key: Any, shape: Mapping[str, Any],
-                values: Mapping[str, np.ndarray]) -> Packer:
-        packer = self._packers.get((topic, key))
-        if packer is None:
-            layout: Layout = layout_for(self.typestore, TOPICS[topic], shape)
-            packer = self._packers[(topic, key)] = layout.packer(list(values))
-        return packer
+    def _program(self, topic: str, key: Any) -> tuple[iceskate_native.CdrProgram,
+                                                      tuple[str, ...]]:
+        """The writer of ``topic``'s messages of shape ``key`` and the columns it numbers."""
+        found = self._programs.get((topic, key))
+        if found is None:
+            shape, sources = _FIELDS[topic](self, key)
+            names = tuple(dict.fromkeys(name for numbers in sources.values()
+                                        for name, _ in numbers))
+            index = {name: k for k, name in enumerate(names)}
+            layout = layout_for(self.typestore, TOPICS[topic], shape)
+            program = layout.program({path: [(index[name], element) for name, element in numbers]
+                                      for path, numbers in sources.items()})
+            found = self._programs[(topic, key)] = (program, names)
+        return found
 
-    def _clock(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        yield None, None, {}, stamps.fields('clock')
+    # ------------------------------------------------ what each field holds, per message shape
+    def _clock(self, key: None) -> tuple[dict, Sources]:
+        return {}, {'clock': _stamp()}
 
-    def _joint_states(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        total = np.zeros((len(block['t']), _N))
-        for effort in block['efforts']:  # 0 where a source did not act
-            total += effort
-        yield None, None, {
-            'name': COORDINATE_NAMES, 'position': _N, 'velocity': _N, 'effort': _N}, {
-            **stamps.fields('header.stamp'), 'position': block['q'],
-            'velocity': block['v'], 'effort': total}
+    def _joint_states(self, key: None) -> tuple[dict, Sources]:
+        return {'name': COORDINATE_NAMES, 'position': _N, 'velocity': _N, 'effort': _N}, {
+            'header.stamp': _stamp(), 'position': _numbers('q', _N),
+            'velocity': _numbers('v', _N), 'effort': _numbers('effort_total', _N)}
 
-    def _head_pose(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        p, o = block['head_position'], block['head_orientation']
-        yield None, None, {'header.frame_id': 'world'}, {
-            **stamps.fields('header.stamp'),
-            **{f'pose.position.{axis}': p[:, i] for i, axis in enumerate('xyz')},
-            **{f'pose.orientation.{axis}': o[:, i] for i, axis in enumerate('xyzw')}}
+    def _head_pose(self, key: None) -> tuple[dict, Sources]:
+        return {'header.frame_id': 'world'}, {
+            'header.stamp': _stamp(),
+            **{f'pose.position.{axis}': [('head_position', i)] for i, axis in enumerate('xyz')},
+            **{f'pose.orientation.{axis}': [('head_orientation', i)]
+               for i, axis in enumerate('xyzw')}}
 
-    def _gait_state(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        mode, cop, q = block['mode'], block['cop_y'], block['q']
-        y0, q1_active = q[:, 0], _Q1_ACTIVE[mode]
-        inside = ~q1_active & (y0 + SOLE_HEEL_Y <= cop) & (cop <= y0 + SOLE_TOE_Y)  # NaN: no
-        values = {
-            **stamps.fields('header.stamp'), **stamps.fields('support_exchange_stamp', 1),
-            **stamps.fields('touchdown_stamp', 2), **stamps.fields('last_transition_stamp', 3),
-            'mode': mode,
-            'support_side': block['side'], 'pivot': block['pivot_code'],
-            'step_index': block['step_index'], 'y0_active': _Y0_ACTIVE[mode],
-            'q1_active': q1_active,
-            'support_normal_force': block['support_normal'],
-            'support_friction_force': block['support_tangential'],
-            'zmp.y': cop,  # NaN: no support force
-            'zmp_inside_support': inside,
-            'touched_down': ~np.isnan(block['t_touchdown']),  # NaN: not yet
-            'heel_anchor_y': block['heel_anchor_y'], 'position': q,
-            'velocity': block['v']}
-        causes = len(events.causes)
-        for code, rows in _groups(mode * causes + events.cause if causes > 1 else mode):
-            number, cause = divmod(code, causes)
-            names = _MODES[number].multipliers
-            selected = values if rows is None else {k: x[rows] for k, x in values.items()}
-            multipliers = block['multipliers'] if rows is None else block['multipliers'][rows]
-            yield (number, events.causes[cause]), rows, {
-                'multiplier_names': names, 'multipliers': len(names),
-                'last_transition_cause': events.causes[cause], 'position': _N, 'velocity': _N}, {
-                **selected, 'multipliers': multipliers[:, _PICKED[number]]}
+    def _gait_state(self, key: tuple[int, str]) -> tuple[dict, Sources]:
+        number, cause = key
+        names = _MODES[number].multipliers
+        return {'multiplier_names': names, 'multipliers': len(names),
+                'last_transition_cause': cause, 'position': _N, 'velocity': _N}, {
+            'header.stamp': _stamp(), 'mode': [('mode', 0)], 'support_side': [('side', 0)],
+            'pivot': [('pivot_code', 0)], 'step_index': [('step_index', 0)],
+            'y0_active': [('y0_active', 0)], 'q1_active': [('q1_active', 0)],
+            'multipliers': [('multipliers', MULTIPLIER_NAMES.index(name)) for name in names],
+            'support_normal_force': [('support_normal', 0)],
+            'support_friction_force': [('support_tangential', 0)],
+            'zmp.y': [('cop_y', 0)],  # NaN: no support force
+            'zmp_inside_support': [('zmp_inside_support', 0)],
+            'last_transition_stamp': _stamp(3), 'support_exchange_stamp': _stamp(1),
+            'touched_down': [('touched_down', 0)], 'touchdown_stamp': _stamp(2),
+            'heel_anchor_y': [('heel_anchor_y', 0)], 'position': _numbers('q', _N),
+            'velocity': _numbers('v', _N)}
 
-    def _joint_dynamics(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        efforts = block['efforts']
-        values = {**stamps.fields('header.stamp'), 'active': _ACTIVE[block['mode']],
-                  'acceleration': block['qdd']}
-        for mask, rows in _groups(block['present']):
-            acting = [i for i in range(len(efforts)) if mask >> i & 1]
-            names = [*(block['sources'][i] for i in acting), PASSIVE]
-            pick = slice(None) if rows is None else rows
-            yield tuple(names), rows, {
-                'name': COORDINATE_NAMES, 'active': _N, 'acceleration': _N,
+    def _joint_dynamics(self, key: tuple[tuple[int, str], ...]) -> tuple[dict, Sources]:
+        names = [*(name for _, name in key), PASSIVE]
+        efforts = [n for i, _ in key for n in _numbers(f'efforts.{i}', _N)]
+        return {'name': COORDINATE_NAMES, 'active': _N, 'acceleration': _N,
                 'source_names': names, 'source_efforts': _N * len(names)}, {
-                **{k: x[pick] for k, x in values.items()},
-                'source_efforts': np.hstack([*(efforts[i][pick] for i in acting),
-                                             block['passive'][pick]])}
+            'header.stamp': _stamp(), 'active': _numbers('active', _N),
+            'acceleration': _numbers('qdd', _N),
+            'source_efforts': [*efforts, *_numbers('passive', _N)]}
 
-    def _tf(self, block: Mapping[str, Any], events: Events, stamps: Stamps):
-        frames = self.links.frames
-        poses = self.links.block_rows(block['q'], block['side'], block['root_pose'])
-        values = {}
-        for k in range(len(frames)):
-            values.update(stamps.fields(f'transforms.{k}.header.stamp'))
-            for i, name in enumerate(('translation.x', 'translation.y', 'translation.z',
-                                      'rotation.x', 'rotation.y', 'rotation.z', 'rotation.w')):
-                values[f'transforms.{k}.transform.{name}'] = poses[:, k, i]
-        shape = {'transforms': len(frames)}
-        for k, (parent, child) in enumerate(frames):
+    def _tf(self, key: None) -> tuple[dict, Sources]:
+        shape: dict[str, Any] = {'transforms': len(self.links.frames)}
+        sources: Sources = {}
+        for k, (parent, child) in enumerate(self.links.frames):
             shape[f'transforms.{k}.header.frame_id'] = parent
             shape[f'transforms.{k}.child_frame_id'] = child
-        yield None, None, shape, values
+            sources[f'transforms.{k}.header.stamp'] = _stamp()
+            for i, name in enumerate(_POSE):
+                sources[f'transforms.{k}.transform.{name}'] = [('tf', 7 * k + i)]
+        return shape, sources
 
 
-_ENCODERS = {
+#: the one source of the live sample (``ControlLoop.live``): the held input
+_LIVE_SOURCE = 'held'
+
+_FIELDS = {
     '/clock': SampleMessages._clock, '/joint_states': SampleMessages._joint_states,
     '/head_pose': SampleMessages._head_pose, '/gait_state': SampleMessages._gait_state,
     '/joint_dynamics': SampleMessages._joint_dynamics, '/tf': SampleMessages._tf}
+
+
+def _column(block: Mapping[str, Any], name: str) -> np.ndarray:
+    """The column ``name`` of ``block`` (``efforts.<i>``: source i's efforts)."""
+    if name.startswith('efforts.'):
+        return block['efforts'][int(name.split('.')[1])]
+    return block[name]
+
+
+def _keys(topic: str, block: Mapping[str, Any], events: Events
+          ) -> Iterator[tuple[Any, np.ndarray | None]]:
+    """(message shape, its rows) for each shape of ``topic``'s messages in ``block``; rows
+    None when it is every row."""
+    if topic == '/gait_state':
+        causes = len(events.causes)
+        for code, rows in _groups(block['mode'] * causes + events.cause):
+            number, cause = divmod(code, causes)
+            yield (number, events.causes[cause]), rows
+    elif topic == '/joint_dynamics':
+        sources = block['sources']
+        for mask, rows in _groups(block['present']):
+            yield tuple((i, sources[i]) for i in range(len(sources)) if mask >> i & 1), rows
+    else:
+        yield None, None
+
+
+def _groups(key: np.ndarray) -> Iterator[tuple[int, np.ndarray | None]]:
+    """(value, rows) for each distinct value of ``key``; rows None when it is every row."""
+    first = key[0]
+    if (key == first).all():
+        yield int(first), None
+        return
+    for value in np.unique(key).tolist():
+        yield value, np.flatnonzero(key == value)

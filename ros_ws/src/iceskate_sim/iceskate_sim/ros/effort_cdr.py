@@ -21,12 +21,13 @@ from types import SimpleNamespace
 import numpy as np
 from rosbags.typesys.store import Typestore
 
+import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues, ControllerCommand, all_finite
 from iceskate_sim.model.robot import COORDINATE_NAMES
-from iceskate_sim.model.stamps import NS_PER_S, ns_to_sec_nanosec
+from iceskate_sim.model.stamps import NS_PER_S
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.recording.cdr import Layout, LayoutError, Packer, layout_for, layout_of
+from iceskate_sim.recording.cdr import Layout, LayoutError, layout_for, layout_of
 from iceskate_sim.ros.conversions import command_from_message
 
 #: The float64 sequences of an EffortCommand, in order.
@@ -116,10 +117,11 @@ class CommandEncoder:
     def __init__(self, source: str, typestore: Typestore | None = None) -> None:
         self.source = source
         self._typestore = typestore or make_typestore()
-        self._last: tuple[tuple, Packer] | None = None
+        self._last: tuple[tuple, iceskate_native.CdrProgram] | None = None
+        self._stamp = np.zeros((1, 1), dtype=np.int64)
 
     def encode(self, values: CommandValues, stamp_ns: int) -> bytes:
-        """The message of the command ``values`` to the state stamped ``stamp_ns``."""
+        """The message of the command ``values`` to the state stamped ``stamp_ns`` [ns] >= 0."""
         arrays = values[:6]
         shape = (values.sources, *(x.size for x in arrays))
         if self._last is None or self._last[0] != shape:
@@ -127,8 +129,13 @@ class CommandEncoder:
                 'source': self.source, 'joint_names': COORDINATE_NAMES,
                 'source_names': values.sources,
                 **{name: x.size for name, x in zip(ARRAYS, arrays, strict=True)}})
-            self._last = (shape, layout.packer([*_STAMP, *ARRAYS]))
-        sec, nanosec = ns_to_sec_nanosec(stamp_ns)
-        return self._last[1].pack({
-            _STAMP[0]: np.array([sec]), _STAMP[1]: np.array([nanosec]),
-            **{name: x[None] for name, x in zip(ARRAYS, arrays, strict=True)}}, 1)[0].tobytes()
+            # column 0: the stamp [ns]; column 1 + k: array k of ARRAYS
+            self._last = (shape, layout.program({
+                'header.stamp': [(0, 0)],
+                **{name: [(1 + k, i) for i in range(x.size)]
+                   for k, (name, x) in enumerate(zip(ARRAYS, arrays, strict=True))}}))
+        if stamp_ns < 0:
+            raise SimulationError(f'a stamp needs a time >= 0, got {stamp_ns} ns')
+        self._stamp[0, 0] = stamp_ns
+        return iceskate_native.encode_rows(
+            self._last[1], [self._stamp, *(x.reshape(1, -1) for x in arrays)], 1)[0].tobytes()

@@ -44,7 +44,7 @@ from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.links import LinkTransforms
-from iceskate_sim.recording.messages import Events, SampleMessages
+from iceskate_sim.recording.messages import SampleMessages
 from iceskate_sim.ros.effort_cdr import CommandDecoder
 from iceskate_sim.run.session import Session
 
@@ -94,7 +94,7 @@ class LockstepSession:
         self._answered: set[str] = set()  # controllers with a command held (free-running)
         self._stamps: dict[str, int] = {}
         #: the state, its live sample and the latest event at it
-        self._live: tuple[HybridState, dict[str, Any], Events] | None = None
+        self._live: tuple[HybridState, tuple[int, int, int]] | None = None
 
     # ----------------------------------------------------------------------------- state
     @property
@@ -132,11 +132,8 @@ class LockstepSession:
         bag's message types, publishable raw (encoded as the bag's records are)."""
         s = self.sim.state
         if self._live is None or self._live[0] is not s:  # taken once per instant
-            live = self._inbox.live()
-            self._live = (s, live, Events.of(live['last_event'], self.sim.events))
-        _, live, events = self._live
-        return {topic: data[0] for topic, data in self.messages.encode(live, events,
-                                                                        topics).items()}
+            self._live = (s, self._inbox.live_fill())
+        return self.messages.encode_live(self._inbox, self._live[1], self.sim.events, topics)
 
     # -------------------------------------------------------------------------- commands
     def offer(self, controller: str, stamp_ns: int,
