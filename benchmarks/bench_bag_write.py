@@ -31,7 +31,7 @@ from iceskate_bringup.scene import load_scene
 from iceskate_sim.recording import bag as recording
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.links import LinkTransforms
-from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages, stamps_ns
+from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages
 from iceskate_sim.run.session import Session, scene_metadata
 
 WAYS = ('Writer.write, message by message', 'write_many, block by block')
@@ -52,7 +52,7 @@ class _Blocks:
 
 def _one_by_one(bag: recording._BagFile, block: dict, events: Events) -> None:
     """``_BagFile.write_block`` as it was: every message through ``Writer.write``."""
-    stamps = stamps_ns(block['t']).tolist()
+    stamps = block['stamps_ns'][:, 0].tolist()
     encoded = bag.messages.encode(block, events)
     columns = [(bag._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
     for k, ns in enumerate(stamps):

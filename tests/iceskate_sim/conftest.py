@@ -118,3 +118,26 @@ def make_dynamics(formulation: str, robot: Robot) -> Callable[..., GaitDynamics]
             return NativeGaitDynamics(robot, params)
         return GaitDynamics(robot, params)
     return make
+
+
+@pytest.fixture(scope='session')
+def native_blocks() -> Callable:
+    """``native_blocks(scene, periods)``: a headless run of ``scene`` on the native loop in
+    blocks of ``periods`` periods; returns (its blocks as ``Session._record_block`` takes them,
+    the event log, the session)."""
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_sim.run.session import Session
+
+    def run(scene, periods: int) -> tuple[list[dict], list, Session]:
+        session = Session(scene)
+        stack = ControlStack(scene, session.robot, session.observation())
+        blocks = []
+        record_block = session._record_block
+        session._record_block = lambda block, first: (blocks.append(block),
+                                                      record_block(block, first))
+        while not session.done:
+            session.run_periods(stack, periods)
+        assert session.error is None
+        return blocks, list(session.sim.events), session
+
+    return run

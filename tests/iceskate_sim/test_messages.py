@@ -4,11 +4,11 @@ definitions and the session's event log."""
 
 from dataclasses import replace
 import pathlib
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
 
-from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, SOLE_HEEL_Y, SOLE_TOE_Y, load_robot
@@ -21,33 +21,25 @@ from iceskate_sim.recording.messages import (
     Events,
     SampleMessages,
 )
-from iceskate_sim.run.session import Session
 
 #: a fast-stepping skate gait (test data): many events in a short window
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
 PERIODS = 600
 
 
-class Run:
-    """One native block of a short run and the session's event log."""
+class Run(NamedTuple):
+    """One native block of a short run, the session's event log and the robot."""
 
-    def __init__(self) -> None:
-        scene = replace(load_scene(FAST_SKATE), duration=PERIODS * 1e-3, record_bag=False)
-        session = Session(scene)
-        stack = ControlStack(scene, session.robot, session.observation())
-        blocks = []
-        record_block = session._record_block
-        session._record_block = lambda block, first: (blocks.append(block),
-                                                      record_block(block, first))
-        assert session.run_periods(stack, PERIODS) == PERIODS
-        (self.block,) = blocks
-        self.events = list(session.sim.events)
-        self.robot = session.robot
+    block: dict
+    events: list
+    robot: Any
 
 
 @pytest.fixture(scope='module')
-def run() -> Run:
-    return Run()
+def run(native_blocks) -> Run:
+    scene = replace(load_scene(FAST_SKATE), duration=PERIODS * 1e-3, record_bag=False)
+    (block,), events, session = native_blocks(scene, PERIODS)
+    return Run(block, events, session.robot)
 
 
 @pytest.fixture(scope='module')

@@ -31,26 +31,12 @@ BLOCK = 100  # periods per native block
 PERIODS = 2 * BLOCK + 17  # two full blocks and a partial one
 
 
-def _native_blocks(scene, periods: int = BLOCK) -> tuple[list[dict], list]:
-    """The native loop's blocks of ``scene`` (``periods`` each) and the run's event log."""
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    blocks = []
-    record_block = session._record_block
-    session._record_block = lambda block, first: (blocks.append(block),
-                                                  record_block(block, first))
-    while not session.done:
-        session.run_periods(stack, periods)
-    assert session.error is None
-    return blocks, list(session.sim.events)
-
-
 @pytest.fixture(scope='module')
-def blocks() -> list[tuple[dict, Events]]:
+def blocks(native_blocks) -> list[tuple[dict, Events]]:
     """The first periods of the stand scene (push, visual lifting, posture stabiliser) on the
     native loop, in blocks of ``BLOCK``, each with its latest events."""
     scene = replace(load_scene('stand'), duration=PERIODS * 1e-3, record_bag=False)
-    got, events = _native_blocks(scene)
+    got, events, _ = native_blocks(scene, BLOCK)
     assert [len(b['t']) for b in got] == [BLOCK, BLOCK, 17]
     return [(b, Events.of(b['last_event'], events)) for b in got]
 
@@ -163,13 +149,13 @@ def test_a_native_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp
     assert clock == [k * 1_000_000 for k in range(len(clock))]
 
 
-def test_the_native_block_holds_what_the_oracle_samples_record():
+def test_the_native_block_holds_what_the_oracle_samples_record(native_blocks):
     """The native loop's block columns of 0.6 s of skating are what the oracle's
     ``reference_samples`` record of the same run: the same modes, sides, pivots, steps,
     sources and latest transitions, values equal to the round-off the two formulations of
     eq. (7) grow over 0.6 s."""
     scene = replace(load_scene('skate'), duration=0.6, record_bag=False)
-    got, events = _native_blocks(scene, 250)
+    got, events, _ = native_blocks(scene, 250)
     b = {key: np.concatenate([block[key] for block in got])
          for key in ('t', 'q', 'v', 'qdd', 'passive', 'multipliers', 'support_normal',
                      'support_tangential', 'mode', 'side', 'pivot', 'step_index',

@@ -14,7 +14,6 @@ import pinocchio as pin
 import pytest
 from rosbags.highlevel import AnyReader
 
-from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
@@ -34,7 +33,6 @@ from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events, SampleMessages
-from iceskate_sim.run.session import Session
 
 #: a fast-stepping skate gait (test data): both support sides, flat and tipped soles
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
@@ -67,20 +65,12 @@ def _concatenated(blocks: list[dict]) -> dict:
 
 
 @pytest.fixture(scope='module')
-def run_blocks() -> tuple[list[tuple[dict, Events]], dict]:
+def run_blocks(native_blocks) -> tuple[list[tuple[dict, Events]], dict]:
     """0.6 s of the fast skate gait on the native loop, in its blocks of 250 periods (each with
     its latest events), and all their rows."""
     scene = replace(load_scene(FAST_SKATE), duration=PERIODS * 1e-3, record_bag=False)
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    blocks = []
-    record_block = session._record_block
-    session._record_block = lambda block, first: (blocks.append(block),
-                                                  record_block(block, first))
-    while not session.done:
-        session.run_periods(stack, 250)
-    assert session.error is None and session.sim.ended is None
-    events = session.sim.events
+    blocks, events, session = native_blocks(scene, 250)
+    assert session.sim.ended is None
     return ([(b, Events.of(b['last_event'], events)) for b in blocks],
             _concatenated(blocks))
 
