@@ -141,3 +141,23 @@ def native_blocks() -> Callable:
         return blocks, list(session.sim.events), session
 
     return run
+
+
+@pytest.fixture(scope='session')
+def native_loop_run() -> Callable:
+    """``native_loop_run(scene, periods)``: ``periods`` periods of ``scene``'s controllers on a
+    native loop of its own; returns (its block, the loop, the simulator)."""
+    from iceskate_bringup.composition import ControlStack
+    from iceskate_sim.run.session import Session
+
+    def run(scene, periods: int) -> tuple[dict, object, object]:
+        session = Session(scene)
+        stack = ControlStack(scene, session.robot, session.observation())
+        sim = session.sim
+        loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()),
+                                scene.pushes, session.psi_initial)
+        block, error = sim.run_loop(loop, periods)
+        assert error is None and len(block['t']) == periods
+        return block, loop, sim
+
+    return run

@@ -83,22 +83,16 @@ def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_m
     assert len(sent) == 3
 
 
-def test_the_answers_to_the_states_of_a_run_are_the_laws_commands(gait_manager):
+def test_the_answers_to_the_states_of_a_run_are_the_laws_commands(gait_manager,
+                                                                  native_loop_run):
     """States of several modes, sides and message layouts (a headless run's block of samples),
     some padded as Fast DDS may pad them: each answer is the law's command at rosbags' reading
     of the same bytes, stamped with the state's stamp."""
-    from iceskate_bringup.composition import ControlStack
     node, sent = gait_manager
     scene = load_scene('skate')
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    sim = session.sim
-    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
-                            session.psi_initial)
-    block, error = sim.run_loop(loop, 1500)
-    assert error is None
+    block, _, sim = native_loop_run(scene, 1500)
     typestore = make_typestore()
-    messages = SampleMessages(typestore, LinkTransforms(session.robot.urdf_model))
+    messages = SampleMessages(typestore, LinkTransforms(load_robot().urdf_model))
     encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
                               ('/gait_state',))['/gait_state']
     law = GaitManagerController(node_parameters(scene)['gait_manager'])

@@ -122,20 +122,12 @@ def test_observation_from_gait_state_equals_the_simulators(typestore, messages, 
 
 
 @pytest.fixture(scope='module')
-def skate_run(messages):
+def skate_run(messages, native_loop_run):
     """1.5 s of the fast skating gait: (its block of samples and their /gait_state bytes, its
     final live gait_state bytes and the simulator's observation then)."""
-    from iceskate_bringup.composition import ControlStack
     from iceskate_bringup.scene import load_scene
-    from iceskate_sim.run.session import Session
     scene = replace(load_scene(FAST_SKATE), duration=1.5)
-    session = Session(scene)
-    stack = ControlStack(scene, session.robot, session.observation())
-    sim = session.sim
-    loop = sim.control_loop(stack.kinematics, list(stack.controllers.values()), scene.pushes,
-                            session.psi_initial)
-    block, error = sim.run_loop(loop, 1500)
-    assert error is None and len(block['t']) == 1500
+    block, loop, sim = native_loop_run(scene, 1500)
     encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
                               ('/gait_state',))['/gait_state']
     live = loop.live()

@@ -491,15 +491,9 @@ Eigen::Vector3d Dynamics::frame_position(
 Placement Dynamics::frame_placement(
   const Contact & contact, const Vector18 & q, const std::string & frame)
 {
-  const SupportModel & support = support_model(contact.side, contact.pivot);
-  const pinocchio::Model & model = support.model.pin();
-  Workspace & w = *work_;
-  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
-  w.q = q;
-  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
-  const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(
-    model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)));
-  return {placement.translation(), placement.rotation()};
+  std::vector<Placement> placements;
+  frame_placements(contact, q, {frame}, placements);
+  return placements[0];
 }
 
 void Dynamics::frame_placements(
