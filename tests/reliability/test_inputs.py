@@ -158,3 +158,25 @@ def test_node_parameter_files_take_yaml_1_2_exponents(tmp_path, ros_env):
     assert result.returncode == 1
     assert result.stderr.strip().endswith(f'cannot read scene {tmp_path / "missing.yaml"}: '
                                           'No such file or directory'), result.stderr
+
+
+@pytest.mark.ros
+def test_a_controller_named_without_its_sources_gets_one_source_named_like_it(tmp_path,
+                                                                             ros_env):
+    """``controllers:=[..., my_ctrl]`` without ``sources.my_ctrl``: my_ctrl answers as its one
+    source (the documented default); with nobody running it, the run ends naming it, its bag
+    closed and readable."""
+    pytest.importorskip('rclpy')
+    from rosbags.highlevel import AnyReader
+    out = tmp_path / 'out'
+    scene = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
+    result = subprocess.run(
+        [sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
+         '-p', f'scene:={scene}', '-p', f'out_dir:={out}', '-p', f'record_bag:={out / "bag"}',
+         '-p', 'controllers:=[my_ctrl]', '-p', 'startup_timeout:=1.0'],
+        env=ros_env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1, result.stderr
+    assert "controller node(s) ['my_ctrl'] not up within 1.0 s" in result.stderr, result.stderr
+    assert 'Traceback' not in result.stderr
+    with AnyReader([out / 'bag']) as reader:
+        assert {c.topic for c in reader.connections} >= {'/robot_description', '/gait_state'}

@@ -135,8 +135,11 @@ class SimulatorNode(Node):
             names = list(scene.inputs)
         out = {}
         for name in names:
-            sources = (self.get_parameter(f'sources.{name}').value
-                       if self.has_parameter(f'sources.{name}') else None)
+            try:
+                sources = (self.get_parameter(f'sources.{name}').value
+                           if self.has_parameter(f'sources.{name}') else None)
+            except ParameterUninitializedException:  # declared for `controllers`, not given
+                sources = None
             out[name] = tuple(sources or (name,))
         return out
 
