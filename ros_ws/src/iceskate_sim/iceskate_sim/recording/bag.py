@@ -23,16 +23,14 @@ import queue
 import signal
 from typing import Any
 
-from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys.store import Typestore
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import Robot, load_robot
-from iceskate_sim.recording.bag_bulk import write_many
 from iceskate_sim.recording.bag_types import OFFERED_QOS, make_typestore
 from iceskate_sim.recording.links import LinkTransforms
+from iceskate_sim.recording.mcap_bag import Bag
 from iceskate_sim.recording.messages import (
-    RECORDED_TOPICS,
     TOPICS,
     Events,
     SampleMessages,
@@ -46,39 +44,27 @@ Batch = tuple[dict[str, Any], Events]
 
 
 class _BagFile:
-    """The open MCAP bag: metadata, connections and the URDF written; encodes blocks."""
+    """The open bag: metadata, topics and the URDF written; encodes blocks."""
 
     def __init__(self, path: pathlib.Path, metadata: dict[str, Any], urdf: str,
                  messages: SampleMessages) -> None:
         self.messages = messages
-        self._writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
-        self._writer.open()
-        for key, value in metadata.items():
-            self._writer.set_custom_data(key, value if isinstance(value, str)
-                                         else json.dumps(value, sort_keys=True))
-        self._writer.set_custom_data('project_version', PROJECT_VERSION)
-        self._connections = {
-            topic: self._writer.add_connection(
-                topic, msgtype, typestore=messages.typestore,
-                offered_qos_profiles=OFFERED_QOS.get(topic, ()))
-            for topic, msgtype in TOPICS.items()}
-        self._writer.write(self._connections['/robot_description'], 0,
-                           messages.description(urdf))
+        custom = {key: value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+                  for key, value in metadata.items()}
+        self._bag: Bag | None = Bag(path, TOPICS, messages.typestore, OFFERED_QOS,
+                                    {**custom, 'project_version': PROJECT_VERSION})
+        self._bag.write('/robot_description', 0, messages.description(urdf))
 
     def write_block(self, block: dict[str, Any], events: Events) -> None:
-        """Write the messages of a block of samples, sample by sample, in one go
-        (``bag_bulk.write_many``)."""
-        stamps = block['stamps_ns'][:, 0].tolist()
-        encoded = self.messages.encode(block, events)
-        columns = [(self._connections[topic], encoded[topic]) for topic in RECORDED_TOPICS]
-        write_many(self._writer, [(connection, ns, column[k]) for k, ns in enumerate(stamps)
-                                  for connection, column in columns])
+        """Write the messages of a block of samples, sample by sample, in one go."""
+        self._bag.write_instants(block['stamps_ns'][:, 0].tolist(),
+                                 self.messages.encode(block, events))
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
+        if self._bag is not None:
+            self._bag.close()
+            self._bag = None
 
 
 def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,

@@ -17,14 +17,6 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rosbags.interfaces import (
-    Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
-)
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 if TYPE_CHECKING:
@@ -37,14 +29,16 @@ __all__ = ['INTERFACES_PACKAGE', 'OFFERED_QOS', 'PASSIVE', 'find_msg_dir', 'make
 INTERFACES_PACKAGE = 'iceskate_interfaces'
 #: Source name of the joint damping and soft-stop torques in JointDynamics.source_names.
 PASSIVE = 'passive'
-#: The QoS a topic is offered with where it differs from a plain reliable one: the URDF is
-#: latched (reliable, transient local, depth 1). The simulator node publishes it so and the bag
-#: says so, so that ``ros2 bag play`` and Foxglove hand it to late subscribers. Durations 0:
-#: the middleware's defaults.
-_DEFAULT_TIME = QosTime(0, 0)
-OFFERED_QOS = {'/robot_description': (Qos(
-    QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
-    _DEFAULT_TIME, _DEFAULT_TIME, QosLiveliness.AUTOMATIC, _DEFAULT_TIME, False),)}
+#: The QoS a topic is offered with where it differs from a plain reliable one, in rosbag2's
+#: metadata form: the URDF is latched (reliable, transient local, depth 1). The simulator node
+#: publishes it so and the bag says so, so that ``ros2 bag play`` and Foxglove hand it to late
+#: subscribers. Durations 0: the middleware's defaults.
+OFFERED_QOS = {'/robot_description': [{
+    'history': 'keep_last', 'depth': 1, 'reliability': 'reliable',
+    'durability': 'transient_local', 'deadline': {'sec': 0, 'nsec': 0},
+    'lifespan': {'sec': 0, 'nsec': 0}, 'liveliness': 'automatic',
+    'liveliness_lease_duration': {'sec': 0, 'nsec': 0},
+    'avoid_ros_namespace_conventions': False}]}
 
 # ros_ws/src/iceskate_sim/iceskate_sim/recording/bag_types.py -> ros_ws/src/interfaces/msg
 # (resolve() follows colcon's --symlink-install links back to the source tree).

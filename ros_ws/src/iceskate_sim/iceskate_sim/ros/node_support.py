@@ -46,7 +46,6 @@ from rclpy.qos import (
     QoSProfile,
     ReliabilityPolicy,
 )
-from rosbags.interfaces import Qos
 import yaml
 
 from iceskate_sim.errors import SimulationError
@@ -72,12 +71,12 @@ STATE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 LOCKSTEP_READER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                                  durability=DurabilityPolicy.VOLATILE)
 
-def _profile(qos: Qos) -> QoSProfile:
-    """rclpy's profile of a bag's QoS (their policies share the rmw numbers)."""
-    return QoSProfile(history=HistoryPolicy(qos.history.value), depth=qos.depth,
-                      reliability=ReliabilityPolicy(qos.reliability.value),
-                      durability=DurabilityPolicy(qos.durability.value),
-                      liveliness=LivelinessPolicy(qos.liveliness.value))
+def _profile(qos: dict[str, Any]) -> QoSProfile:
+    """rclpy's profile of a QoS in rosbag2's metadata form (the same policy names)."""
+    return QoSProfile(history=HistoryPolicy[qos['history'].upper()], depth=qos['depth'],
+                      reliability=ReliabilityPolicy[qos['reliability'].upper()],
+                      durability=DurabilityPolicy[qos['durability'].upper()],
+                      liveliness=LivelinessPolicy[qos['liveliness'].upper()])
 
 
 #: /robot_description: latched, as the bag records it (``bag_types.OFFERED_QOS``).
