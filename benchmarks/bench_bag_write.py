@@ -32,7 +32,6 @@ from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.recording import bag as recording
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import RECORDED_TOPICS, TOPICS, Events, SampleMessages
 from iceskate_sim.run.session import Session, scene_metadata
 
@@ -105,7 +104,7 @@ def main() -> None:
         session.run_periods(stack, 1000)
     session.finish()
     samples = sum(len(block['t']) for block, _ in recorder.blocks)
-    messages = SampleMessages(make_typestore(), LinkTransforms(session.robot.urdf_model))
+    messages = SampleMessages(make_typestore(), session.robot.tf_frames)
     for block, events in recorder.blocks:  # the layouts of every message, as in a writer
         messages.encode(block, events)
     times: dict[str, list[float]] = {way: [] for way in WAYS}

@@ -38,9 +38,9 @@ from iceskate_sim.model.robot import (
 )
 from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag import BagRecorder
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events
 from oracle.dynamics import GaitDynamics
+from oracle.tf import tf_rows
 
 #: A tiny version of the skate scene: ice, visual lifting, posture and the torso-yaw input.
 TINY_SKATE = {
@@ -118,9 +118,8 @@ def _synthetic_state(k: int, yaw: bool) -> tuple[float, int, ContactState, np.nd
 def synthetic_block(robot, yaw: bool) -> dict:
     """The synthetic samples as the native loop's block of samples (``ControlLoop.run``'s
     columns): dynamics by ``GaitDynamics.evaluate``, the head-top placement by its
-    ``frame_placement``, the URDF root link's world pose by Pinocchio in the support model."""
+    ``frame_placement``, the /tf rows by Pinocchio in the support model (``oracle.tf``)."""
     dyn = GaitDynamics(robot)
-    root = LinkTransforms(robot.urdf_model).root
     rows: dict[str, list] = {}
     sources = ['visual_lifting', 'yaw'] if yaw else ['visual_lifting']
     efforts = {name: [] for name in sources}
@@ -135,11 +134,6 @@ def synthetic_block(robot, yaw: bool) -> dict:
             acting['yaw'] = np.where(joints == 8, 30.0 * np.sin(20.0 * t), 0.0)
         result = dyn.evaluate(contact, q, v, np.sum(list(acting.values()), axis=0))
         head = dyn.frame_placement(contact, q, 'head_top')
-        support = robot.support_model(contact.side, contact.pivot)
-        data = support.new_data()
-        pin.forwardKinematics(support.model, data, q)
-        root_pose = pin.SE3ToXYZQUAT(pin.updateFramePlacement(support.model, data,
-                                                              support.frame_ids[root]))
         R = head.rotation
         pitch = np.arctan2(-R[1, 2], R[2, 2])
         pivot_code = 0 if not contact.mode.q1_active else 1 + PIVOTS.index(contact.pivot)
@@ -153,8 +147,8 @@ def synthetic_block(robot, yaw: bool) -> dict:
             'support_tangential': result.support_tangential, 'cop_y': result.cop_y,
             'head_position': head.translation.copy(),
             'head_orientation': pin.Quaternion(R).coeffs().copy(), 'head_pitch': pitch,
-            'root_pose': root_pose, 'head_target': (head.translation[1], head.translation[2],
-                                                    pitch),
+            'tf': tf_rows(robot, contact.side, contact.pivot, q).ravel(),
+            'head_target': (head.translation[1], head.translation[2], pitch),
             'last_event': -1, 'present': (1 << len(sources)) - 1,
             'stamps_ns': [seconds_to_ns(t), 0, 0, 0],
             'y0_active': contact.mode.y0_active, 'q1_active': contact.mode.q1_active,

@@ -30,10 +30,10 @@ from iceskate_sim.model.command import CommandValues, HeldCommand
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import PIVOTS, SIDES, Robot
 from iceskate_sim.physics.hybrid import Transition
-from iceskate_sim.physics.native import root_link
 from iceskate_sim.physics.simulation import Simulator
 from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
+from oracle.tf import tf_rows
 
 
 def _scene(name: str, duration: float, bag: bool = False, **simulator: object) -> Scene:
@@ -117,14 +117,21 @@ def test_commands_held_one_period_at_a_time_equal_the_session_stepped(
 
 
 def _placements(robot: Robot, side: int, pivot: int, q: np.ndarray) -> tuple[pin.SE3, np.ndarray]:
-    """Python's head-top placement and root link pose (x, y, z, qx, qy, qz, qw) in the support
-    model of side and pivot (indices) at q."""
+    """Python's head-top placement and /tf rows (``oracle.tf``) in the support model of side and
+    pivot (indices) at q."""
     support = robot.support_model(SIDES[side], PIVOTS[pivot])
     data = support.new_data()
     pin.forwardKinematics(support.model, data, q)
     head = pin.updateFramePlacement(support.model, data, support.frame_ids['head_top']).copy()
-    root = pin.updateFramePlacement(support.model, data, support.frame_ids[root_link(robot)])
-    return head, pin.SE3ToXYZQUAT(root)
+    return head, tf_rows(robot, SIDES[side], PIVOTS[pivot], q)
+
+
+def _assert_tf(row: np.ndarray, expected: np.ndarray) -> None:
+    """A sample's /tf rows against ``oracle.tf``'s: the root link's world pose the same
+    numbers, the joints' transforms to rounding (SE3 composed in another order)."""
+    row = row.reshape(expected.shape)
+    assert np.array_equal(row[0], expected[0])
+    np.testing.assert_allclose(row, expected, rtol=0.0, atol=1e-14)
 
 
 def _assert_head(row: dict, k: int, head: pin.SE3) -> None:
@@ -134,7 +141,7 @@ def _assert_head(row: dict, k: int, head: pin.SE3) -> None:
     assert row['head_pitch'][k] == np.arctan2(-rotation[1, 2], rotation[2, 2])
 
 
-def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_root_pose() -> None:
+def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_tf() -> None:
     scene = _scene('skate', 2.5)  # toe and heel pivots, support exchanges
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
@@ -146,11 +153,11 @@ def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_root_pos
     assert error is None and n == session.n_periods
     for key, shape, dtype in [('head_orientation', (n, 4), np.float64),
                               ('head_pitch', (n,), np.float64), ('pivot_code', (n,), np.int32),
-                              ('root_pose', (n, 7), np.float64)]:
+                              ('tf', (n, 7 * len(session.robot.tf_frames)), np.float64)]:
         assert (block[key].shape, block[key].dtype) == (shape, dtype), key
     assert 'head_rotation' not in block
     robot = session.robot
-    assert root_link(robot) == 'pelvis'  # the URDF's root link
+    assert robot.tf_frames[0] == ('world', 'pelvis')  # the URDF's root link
     codes = block['pivot_code']
     assert set(codes.tolist()) == {0, 1, 2}
     # the head is observed before the transitions due at t_k, the sample's state after them
@@ -159,8 +166,8 @@ def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_root_pos
             *(int(np.flatnonzero(codes == code)[0]) for code in (0, 1, 2))}
     for k in sorted(rows):
         side, pivot, mode = int(block['side'][k]), int(block['pivot'][k]), int(block['mode'][k])
-        head, root = _placements(robot, side, pivot, block['q'][k])
-        assert np.array_equal(block['root_pose'][k], root), k
+        head, tf = _placements(robot, side, pivot, block['q'][k])
+        _assert_tf(block['tf'][k], tf)
         assert codes[k] == (pivot + 1 if MODES[mode].q1_active else 0), k
         if not transition_at[k]:
             _assert_head(block, k, head)
@@ -202,10 +209,10 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
                 assert np.array_equal(live[key][0], expected, equal_nan=True), key
             held = HeldCommand.of_controllers(commands.values()).torque(state.q, state.v)
             assert live['sources'] == ['held'] and np.array_equal(live['efforts'][0][0], held)
-            head, root = _placements(session.robot, side, pivot, state.q)
+            head, tf = _placements(session.robot, side, pivot, state.q)
             assert np.array_equal(head.translation, sim.head_placement().translation)
             _assert_head(live, 0, head)
-            assert np.array_equal(live['root_pose'][0], root)
+            _assert_tf(live['tf'][0], tf)
             last = int(live['last_event'][0])
             assert (sim.events[last] if last >= 0 else None) == _last_event_before(sim, state.t)
     assert sim.events  # transitions happened
@@ -302,7 +309,11 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
     loop = sim.control_loop(stack.kinematics, controllers, (), session.psi_initial)
     with pytest.raises(ValueError, match='number of periods must be >= 0'):
         loop._kernel.run(-1)
-    with pytest.raises(ValueError, match="unknown frame 'nose'"):  # a root link it lacks
+    for pairs in ([('world', 'nose')], [('nose', 'pelvis')]):  # a link it lacks
+        with pytest.raises(ValueError, match="unknown frame 'nose'"):
+            iceskate_native.ControlLoop(loop._periods._kernel, None, [], [],
+                                        session.psi_initial, pairs)
+    with pytest.raises(ValueError, match="child must be a link, not the world"):
         iceskate_native.ControlLoop(loop._periods._kernel, None, [], [], session.psi_initial,
-                                    'nose')
+                                    [('pelvis', 'world')])
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)

@@ -19,7 +19,6 @@ from iceskate_sim.model.robot import load_robot  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.physics.native_control import native_command, native_kinematics  # noqa: E402
 from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
-from iceskate_sim.recording.links import LinkTransforms  # noqa: E402
 from iceskate_sim.recording.messages import Events, SampleMessages  # noqa: E402
 from iceskate_sim.ros.effort_cdr import CommandDecoder  # noqa: E402
 from iceskate_sim.ros.lockstep import LockstepSession  # noqa: E402
@@ -92,7 +91,7 @@ def test_the_answers_to_the_states_of_a_run_are_the_laws_commands(gait_manager,
     scene = load_scene('skate')
     block, _, sim = native_loop_run(scene, 1500)
     typestore = make_typestore()
-    messages = SampleMessages(typestore, LinkTransforms(load_robot().urdf_model))
+    messages = SampleMessages(typestore, load_robot().tf_frames)
     encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
                               ('/gait_state',))['/gait_state']
     law = GaitManagerController(node_parameters(scene)['gait_manager'])

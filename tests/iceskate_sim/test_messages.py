@@ -14,7 +14,6 @@ from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, SOLE_HEEL_Y, SOLE_TOE_Y, load_robot
 from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import (
     RECORDED_TOPICS,
     TOPICS,
@@ -48,8 +47,9 @@ def typestore():
 
 
 @pytest.fixture(scope='module')
-def links(run) -> LinkTransforms:
-    return LinkTransforms(run.robot.urdf_model)
+def links(run) -> list[tuple[str, str]]:
+    """The /tf frame pairs."""
+    return run.robot.tf_frames
 
 
 def _messages(typestore, links, block, events) -> dict[str, list]:
@@ -68,12 +68,12 @@ def _equal(a, b) -> bool:
     return np.array_equal(np.asarray(a, dtype=float), np.asarray(b, dtype=float), equal_nan=True)
 
 
-def _check(block: dict, events: list, messages: dict[str, list], links: LinkTransforms) -> None:
+def _check(block: dict, events: list, messages: dict[str, list], links: list) -> None:
     """Every field of every message of ``block`` against its columns."""
     names = list(COORDINATE_NAMES)
     rows = len(block['t'])
     assert all(len(messages[topic]) == rows for topic in RECORDED_TOPICS)
-    tf_rows = links.block_rows(block['q'], block['side'], block['root_pose'])
+    tf_rows = block['tf'].reshape(rows, len(links), 7)
     for k in range(rows):
         stamp = _stamp(block['t'][k])
         mode = MODES[int(block['mode'][k])]
@@ -138,15 +138,11 @@ def _check(block: dict, events: list, messages: dict[str, list], links: LinkTran
                       [*(block['efforts'][i][k] for i in acting), block['passive'][k]])
 
         tf = messages['/tf'][k]
-        assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == links.frames
+        assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == links
         for t, row in zip(tf.transforms, tf_rows[k], strict=True):
             assert (t.header.stamp.sec, t.header.stamp.nanosec) == stamp
             x, r = t.transform.translation, t.transform.rotation
             assert _equal([x.x, x.y, x.z, r.x, r.y, r.z, r.w], row)
-        root = tf.transforms[0].transform
-        assert _equal([root.translation.x, root.translation.y, root.translation.z,
-                       root.rotation.x, root.rotation.y, root.rotation.z, root.rotation.w],
-                      block['root_pose'][k])
 
 
 def test_the_run_covers_the_cases(run):

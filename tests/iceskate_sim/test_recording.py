@@ -74,7 +74,7 @@ def test_the_bag_holds_each_samples_messages_in_order(tmp_path, blocks):
     t = np.concatenate([b['t'] for b, _ in blocks])
     assert [(topic, stamp) for topic, stamp, _ in got[1:]] == [
         (topic, seconds_to_ns(float(time))) for time in t for topic in RECORDED_TOPICS]
-    encoder = SampleMessages(recorder.messages.typestore, recorder.messages.links)
+    encoder = SampleMessages(recorder.messages.typestore, recorder.messages.tf_frames)
     expected = []
     for block, events in blocks:
         encoded = encoder.encode(block, events)

@@ -20,7 +20,6 @@ from iceskate_sim.model.robot import COORDINATE_NAMES, PIVOTS, SIDES, load_robot
 from iceskate_sim.model.stamps import ns_to_sec_nanosec, seconds_to_ns, set_stamp
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events, SampleMessages
 from iceskate_sim.ros.conversions import command_from_message
 from oracle.messages import (
@@ -41,7 +40,7 @@ def typestore():
 
 @pytest.fixture(scope='module')
 def messages(typestore) -> SampleMessages:
-    return SampleMessages(typestore, LinkTransforms(load_robot().urdf_model))
+    return SampleMessages(typestore, load_robot().tf_frames)
 
 
 @pytest.fixture(scope='module')

@@ -1,7 +1,7 @@
 """/tf in the bags: at every sample the world pose of every URDF link, read back with the
 ``mcap`` reader (not rosbags) and checked against forward kinematics of the URDF on a free-flyer
 base placed by the support foot, not by the simulator's support-rooted models. The samples are
-the native loop's block columns (q, support side and pivot, the root link's ``root_pose``)."""
+the native loop's block columns (q, support side and pivot, and its /tf rows ``tf``)."""
 
 from dataclasses import replace
 import pathlib
@@ -15,7 +15,6 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from iceskate_bringup.scene import load_scene
-from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import (
@@ -28,11 +27,11 @@ from iceskate_sim.model.robot import (
     load_robot,
 )
 from iceskate_sim.model.stamps import seconds_to_ns
-from iceskate_sim.physics.native import root_link
+from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import Events, SampleMessages
+from iceskate_sim.run.session import Session
 
 #: a fast-stepping skate gait (test data): both support sides, flat and tipped soles
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
@@ -61,7 +60,7 @@ def _record(path: pathlib.Path, blocks: list[tuple[dict, Events]], background: b
 def _concatenated(blocks: list[dict]) -> dict:
     """One block of the rows of ``blocks`` (the columns the checks read)."""
     return {key: np.concatenate([b[key] for b in blocks])
-            for key in ('t', 'q', 'side', 'pivot', 'root_pose', 'head_position')}
+            for key in ('t', 'q', 'side', 'pivot', 'tf', 'head_position')}
 
 
 @pytest.fixture(scope='module')
@@ -76,26 +75,22 @@ def run_blocks(native_blocks) -> tuple[list[tuple[dict, Events]], dict]:
 
 
 @pytest.fixture
-def random_block(dynamics, random_state) -> dict:
+def random_block(random_state) -> dict:
     """One random state of every mode on every support side and pivot (q1 tipped where the
-    mode frees it), 1 ms apart, the root link placed by the Python support model."""
-    root = root_link(load_robot())
+    mode frees it), 1 ms apart: the native loop's live sample of each, set on its simulator."""
+    session = Session(replace(load_scene('stand'), record_bag=False))
+    loop = session.command_inbox(())
     rows = []
     for mode in MODES.values():
-        for s, side in enumerate(SIDES):
-            for p, pivot in enumerate(PIVOTS):
-                q, _ = random_state(mode)
-                contact = ContactState(mode, side, pivot)
-                placement = dynamics.frame_placement(contact, q, root)
-                head = dynamics.frame_placement(contact, q, 'head_top')
-                rows.append((q, s, p, pin.SE3ToXYZQUAT(placement), head.translation))
-    q, side, pivot, root_pose, head = (np.array(c) for c in zip(*rows, strict=True))
-    n = len(q)
-    return {'t': np.arange(n) * 1e-3, 't_exchange': np.zeros(n),
-            't_touchdown': np.full(n, np.nan), 'q': q, 'side': side, 'pivot': pivot,
-            'root_pose': root_pose, 'head_position': head,
-            'last_event': np.full(n, -1, dtype=np.int64),
-            'stamps_ns': np.column_stack([np.arange(n) * 1_000_000, np.zeros((n, 3), np.int64)])}
+        for side in SIDES:
+            for pivot in PIVOTS:
+                q, v = random_state(mode)
+                session.sim.set_state(HybridState(len(rows) * 1e-3, q, v,
+                                                  ContactState(mode, side, pivot)))
+                rows.append(loop.live())
+    return {key: np.concatenate([row[key] for row in rows])
+            for key in ('t', 'q', 'side', 'pivot', 'tf', 'head_position', 'last_event',
+                        'stamps_ns')}
 
 
 def _decoded(bag: pathlib.Path) -> list[tuple[int, object]]:
@@ -186,7 +181,7 @@ def test_tf_of_a_run_places_every_link_as_urdf_kinematics_does(tmp_path, run_blo
 def test_tf_of_every_mode_side_and_pivot(robot, random_block):
     """The /tf bytes of the encoder, decoded by rosbags, over every contact."""
     typestore = make_typestore()
-    encoded = SampleMessages(typestore, LinkTransforms(robot.urdf_model)).encode(
+    encoded = SampleMessages(typestore, robot.tf_frames).encode(
         random_block, Events.of(random_block['last_event'], []), topics=('/tf',))
     assert list(encoded) == ['/tf']
     messages = [typestore.deserialize_cdr(data, 'tf2_msgs/msg/TFMessage')
@@ -196,22 +191,16 @@ def test_tf_of_every_mode_side_and_pivot(robot, random_block):
                zip(random_block['t'], messages, strict=True)], random_block)
 
 
-def test_block_rows_of_a_row_and_of_the_block_agree(robot, random_block):
-    """``block_rows`` of the whole block (rows of both sides at once) is its rows' one by one;
-    a row's constant transforms do not depend on q, its revolute ones turn with q."""
-    links = LinkTransforms(robot.urdf_model)
-    b = random_block
-    rows = links.block_rows(b['q'], b['side'], b['root_pose'])
-    assert rows.shape == (len(b['q']), len(links.frames), 7)
-    for k in range(len(b['q'])):
-        one = links.block_rows(b['q'][k:k + 1], b['side'][k:k + 1], b['root_pose'][k:k + 1])
-        np.testing.assert_array_equal(one[0], rows[k])
-    np.testing.assert_array_equal(rows[:, 0], b['root_pose'])
-    moving = np.ptp(rows[:, 1:], axis=0).max(axis=1) > 0
+def test_only_the_revolute_joints_move(robot, random_block):
+    """Over states of every contact, a fixed joint's transform stays (to rounding) and a
+    revolute one's turns; the root link's world pose is the first row."""
+    rows = random_block['tf'].reshape(len(random_block['t']), -1, 7)
+    assert rows.shape[1] == len(robot.tf_frames) and robot.tf_frames[0] == ('world', 'pelvis')
+    moving = np.ptp(rows[:, 1:], axis=0).max(axis=1) > 1e-12
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
     revolute = {(j.find('parent').get('link'), j.find('child').get('link'))
                 for j in ET.fromstring(urdf).iter('joint') if j.get('type') == 'revolute'}
-    assert {pair for pair, m in zip(links.frames[1:], moving, strict=True) if m} == revolute
+    assert {pair for pair, m in zip(robot.tf_frames[1:], moving, strict=True) if m} == revolute
 
 
 def test_the_bag_opens_with_rosbags_and_lists_tf(tmp_path, run_blocks):
@@ -232,10 +221,3 @@ def test_the_bag_opens_with_rosbags_and_lists_tf(tmp_path, run_blocks):
     assert messages[0].transforms[0].header.frame_id == 'world'
 
 
-def test_a_joint_neither_revolute_nor_fixed_is_refused(tmp_path):
-    urdf = load_robot().urdf_path.read_text(encoding='utf-8')
-    path = tmp_path / 'prismatic.urdf'
-    path.write_text(urdf.replace('<joint name="torso_yaw" type="revolute">',
-                                 '<joint name="torso_yaw" type="prismatic">'), encoding='utf-8')
-    with pytest.raises(SimulationError, match='torso_yaw .* neither revolute nor fixed'):
-        LinkTransforms(load_robot(str(path)).urdf_model)

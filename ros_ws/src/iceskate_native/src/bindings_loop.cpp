@@ -18,6 +18,7 @@
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/pair.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
@@ -68,7 +69,8 @@ using PushRow = std::tuple<double, double, std::string, Eigen::VectorXd>;
 void construct_loop(
   BoundControlLoop * self, nb::object simulator, nb::object kinematics,
   std::vector<nb::object> controllers, const std::vector<PushRow> & pushes,
-  const Eigen::Ref<const Eigen::VectorXd> & head_origin, const std::string & root_link,
+  const Eigen::Ref<const Eigen::VectorXd> & head_origin,
+  const std::vector<std::pair<std::string, std::string>> & tf_pairs,
   const std::vector<std::vector<std::string>> & inbox)
 {
   HybridSimulator & sim = native_object<HybridSimulator>(simulator, "the simulator");
@@ -91,7 +93,7 @@ void construct_loop(
   }
   new (self) BoundControlLoop{
     std::move(simulator), std::move(kinematics), std::move(controllers),
-    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin, root_link),
+    ControlLoop(sim, kin, std::move(laws), std::move(rows), head_origin, tf_pairs),
     SampleBlock{}, SampleBlock{}, std::move(slots), std::vector<bool>(inbox.size(), false), {}};
 }
 
@@ -203,7 +205,7 @@ nb::dict block_arrays(SampleBlock & b)
   out["head_position"] = array_of(std::move(b.head_position), {n, 3});
   out["head_orientation"] = array_of(std::move(b.head_orientation), {n, 4});
   out["head_pitch"] = array_of(std::move(b.head_pitch), {n});
-  out["root_pose"] = array_of(std::move(b.root_pose), {n, 7});
+  out["tf"] = array_of(std::move(b.tf), {n, 7 * b.tf_pairs});
   out["head_target"] = array_of(std::move(b.head_target), {n, 3});
   out["last_event"] = array_of(std::move(b.last_event), {n});
   out["stamps_ns"] = array_of(std::move(b.stamps_ns), {n, 4});
@@ -288,12 +290,13 @@ void bind_control_loop(nb::module_ & m)
     "keeps the simulator, kinematics and controllers alive.")
     .def(
       "__init__", &construct_loop, "simulator"_a, "kinematics"_a.none(), "controllers"_a,
-      "pushes"_a, "head_origin"_a, "root_link"_a,
+      "pushes"_a, "head_origin"_a, "tf_pairs"_a,
       "inbox"_a = std::vector<std::vector<std::string>>{},
       "simulator: a HybridSimulator; kinematics: a Kinematics (None without controllers); "
       "controllers: Controller objects; pushes: [(start [s], duration [s], frame, world force "
       "(3,) [N])]; head_origin: the head target recorded while no controller steers one; "
-      "root_link: the frame of the URDF's root link, whose world pose a sample records; "
+      "tf_pairs: the (parent, child) link frames whose /tf transform a sample records, parent "
+      "'world' for the world frame; "
       "inbox: the source names of each controller node whose commands come through receive(), "
       "in summing order.")
     .def(
@@ -346,8 +349,8 @@ void bind_control_loop(nb::module_ & m)
       "step_index (n,) int32; q, v, qdd, passive, applied (n, 18); multipliers (n, 3); "
       "support_normal, support_tangential, cop_y (n,); head_position (n, 3) [m], "
       "head_orientation (n, 4) quaternion x, y, z, w, head_pitch (n,) [rad]: the head top "
-      "observed at t_k; root_pose (n, 7): the URDF root link's world x, y, z [m], qx, qy, qz, "
-      "qw; head_target (n, 3); last_event (n,) int64 (index in the event log, -1: none), "
+      "observed at t_k; tf (n, 7 * pairs): per tf pair, the child's placement in its parent's "
+      "x, y, z [m], qx, qy, qz, qw; head_target (n, 3); last_event (n,) int64 (index in the event log, -1: none), "
       "stamps_ns (n, 4) int64: t, t_exchange, t_touchdown (0 before it) and the latest "
       "transition's t (0: none) in whole nanoseconds, "
       "present (n,) uint64 (bit i: source i answered), sources (names), efforts (one (n, 18) "

@@ -1,5 +1,6 @@
 #include "iceskate_native/control_loop.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
@@ -65,7 +66,7 @@ void SampleBlock::clear()
   count = 0;
   for (auto * column : {&t, &t_exchange, &t_touchdown, &heel_anchor_y, &q, &v, &qdd, &passive,
                         &applied, &multipliers, &support_normal, &support_tangential, &cop_y,
-                        &head_position, &head_orientation, &head_pitch, &root_pose,
+                        &head_position, &head_orientation, &head_pitch, &tf,
                         &head_target}) {
     column->clear();
   }
@@ -86,14 +87,15 @@ void SampleBlock::clear()
 
 ControlLoop::ControlLoop(
   HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
-  std::vector<Push> pushes, const Eigen::Vector3d & head_origin, const std::string & root_link)
+  std::vector<Push> pushes, const Eigen::Vector3d & head_origin,
+  const std::vector<std::pair<std::string, std::string>> & tf_pairs)
 : simulator_(simulator),
   kinematics_(kinematics),
   controllers_(std::move(controllers)),
   pushes_(std::move(pushes)),
   head_origin_(head_origin),
   held_target_(head_origin),
-  frames_{"head_top", root_link},
+  frames_{"head_top"},
   outputs_(controllers_.size())
 {
   for (const Controller * controller : controllers_) {
@@ -113,8 +115,26 @@ ControlLoop::ControlLoop(
   if (!head_origin_.allFinite()) {
     throw std::invalid_argument("the head origin must be finite");
   }
-  for (int k = 0; k < 4; ++k) {  // invalid_argument if a support model lacks the root link
-    simulator_.dynamics().support_model(k / 2, k % 2).frame(root_link);
+  const auto frame_index = [this](const std::string & name) {
+    if (name == "world") {
+      return 0;  // placements_[0] is the head's; a world parent is the identity (sample())
+    }
+    for (int k = 0; k < 4; ++k) {  // invalid_argument if a support model lacks the frame
+      simulator_.dynamics().support_model(k / 2, k % 2).frame(name);
+    }
+    const auto found = std::find(frames_.begin() + 1, frames_.end(), name);
+    if (found != frames_.end()) {
+      return static_cast<int>(found - frames_.begin());
+    }
+    frames_.push_back(name);
+    return static_cast<int>(frames_.size()) - 1;
+  };
+  for (const auto & [parent, child] : tf_pairs) {
+    if (child == "world") {
+      throw std::invalid_argument("a /tf pair's child must be a link, not the world");
+    }
+    const int parent_index = frame_index(parent);
+    tf_.emplace_back(parent_index, frame_index(child));
   }
 }
 
@@ -190,7 +210,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
 {
   Dynamics & dynamics = simulator_.dynamics();
   const HybridState & now = simulator_.state();
-  // the head observed at t_k and the root link at the sample's state, in one pass unless a
+  // the head observed at t_k and the /tf links at the sample's state, in one pass unless a
   // transition due at t_k changes the support or q (below)
   dynamics.frame_placements(now.contact, now.q, frames_, placements_);
   const int observed_side = now.contact.side;
@@ -260,15 +280,17 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   }
   block.present.push_back(present);
   if (s.contact.side != observed_side || s.contact.pivot != observed_pivot
-      || s.q != observed_q) {  // moved at t_k: the root link where the sample's state has it
-    placements_[1] = dynamics.frame_placement(s.contact, s.q, frames_[1]);
+      || s.q != observed_q) {  // moved at t_k: the links where the sample's state has them
+    const Placement head = placements_[0];
+    dynamics.frame_placements(s.contact, s.q, frames_, placements_);
+    placements_[0] = head;
   }
-  sample(block, s, r, placements_[0], placements_[1], held_target_);
+  sample(block, s, r, placements_[0], held_target_);
 }
 
 void ControlLoop::sample(
   SampleBlock & block, const HybridState & s, const DynamicsResult & r, const Placement & head,
-  const Placement & root, const Eigen::Vector3d & target) const
+  const Eigen::Vector3d & target) const
 {
   const Mode & mode = simulator_.dynamics().mode(s.contact.mode);
   const bool q1_active = mode.q1_active;
@@ -294,8 +316,18 @@ void ControlLoop::sample(
   append(block.head_position, head.translation);
   append(block.head_orientation, Eigen::Quaterniond(rotation).coeffs());
   block.head_pitch.push_back(std::atan2(-rotation(1, 2), rotation(2, 2)));
-  append(block.root_pose, root.translation);
-  append(block.root_pose, Eigen::Quaterniond(root.rotation).coeffs());
+  block.tf_pairs = tf_.size();
+  for (const auto & [parent, child] : tf_) {
+    const Placement & c = placements_[static_cast<std::size_t>(child)];
+    if (parent == 0) {
+      append(block.tf, c.translation);
+      append(block.tf, Eigen::Quaterniond(c.rotation).coeffs());
+      continue;
+    }
+    const Placement & p = placements_[static_cast<std::size_t>(parent)];
+    append(block.tf, (p.rotation.transpose() * (c.translation - p.translation)).eval());
+    append(block.tf, Eigen::Quaterniond(p.rotation.transpose() * c.rotation).coeffs());
+  }
   append(block.head_target, target);
   const long last = last_event_at(simulator_.events(), s.t);
   block.last_event.push_back(last);
@@ -337,7 +369,7 @@ void ControlLoop::live(SampleBlock & block)
   block.efforts.assign(1, std::vector<double>(tau.data(), tau.data() + kCoordinates));
   block.present.push_back(1);
   simulator_.dynamics().frame_placements(s.contact, s.q, frames_, placements_);
-  sample(block, s, simulator_.result(), placements_[0], placements_[1], held_target_);
+  sample(block, s, simulator_.result(), placements_[0], held_target_);
 }
 
 Column column_of(const SampleBlock & block, const std::string & name)
@@ -372,7 +404,7 @@ Column column_of(const SampleBlock & block, const std::string & name)
   if (name == "head_position") return reals(block.head_position, 3);
   if (name == "head_orientation") return reals(block.head_orientation, 4);
   if (name == "head_pitch") return reals(block.head_pitch, 1);
-  if (name == "root_pose") return reals(block.root_pose, 7);
+  if (name == "tf") return reals(block.tf, 7 * block.tf_pairs);
   if (name == "head_target") return reals(block.head_target, 3);
   if (name == "last_event") {
     static_assert(sizeof(long) == sizeof(std::int64_t), "last_event is read as int64");

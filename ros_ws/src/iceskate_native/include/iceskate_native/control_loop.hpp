@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -49,8 +50,8 @@ struct ReceivedCommand
 /// The samples of consecutive control instants, column by column (row-major per sample). A
 /// sample holds the state at t_k after the transitions due then, its dynamics under the
 /// commands held over the period, each source's generalized force at the observed state, the
-/// head-top placement observed at t_k, the world placement of the URDF's root link at the
-/// sample's state and the head target steered to.
+/// head-top placement observed at t_k, the /tf transforms of the URDF's links at the sample's
+/// state and the head target steered to.
 struct SampleBlock
 {
   int count = 0;
@@ -64,7 +65,10 @@ struct SampleBlock
   std::vector<double> head_position;     ///< 3 per sample [m]
   std::vector<double> head_orientation;  ///< quaternion x, y, z, w (Eigen's coeffs())
   std::vector<double> head_pitch;        ///< atan2(-R(1,2), R(2,2)) [rad] of its rotation R
-  std::vector<double> root_pose;         ///< x, y, z [m], qx, qy, qz, qw
+  /// 7 per /tf pair per sample: the child link's placement in its parent's (or the world's):
+  /// x, y, z [m], qx, qy, qz, qw.
+  std::vector<double> tf;
+  std::size_t tf_pairs = 0;  ///< the /tf pairs of a sample
   std::vector<double> head_target;       ///< psi_d: y [m], z [m], pitch [rad]
   /// Index in the simulator's event log of the latest transition at or before t_k; -1: none.
   std::vector<long> last_event;
@@ -99,11 +103,12 @@ class ControlLoop
 {
 public:
   /// head_origin: the head target recorded while no controller steers one (psi at t = 0);
-  /// root_link: the frame of the URDF's root link in the support models (std::invalid_argument
-  /// if one lacks it).
+  /// tf_pairs: the (parent, child) link frames of /tf, parent "world" for the world frame
+  /// (std::invalid_argument if a support model lacks a frame).
   ControlLoop(
     HybridSimulator & simulator, Kinematics * kinematics, std::vector<Controller *> controllers,
-    std::vector<Push> pushes, const Eigen::Vector3d & head_origin, const std::string & root_link);
+    std::vector<Push> pushes, const Eigen::Vector3d & head_origin,
+    const std::vector<std::pair<std::string, std::string>> & tf_pairs);
 
   /// Up to `periods` control periods into `block` (cleared first); returns the samples taken.
   /// It stops after a period in which the run ended physically (HybridSimulator::ended), and
@@ -134,10 +139,11 @@ private:
   void period(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
   std::size_t source_index(SampleBlock & block, const std::string & name);
   /// Append a sample but its efforts and `present` to `block`: the state `s`, its dynamics
-  /// `r`, the head-top and root link placements and the head target.
+  /// `r`, the head-top placement, the /tf transforms of the link placements (placements_ from
+  /// 1 on) and the head target.
   void sample(
     SampleBlock & block, const HybridState & s, const DynamicsResult & r, const Placement & head,
-    const Placement & root, const Eigen::Vector3d & target) const;
+    const Eigen::Vector3d & target) const;
 
   HybridSimulator & simulator_;
   Kinematics * kinematics_;
@@ -145,8 +151,9 @@ private:
   std::vector<Push> pushes_;
   Eigen::Vector3d head_origin_;
   Eigen::Vector3d held_target_;            // the head target of the last period
-  std::vector<std::string> frames_;        // head_top and the root link: a sample's placements
+  std::vector<std::string> frames_;        // head_top, then the /tf links: a sample's placements
   std::vector<Placement> placements_;      // theirs, reused
+  std::vector<std::pair<int, int>> tf_;    // /tf pairs: indices in frames_ (parent 0: world)
   std::vector<ControllerOutput> outputs_;  // one per controller, reused
   std::vector<ReceivedCommand> commands_;  // their commands as a node would send them
   std::exception_ptr error_;

@@ -113,9 +113,10 @@ class SupportModel:
     """A Pinocchio model of the robot rooted at one support foot with one pivot edge.
 
     ``model`` has 18 one-dof joints in Table-2 order (nq = nv = 18). Frames: ``head_top``,
-    ``swing_heel``, ``swing_toe``, ``support_heel``, ``support_toe``, ``pelvis`` (pelvis
-    centre) and one body frame per anatomical link (``right_shank``, ...), at the URDF link
-    origin, so that the same physical frame exists in every support model.
+    ``swing_heel``, ``swing_toe``, ``support_heel``, ``support_toe`` (also by their URDF link
+    names, ``right_heel``, ...), ``pelvis_centre`` and one body frame per anatomical link
+    (``right_shank``, ...), at the URDF link origin, so that the same physical frame exists in
+    every support model.
     """
 
     side: str
@@ -137,6 +138,18 @@ class Robot:
     models: dict[tuple[str, str], SupportModel]
     damping: np.ndarray  # N m s/rad per Table-2 coordinate (y0: 0), shape (18,)
     total_mass: float  # kg
+
+    @property
+    def tf_frames(self) -> list[tuple[str, str]]:
+        """The (parent, child) frames of /tf in robot_state_publisher's layout: ``world`` -> the
+        URDF's root link (the link on its universe frame), then parent link -> child link of
+        each URDF joint (the fixed ones too), in the URDF model's frame order."""
+        frames = self.urdf_model.frames
+        child_of = {f.parentFrame: f.name for f in frames if f.type == pin.FrameType.BODY}
+        joints = (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
+        return [('world', child_of[0]), *((frames[f.parentFrame].name, child_of[k])
+                                          for k, f in enumerate(frames)
+                                          if k and f.type in joints)]
 
     def support_model(self, side: str, pivot: str) -> SupportModel:
         """Return the model rooted at the ``side`` foot pivoting about its ``pivot`` edge."""
@@ -226,10 +239,13 @@ def _build_support_model(urdf_model: pin.Model, links: dict[str, _Link],
     head = joints['neck_pitch']
     add_frame('head_top', 17, head + np.array([0.0, 0.0, 0.24]))
     swing_ankle = joints[f'{swing}_ankle_pitch']
-    for role, joint, ankle_at in (('swing', 7, swing_ankle), ('support', 1, ankle)):
-        add_frame(f'{role}_heel', joint, ankle_at + np.array([0.0, SOLE_HEEL_Y, SOLE_Z]))
-        add_frame(f'{role}_toe', joint, ankle_at + np.array([0.0, SOLE_TOE_Y, SOLE_Z]))
+    for role, foot, joint, ankle_at in (('swing', swing, 7, swing_ankle),
+                                        ('support', side, 1, ankle)):
+        for edge, y in (('heel', SOLE_HEEL_Y), ('toe', SOLE_TOE_Y)):
+            for name in (f'{role}_{edge}', f'{foot}_{edge}'):  # the URDF's sole link too
+                add_frame(name, joint, ankle_at + np.array([0.0, y, SOLE_Z]))
     frame_names = ['head_top', 'swing_heel', 'swing_toe', 'support_heel', 'support_toe',
+                   *(f'{foot}_{edge}' for foot in SIDES for edge in PIVOTS),
                    'pelvis_centre', *links]
     frame_ids = {name: model.getFrameId(name) for name in frame_names}
     return SupportModel(side, pivot, model, frame_ids)

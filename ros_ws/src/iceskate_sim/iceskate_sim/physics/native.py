@@ -16,7 +16,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import pinocchio as pin
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
@@ -56,13 +55,6 @@ def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
     models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
     frames = [dict(robot.models[key].frame_ids) for key in keys]
     return models, frames
-
-
-def root_link(robot: Robot) -> str:
-    """The URDF's root link (the link on its universe frame): a frame of every support model,
-    whose world pose the native loop records (``root_pose``)."""
-    frames = robot.urdf_model.frames
-    return next(f.name for f in frames if f.type == pin.FrameType.BODY and f.parentFrame == 0)
 
 
 class NativeGaitDynamics(ModelTerms):
@@ -311,8 +303,8 @@ class NativeControlLoop:
     Without controllers it holds the commands of controller nodes received from outside (the
     ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the
     block), ``take_block`` the samples held; ``live`` is the live view of the current state.
-    A sample holds what the recording encodes, among it the world pose of the URDF's root link
-    (``root_link``).
+    A sample holds what the recording encodes, among it the /tf transforms of the URDF's links
+    (``Robot.tf_frames``).
 
     :param periods: the native periods it advances (a ``Simulator``'s, which mirrors them after
         each block).
@@ -334,7 +326,7 @@ class NativeControlLoop:
         try:
             self._kernel = iceskate_native.ControlLoop(
                 periods._kernel, kinematics, list(controllers), rows,
-                np.asarray(head_origin, dtype=float), root_link(periods.robot),
+                np.asarray(head_origin, dtype=float), periods.robot.tf_frames,
                 [list(s) for s in inbox])
         except (ValueError, TypeError) as exc:
             raise SimulationError(f'native control loop: {exc}') from None

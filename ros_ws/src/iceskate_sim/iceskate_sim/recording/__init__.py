@@ -1,5 +1,5 @@
 """Recording a run: CDR layouts from the message definitions (``cdr``), what each topic holds
-of a sample (``messages``, with the /tf transforms of ``links``), the bag and its writer process
+of a sample (``messages``), the bag and its writer process
 (``bag``), the rosbag2 MCAP file written many messages at a time (``mcap_bag``), the message
 types without ROS (``bag_types``).
 """

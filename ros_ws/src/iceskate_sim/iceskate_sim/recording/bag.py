@@ -28,7 +28,6 @@ from rosbags.typesys.store import Typestore
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import Robot, load_robot
 from iceskate_sim.recording.bag_types import OFFERED_QOS, make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.mcap_bag import Bag
 from iceskate_sim.recording.messages import (
     TOPICS,
@@ -160,7 +159,7 @@ class BagRecorder:
         if self.path.exists():
             raise SimulationError(f'bag {self.path} already exists; choose a new --out')
         self.messages = SampleMessages(typestore or make_typestore(),
-                                       LinkTransforms((robot or load_robot()).urdf_model))
+                                       (robot or load_robot()).tf_frames)
         self.count = 0
         self._bag: _BagFile | None = None
         self._process: multiprocessing.process.BaseProcess | None = None

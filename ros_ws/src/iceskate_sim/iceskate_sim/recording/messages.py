@@ -2,7 +2,7 @@
 
 A sample is a row of the native control loop's block (``iceskate_native.ControlLoop.run``,
 ``take_block``, ``live``: columns t, q, v, qdd, passive, mode, side, pivot_code, step_index,
-multipliers, support forces, cop_y, head_position, head_orientation, root_pose, last_event,
+multipliers, support forces, cop_y, head_position, head_orientation, tf, last_event,
 stamps_ns, the mode's flags, effort_total and the efforts of its sources). What each field of
 each topic's message holds is written once, below: for a message shape (the strings and
 sequence lengths it has, e.g. a gait mode's multiplier names), the column and element of each
@@ -20,7 +20,8 @@ Topics (one message per sample, stamped with its simulation time):
   controllers read
 * ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations and the effort of
   every input source (plus ``passive``: damping and soft stops)
-* ``/tf`` (tf2_msgs/TFMessage): every URDF link (``links.LinkTransforms``)
+* ``/tf`` (tf2_msgs/TFMessage): every URDF link (``Robot.tf_frames``: the world to the root
+  link, then one per URDF joint, parent link to child link; the loop's ``tf`` column)
 
 and ``/robot_description`` (std_msgs/String) once.
 """
@@ -38,7 +39,6 @@ from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 from iceskate_sim.recording.bag_types import PASSIVE
 from iceskate_sim.recording.cdr import layout_for
-from iceskate_sim.recording.links import LinkTransforms
 
 TOPICS = {
     '/clock': 'rosgraph_msgs/msg/Clock',
@@ -59,7 +59,7 @@ _POSE = ('translation.x', 'translation.y', 'translation.z', 'rotation.x', 'rotat
          'rotation.z', 'rotation.w')
 
 #: A number's source: (column name, element) of the sample (``efforts.<i>``: source i's
-#: efforts; ``tf``: the /tf rows of ``LinkTransforms``); per field path, one per number.
+#: efforts); per field path, one per number.
 Sources = dict[str, list[tuple[str, int]]]
 
 
@@ -97,12 +97,13 @@ class SampleMessages:
     """Encodes samples into the CDR bytes of the recorded topics' messages.
 
     :param typestore: the types (``bag_types.make_typestore()``).
-    :param links: the /tf transforms of the recorded robot.
+    :param tf_frames: the (parent, child) frames of /tf (``Robot.tf_frames``), those of the
+        samples' ``tf`` column.
     """
 
-    def __init__(self, typestore: Typestore, links: LinkTransforms) -> None:
+    def __init__(self, typestore: Typestore, tf_frames: Sequence[tuple[str, str]]) -> None:
         self.typestore = typestore
-        self.links = links
+        self.tf_frames = list(tf_frames)
         self._programs: dict[tuple[str, Any], tuple[iceskate_native.CdrProgram,
                                                     tuple[str, ...]]] = {}
 
@@ -110,15 +111,12 @@ class SampleMessages:
                topics: Sequence[str] = RECORDED_TOPICS) -> dict[str, list[bytes]]:
         """Topic -> the bytes of its message at each row of ``block``."""
         rows = len(block['t'])
-        columns = {'tf': self.links.block_rows(block['q'], block['side'], block['root_pose'])
-                   .reshape(rows, -1)} if '/tf' in topics else {}
         out: dict[str, list[bytes]] = {}
         for topic in topics:
             encoded: list[bytes] = [b''] * rows
             for key, selected in _keys(topic, block, events):
                 program, names = self._program(topic, key)
-                arrays = [columns[name] if name in columns else _column(block, name)
-                          for name in names]
+                arrays = [_column(block, name) for name in names]
                 if selected is None:
                     encoded = [row.tobytes() for row in iceskate_native.encode_rows(
                         program, arrays, rows)]
@@ -134,7 +132,7 @@ class SampleMessages:
                     topics: Sequence[str]) -> dict[str, bytes]:
         """Topic -> the bytes of its message of the live sample ``loop`` took (its
         ``live_fill()``: ``taken``, its mode, latest transition and sources present);
-        ``events``: the event log. Not for /tf."""
+        ``events``: the event log."""
         mode, last, _ = taken
         out = {}
         for topic in topics:
@@ -208,9 +206,9 @@ class SampleMessages:
             'source_efforts': [*efforts, *_numbers('passive', _N)]}
 
     def _tf(self, key: None) -> tuple[dict, Sources]:
-        shape: dict[str, Any] = {'transforms': len(self.links.frames)}
+        shape: dict[str, Any] = {'transforms': len(self.tf_frames)}
         sources: Sources = {}
-        for k, (parent, child) in enumerate(self.links.frames):
+        for k, (parent, child) in enumerate(self.tf_frames):
             shape[f'transforms.{k}.header.frame_id'] = parent
             shape[f'transforms.{k}.child_frame_id'] = child
             sources[f'transforms.{k}.header.stamp'] = _stamp()

@@ -43,7 +43,6 @@ from iceskate_sim.model.command import CommandValues, ControllerCommand
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag_types import make_typestore
-from iceskate_sim.recording.links import LinkTransforms
 from iceskate_sim.recording.messages import SampleMessages
 from iceskate_sim.ros.effort_cdr import CommandDecoder
 from iceskate_sim.run.session import Session
@@ -84,7 +83,7 @@ class LockstepSession:
         self.sources = tuple(s for sources in controllers.values() for s in sources)
         self.recorder = session.recorder
         self.messages = (self.recorder.messages if self.recorder else
-                         SampleMessages(make_typestore(), LinkTransforms(self.robot.urdf_model)))
+                         SampleMessages(make_typestore(), self.robot.tf_frames))
         #: the native loop that holds the commands
         self._inbox = session.command_inbox(tuple(controllers.values()))
         self._index = {c: k for k, c in enumerate(self.controllers)}
