@@ -136,6 +136,17 @@ ControlLoop::ControlLoop(
     const int parent_index = frame_index(parent);
     tf_.emplace_back(parent_index, frame_index(child));
   }
+  for (int k = 0; k < 4; ++k) {
+    for (const std::string & name : frames_) {
+      frame_ids_[static_cast<std::size_t>(k)].push_back(
+        simulator_.dynamics().support_model(k / 2, k % 2).frame(name));
+    }
+  }
+}
+
+const std::vector<int> & ControlLoop::frame_ids(const Contact & contact) const
+{
+  return frame_ids_[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
 }
 
 int ControlLoop::run(int periods, SampleBlock & block)
@@ -212,7 +223,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   const HybridState & now = simulator_.state();
   // the head observed at t_k and the /tf links at the sample's state, in one pass unless a
   // transition due at t_k changes the support or q (below)
-  dynamics.frame_placements(now.contact, now.q, frames_, placements_);
+  dynamics.frame_placements(now.contact, now.q, frame_ids(now.contact), placements_);
   const int observed_side = now.contact.side;
   const int observed_pivot = now.contact.pivot;
   const Vector18 observed_q = now.q;
@@ -282,7 +293,7 @@ void ControlLoop::period(const std::vector<ReceivedCommand> & commands, SampleBl
   if (s.contact.side != observed_side || s.contact.pivot != observed_pivot
       || s.q != observed_q) {  // moved at t_k: the links where the sample's state has them
     const Placement head = placements_[0];
-    dynamics.frame_placements(s.contact, s.q, frames_, placements_);
+    dynamics.frame_placements(s.contact, s.q, frame_ids(s.contact), placements_);
     placements_[0] = head;
   }
   sample(block, s, r, placements_[0], held_target_);
@@ -368,7 +379,7 @@ void ControlLoop::live(SampleBlock & block)
   block.sources.assign(1, "held");
   block.efforts.assign(1, std::vector<double>(tau.data(), tau.data() + kCoordinates));
   block.present.push_back(1);
-  simulator_.dynamics().frame_placements(s.contact, s.q, frames_, placements_);
+  simulator_.dynamics().frame_placements(s.contact, s.q, frame_ids(s.contact), placements_);
   sample(block, s, simulator_.result(), placements_[0], held_target_);
 }
 

@@ -492,12 +492,13 @@ Placement Dynamics::frame_placement(
   const Contact & contact, const Vector18 & q, const std::string & frame)
 {
   std::vector<Placement> placements;
-  frame_placements(contact, q, {frame}, placements);
+  frame_placements(contact, q, {support_model(contact.side, contact.pivot).frame(frame)},
+                   placements);
   return placements[0];
 }
 
 void Dynamics::frame_placements(
-  const Contact & contact, const Vector18 & q, const std::vector<std::string> & frames,
+  const Contact & contact, const Vector18 & q, const std::vector<int> & ids,
   std::vector<Placement> & placements)
 {
   const SupportModel & support = support_model(contact.side, contact.pivot);
@@ -506,10 +507,10 @@ void Dynamics::frame_placements(
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::forwardKinematics(model, data, ConstVector(w.q));
-  placements.resize(frames.size());
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(
-      model, data, static_cast<pinocchio::FrameIndex>(support.frame(frames[i])));
+  placements.resize(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const pinocchio::SE3 & placement =
+      pinocchio::updateFramePlacement(model, data, static_cast<pinocchio::FrameIndex>(ids[i]));
     placements[i] = {placement.translation(), placement.rotation()};
   }
 }

@@ -7,6 +7,7 @@
 // both give the same samples bit for bit, whatever the block size.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <exception>
 #include <string>
@@ -138,6 +139,8 @@ private:
   void step(SampleBlock & block);
   void period(const std::vector<ReceivedCommand> & commands, SampleBlock & block);
   std::size_t source_index(SampleBlock & block, const std::string & name);
+  /// frame_ids_ of the support model of `contact`.
+  const std::vector<int> & frame_ids(const Contact & contact) const;
   /// Append a sample but its efforts and `present` to `block`: the state `s`, its dynamics
   /// `r`, the head-top placement, the /tf transforms of the link placements (placements_ from
   /// 1 on) and the head target.
@@ -152,6 +155,7 @@ private:
   Eigen::Vector3d head_origin_;
   Eigen::Vector3d held_target_;            // the head target of the last period
   std::vector<std::string> frames_;        // head_top, then the /tf links: a sample's placements
+  std::array<std::vector<int>, 4> frame_ids_;  // their indices in support model side * 2 + pivot
   std::vector<Placement> placements_;      // theirs, reused
   std::vector<std::pair<int, int>> tf_;    // /tf pairs: indices in frames_ (parent 0: world)
   std::vector<ControllerOutput> outputs_;  // one per controller, reused

@@ -154,11 +154,11 @@ public:
   Placement frame_placement(const Contact & contact, const Vector18 & q,
                             const std::string & frame);
 
-  /// World placements of named frames of the support model of `contact` after one
-  /// forward-kinematics pass: placements[i] of frames[i] (resized).
+  /// World placements of frames of the support model of `contact` after one
+  /// forward-kinematics pass: placements[i] of frame index ids[i] (SupportModel::frame; the
+  /// vector is resized).
   void frame_placements(const Contact & contact, const Vector18 & q,
-                        const std::vector<std::string> & frames,
-                        std::vector<Placement> & placements);
+                        const std::vector<int> & ids, std::vector<Placement> & placements);
 
   /// J^T f: the generalized force of a world force `force` [N] at a named frame's origin
   /// [N m, N]; entries of locked coordinates 0.
