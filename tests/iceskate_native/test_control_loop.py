@@ -313,7 +313,7 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
         with pytest.raises(ValueError, match="unknown frame 'nose'"):
             iceskate_native.ControlLoop(loop._periods._kernel, None, [], [],
                                         session.psi_initial, pairs)
-    with pytest.raises(ValueError, match="child must be a link, not the world"):
+    with pytest.raises(ValueError, match='child must be a link, not the world'):
         iceskate_native.ControlLoop(loop._periods._kernel, None, [], [], session.psi_initial,
                                     [('pelvis', 'world')])
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)

@@ -65,12 +65,6 @@ MIN_WINDOW = 8
 #: Terms of eq. (11), in the order of the equation (keys of JointDecomposition.terms()).
 TERMS = ('own_inertia', 'tau', 'm_total', 'coriolis', 'gravity', 'damping', 'limit',
          'constraint', 'support_friction', 'residual')
-TERM_LABELS = {
-    'own_inertia': 'M_ii q̈_i', 'tau': 'τ_i', 'm_total': 'M_total = −Σ M_ij q̈_j',
-    'coriolis': 'h_i', 'gravity': 'g_i', 'damping': 'd_i q̇_i', 'limit': 'soft stop',
-    'constraint': 'swing constraint', 'support_friction': 'support friction',
-    'residual': 'closure residual',
-}
 #: Sources that are external forces on a link (recorded as J^T f), not joint inputs.
 EXTERNAL_SOURCES = ('push',)
 _HEEL_SPEED_EPS = 1e-9  # m/s: below it a sliding heel's friction direction defaults to +1

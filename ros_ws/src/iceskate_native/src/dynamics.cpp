@@ -488,15 +488,6 @@ Eigen::Vector3d Dynamics::frame_position(
     .translation();
 }
 
-Placement Dynamics::frame_placement(
-  const Contact & contact, const Vector18 & q, const std::string & frame)
-{
-  std::vector<Placement> placements;
-  frame_placements(contact, q, {support_model(contact.side, contact.pivot).frame(frame)},
-                   placements);
-  return placements[0];
-}
-
 void Dynamics::frame_placements(
   const Contact & contact, const Vector18 & q, const std::vector<int> & ids,
   std::vector<Placement> & placements)

@@ -56,10 +56,6 @@ class StopRequest:
         if self.signum is None:
             self.signum = signum
 
-    def request(self, signum: int) -> None:
-        """Ask to stop as if ``signum`` had arrived."""
-        self._handle(signum, None)
-
     @property
     def requested(self) -> bool:
         """A stop signal has arrived."""

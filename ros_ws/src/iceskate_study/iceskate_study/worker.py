@@ -20,10 +20,6 @@ from typing import Any
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
-#: A run's status in the table: it ran to its end, it ended physically (a fall), or it failed
-#: (the physics broke down, or it could not start).
-STATUSES = ('ok', 'fell', 'failed')
-
 
 @dataclass(frozen=True)
 class Task:

@@ -150,10 +150,6 @@ public:
   Eigen::Vector3d frame_position(const Contact & contact, const Vector18 & q,
                                  const std::string & frame);
 
-  /// World placement of a named frame of the support model of `contact`.
-  Placement frame_placement(const Contact & contact, const Vector18 & q,
-                            const std::string & frame);
-
   /// World placements of frames of the support model of `contact` after one
   /// forward-kinematics pass: placements[i] of frame index ids[i] (SupportModel::frame; the
   /// vector is resized).

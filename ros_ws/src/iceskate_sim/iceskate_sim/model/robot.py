@@ -38,7 +38,6 @@ SOLE_HALF_WIDTH = 0.05  # m
 PIVOT_Y = {'toe': SOLE_TOE_Y, 'heel': SOLE_HEEL_Y}
 GRAVITY = 9.81  # m/s^2
 
-LEG_JOINTS = ('hip_pitch', 'knee_pitch', 'ankle_pitch')
 UPPER_BODY = {  # Table-2 joint -> (URDF joint, URDF child link)
     8: ('torso_yaw', 'torso_lower'),
     9: ('lumbar_pitch', 'torso_middle'),
