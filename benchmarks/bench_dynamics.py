@@ -8,7 +8,7 @@ a new state every call, so the state terms ``evaluate`` keeps are never reused),
 evaluated again ("kept": what a period's second and third evaluations cost), the free-flyer
 cross-check ``FloatingBaseDynamics.evaluate`` (``tests/oracle/floating_base.py``) at the same
 state, and the individual Pinocchio calls and the linear solve that ``evaluate`` is made of;
-and the native core at the same states: ``NativeGaitDynamics.evaluate`` (the C++ kernel behind
+and the native core at the same states: ``NativeProbes.evaluate`` (the C++ kernel behind
 the same Python interface) and the
 kernel's own binding call (``kernel``: argument checks, eq. (7), the result's arrays), with the
 ratio Python / native measured in this run. Figures are the median over ``--repeat`` runs
@@ -91,13 +91,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     (pin, ContactState, DynamicsParameters, GaitDynamics, FloatingBaseDynamics, MODES,
      JOINT_LIMITS, load_robot) = _import_core()
-    from iceskate_sim.physics.native import NativeGaitDynamics
     from oracle.dynamics import _solve  # the linear solve of evaluate
+    from oracle.native_probes import NativeProbes
 
     robot = load_robot()
     params = DynamicsParameters(mu=0.005)
     dynamics = GaitDynamics(robot, params)
-    native = NativeGaitDynamics(robot, params)
+    native = NativeProbes(robot, params)
     floating = FloatingBaseDynamics(robot, params)
     sm = robot.support_model(args.side, args.pivot)
     model = sm.model

@@ -14,13 +14,13 @@ Everything is measured in one run, so the ratios hold for one machine and one ho
   step, 1 ms control period, so a period is one step): the scene runs for ``--warmup`` s with
   its controllers, then ``--states`` states are taken one every
   ``--spacing`` periods, each with the command the controllers held over its period. From each
-  state whose period fires no event: (a) ``NativeGaitDynamics.integrate_segment`` to the period
+  state whose period fires no event: (a) ``NativeProbes.integrate_segment`` to the period
   end (the native segment call: one implicit-Euler step, three eq. (7) solves (start, implicit
   step, end), the guards at both ends) and the kernel's own binding call; (b) the whole
   control period: the kernel's ``HybridSimulator.advance`` (the period in C++: the start
   evaluation, settle, the segment, the end-of-period projection, the health checks; the
   binding call alone) and ``Simulator.advance`` (that call plus the Python that mirrors the
-  state, events and counters); one eq. (7) solve (``NativeGaitDynamics.evaluate`` and the
+  state, events and counters); one eq. (7) solve (``NativeProbes.evaluate`` and the
   kernel's ``evaluate``).
 
 Before each timed ``advance`` the simulator is put back to the state (``Simulator.set_state``:
@@ -60,6 +60,10 @@ from iceskate_sim.model.robot import N_COORDINATES, anatomical_map, load_robot
 from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.physics.simulation import Simulator
 
+# the native kernel's single calls are test tools (tests/oracle)
+sys.path.append(str(pathlib.Path(__file__).resolve().parents[1] / 'tests'))
+from oracle.native_probes import NativeProbes  # noqa: E402
+
 GOAL_RATIO = 4.0  # physics alone <= 4 x mj_step (implicitfast) at the same step
 
 
@@ -78,8 +82,9 @@ def restore(sim: Simulator, snap: Snapshot) -> None:
     """Put ``sim`` back where the run was at ``snap``, its dynamics' kept state terms as the
     previous period leaves them (its last solve at this state, under the previous command)."""
     sim.set_state(snap.state)
-    sim.dynamics.evaluate(snap.state.contact, snap.state.q, snap.state.v, snap.previous.bias,
-                          None, snap.previous.stiffness, snap.previous.damping)
+    NativeProbes.of(sim.dynamics).evaluate(snap.state.contact, snap.state.q, snap.state.v,
+                                           snap.previous.bias, None, snap.previous.stiffness,
+                                           snap.previous.damping)
 
 
 def collect_states(scene, robot, warmup: float, count: int, spacing: int) -> list[Snapshot]:
@@ -245,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     # per state, in turn: mj_step (both integrators), (a) the native segment call and the
     # kernel's binding call, one eq. (7) solve
     native_sim = Simulator(robot, config, scene.initial)
-    native = native_sim.dynamics
+    native = NativeProbes.of(native_sim.dynamics)
     mj_implicitfast, mj_rk4, nefc_implicitfast, nefc_rk4 = [], [], [], []
     segment, kernel_segment, evaluate, kernel_evaluate = [], [], [], []
     for snap, state in zip(quiet, states, strict=True):
@@ -292,11 +297,11 @@ def main(argv: list[str] | None = None) -> int:
     rows = {
         'mj_step implicitfast': per_state(mj_implicitfast),
         'mj_step RK4': per_state(mj_rk4),
-        '(a) NativeGaitDynamics.integrate_segment': per_state(segment),
+        '(a) NativeProbes.integrate_segment': per_state(segment),
         '    kernel integrate_segment (binding call)': per_state(kernel_segment),
         '(b) kernel HybridSimulator.advance': per_state(advance_kernel),
         '(b) Simulator.advance': per_state(advance_native),
-        'eq. (7): NativeGaitDynamics.evaluate': per_state(evaluate),
+        'eq. (7): NativeProbes.evaluate': per_state(evaluate),
         'eq. (7): kernel evaluate (binding call)': per_state(kernel_evaluate),
     }
     base = rows['mj_step implicitfast']['median']
@@ -335,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{name:<44} {row["median"]:10.1f} {spread:>19} '
               f'{row["median"] / base:22.2f}x')
     print()
-    a = rows['(a) NativeGaitDynamics.integrate_segment']['median'] / base
+    a = rows['(a) NativeProbes.integrate_segment']['median'] / base
     b_kernel = rows['(b) kernel HybridSimulator.advance']['median'] / base
     b = rows['(b) Simulator.advance']['median'] / base
     verdict = {True: 'meets', False: 'misses'}

@@ -1,10 +1,10 @@
 """The native eq. (7) against the Python reference: every mode, side, pivot and friction case.
 
-``oracle.dynamics.GaitDynamics`` is the readable reference; ``NativeGaitDynamics`` solves the
-same system in C++ (``iceskate_native.Dynamics``). The two factorise the same matrix with
-LU of partial pivoting in different operation orders, so they agree to rounding: each quantity
-to 1e-11 of its scale (the dynamics matrix has condition numbers up to ~1e4 here, and most
-entries agree to ~1e-13).
+``oracle.dynamics.GaitDynamics`` is the readable reference; ``NativeGaitDynamics`` (called
+through ``oracle.native_probes``) solves the same system in C++ (``iceskate_native.Dynamics``).
+The two factorise the same matrix with LU of partial pivoting in different operation orders, so
+they agree to rounding: each quantity to 1e-11 of its scale (the dynamics matrix has condition
+numbers up to ~1e4 here, and most entries agree to ~1e-13).
 """
 
 import itertools
@@ -17,8 +17,8 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters
 from iceskate_sim.model.modes import MODES, get_mode
 from iceskate_sim.model.robot import JOINT_LIMITS, PIVOTS, SIDES, load_robot
-from iceskate_sim.physics.native import NativeGaitDynamics
 from oracle.dynamics import GaitDynamics
+from oracle.native_probes import NativeProbes
 
 #: a fast-stepping skate gait (test data): many events in a short window
 FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
@@ -39,7 +39,7 @@ def robot():
 def engines(robot):
     """(reference, native) with the same parameters (Baumgarte on, to check its terms too)."""
     params = DynamicsParameters(baumgarte=5.0)
-    return GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
+    return GaitDynamics(robot, params), NativeProbes(robot, params)
 
 
 def state(mode, rng, into_stops=False):
@@ -200,7 +200,7 @@ def _heel_lift(robot):
     from iceskate_sim.physics.hybrid import FrictionModel, HybridState
     from oracle.automaton import guard_values
     params = DynamicsParameters()
-    reference, native = GaitDynamics(robot, params), NativeGaitDynamics(robot, params)
+    reference, native = GaitDynamics(robot, params), NativeProbes(robot, params)
     q = np.zeros(18)
     q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
     contact = ContactState(get_mode(17), 'right', 'toe')
@@ -299,7 +299,7 @@ def test_a_segment_without_event_reaches_the_end(robot):
     from iceskate_sim.model.command import HeldCommand
     from iceskate_sim.physics.hybrid import FrictionModel, HybridState
     from iceskate_sim.physics.integrators import IntegratorConfig
-    native = NativeGaitDynamics(robot)
+    native = NativeProbes(robot)
     q = np.zeros(18)
     q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
     contact = ContactState(get_mode(17), 'right', 'toe')

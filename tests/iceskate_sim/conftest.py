@@ -114,8 +114,8 @@ def make_dynamics(formulation: str, robot: Robot) -> Callable[..., GaitDynamics]
     """``make_dynamics(params)`` -> the dynamics routine of the test's formulation."""
     def make(params: DynamicsParameters | None = None) -> GaitDynamics:
         if formulation == 'native':
-            from iceskate_sim.physics.native import NativeGaitDynamics
-            return NativeGaitDynamics(robot, params)
+            from oracle.native_probes import NativeProbes
+            return NativeProbes(robot, params)
         return GaitDynamics(robot, params)
     return make
 

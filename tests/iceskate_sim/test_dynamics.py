@@ -17,8 +17,8 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, DynamicsResult
 from iceskate_sim.model.modes import MODES, get_mode
 from iceskate_sim.model.robot import N_COORDINATES
-from iceskate_sim.physics.native import NativeGaitDynamics
 from oracle.dynamics import GaitDynamics
+from oracle.native_probes import NativeProbes
 
 LWA = pin.LOCAL_WORLD_ALIGNED
 G = 9.81
@@ -387,8 +387,8 @@ def rest_state():
 
 @pytest.fixture
 def native(robot):
-    """The shipped kernel (``NativeGaitDynamics``) whose input checks these tests pin."""
-    return NativeGaitDynamics(robot, DynamicsParameters())
+    """The shipped kernel (``NativeGaitDynamics``, probed) whose input checks these tests pin."""
+    return NativeProbes(robot, DynamicsParameters())
 
 
 def test_wrong_length_q_is_rejected(native, rest_state):

@@ -4,7 +4,7 @@ runs on the shipped simulator.
 Each order, step and event test runs on two engines: 'oracle', the oracle's ``Integrator`` on
 the mode-1 dynamics (support flat and stuck, swing foot in the air) of
 ``GaitDynamics.evaluate`` with the oracle automaton's guards (``guard_values``), and 'native',
-the shipped kernel's segment (``NativeGaitDynamics.integrate_segment``: the same mode, input and
+the shipped kernel's segment (``NativeProbes.integrate_segment``: the same mode, input and
 guards in C++). The reference solutions are the oracle's DOP853 at tolerances far below the
 errors they judge, and the tests check that margin too.
 """
@@ -22,11 +22,11 @@ from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import N_COORDINATES
 from iceskate_sim.physics.hybrid import FrictionModel, HybridState, guards_of
 from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
-from iceskate_sim.physics.native import NativeGaitDynamics
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from oracle.automaton import guard_values
 from oracle.dynamics import GaitDynamics
 from oracle.integrators import Integrator, ReferenceIntegratorConfig
+from oracle.native_probes import NativeProbes
 
 N = N_COORDINATES
 MODE = get_mode(1)
@@ -43,7 +43,7 @@ class Problem:
                  engine: str = 'oracle'):
         params = DynamicsParameters(joint_limits=joint_limits)
         self.engine = engine
-        self.dynamics = (GaitDynamics if engine == 'oracle' else NativeGaitDynamics)(robot,
+        self.dynamics = (GaitDynamics if engine == 'oracle' else NativeProbes)(robot,
                                                                                        params)
         self.contact = ContactState(MODE, 'right', 'toe')
         self.tau = tau

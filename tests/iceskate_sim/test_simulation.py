@@ -22,6 +22,7 @@ from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from oracle.automaton import GUARD_VALUES, guard_values
 from oracle.dynamics import GaitDynamics
+from oracle.native_probes import NativeProbes
 from oracle.simulator import ReferenceSimulator
 
 N = N_COORDINATES
@@ -147,6 +148,12 @@ def _rigid_torque(robot, sim: Simulator, reference: np.ndarray,
     return tau
 
 
+def _solver(sim) -> GaitDynamics | NativeProbes:
+    """Eq. (7) of ``sim``: the oracle's own dynamics, or the shipped kernel's probe."""
+    dynamics = sim.dynamics
+    return dynamics if isinstance(dynamics, GaitDynamics) else NativeProbes.of(dynamics)
+
+
 def test_ice_glide_decelerates_at_mu_g_and_sticks(robot, runs):
     """Mode 3 from yd0 = 0.5 m/s with the body held rigid: yd0'' = -mu g until yd0 = 0, then
     E5 (stuck, mode 1); a forward lean that kicks back on the foot is held by the toe pick."""
@@ -164,7 +171,7 @@ def test_ice_glide_decelerates_at_mu_g_and_sticks(robot, runs):
         # a valid scenario: the new input makes no guard due at once (no CoP jump off the
         # sole, no friction or normal-force limit), so every event is a located crossing
         s = sim.state
-        start = sim.dynamics.evaluate(s.contact, s.q, s.v, tau)
+        start = _solver(sim).evaluate(s.contact, s.q, s.v, tau)
         assert np.all(guard_values(s, start, ICE) <= GUARD_MARGIN), s.summary()
         return run.advance(tau)
 
@@ -340,7 +347,7 @@ def test_a_guard_made_due_by_a_new_input_fires_at_once(robot, runs):
     kick = tau.copy()
     kick[2] -= 150.0
     state = run.sim.state
-    result = run.sim.dynamics.evaluate(state.contact, state.q, state.v, kick)
+    result = _solver(run.sim).evaluate(state.contact, state.q, state.v, kick)
     assert result.support_normal > 50.0
     assert result.cop_y - state.q[Y0] < -0.5  # far behind the heel edge (-0.06 m) at once
     due = guard_values(state, result, config.friction) > GUARD_MARGIN

@@ -28,8 +28,25 @@ from iceskate_sim.physics.integrators import (
     GUARD_MARGIN,
     METHODS,
     IntegratorConfig,
-    Segment,
 )
+
+
+@dataclass
+class Segment:
+    """Outcome of ``integrate_segment`` (this oracle's and the native probe's).
+
+    :ivar t: time reached [s]. :ivar x: state there. :ivar result: dynamics at (t, x).
+    :ivar fired: index of the guard that fired at ``t`` (None: reached t_end).
+    :ivar steps: accepted steps. :ivar evaluations: right-hand-side evaluations.
+    """
+
+    t: float
+    x: np.ndarray
+    result: DynamicsResult
+    fired: int | None
+    steps: int
+    evaluations: int
+
 
 #: rhs(t, x, implicit_step=0.0) -> (xdot, dynamics); an implicit step's dynamics may be None
 Rhs = Callable[..., tuple[np.ndarray, DynamicsResult | None]]

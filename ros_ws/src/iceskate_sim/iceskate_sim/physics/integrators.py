@@ -21,7 +21,6 @@ from typing import ClassVar
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.dynamics import DynamicsResult
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 METHODS = (*FIXED_STEP, 'rk45')
@@ -56,20 +55,3 @@ class IntegratorConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):
                 raise SimulationError(f'integrator {name} must be > 0, got {value!r}')
-
-
-@dataclass
-class Segment:
-    """Outcome of ``integrate_segment``.
-
-    :ivar t: time reached [s]. :ivar x: state there. :ivar result: dynamics at (t, x).
-    :ivar fired: index of the guard that fired at ``t`` (None: reached t_end).
-    :ivar steps: accepted steps. :ivar evaluations: right-hand-side evaluations.
-    """
-
-    t: float
-    x: np.ndarray
-    result: DynamicsResult
-    fired: int | None
-    steps: int
-    evaluations: int

@@ -1,8 +1,8 @@
-"""The native (C++) kernel seen from Python: eq. (7) (``NativeGaitDynamics``: ``evaluate`` and
-``implicit_acceleration`` by ``iceskate_native.Dynamics`` beside the model terms of
-``ModelTerms``), the integration of a mode with its guards and event location
-(``integrate_segment``), whole control periods with their transitions, projection and health
-checks (``NativePeriods``) and many periods with the controllers (``NativeControlLoop``).
+"""The native (C++) kernel seen from Python: eq. (7) (``NativeGaitDynamics``: the kernel
+``iceskate_native.Dynamics`` beside the model terms of ``ModelTerms``), whole control periods
+with their integration, event location, transitions, projection and health checks
+(``NativePeriods``) and many periods with the controllers (``NativeControlLoop``). The kernel's
+single calls (one solve, one segment) are test tools (``tests/oracle/native_probes.py``).
 
 The kernel gets the four support models (sent as Pinocchio archives), the mode table
 (``iceskate_sim.model.modes``), the guard table (``iceskate_sim.physics.hybrid``), damping, soft
@@ -43,7 +43,7 @@ from iceskate_sim.physics.hybrid import (
     guards_of,
     resolved_cause,
 )
-from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig, Segment
+from iceskate_sim.physics.integrators import GUARD_MARGIN, IntegratorConfig
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)
@@ -58,7 +58,8 @@ def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
 
 
 class NativeGaitDynamics(ModelTerms):
-    """Eq. (7) in C++ beside the model terms (one kernel per instance: not thread-safe)."""
+    """Eq. (7) in C++ (``iceskate_native.Dynamics``, which ``NativePeriods`` integrates) beside
+    the model terms (one kernel per instance: not thread-safe)."""
 
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         super().__init__(robot, params)
@@ -74,102 +75,6 @@ class NativeGaitDynamics(ModelTerms):
                  p.damping))
         except ValueError as exc:
             raise SimulationError(f'native dynamics: {exc}') from None
-
-    def _arguments(self, contact: ContactState, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
-                   push: tuple[str, np.ndarray] | None, stiffness: np.ndarray | None,
-                   damping: np.ndarray | None) -> tuple:
-        if (stiffness is None) != (damping is None):  # a joint impedance needs both
-            stiffness = np.zeros(18) if stiffness is None else stiffness
-            damping = np.zeros(18) if damping is None else damping
-        if contact.side not in SIDES or contact.pivot not in PIVOTS:
-            raise SimulationError(f'unknown support side/pivot {(contact.side, contact.pivot)}; '
-                                  f'sides {SIDES}, pivots {PIVOTS}')
-        return (contact.mode.number, SIDES.index(contact.side), PIVOTS.index(contact.pivot),
-                contact.heel_anchor_y, contact.support_slide_dir, contact.heel_slide_dir,
-                np.asarray(q, dtype=float), np.asarray(v, dtype=float),
-                np.asarray(tau, dtype=float),
-                None if stiffness is None else np.asarray(stiffness, dtype=float),
-                None if damping is None else np.asarray(damping, dtype=float),
-                '' if push is None else push[0],
-                None if push is None else np.asarray(push[1], dtype=float))
-
-    def evaluate(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
-                 tau: np.ndarray, push: tuple[str, np.ndarray] | None = None,
-                 stiffness: np.ndarray | None = None, damping: np.ndarray | None = None,
-                 ) -> DynamicsResult:
-        """Eq. (7) of ``contact.mode`` at (q, v) natively: the accelerations, multipliers and
-        support wrench (docs/model.md §4)."""
-        try:
-            (qdd, multipliers, wrench, normal, tangential, cop_y, heel_friction, applied, heel,
-             heel_velocity, toe_z, passive) = self._kernel.evaluate(
-                *self._arguments(contact, q, v, tau, push, stiffness, damping))
-        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
-            raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
-        return DynamicsResult(qdd, multipliers, wrench, normal, tangential, cop_y,
-                              heel_friction, applied, heel, heel_velocity, toe_z, passive)
-
-    def implicit_acceleration(self, contact: ContactState, q: np.ndarray, v: np.ndarray,
-                              tau: np.ndarray, push: tuple[str, np.ndarray] | None,
-                              stiffness: np.ndarray | None, damping: np.ndarray | None,
-                              step: float) -> np.ndarray:
-        """Accelerations of an implicit step ((M + h D) a = f - D v, D the joint, impedance
-        and soft-stop damping), natively.
-
-        For tests and benchmarks: the periods run inside ``HybridSimulator``
-        (``NativePeriods``), which takes its implicit steps without this call."""
-        try:
-            return self._kernel.implicit_acceleration(
-                *self._arguments(contact, q, v, tau, push, stiffness, damping), step)
-        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
-            raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
-
-    def _guard_arguments(self, mode_number: int, t: float, suppressed: dict[str, float],
-                         friction: FrictionModel) -> tuple:
-        names = [g.name for g in guards_of(MODES[mode_number])]
-        rested = [suppressed.get(name, -np.inf) for name in names]
-        return (names, rested, friction.mu, friction.rule == 'ice', GUARD_CONSTANTS,
-                GUARD_MARGIN)
-
-    def guard_values(self, state: HybridState, command: HeldCommand,
-                     push: tuple[str, np.ndarray] | None, friction: FrictionModel,
-                     suppressed: dict[str, float]) -> np.ndarray:
-        """Values of the guards of ``state.mode`` (rested ones -1), natively.
-
-        For tests and benchmarks: the periods run inside ``HybridSimulator``
-        (``NativePeriods``), which evaluates its guards without this call."""
-        args = self._arguments(state.contact, state.q, state.v, command.bias, push,
-                               command.stiffness, command.damping)
-        try:
-            return self._kernel.guard_values(
-                *args, *self._guard_arguments(state.mode.number, state.t, suppressed, friction),
-                state.t)
-        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
-            raise SimulationError(f'mode {state.mode.number} guards: {exc}') from None
-
-    def integrate_segment(self, state: HybridState, command: HeldCommand,
-                          push: tuple[str, np.ndarray] | None, integrator: IntegratorConfig,
-                          friction: FrictionModel, suppressed: dict[str, float],
-                          t_end: float) -> Segment:
-        """Integrate ``state`` to ``t_end`` or the first guard crossing with a fixed-step
-        method or rk45 (``Integrator.integrate_segment``'s counterpart, natively; rk45 starts
-        with ``integrator.step`` and keeps no step history between calls).
-
-        For tests and benchmarks: the periods run inside ``HybridSimulator``
-        (``NativePeriods``), which integrates its segments without this call."""
-        (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
-         frame, force) = self._arguments(state.contact, state.q, state.v, command.bias, push,
-                                         command.stiffness, command.damping)
-        try:
-            t, x, result, fired, steps, evaluations = self._kernel.integrate_segment(
-                mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness, damping,
-                frame, force, integrator.method, integrator.step, integrator.rtol,
-                integrator.atol, integrator.event_tolerance,
-                *self._guard_arguments(mode, state.t, suppressed, friction), state.t,
-                np.concatenate([q, v]), t_end)
-        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
-            raise SimulationError(f'mode {mode} integration: {exc}') from None
-        return Segment(t, x, DynamicsResult(*result), None if fired < 0 else fired, steps,
-                       evaluations)
 
 
 #: Guard causes for the event log, by name.
