@@ -89,8 +89,9 @@ import numpy as np
 
 from gait_manager.parameters import GaitManagerParameters
 from iceskate_bringup.runner import run
-from iceskate_bringup.scene import parse_scene, scene_path
+from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.run.scene import scene_path
 from iceskate_sim.yaml_io import read_yaml
 
 # block.key -> (low, high)

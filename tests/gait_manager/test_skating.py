@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from iceskate_bringup.runner import run
-from iceskate_bringup.scene import load_scene, parse_scene, scene_path
+from iceskate_bringup.scene import load_scene, parse_scene
+from iceskate_sim.run.scene import scene_path
 from iceskate_sim.yaml_io import read_yaml
 
 EDGE_MODES = {2, 4, 6, 8, 10, 12, 14, 16, 18, 20}  # support on its toe or heel edge (Table 2)

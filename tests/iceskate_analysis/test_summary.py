@@ -19,9 +19,10 @@ from iceskate_analysis.summary import (
     write_summary,
 )
 from iceskate_bringup.runner import main, run
-from iceskate_bringup.scene import load_scene, parse_scene, scene_path
+from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.run.metrics import Trajectory
+from iceskate_sim.run.scene import scene_path
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from iceskate_bringup.runner import main, simulate
-from iceskate_bringup.scene import node_parameters, parse_scene, scene_path, scene_sources
+from iceskate_bringup.scene import node_parameters, parse_scene, scene_sources
 import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import load_robot
 from iceskate_sim.physics.native_control import native_kinematics
+from iceskate_sim.run.scene import scene_path
 from iceskate_sim.yaml_io import read_yaml
 
 EXAMPLE = 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'

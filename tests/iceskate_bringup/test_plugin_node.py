@@ -33,7 +33,8 @@ def test_the_graph_with_a_plugin_node_gives_the_headless_trajectory(tmp_path, ro
     pytest.importorskip('rclpy')
     from iceskate_bringup.graph import graph_nodes, run_graph
     from iceskate_bringup.runner import run
-    from iceskate_bringup.scene import load_scene, scene_path
+    from iceskate_bringup.scene import load_scene
+    from iceskate_sim.run.scene import scene_path
 
     raw = read_yaml(scene_path('stand_python'), 'scene')
     raw['duration'] = 0.3
@@ -66,7 +67,7 @@ def test_a_failing_plugin_node_logs_its_error_and_the_simulator_names_it(tmp_pat
     from pathlib import Path
 
     from iceskate_bringup.graph import run_graph
-    from iceskate_bringup.scene import scene_path
+    from iceskate_sim.run.scene import scene_path
     here = str(Path(__file__).resolve().parent)  # plugin_controllers, for the node's process
     monkeypatch.setenv('PYTHONPATH', os.pathsep.join([here, os.environ.get('PYTHONPATH', '')]))
     monkeypatch.syspath_prepend(here)

@@ -5,14 +5,9 @@ import copy
 import pytest
 import yaml
 
-from iceskate_bringup.scene import (
-    load_scene,
-    parse_scene,
-    scene_dirs,
-    scene_sources,
-    shipped_scenes,
-)
+from iceskate_bringup.scene import load_scene, parse_scene, scene_sources
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.run.scene import scene_dirs, shipped_scenes
 
 REQUIRED = {'stand', 'skate', 'skate_no_yaw', 'walk'}
 

@@ -180,3 +180,70 @@ def test_a_controller_named_without_its_sources_gets_one_source_named_like_it(tm
     assert 'Traceback' not in result.stderr
     with AnyReader([out / 'bag']) as reader:
         assert {c.topic for c in reader.connections} >= {'/robot_description', '/gait_state'}
+
+
+NODE_MODULES = {'simulator': 'iceskate_sim.ros.simulator_node',
+                'visual_lifting': 'visual_lifting.visual_lifting_node',
+                'gait_manager': 'gait_manager.gait_manager_node',
+                'plugin_controller': 'iceskate_bringup.plugin_node'}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(('name', 'parameter'), [
+    ('simulator', 'startup_timeout'), ('visual_lifting', 'kp'),
+    ('gait_manager', 'posture.stiffness'), ('plugin_controller', 'plugin')])
+def test_help_prints_the_usage_and_the_parameters_and_starts_nothing(ros_env, name, parameter):
+    result = subprocess.run([sys.executable, '-m', NODE_MODULES[name], '--help'], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f'usage: ros2 run <package> {name} [-h] [--ros-args')
+    assert f'\n  {parameter} = ' in result.stdout, result.stdout
+    assert result.stderr == ''  # no node came up: nothing logged
+
+
+@pytest.mark.ros
+def test_the_simulator_alone_runs_the_shipped_skate_and_says_whom_it_waits_for(ros_env):
+    """No parameter at all: the shipped ``skate`` scene (by name); the simulator says once
+    which controller nodes it waits for, then ends naming the missing ones."""
+    pytest.importorskip('rclpy')
+    result = subprocess.run([sys.executable, '-m', NODE_MODULES['simulator'], '--ros-args',
+                             '-p', 'startup_timeout:=1.0'], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 1, result.stderr
+    waiting = [line for line in result.stderr.splitlines() if 'waiting up to' in line]
+    assert len(waiting) == 1
+    assert "waiting up to 1 s for the controller node(s) ['gait_manager', 'visual_lifting']" \
+        in waiting[0]
+    assert ("controller node(s) ['gait_manager', 'visual_lifting'] not up within 1.0 s"
+            in result.stderr), result.stderr
+
+
+@pytest.mark.ros
+def test_a_controller_by_hand_says_it_is_ready_and_ends_with_the_run(tmp_path, ros_env):
+    """The simulator (a shipped scene by name, one controller node) and visual_lifting started
+    by hand: the simulator logs the node's arrival, runs, exits; the controller then ends by
+    itself with exit code 0."""
+    pytest.importorskip('rclpy')
+    out = tmp_path / 'out'
+    simulator = subprocess.Popen(
+        [sys.executable, '-m', NODE_MODULES['simulator'], '--ros-args', '-p', 'scene:=stand',
+         '-p', 'duration:=0.05', '-p', f'out_dir:={out}', '-p', 'controllers:=[visual_lifting]',
+         '-p', 'startup_timeout:=30.0'],
+        env=ros_env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    controller = subprocess.Popen(
+        [sys.executable, '-m', NODE_MODULES['visual_lifting']], env=ros_env,
+        stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    try:
+        _, simulator_log = simulator.communicate(timeout=60)
+        _, controller_log = controller.communicate(timeout=30)
+    finally:
+        for process in (simulator, controller):
+            if process.poll() is None:
+                process.kill()
+                process.wait(timeout=10)
+    assert simulator.returncode == 0, simulator_log
+    assert "controller node 'visual_lifting' is up" in simulator_log
+    assert (out / 'metrics.json').is_file()
+    assert controller.returncode == 0, controller_log
+    assert 'ready: answering gait_state' in controller_log
+    assert 'the simulator is gone: the run is over' in controller_log

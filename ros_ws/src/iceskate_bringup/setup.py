@@ -21,6 +21,8 @@ def share_tree(folder):
 
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+    # it ships scenes (iceskate_sim.run.scene.SCENE_RESOURCE): share/<pkg>/scenes/<name>.yaml
+    ('share/ament_index/resource_index/iceskate_scenes', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
 ]
 for folder in ('scenes', 'launch', 'config'):

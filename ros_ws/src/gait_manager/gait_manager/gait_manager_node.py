@@ -55,7 +55,7 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point."""
-    return run_node(GaitManagerNode, 'gait_manager', args)
+    return run_node(GaitManagerNode, 'gait_manager', args, __doc__, GaitManagerParameters)
 
 
 if __name__ == '__main__':

@@ -36,11 +36,12 @@ import time
 from typing import Any
 
 from iceskate_bringup.plugin import PluginBlock
-from iceskate_bringup.scene import load_scene, node_parameters, scene_path, scene_sources
+from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import ament_prefixes
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.node_support import write_parameter_file
+from iceskate_sim.run.scene import scene_path
 from iceskate_sim.run.session import prepare_output
 from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 

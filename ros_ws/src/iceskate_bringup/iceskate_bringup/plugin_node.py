@@ -95,7 +95,8 @@ class PluginControllerNode(ControllerNode[PluginNodeParameters]):
 def main(args: list[str] | None = None) -> int:
     """Console entry point."""
     name = node_name(sys.argv if args is None else args)
-    return run_node(lambda: PluginControllerNode(name), name, args)
+    return run_node(lambda: PluginControllerNode(name), name, args, __doc__,
+                    PluginNodeParameters)
 
 
 if __name__ == '__main__':

@@ -5,8 +5,8 @@ validated too, by the controller packages' own parameter classes (``VisualLiftin
 ``GaitManagerParameters``), and a controller written in Python (a block with ``plugin``,
 ``iceskate_bringup.plugin``) by importing its class and building it with its ``parameters``,
 so a scene is checked whole before anything starts. Shipped scenes
-live in ``share/iceskate_bringup/scenes/<name>.yaml`` (the source tree's ``scenes/`` before the
-workspace is built).
+live in ``share/iceskate_bringup/scenes/<name>.yaml`` (found by name through the ament index:
+``iceskate_sim.run.scene.scene_path``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ from iceskate_bringup.plugin import (
     plugin_sources,
 )
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.robot import ament_prefixes
 from iceskate_sim.run.scene import Scene
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
@@ -122,30 +121,6 @@ def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
     return out
 
 
-def scene_dirs() -> list[pathlib.Path]:
-    """Directories searched for shipped scenes (installed share dir, then the source tree)."""
-    dirs = [p / 'share' / 'iceskate_bringup' / 'scenes' for p in ament_prefixes()]
-    dirs.append(pathlib.Path(__file__).resolve().parents[1] / 'scenes')
-    return [d for d in dirs if d.is_dir()]
-
-
-def shipped_scenes() -> list[str]:
-    """Names of the shipped scenes."""
-    return sorted({p.stem for d in scene_dirs() for p in d.glob('*.yaml')})
-
-
-def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
-    """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself."""
-    path = pathlib.Path(name_or_path)
-    if path.suffix:
-        return path
-    for d in scene_dirs():
-        if (d / f'{path.name}.yaml').is_file():
-            return d / f'{path.name}.yaml'
-    raise SimulationError(f'unknown scene {str(name_or_path)!r}; shipped scenes: '
-                          f'{shipped_scenes()}')
-
-
 def load_scene(name_or_path: str | pathlib.Path) -> Scene:
     """Load a shipped scene by name or a scene YAML by path, validated whole."""
-    return load_scene_file(scene_path(name_or_path), validate_inputs)
+    return load_scene_file(name_or_path, validate_inputs)

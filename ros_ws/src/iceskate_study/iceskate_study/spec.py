@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_bringup.scene import parse_scene, scene_path
+from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import ament_prefixes
 from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
-from iceskate_sim.run.scene import Scene
+from iceskate_sim.run.scene import Scene, scene_path
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
 

@@ -47,7 +47,8 @@ class VisualLiftingNode(ControllerNode[VisualLiftingParameters]):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point."""
-    return run_node(VisualLiftingNode, 'visual_lifting', args)
+    return run_node(VisualLiftingNode, 'visual_lifting', args, __doc__,
+                    VisualLiftingParameters)
 
 
 if __name__ == '__main__':

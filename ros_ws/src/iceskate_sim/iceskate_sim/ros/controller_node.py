@@ -12,13 +12,15 @@ on ``effort_commands``, stamped with the state's stamp (the lockstep key): one m
 instant and node, published raw (``effort_cdr.CommandEncoder``: the values written into the
 message's layout, where an rclpy message costs 15 us). ``use_sim_time`` is true unless
 overridden. A law failing at one instant logs an error and sends nothing: the simulator's
-timeout then names the node.
+timeout then names the node. The node logs once that it is ready, and ends (exit code 0) when
+the simulator it served is gone: the run is over.
 """
 
 from __future__ import annotations
 
 from typing import Any, Generic, TypeVar
 
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -39,6 +41,8 @@ from iceskate_sim.ros.node_support import (
 )
 
 P = TypeVar('P')
+#: Wall seconds between two looks for the simulator (after the first state).
+SIMULATOR_CHECK_PERIOD = 0.5
 
 
 class ControllerNode(Node, Generic[P]):
@@ -62,8 +66,20 @@ class ControllerNode(Node, Generic[P]):
         self._encoder = CommandEncoder(node_name, typestore)
         self._gait_states = GaitStateReader(typestore)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
-        self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
-                                 LOCKSTEP_READER_QOS, raw=True)
+        self._states = self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
+                                                LOCKSTEP_READER_QOS, raw=True)
+        self._served = False  # a state has come: a simulator serves this node
+        #: The simulator it served is gone (``node_support.run_node`` then ends the node).
+        self.finished = False
+        self.create_timer(SIMULATOR_CHECK_PERIOD, self._check_simulator,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))  # /clock stops at the end
+        self.get_logger().info('ready: answering gait_state on effort_commands')
+
+    def _check_simulator(self) -> None:
+        """End the node once the simulator it served has no gait_state publisher left."""
+        if self._served and not self.finished and self._states.get_publisher_count() == 0:
+            self.get_logger().info('the simulator is gone: the run is over')
+            self.finished = True
 
     def _on_parameters(self, params: P) -> None:
         """New parameters (``ros2 param set``), already checked: used from the next state."""
@@ -81,6 +97,7 @@ class ControllerNode(Node, Generic[P]):
 
     def on_gait_state(self, data: bytes) -> None:
         """Answer the state of one instant (a GaitState's CDR bytes) with this node's command."""
+        self._served = True
         if not self.active:
             return
         try:

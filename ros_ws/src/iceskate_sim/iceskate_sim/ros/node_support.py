@@ -229,8 +229,26 @@ def check_parameter_files(argv: list[str]) -> None:
             read_yaml(value, 'parameter file')
 
 
-def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None) -> int:
+def usage(name: str, about: str, parameters: type | None) -> str:
+    """The ``--help`` text of a node's executable: how to call it, what it does, its ROS
+    parameters (from the parameter class: default, unit, range, description)."""
+    lines = [f'usage: ros2 run <package> {name} [-h] [--ros-args [-p NAME:=VALUE]... '
+             '[--params-file FILE]]', '', about.strip()]
+    if parameters is not None:
+        lines += ['', 'ROS parameters (-p NAME:=VALUE; ros2 param describe shows them too):']
+        for key, (_, rules, default) in leaf_fields(parameters).items():
+            extra = ', '.join(x for x in (rules.unit, rules.bounds_text()) if x)
+            lines.append(f'  {key} = {default!r}{f" ({extra})" if extra else ""}: '
+                         f'{rules.description}')
+    return '\n'.join(lines)
+
+
+def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None,
+             about: str = '', parameters: type | None = None) -> int:
     """The Jazzy main(): init, make the node, spin until it is finished or stopped.
+
+    ``-h``/``--help`` before ``--ros-args`` prints ``usage(name, about, parameters)`` and starts
+    nothing.
 
     SIGINT, SIGTERM and SIGHUP stop the node cleanly (rclpy's own handlers are not installed:
     ``StopRequest`` notes the signal and the spin loop ends within 0.1 s). The node may define
@@ -243,6 +261,11 @@ def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None
     """
     from rclpy.experimental import EventsExecutor
     from rclpy.signals import SignalHandlerOptions
+    argv = sys.argv[1:] if args is None else args[1:]
+    own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    if {'-h', '--help'} & set(own):
+        print(usage(name, about, parameters))
+        return 0
     node = None
     parent = os.getppid()
     with StopRequest() as stop:

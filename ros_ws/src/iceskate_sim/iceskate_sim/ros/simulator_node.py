@@ -56,8 +56,9 @@ class SimulatorNodeParameters:
     """The simulator node's ROS parameters (see config/simulator.yaml); each field is a
     ``setting`` with its description, unit and range."""
 
-    scene: str = setting('', 'path of the scene YAML (its simulator part: floor, initial state, '
-                         'integrator, disturbances, duration, recording)')
+    scene: str = setting('skate', 'a shipped scene name or the path of a scene YAML (its '
+                         'simulator part: floor, initial state, integrator, disturbances, '
+                         'duration, recording)')
     duration: float = setting(0.0, 'run length; 0: the scene duration', unit='s', low=0.0,
                               high=MAX_DURATION)
     lockstep: bool = setting(True, 'wait for every command stamped t_k (else free-running)')
@@ -87,9 +88,6 @@ class SimulatorNode(Node):
         c = self.config = declare_parameters(self, SimulatorNodeParameters, SimulationError)
         self._declare_controllers()
         check_unknown(self)
-        if not c.scene:
-            raise ConfigError('parameter scene: the path of a scene YAML is needed (run_scene '
-                              'SCENE --ros writes it into DIR/params/simulator.yaml)')
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
@@ -106,6 +104,7 @@ class SimulatorNode(Node):
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
             (('joint_states', JointState), ('head_pose', PoseStamped), ('gait_state', GaitState))}
         self._readers: set[str] = set()  # live topics with readers (``_count_readers``)
+        self._waited: set[str] | None = None  # controller nodes seen up while starting
         self.create_publisher(String, 'robot_description', LATCHED_QOS).publish(
             String(data=self.session.robot.urdf_path.read_text(encoding='utf-8')))
         self.create_service(StepSimulation, '~/step', self.step_callback)
@@ -183,6 +182,16 @@ class SimulatorNode(Node):
         up = ({i.node_name for i in self.get_publishers_info_by_topic('effort_commands')}
               & {i.node_name for i in self.get_subscriptions_info_by_topic('gait_state')})
         matched = self._pub['/gait_state'].get_subscription_count()
+        nodes = self.session.nodes
+        if self._waited is None and nodes:  # once: what it waits for, then each arrival
+            self._waited = set()
+            self.get_logger().info(
+                f'waiting up to {self.config.startup_timeout:g} s for the controller node(s) '
+                f'{sorted(nodes)} (e.g. ros2 run visual_lifting visual_lifting; run_scene '
+                'SCENE --ros starts them all)')
+        for name in sorted((up & nodes) - (self._waited or set())):
+            self._waited.add(name)
+            self.get_logger().info(f'controller node {name!r} is up')
         if self.loop.try_begin(up, matched, self.config.startup_timeout):
             self.get_logger().info(f'running {self.session.scene.name!r}: sources '
                                    f'{list(self.session.sources)}, nodes '
@@ -208,7 +217,7 @@ class SimulatorNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point (``ros2 run iceskate_sim simulator``)."""
-    return run_node(SimulatorNode, 'simulator', args)
+    return run_node(SimulatorNode, 'simulator', args, __doc__, SimulatorNodeParameters)
 
 
 if __name__ == '__main__':

@@ -6,7 +6,9 @@ and tolerance, and what is recorded. This module validates everything the simula
 controllers' blocks are kept as given and validated by the layer that composes the controllers
 (``parse_scene``'s ``validate_inputs``; ``iceskate_bringup.scene`` does it for the shipped
 controllers). An unknown key, a wrong type or an out-of-range value is refused with a
-``SimulationError`` naming the key (e.g. ``integrator.step``).
+``SimulationError`` naming the key (e.g. ``integrator.step``). A scene is named by its file's
+path or, for the scenes a package ships (``share/<package>/scenes/<name>.yaml``, the package
+registered under the ament index's ``iceskate_scenes``), by its name.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import math
 import pathlib
 from typing import Any, TypeVar
 
+from ament_index_python import get_resources
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
@@ -31,6 +34,8 @@ from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is f
 POSTURES = ('bent_knees', 'staggered', 'upright')
 #: The longest run [s] a scene (or ``run_scene --duration``) may ask for.
 MAX_DURATION = 3600.0
+#: The ament index resource of the packages that ship scenes.
+SCENE_RESOURCE = 'iceskate_scenes'
 T = TypeVar('T')
 
 
@@ -300,8 +305,36 @@ def _record_every(rate: float | None, control_period: float) -> int:
                     f'{control_rate / 10:g})')
     return every
 
-def load_scene(path: str | pathlib.Path,
+def scene_dirs() -> list[pathlib.Path]:
+    """The scene folders, ``share/<package>/scenes``, of the packages that register under the
+    ament index's ``SCENE_RESOURCE`` (``iceskate_bringup``'s shipped scenes), by package."""
+    return [pathlib.Path(prefix) / 'share' / package / 'scenes'
+            for package, prefix in sorted(get_resources(SCENE_RESOURCE).items())]
+
+
+def shipped_scenes() -> list[str]:
+    """Names of the shipped scenes."""
+    return sorted({p.stem for d in scene_dirs() for p in d.glob('*.yaml')})
+
+
+def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
+    """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself.
+
+    :raises SimulationError: for a name no package ships, listing those shipped.
+    """
+    path = pathlib.Path(name_or_path)
+    if path.suffix or len(path.parts) > 1:
+        return path
+    for d in scene_dirs():
+        if (d / f'{path.name}.yaml').is_file():
+            return d / f'{path.name}.yaml'
+    raise SimulationError(f'unknown scene {str(name_or_path)!r}; shipped scenes: '
+                          f'{", ".join(shipped_scenes())} (or give the path of a YAML file)')
+
+
+def load_scene(name_or_path: str | pathlib.Path,
                validate_inputs: Callable[[str, dict[str, Any]], None] | None = None) -> Scene:
-    """Load and validate the scene YAML file at ``path`` (see ``parse_scene``)."""
-    return parse_scene(read_yaml(path, 'scene'), validate_inputs)
+    """Load and validate a shipped scene by name or the scene YAML file at a path (see
+    ``parse_scene``)."""
+    return parse_scene(read_yaml(scene_path(name_or_path), 'scene'), validate_inputs)
 
