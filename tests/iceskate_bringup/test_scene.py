@@ -7,21 +7,18 @@ import yaml
 
 from iceskate_bringup.scene import load_scene, parse_scene, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.scene import scene_dirs, shipped_scenes
+from iceskate_sim.installed import shipped_files
+from iceskate_sim.run.scene import SCENE_RESOURCE, scene_path
 
 REQUIRED = {'stand', 'skate', 'skate_no_yaw', 'walk'}
 
 
 def _raw(name: str) -> dict:
-    for d in scene_dirs():
-        path = d / f'{name}.yaml'
-        if path.is_file():
-            return yaml.safe_load(path.read_text())
-    raise AssertionError(f'scene {name} not found')
+    return yaml.safe_load(scene_path(name).read_text())
 
 
 def test_required_scenes_are_shipped():
-    assert REQUIRED <= set(shipped_scenes())
+    assert REQUIRED <= set(shipped_files(SCENE_RESOURCE, 'scenes'))
 
 
 @pytest.mark.parametrize('name', sorted(REQUIRED))

@@ -14,6 +14,7 @@ pytest.importorskip('rosbags')
 
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer  # noqa: E402
 
+from iceskate_sim.errors import SimulationError  # noqa: E402
 from iceskate_sim.recording.bag_types import find_msg_dir, make_typestore, msg_types  # noqa: E402
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
@@ -116,15 +117,23 @@ def test_make_typestore_registers_all_interface_messages():
     assert typestore.types[GAIT_STATE].PIVOT_HEEL == 2
 
 
-def test_find_msg_dir_prefers_ament_prefix_path(tmp_path, monkeypatch):
-    share = tmp_path / 'prefix' / 'share' / 'iceskate_interfaces' / 'msg'
+def test_find_msg_dir_is_the_installed_packages(tmp_path, monkeypatch):
+    """The first prefix of AMENT_PREFIX_PATH whose ament index holds iceskate_interfaces; none:
+    one sentence saying the workspace is not built."""
+    prefix = tmp_path / 'prefix'
+    share = prefix / 'share' / 'iceskate_interfaces' / 'msg'
     share.mkdir(parents=True)
     for source in SOURCE_MSG_DIR.glob('*.msg'):
         (share / source.name).write_text(source.read_text())
-    monkeypatch.setenv('AMENT_PREFIX_PATH', f'{tmp_path / "empty"}:{tmp_path / "prefix"}')
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    (index / 'iceskate_interfaces').touch()
+    monkeypatch.setenv('AMENT_PREFIX_PATH', f'{tmp_path / "empty"}:{prefix}')
     assert find_msg_dir() == share
+    assert make_typestore().types['iceskate_interfaces/msg/GaitState'].PIVOT_HEEL == 2
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'empty'))
-    assert find_msg_dir() == SOURCE_MSG_DIR
+    with pytest.raises(SimulationError, match='package iceskate_interfaces is not installed'):
+        find_msg_dir()
 
 
 def test_msg_types_raises_on_directory_without_msg_files(tmp_path):

@@ -10,6 +10,8 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        # it ships studies (iceskate_study.spec.STUDY_RESOURCE): share/<pkg>/studies/<name>.yaml
+        ('share/ament_index/resource_index/iceskate_studies', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/studies', sorted(glob('studies/*.yaml'))),
     ],

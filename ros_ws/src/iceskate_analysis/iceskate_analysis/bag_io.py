@@ -438,7 +438,7 @@ def _default_typestore() -> Typestore | None:
     from iceskate_sim.recording.bag_types import make_typestore
     try:
         return make_typestore()
-    except FileNotFoundError:
+    except (FileNotFoundError, SimulationError):  # not installed: the bag's own definitions
         return None
 
 

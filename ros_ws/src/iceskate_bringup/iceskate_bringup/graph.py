@@ -16,7 +16,7 @@ SCHED_IDLE): the processes are started from a thread switched to it for that mom
 process, the run's thread is switched while it runs).
 
 The executables are the installed ones (``<prefix>/lib/<pkg>/<exe>``, as ``ros2 run`` finds
-them), else ``python -m <module>`` from the sources. Node logs go to
+them). Node logs go to
 ``$ROS_LOG_DIR/<node>.log`` (printed on failure).
 """
 
@@ -30,7 +30,6 @@ import os
 import pathlib
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from typing import Any
@@ -38,7 +37,7 @@ from typing import Any
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.robot import ament_prefixes
+from iceskate_sim.installed import share_path
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.node_support import write_parameter_file
 from iceskate_sim.run.scene import scene_path
@@ -76,24 +75,16 @@ class NodeSpec:
 
 
 def config_file(package: str, node: str) -> pathlib.Path:
-    """The node's YAML: installed share/<pkg>/config, else the source tree."""
-    for prefix in ament_prefixes():
-        path = prefix / 'share' / package / 'config' / f'{node}.yaml'
-        if path.is_file():
-            return path
-    source = pathlib.Path(__file__).resolve().parents[2] / package / 'config' / f'{node}.yaml'
-    if source.is_file():
-        return source
-    raise SimulationError(f'no config/{node}.yaml of package {package} (is ros_ws built?)')
+    """The node's shipped YAML, ``share/<package>/config/<node>.yaml``."""
+    path = share_path(package, 'config', f'{node}.yaml')
+    if not path.is_file():
+        raise SimulationError(f'package {package} installs no config/{node}.yaml')
+    return path
 
 
 def command_of(spec: NodeSpec) -> list[str]:
-    """How to start a node: the installed executable, else ``python -m``."""
-    for prefix in ament_prefixes():
-        exe = prefix / 'lib' / spec.package / spec.executable
-        if exe.is_file() and os.access(exe, os.X_OK):
-            return [str(exe)]
-    return [sys.executable, '-m', spec.module]
+    """How to start a node: the executable its package installs (``lib/<package>``)."""
+    return [str(share_path(spec.package).parents[1] / 'lib' / spec.package / spec.executable)]
 
 
 def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None,

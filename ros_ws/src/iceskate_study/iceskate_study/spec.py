@@ -43,7 +43,7 @@ import numpy as np
 
 from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.robot import ament_prefixes
+from iceskate_sim.installed import shipped_files, shipped_or_path
 from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_sim.run.scene import Scene, scene_path
@@ -352,34 +352,19 @@ def kept(name: str, metrics: tuple[str, ...]) -> bool:
 
 
 # ------------------------------------------------------------------------ the SPEC
-def study_dirs() -> list[pathlib.Path]:
-    """Directories searched for shipped studies (installed share dir, then the source tree)."""
-    dirs = [p / 'share' / 'iceskate_study' / 'studies' for p in ament_prefixes()]
-    dirs.append(pathlib.Path(__file__).resolve().parents[1] / 'studies')
-    return [d for d in dirs if d.is_dir()]
+#: The ament index resource of the packages that ship studies.
+STUDY_RESOURCE = 'iceskate_studies'
 
 
 def shipped_studies() -> list[str]:
     """Names of the shipped studies."""
-    return sorted({p.stem for d in study_dirs() for p in d.glob('*.yaml')})
-
-
-def spec_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
-    """The YAML file of a shipped study name (e.g. 'arm_swing'), or the path itself."""
-    path = pathlib.Path(name_or_path)
-    if path.suffix:
-        return path
-    for d in study_dirs():
-        if (d / f'{path.name}.yaml').is_file():
-            return d / f'{path.name}.yaml'
-    raise StudyError(f'unknown study {str(name_or_path)!r}; shipped studies: '
-                     f'{shipped_studies()} (or give the path of a SPEC file)')
+    return list(shipped_files(STUDY_RESOURCE, 'studies'))
 
 
 def load_spec(name_or_path: str | pathlib.Path) -> Spec:
     """Read and validate a SPEC file (a path, or a shipped study's name)."""
-    path = spec_path(name_or_path)
     try:
+        path = shipped_or_path(name_or_path, STUDY_RESOURCE, 'studies', 'study')
         raw = read_yaml(path, 'SPEC')
     except SimulationError as exc:
         raise StudyError(str(exc)) from None

@@ -17,13 +17,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import functools
-import os
 import pathlib
 
 import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.installed import share_path
 
 N_COORDINATES = 18
 COORDINATE_NAMES: tuple[str, ...] = ('y0',) + tuple(f'q{i}' for i in range(1, 18))
@@ -79,21 +79,8 @@ def anatomical_map(side: str) -> list[tuple[int, str, float]]:
 
 
 def default_urdf_path() -> pathlib.Path:
-    """Return the URDF shipped with the package (installed share dir or source tree)."""
-    package = pathlib.Path(__file__).resolve().parents[2]  # ros_ws/src/iceskate_sim
-    candidates = [package / 'urdf' / 'iceskate_humanoid.urdf']
-    for prefix in ament_prefixes():
-        candidates.append(prefix / 'share' / 'iceskate_sim' / 'urdf' / 'iceskate_humanoid.urdf')
-    for path in candidates:
-        if path.is_file():
-            return path
-    raise SimulationError(f'iceskate_humanoid.urdf not found (looked in {candidates})')
-
-
-def ament_prefixes() -> list[pathlib.Path]:
-    """The install prefixes of $AMENT_PREFIX_PATH, in order (where ROS looks for packages)."""
-    return [pathlib.Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
-            if p]
+    """The URDF the package installs (``share/iceskate_sim/urdf``)."""
+    return share_path('iceskate_sim', 'urdf', 'iceskate_humanoid.urdf')
 
 
 @dataclass(frozen=True)

@@ -4,20 +4,18 @@ The bag writer (recorder) and the offline analysis read and write rosbag2 bags w
 and need our custom message definitions. They come from the ``.msg`` files of the
 ``iceskate_interfaces`` package, so no ROS build and no ``rclpy`` import are needed.
 
-Lookup order of the ``.msg`` directory:
-
-1. ``<prefix>/share/iceskate_interfaces/msg`` for every ``<prefix>`` in ``$AMENT_PREFIX_PATH``
-   (what an installed workspace provides; no ``ament_index`` import),
-2. the source tree: ``ros_ws/src/interfaces/msg`` next to this package's source.
+The ``.msg`` files are those the package installs (``share/iceskate_interfaces/msg``, found
+through the ament index).
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from iceskate_sim.installed import share_path
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -40,34 +38,12 @@ OFFERED_QOS = {'/robot_description': [{
     'liveliness_lease_duration': {'sec': 0, 'nsec': 0},
     'avoid_ros_namespace_conventions': False}]}
 
-# ros_ws/src/iceskate_sim/iceskate_sim/recording/bag_types.py -> ros_ws/src/interfaces/msg
-# (resolve() follows colcon's --symlink-install links back to the source tree).
-_SOURCE_MSG_DIR = Path(__file__).resolve().parents[3] / 'interfaces' / 'msg'
-
-
-def _candidate_dirs() -> list[Path]:
-    """Return the directories searched for ``*.msg`` files, in lookup order."""
-    candidates = []
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if prefix:
-            candidates.append(Path(prefix) / 'share' / INTERFACES_PACKAGE / 'msg')
-    candidates.append(_SOURCE_MSG_DIR)
-    return candidates
-
-
 def find_msg_dir() -> Path:
-    """Return the first directory that holds the ``iceskate_interfaces`` ``.msg`` files.
+    """The ``.msg`` files' folder the ``iceskate_interfaces`` package installs.
 
-    :return: directory containing at least one ``*.msg`` file.
-    :raises FileNotFoundError: when no candidate directory holds ``.msg`` files; the message
-        lists every directory searched.
+    :raises SimulationError: if the package is not installed.
     """
-    candidates = _candidate_dirs()
-    for directory in candidates:
-        if directory.is_dir() and any(directory.glob('*.msg')):
-            return directory
-    searched = ', '.join(str(c) for c in candidates)
-    raise FileNotFoundError(f'no {INTERFACES_PACKAGE} .msg files found; searched: {searched}')
+    return share_path(INTERFACES_PACKAGE, 'msg')
 
 
 def msg_types(msg_dir: Path | str | None = None) -> dict:
@@ -94,7 +70,8 @@ def make_typestore(msg_dir: Path | str | None = None) -> Typestore:
 
     :param msg_dir: directory of the ``.msg`` files; default: :func:`find_msg_dir`.
     :return: a new ``Typestore`` (``Stores.ROS2_JAZZY`` plus our types).
-    :raises FileNotFoundError: when the ``.msg`` files cannot be found.
+    :raises SimulationError: when ``iceskate_interfaces`` is not installed.
+    :raises FileNotFoundError: when the ``.msg`` folder holds no ``.msg`` file.
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
     typestore.register(msg_types(msg_dir))

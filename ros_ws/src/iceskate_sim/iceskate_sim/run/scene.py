@@ -19,10 +19,10 @@ import math
 import pathlib
 from typing import Any, TypeVar
 
-from ament_index_python import get_resources
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.parameters import block, check_fields, keyed_from_mapping, setting
@@ -305,31 +305,12 @@ def _record_every(rate: float | None, control_period: float) -> int:
                     f'{control_rate / 10:g})')
     return every
 
-def scene_dirs() -> list[pathlib.Path]:
-    """The scene folders, ``share/<package>/scenes``, of the packages that register under the
-    ament index's ``SCENE_RESOURCE`` (``iceskate_bringup``'s shipped scenes), by package."""
-    return [pathlib.Path(prefix) / 'share' / package / 'scenes'
-            for package, prefix in sorted(get_resources(SCENE_RESOURCE).items())]
-
-
-def shipped_scenes() -> list[str]:
-    """Names of the shipped scenes."""
-    return sorted({p.stem for d in scene_dirs() for p in d.glob('*.yaml')})
-
-
 def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
     """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself.
 
     :raises SimulationError: for a name no package ships, listing those shipped.
     """
-    path = pathlib.Path(name_or_path)
-    if path.suffix or len(path.parts) > 1:
-        return path
-    for d in scene_dirs():
-        if (d / f'{path.name}.yaml').is_file():
-            return d / f'{path.name}.yaml'
-    raise SimulationError(f'unknown scene {str(name_or_path)!r}; shipped scenes: '
-                          f'{", ".join(shipped_scenes())} (or give the path of a YAML file)')
+    return shipped_or_path(name_or_path, SCENE_RESOURCE, 'scenes', 'scene')
 
 
 def load_scene(name_or_path: str | pathlib.Path,

@@ -1,0 +1,51 @@
+"""Files the workspace's packages install, ``share/<package>/...``, found through the ament
+index (``ament_index_python``) as ROS finds them; shipped YAML files (scenes, studies) by name.
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+from ament_index_python import PackageNotFoundError, get_package_share_path, get_resources
+
+from iceskate_sim.errors import SimulationError
+
+
+def share_path(package: str, *parts: str) -> pathlib.Path:
+    """``share/<package>/<parts>`` of an installed package (the path may not exist).
+
+    :raises SimulationError: if the package is not installed (``make setup`` builds ros_ws).
+    """
+    try:
+        return get_package_share_path(package).joinpath(*parts)
+    except PackageNotFoundError:
+        raise SimulationError(f'package {package} is not installed (no {package} in '
+                              'AMENT_PREFIX_PATH: build ros_ws with make setup and source '
+                              'env.sh)') from None
+
+
+def shipped_files(resource: str, folder: str) -> dict[str, pathlib.Path]:
+    """Name -> ``share/<package>/<folder>/<name>.yaml`` of the packages registered under the
+    ament index's ``resource`` (the first package, by name, wins a name)."""
+    found: dict[str, pathlib.Path] = {}
+    for package, prefix in sorted(get_resources(resource).items()):
+        for path in sorted((pathlib.Path(prefix) / 'share' / package / folder).glob('*.yaml')):
+            found.setdefault(path.stem, path)
+    return found
+
+
+def shipped_or_path(name_or_path: str | pathlib.Path, resource: str, folder: str,
+                    what: str) -> pathlib.Path:
+    """The shipped YAML file of a name (``shipped_files``), or the path itself (one with a
+    suffix or a folder).
+
+    :raises SimulationError: for a name none ships, listing those shipped.
+    """
+    path = pathlib.Path(name_or_path)
+    if path.suffix or len(path.parts) > 1:
+        return path
+    shipped = shipped_files(resource, folder)
+    if path.name in shipped:
+        return shipped[path.name]
+    raise SimulationError(f'unknown {what} {str(name_or_path)!r}; shipped {what}s: '
+                          f'{", ".join(shipped)} (or give the path of a YAML file)')
