@@ -78,6 +78,39 @@ def test_lockstep_session_reproduces_the_headless_run(scene, tmp_path):
     assert (tmp_path / 'ros' / 'bag' / 'metadata.yaml').is_file()
 
 
+def test_sources_not_given_are_taken_from_the_first_commands(scene, tmp_path):
+    """Controllers named without their sources (by hand, no parameter file): the breakdown of
+    each one's first command is taken before the first period; the run equals the one with
+    the sources given."""
+    given = make_session(scene, tmp_path / 'given')
+    expected = drive(given, controllers(scene, given))
+    learned = LockstepSession(Session(scene, tmp_path / 'learned'),
+                              dict.fromkeys(scene_sources(scene)))
+    assert learned.sources == ('visual_lifting', 'gait_manager')  # one each until they answer
+    metrics = drive(learned, controllers(scene, learned))
+    assert learned.sources == given.sources == ('visual_lifting', 'posture', 'weight_transfer')
+    assert metrics['sources'] == expected['sources']
+    a, b = (np.load(tmp_path / name / 'trajectory.npz') for name in ('learned', 'given'))
+    for key in b.files:
+        assert np.array_equal(a[key], b[key]), key
+
+
+def test_a_breakdown_that_changes_after_the_first_period_is_refused(scene):
+    session = LockstepSession(Session(scene), {'visual_lifting': ('visual_lifting',),
+                                               'gait_manager': None})
+    answer = controllers(scene, session)
+    obs = session.session.observation()
+    for controller, command in answer(obs).items():
+        session.offer(controller, seconds_to_ns(obs.t), command)
+    session.step()
+    obs = session.session.observation()
+    with pytest.raises(SimulationError, match="command of 'gait_manager' breaks down into "
+                       r"sources \['posture'\]; scene 'tiny_stand' runs \['posture', "
+                       r"'weight_transfer'\] on it"):
+        session.offer('gait_manager', seconds_to_ns(obs.t),
+                      ControllerCommand(JointCommand(np.zeros(18)), {'posture': np.zeros(18)}))
+
+
 def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
     session = make_session(scene)
     assert session.controllers == ('visual_lifting', 'gait_manager')

@@ -1,6 +1,7 @@
 """Bad paths and bad files are refused before anything starts, in one sentence naming the path or
 key and the problem (never a traceback, never a Python method); YAML 1.2 numbers everywhere."""
 
+import json
 import os
 from pathlib import Path
 import re
@@ -219,31 +220,37 @@ def test_the_simulator_alone_runs_the_shipped_skate_and_says_whom_it_waits_for(r
 
 
 @pytest.mark.ros
-def test_a_controller_by_hand_says_it_is_ready_and_ends_with_the_run(tmp_path, ros_env):
-    """The simulator (a shipped scene by name, one controller node) and visual_lifting started
-    by hand: the simulator logs the node's arrival, runs, exits; the controller then ends by
-    itself with exit code 0."""
+def test_the_nodes_by_hand_run_a_shipped_scene_and_end_with_it(tmp_path, ros_env):
+    """The simulator (a shipped scene by name, nothing else given) and both controllers
+    started by hand: the simulator logs each arrival, takes each node's sources from its first
+    command, runs and exits; the controllers then end by themselves with exit code 0."""
     pytest.importorskip('rclpy')
     out = tmp_path / 'out'
     simulator = subprocess.Popen(
         [sys.executable, '-m', NODE_MODULES['simulator'], '--ros-args', '-p', 'scene:=stand',
-         '-p', 'duration:=0.05', '-p', f'out_dir:={out}', '-p', 'controllers:=[visual_lifting]',
-         '-p', 'startup_timeout:=30.0'],
+         '-p', 'duration:=0.05', '-p', f'out_dir:={out}', '-p', 'startup_timeout:=30.0'],
         env=ros_env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
-    controller = subprocess.Popen(
-        [sys.executable, '-m', NODE_MODULES['visual_lifting']], env=ros_env,
-        stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    nodes = {name: subprocess.Popen([sys.executable, '-m', NODE_MODULES[name]], env=ros_env,
+                                    stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+             for name in ('visual_lifting', 'gait_manager')}
+    logs = {}
     try:
         _, simulator_log = simulator.communicate(timeout=60)
-        _, controller_log = controller.communicate(timeout=30)
+        for name, process in nodes.items():
+            logs[name] = process.communicate(timeout=30)[1]
     finally:
-        for process in (simulator, controller):
+        for process in (simulator, *nodes.values()):
             if process.poll() is None:
                 process.kill()
                 process.wait(timeout=10)
     assert simulator.returncode == 0, simulator_log
-    assert "controller node 'visual_lifting' is up" in simulator_log
-    assert (out / 'metrics.json').is_file()
-    assert controller.returncode == 0, controller_log
-    assert 'ready: answering gait_state' in controller_log
-    assert 'the simulator is gone: the run is over' in controller_log
+    assert 'rejected' not in simulator_log, simulator_log
+    for name, process in nodes.items():
+        assert f'controller node {name!r} is up' in simulator_log
+        assert process.returncode == 0, logs[name]
+        assert 'ready: answering gait_state' in logs[name]
+        assert 'the simulator is gone: the run is over' in logs[name]
+    # gait_manager by hand runs its own parameters (every source), not the scene's block
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert metrics['sources'] == ['visual_lifting', 'posture', 'feedforward', 'weight_transfer',
+                                  'heel', 'arm_assist', 'yaw']

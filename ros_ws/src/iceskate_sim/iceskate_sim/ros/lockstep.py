@@ -66,31 +66,34 @@ class LockstepSession:
 
     :param session: the run.
     :param controllers: the controller nodes the scene runs, in summing order, each with the
-        names of its command sources in order (its breakdown).
+        names of its command sources in order (its breakdown); None: the breakdown of the
+        node's first command (one source named like the node until then), taken while no
+        period has run.
     :param lockstep: wait for a command stamped t_k from every controller (True), or hold each
         controller's latest command (False).
     """
 
-    def __init__(self, session: Session, controllers: dict[str, tuple[str, ...]],
+    def __init__(self, session: Session, controllers: dict[str, tuple[str, ...] | None],
                  lockstep: bool = True) -> None:
         self.session = session
         self.scene = session.scene
         self.sim = session.sim
         self.robot = session.robot
         self.lockstep = lockstep
-        self._breakdown = dict(controllers)
+        self._breakdown = {c: sources or (c,) for c, sources in controllers.items()}
+        self._learning = {c for c, sources in controllers.items() if sources is None}
         self.controllers = tuple(controllers)
-        self.sources = tuple(s for sources in controllers.values() for s in sources)
         self.recorder = session.recorder
         self.messages = (self.recorder.messages if self.recorder else
                          SampleMessages(make_typestore(), self.robot.tf_frames))
         #: the native loop that holds the commands
-        self._inbox = session.command_inbox(tuple(controllers.values()))
+        self._inbox = session.command_inbox(tuple(self._breakdown.values()))
         self._index = {c: k for k, c in enumerate(self.controllers)}
         self._restart()
 
     def _restart(self) -> None:
         self._answered: set[str] = set()  # controllers with a command held (free-running)
+        self._received: dict[str, CommandValues] = {}  # each controller's latest command
         self._stamps: dict[str, int] = {}
         #: the state, its live sample and the latest event at it
         self._live: tuple[HybridState, tuple[int, int, int]] | None = None
@@ -100,6 +103,11 @@ class LockstepSession:
     def t_ns(self) -> int:
         """Stamp of the current instant t_k [ns]."""
         return seconds_to_ns(self.sim.time)
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        """Every controller's sources, in summing order."""
+        return tuple(s for sources in self._breakdown.values() for s in sources)
 
     @property
     def nodes(self) -> set[str]:
@@ -154,6 +162,10 @@ class LockstepSession:
         if isinstance(command, ControllerCommand):
             command = CommandValues.of(command)
         expected = self._breakdown[controller]
+        if controller in self._learning and command.sources and command.sources != expected:
+            self._adopt(controller, command.sources)
+            expected = command.sources
+        self._learning.discard(controller)
         if not command.sources and expected == (controller,):
             state = self.sim.state
             total = command.command().command
@@ -181,7 +193,21 @@ class LockstepSession:
             raise SimulationError(f'{exc} (from {controller!r})') from None
         self._answered.add(controller)
         self._stamps[controller] = stamp_ns
+        self._received[controller] = command
         return True
+
+    def _adopt(self, controller: str, sources: tuple[str, ...]) -> None:
+        """Take ``sources`` as the breakdown of ``controller`` (whose sources were not given):
+        a new inbox, holding the commands received so far."""
+        if self.periods:
+            raise SimulationError(f'command of {controller!r} breaks down into sources '
+                                  f'{list(sources)} after the run began with '
+                                  f'{list(self._breakdown[controller])}')
+        self._breakdown[controller] = tuple(sources)
+        self._inbox = self.session.command_inbox(tuple(self._breakdown.values()), renew=True)
+        self._live = None
+        for other, command in self._received.items():
+            self._inbox.receive(self._index[other], command)
 
     def missing(self) -> list[str]:
         """Controllers whose command for t_k has not arrived (free-running: none ever did)."""

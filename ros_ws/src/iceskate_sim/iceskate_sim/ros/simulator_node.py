@@ -119,15 +119,17 @@ class SimulatorNode(Node):
         """``controllers`` and, for each, ``sources.<controller>`` (string arrays)."""
         self.declare_parameter('controllers', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description='controller nodes whose commands are summed, in order (empty: the '
-                        "scene's inputs, each with one source named like it)"))
+                        "scene's inputs; a node without sources.<node>: the sources its first "
+                        'command names)'))
         overrides = getattr(self, '_parameter_overrides', {})
         for name in overrides.get('controllers', Parameter('', value=[])).value or []:
             self.declare_parameter(f'sources.{name}', Parameter.Type.STRING_ARRAY,
                                    ParameterDescriptor(description=f'command sources of {name}, '
                                                        'in the order of its breakdown'))
 
-    def _controllers(self, scene: Scene) -> dict[str, tuple[str, ...]]:
-        """Each controller node with its sources (parameters, else the scene's inputs)."""
+    def _controllers(self, scene: Scene) -> dict[str, tuple[str, ...] | None]:
+        """Each controller node (parameter ``controllers``, else the scene's inputs) with its
+        sources (parameter ``sources.<node>``; None: the breakdown of its first command)."""
         try:
             names = list(self.get_parameter('controllers').value) or list(scene.inputs)
         except ParameterUninitializedException:  # not given: the scene's controller blocks
@@ -139,7 +141,7 @@ class SimulatorNode(Node):
                            if self.has_parameter(f'sources.{name}') else None)
             except ParameterUninitializedException:  # declared for `controllers`, not given
                 sources = None
-            out[name] = tuple(sources or (name,))
+            out[name] = tuple(sources) if sources else None
         return out
 
     @property

@@ -151,11 +151,12 @@ class Session:
         """What the controllers see at t_k (times at the stamps' nanosecond resolution)."""
         return self.sim.observation()
 
-    def command_inbox(self, inbox: tuple[tuple[str, ...], ...]) -> NativeControlLoop:
+    def command_inbox(self, inbox: tuple[tuple[str, ...], ...],
+                      renew: bool = False) -> NativeControlLoop:
         """The native loop that holds commands received from outside (``hold``): ``inbox`` has
         the sources of each controller node in summing order; ``receive`` a node's command by
-        its index."""
-        if self._inbox is None:
+        its index. ``renew``: a new one (for a new ``inbox``; the commands held are dropped)."""
+        if self._inbox is None or renew:
             self._inbox = self.sim.control_loop(None, [], self.scene.pushes, self.psi_initial,
                                                 inbox)
         return self._inbox
