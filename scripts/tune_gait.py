@@ -91,8 +91,7 @@ from gait_manager.parameters import GaitManagerParameters
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.scene import scene_path
-from iceskate_sim.yaml_io import read_yaml
+from iceskate_sim.run.scene import scene_raw
 
 # block.key -> (low, high)
 SPACE = {
@@ -394,7 +393,7 @@ def main() -> None:
                              'over CHECKS and print one JSON line per case')
     args = parser.parse_args()
     try:  # YAML 1.2 numbers, as run_scene reads it
-        base = read_yaml(scene_path(args.scene), 'scene')
+        base = scene_raw(args.scene)
     except SimulationError as exc:
         raise SystemExit(f'--scene: {exc}') from None
     base['duration'] = args.duration

@@ -11,8 +11,7 @@ import pytest
 
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene, parse_scene
-from iceskate_sim.run.scene import scene_path
-from iceskate_sim.yaml_io import read_yaml
+from iceskate_sim.run.scene import scene_raw
 
 EDGE_MODES = {2, 4, 6, 8, 10, 12, 14, 16, 18, 20}  # support on its toe or heel edge (Table 2)
 
@@ -105,7 +104,7 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
     swing the arm assist gave: at the brake's end the shoulders' RMS speed is under half of
     what it was just before the exchange, and well under what it is then when the arms are
     let go at once (release_time 0)."""
-    raw = read_yaml(scene_path('skate_no_yaw'), 'scene')
+    raw = scene_raw('skate_no_yaw')
     release = raw['inputs']['gait_manager']['arm_assist']['release_time']
     assert release > 0.0
     raw['inputs']['gait_manager']['arm_assist']['release_time'] = 0.0
@@ -123,7 +122,7 @@ def test_the_release_brakes_the_swing_the_arm_assist_left(skate_runs, tmp_path):
 def _pushed_skate(start: float, force: float, duration: float = 15.0) -> dict:
     """The shipped skate scene (no bag, ``duration`` [s]) with a 0.1 s chest push of ``force``
     [N] (> 0: forward) from ``start`` [s]."""
-    raw = read_yaml(scene_path('skate'), 'scene')
+    raw = scene_raw('skate')
     raw['duration'], raw['record'] = duration, {'bag': False}
     raw['disturbances'] = [{'start': start, 'duration': 0.1, 'frame': 'chest',
                             'force': [0.0, force, 0.0]}]

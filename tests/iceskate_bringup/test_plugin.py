@@ -16,8 +16,7 @@ import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import load_robot
 from iceskate_sim.physics.native_control import native_kinematics
-from iceskate_sim.run.scene import scene_path
-from iceskate_sim.yaml_io import read_yaml
+from iceskate_sim.run.scene import scene_raw
 
 EXAMPLE = 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'
 HERE = Path(__file__).resolve().parent
@@ -30,7 +29,7 @@ def _test_plugins(monkeypatch):
 
 
 def _raw(name: str, duration: float, bag: bool = False) -> dict:
-    raw = read_yaml(scene_path(name), 'scene')
+    raw = scene_raw(name)
     raw['duration'] = duration
     raw['record'] = {'bag': bag}
     return raw
@@ -265,7 +264,7 @@ def test_the_loop_refuses_sources_that_are_empty_or_repeated(names):
 
     from iceskate_sim.run.scene import load_scene
     from iceskate_sim.run.session import Session
-    scene = load_scene(scene_path('stand'))
+    scene = load_scene('stand')
     session = Session(scene)
     loop = session.sim.control_loop(native_kinematics(session.robot), [NamedSources(names)], (),
                                     session.psi_initial)

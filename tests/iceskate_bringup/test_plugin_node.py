@@ -9,7 +9,6 @@ import pytest
 
 from iceskate_bringup.plugin_node import PluginNodeParameters, node_name
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.yaml_io import read_yaml
 
 EXAMPLE = 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'
 
@@ -34,9 +33,9 @@ def test_the_graph_with_a_plugin_node_gives_the_headless_trajectory(tmp_path, ro
     from iceskate_bringup.graph import graph_nodes, run_graph
     from iceskate_bringup.runner import run
     from iceskate_bringup.scene import load_scene
-    from iceskate_sim.run.scene import scene_path
+    from iceskate_sim.run.scene import scene_raw
 
-    raw = read_yaml(scene_path('stand_python'), 'scene')
+    raw = scene_raw('stand_python')
     raw['duration'] = 0.3
     raw['record'] = {'bag': False}
     path = tmp_path / 'scene.yaml'
@@ -67,11 +66,11 @@ def test_a_failing_plugin_node_logs_its_error_and_the_simulator_names_it(tmp_pat
     from pathlib import Path
 
     from iceskate_bringup.graph import run_graph
-    from iceskate_sim.run.scene import scene_path
+    from iceskate_sim.run.scene import scene_raw
     here = str(Path(__file__).resolve().parent)  # plugin_controllers, for the node's process
     monkeypatch.setenv('PYTHONPATH', os.pathsep.join([here, os.environ.get('PYTHONPATH', '')]))
     monkeypatch.syspath_prepend(here)
-    raw = read_yaml(scene_path('stand'), 'scene')
+    raw = scene_raw('stand')
     raw['duration'] = 0.5
     raw['record'] = {'bag': True}
     raw['inputs'] = {'visual_lifting': raw['inputs']['visual_lifting'],

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+import yaml
 
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import main, run
@@ -116,4 +117,38 @@ def test_main_reports_a_bad_scene_and_exits_non_zero(tmp_path, capsys):
 def test_main_refuses_graph_options_without_ros(tmp_path, capsys, option):
     assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', *option]) == 1
     assert '--single-process and --rt-priority need --ros' in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_set_changes_scene_keys_of_the_run(tmp_path, capsys):
+    """``--set KEY=VALUE`` (VALUE in YAML) changes the scene the run uses; the ROS graph gets
+    the same scene in ``params/scene.yaml``."""
+    out = tmp_path / 'out'
+    assert main(['stand', '--out', str(out), '--quiet', '--set', 'duration=0.02',
+                 '--set', 'floor.mu=0.5', '--set', 'inputs.visual_lifting.kp=[30, 290, 1e3]',
+                 '--set', 'record.bag=false']) == 0
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert metrics['sim_time_s'] == pytest.approx(0.02)
+    assert not (out / 'bag').exists()
+    from iceskate_bringup.graph import graph_nodes
+    graph_nodes('stand', tmp_path / 'graph', overrides={'floor.mu': 0.5})
+    written = yaml.safe_load((tmp_path / 'graph' / 'params' / 'scene.yaml').read_text())
+    assert written['floor']['mu'] == 0.5 and written['scene'] == 'stand'
+    simulator = yaml.safe_load((tmp_path / 'graph' / 'params' / 'simulator.yaml').read_text())
+    assert simulator['simulator']['ros__parameters']['scene'] == str(
+        (tmp_path / 'graph' / 'params' / 'scene.yaml').resolve())
+
+
+@pytest.mark.parametrize(('setting', 'expected'), [
+    ('floor.mu', "--set 'floor.mu': give KEY=VALUE (e.g. floor.mu=0.01)"),
+    ('floor.mu=[0.1,', "--set floor.mu: '[0.1,' is no YAML value"),
+    ('floor.nu=0.1', "scene key 'floor.nu'"),
+    ('floor.mu=-1', "scene key 'floor.mu'"),
+    ('initial.q[0]=1', 'override initial.q[0]: initial.q is not in the scene; give the whole'),
+    ('a..b=1', "override a..b: 'a..b' is not a dotted scene key"),
+])
+def test_a_bad_set_is_refused_in_one_sentence(tmp_path, capsys, setting, expected):
+    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', '--set', setting]) == 1
+    err = capsys.readouterr().err
+    assert expected in err and err.count('\n') == 1, err
     assert not (tmp_path / 'out').exists()

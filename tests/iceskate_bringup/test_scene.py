@@ -3,18 +3,17 @@
 import copy
 
 import pytest
-import yaml
 
 from iceskate_bringup.scene import load_scene, parse_scene, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_files
-from iceskate_sim.run.scene import SCENE_RESOURCE, scene_path
+from iceskate_sim.run.scene import SCENE_RESOURCE, scene_raw
 
 REQUIRED = {'stand', 'skate', 'skate_no_yaw', 'walk'}
 
 
 def _raw(name: str) -> dict:
-    return yaml.safe_load(scene_path(name).read_text())
+    return scene_raw(name)
 
 
 def test_required_scenes_are_shipped():
@@ -100,3 +99,20 @@ def test_malformed_yaml_and_unknown_scene_are_refused(tmp_path):
         load_scene(bad)
     with pytest.raises(SimulationError, match="unknown scene 'nope'"):
         load_scene('nope')
+
+
+def test_a_base_chain_merges_in_order_and_a_loop_is_refused(tmp_path):
+    (tmp_path / 'a.yaml').write_text('base: stand\nscene: a\nfloor: {mu: 0.3}\n')
+    (tmp_path / 'b.yaml').write_text('base: a.yaml\nscene: b\nduration: 1.5\n')
+    raw = scene_raw(tmp_path / 'b.yaml', {'floor.rule': 'ice'})
+    assert (raw['scene'], raw['duration'], raw['floor']) == ('b', 1.5, {'rule': 'ice', 'mu': 0.3})
+    assert raw['inputs'] == scene_raw('stand')['inputs']
+    (tmp_path / 'a.yaml').write_text('base: b.yaml\nscene: a\n')
+    with pytest.raises(SimulationError, match="a.yaml: its base 'b.yaml' leads back to itself"):
+        scene_raw(tmp_path / 'b.yaml')
+    (tmp_path / 'c.yaml').write_text('base: [stand]\nscene: c\n')
+    with pytest.raises(SimulationError, match='base must be a shipped scene name or the path'):
+        scene_raw(tmp_path / 'c.yaml')
+    (tmp_path / 'd.yaml').write_text('base: nowhere\nscene: d\n')
+    with pytest.raises(SimulationError, match="unknown scene 'nowhere'"):
+        scene_raw(tmp_path / 'd.yaml')

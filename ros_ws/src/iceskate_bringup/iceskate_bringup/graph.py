@@ -34,13 +34,14 @@ import tempfile
 import time
 from typing import Any
 
+import yaml
+
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.node_support import write_parameter_file
-from iceskate_sim.run.scene import scene_path
 from iceskate_sim.run.session import prepare_output
 from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 
@@ -88,15 +89,20 @@ def command_of(spec: NodeSpec) -> list[str]:
 
 
 def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None,
+                overrides: dict[str, Any] | None = None,
                 **simulator_parameters: Any) -> list[NodeSpec]:
     """The simulator and the controller nodes the scene runs, each with its parameter file
     written into ``out/params/`` (``<node>.yaml``: the scene composed into node parameters;
-    reusable to start the nodes by hand)."""
-    scene = load_scene(scene_arg)
+    reusable to start the nodes by hand), and the scene the simulator reads, ``scene.yaml``
+    (its base merged in, ``overrides`` set: dotted key -> value)."""
+    scene = load_scene(scene_arg, overrides)
     controllers = scene_sources(scene)
     folder = out / 'params'
     folder.mkdir(parents=True, exist_ok=True)
-    params: dict[str, Any] = {'scene': str(scene_path(scene_arg).resolve()), 'out_dir': str(out)}
+    (folder / 'scene.yaml').write_text(yaml.safe_dump(scene.raw, sort_keys=False),
+                                       encoding='utf-8')
+    params: dict[str, Any] = {'scene': str((folder / 'scene.yaml').resolve()),
+                              'out_dir': str(out)}
     if scene.record_bag:
         params['record_bag'] = str(out / 'bag')
     if duration is not None:
@@ -234,8 +240,10 @@ def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
 def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = None,
               single_process: bool = False, domain_id: int | None = None,
               timeout: float | None = None, rt_priority: int = 0,
-              stop: StopRequest | None = None, **simulator_parameters: Any) -> dict[str, Any]:
-    """Run a scene through the ROS graph; return its metrics (also in ``out/metrics.json``).
+              stop: StopRequest | None = None, overrides: dict[str, Any] | None = None,
+              **simulator_parameters: Any) -> dict[str, Any]:
+    """Run a scene (with ``overrides``: dotted key -> value) through the ROS graph; return its
+    metrics (also in ``out/metrics.json``).
 
     The output folder is checked first (``prepare_output``). A SIGINT, SIGTERM or SIGHUP
     (``stop``) is passed on to the simulator, which ends the run cleanly (bag closed, outputs
@@ -255,16 +263,17 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
         if stop is None:
             stop = stack.enter_context(StopRequest())
         return _run_graph(scene_arg, out.resolve(), duration, single_process, domain_id,
-                          timeout, rt_priority, stop, simulator_parameters)
+                          timeout, rt_priority, stop, overrides, simulator_parameters)
 
 
 def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single_process: bool,
                domain_id: int | None, timeout: float | None, rt_priority: int,
-               stop: StopRequest, simulator_parameters: dict[str, Any]) -> dict[str, Any]:
-    scene = load_scene(scene_arg)
+               stop: StopRequest, overrides: dict[str, Any] | None,
+               simulator_parameters: dict[str, Any]) -> dict[str, Any]:
+    scene = load_scene(scene_arg, overrides)
     prepare_output(out, out / 'bag' if scene.record_bag else None)
     before = _file_stamp(out / 'metrics.json')  # an earlier run's file is never reported
-    specs = graph_nodes(scene_arg, out, duration, **simulator_parameters)
+    specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
     env = ros_environment(domain_id)
     say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
     why, early = '', {}

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.shutdown import StopRequest, say
+from iceskate_sim.yaml_io import yaml_value
 
 if TYPE_CHECKING:
     from iceskate_sim.run.scene import Scene
@@ -185,6 +186,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('scene', help='shipped scene name (e.g. skate) or path to a YAML file')
     parser.add_argument('--out', type=pathlib.Path, required=True, help='output directory')
     parser.add_argument('--duration', type=float, help='override the scene duration [s]')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help='set a scene key (dotted, e.g. floor.mu=0.01 or '
+                             "'inputs.visual_lifting.kp=[30, 290, 1100]'; VALUE in YAML); "
+                             'repeatable')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--ros', action='store_true',
                         help='run through the ROS 2 node graph (iceskate_bringup.graph)')
@@ -201,7 +206,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     try:
         if not args.ros and (args.single_process or args.rt_priority):
             raise SimulationError('--single-process and --rt-priority need --ros')
-        scene = load_scene(args.scene)
+        overrides = _overrides(args.set)
+        scene = load_scene(args.scene, overrides)
         if args.duration is not None:
             if not (math.isfinite(args.duration) and 0.0 < args.duration <= MAX_DURATION):
                 raise SimulationError(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
@@ -213,7 +219,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             from iceskate_bringup.graph import run_graph
             metrics = run_graph(args.scene, args.out, duration=args.duration,
                                 single_process=args.single_process,
-                                rt_priority=args.rt_priority, stop=stop)
+                                rt_priority=args.rt_priority, stop=stop, overrides=overrides)
         else:
             metrics = run(scene, args.out, progress=not args.quiet, stop=stop)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code
@@ -230,6 +236,17 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)
     return 0
+
+
+def _overrides(settings: list[str]) -> dict[str, Any]:
+    """Scene key -> value of ``--set KEY=VALUE`` options (VALUE read as YAML)."""
+    out = {}
+    for setting in settings:
+        key, equals, value = setting.partition('=')
+        if not equals or not key.strip():
+            raise SimulationError(f'--set {setting!r}: give KEY=VALUE (e.g. floor.mu=0.01)')
+        out[key.strip()] = yaml_value(value, f'--set {key.strip()}')
+    return out
 
 
 OUTPUTS = ('metrics.json', 'events.json', 'trajectory.npz', 'bag/', 'summary.png')

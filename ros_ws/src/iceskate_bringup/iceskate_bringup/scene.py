@@ -11,6 +11,7 @@ live in ``share/iceskate_bringup/scenes/<name>.yaml`` (found by name through the
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 import pathlib
 from typing import Any
@@ -121,6 +122,8 @@ def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
     return out
 
 
-def load_scene(name_or_path: str | pathlib.Path) -> Scene:
-    """Load a shipped scene by name or a scene YAML by path, validated whole."""
-    return load_scene_file(name_or_path, validate_inputs)
+def load_scene(name_or_path: str | pathlib.Path,
+               overrides: Mapping[str, Any] | None = None) -> Scene:
+    """Load a shipped scene by name or a scene YAML by path (with its base and ``overrides``,
+    dotted key -> value: ``iceskate_sim.run.scene.scene_raw``), validated whole."""
+    return load_scene_file(name_or_path, validate_inputs, overrides)

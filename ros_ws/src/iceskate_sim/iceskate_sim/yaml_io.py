@@ -24,6 +24,16 @@ _Yaml12Loader.add_implicit_resolver(
     list('-+0123456789'))
 
 
+def yaml_value(text: str, what: str) -> Any:
+    """The value a YAML text gives (YAML 1.2 numbers: ``1e-3``, ``[30, 290, 1100]``, ``ice``),
+    or SimulationError naming ``what``."""
+    try:
+        return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError as exc:
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise SimulationError(f'{what}: {text!r} is no YAML value ({problem})') from None
+
+
 def read_yaml(path: str | pathlib.Path, what: str) -> Any:
     """The YAML document at ``path`` (YAML 1.2 numbers), or SimulationError naming ``what``,
     the path and the problem (unreadable, not UTF-8 text, malformed)."""

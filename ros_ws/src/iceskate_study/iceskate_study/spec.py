@@ -46,7 +46,8 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_files, shipped_or_path
 from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
-from iceskate_sim.run.scene import Scene, scene_path
+from iceskate_sim.run.scene import Scene, key_tokens, scene_path, scene_raw
+from iceskate_sim.run.scene import set_key as set_scene_key
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
 
@@ -62,9 +63,6 @@ RUN_COLUMNS = ('key', 'point', 'repeat', 'status', 'failure', 'run_dir', 'worker
 #: The most runs a SPEC may generate.
 MAX_RUNS = 1_000_000
 
-_NAME = r'[A-Za-z_][A-Za-z0-9_]*'
-_KEY = re.compile(rf'{_NAME}(?:\[\d+\])*(?:\.{_NAME}(?:\[\d+\])*)*')
-_TOKEN = re.compile(rf'({_NAME})|\[(\d+)\]')
 _METRIC = re.compile(r'[A-Za-z0-9_]+(?:\.[A-Za-z0-9_]+)*')
 
 
@@ -194,45 +192,12 @@ def _is_number(value: Any) -> bool:
 
 
 # ------------------------------------------------------------------ dotted scene keys
-def key_tokens(key: str, where: str) -> list[str | int]:
-    """The names and list indices of a dotted scene key (``a.b[2].c`` -> a, b, 2, c)."""
-    if not isinstance(key, str) or not _KEY.fullmatch(key):
-        raise _fail(where, f'{key!r} is not a dotted scene key (e.g. floor.mu, '
-                           'inputs.visual_lifting.kp[1], disturbances[0].force[1])')
-    return [name if name else int(index) for name, index in _TOKEN.findall(key)]
-
-
 def set_key(raw: dict[str, Any], key: str, value: Any, where: str) -> None:
-    """Set scene key ``key`` of mapping ``raw`` to ``value``; a missing mapping on the way is
-    made (the scene's validation judges the key), a list entry must exist."""
-    tokens = key_tokens(key, where)
-    node: Any = raw
-    for depth, token in enumerate(tokens):
-        last = depth == len(tokens) - 1
-        done = ''.join(f'[{t}]' if isinstance(t, int) else f'.{t}' for t in tokens[:depth])
-        done = done.lstrip('.')
-        if isinstance(token, int):
-            if not isinstance(node, list):
-                raise _fail(where, f'{done} is not a list in the scene; give it whole in '
-                                   'overrides first')
-            if token >= len(node):
-                raise _fail(where, f'{done} has {len(node)} entries in the scene, no [{token}]')
-            if last:
-                node[token] = value
-            else:
-                node = node[token]
-            continue
-        if not isinstance(node, dict):
-            raise _fail(where, f'{done} is not a mapping in the scene')
-        if last:
-            node[token] = value
-        else:
-            if node.get(token) is None:
-                if isinstance(tokens[depth + 1], int):
-                    raise _fail(where, f'{done + "." if done else ""}{token} is not in the '
-                                       'scene; give the whole list in overrides first')
-                node[token] = {}
-            node = node[token]
+    """``iceskate_sim.run.scene.set_key``, its refusal named as SPEC key ``where``."""
+    try:
+        set_scene_key(raw, key, value)
+    except SimulationError as exc:
+        raise _fail(where, str(exc)) from None
 
 
 def run_key(raw: dict[str, Any], repeat: int) -> str:
@@ -251,7 +216,10 @@ def _count(value: Any, where: str) -> int:
 
 def _axis(key: str, raw: Any, sampling: str) -> Axis:
     where = f'axes.{key}'
-    key_tokens(key, where)
+    try:
+        key_tokens(key)
+    except SimulationError as exc:
+        raise _fail(where, str(exc)) from None
     if isinstance(raw, list):
         if sampling != 'grid':
             raise _fail(where, f'sampling {sampling!r} draws from a range: give '
@@ -380,12 +348,9 @@ def _base_scene(raw: Any, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, A
         candidate = path.parent / candidate
     try:
         scene_file = scene_path(candidate if candidate.suffix else raw)
-        base = read_yaml(scene_file, 'scene')
+        return scene_file.resolve(), scene_raw(scene_file)
     except SimulationError as exc:
         raise _fail('scene', str(exc)) from None
-    if not isinstance(base, dict):
-        raise _fail('scene', f'{scene_file} is not a scene mapping')
-    return scene_file.resolve(), base
 
 
 def _check_scene(raw: dict[str, Any], where: str, what: str) -> Scene:

@@ -13,10 +13,12 @@ registered under the ament index's ``iceskate_scenes``), by its name.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+import copy
 from dataclasses import MISSING, dataclass, field, make_dataclass
 import math
 import pathlib
+import re
 from typing import Any, TypeVar
 
 import numpy as np
@@ -313,9 +315,101 @@ def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
     return shipped_or_path(name_or_path, SCENE_RESOURCE, 'scenes', 'scene')
 
 
-def load_scene(name_or_path: str | pathlib.Path,
-               validate_inputs: Callable[[str, dict[str, Any]], None] | None = None) -> Scene:
-    """Load and validate a shipped scene by name or the scene YAML file at a path (see
-    ``parse_scene``)."""
-    return parse_scene(read_yaml(scene_path(name_or_path), 'scene'), validate_inputs)
+_NAME = r'[A-Za-z_][A-Za-z0-9_]*'
+_KEY = re.compile(rf'{_NAME}(?:\[\d+\])*(?:\.{_NAME}(?:\[\d+\])*)*')
+_TOKEN = re.compile(rf'({_NAME})|\[(\d+)\]')
 
+
+def key_tokens(key: str) -> list[str | int]:
+    """The names and list indices of a dotted scene key (``a.b[2].c`` -> a, b, 2, c).
+
+    :raises SimulationError: for text that is no dotted key.
+    """
+    if not isinstance(key, str) or not _KEY.fullmatch(key):
+        raise SimulationError(f'{key!r} is not a dotted scene key (e.g. floor.mu, '
+                              'inputs.visual_lifting.kp[1], disturbances[0].force[1])')
+    return [name if name else int(index) for name, index in _TOKEN.findall(key)]
+
+
+def set_key(raw: dict[str, Any], key: str, value: Any) -> None:
+    """Set scene key ``key`` of mapping ``raw`` to ``value``; a missing mapping on the way is
+    made (the scene's validation judges the key), a list entry must exist.
+
+    :raises SimulationError: for a bad key or a path the scene's shape does not have.
+    """
+    tokens = key_tokens(key)
+    node: Any = raw
+    for depth, token in enumerate(tokens):
+        last = depth == len(tokens) - 1
+        done = ''.join(f'[{t}]' if isinstance(t, int) else f'.{t}' for t in tokens[:depth])
+        done = done.lstrip('.')
+        if isinstance(token, int):
+            if not isinstance(node, list):
+                raise SimulationError(f'{done} is not a list in the scene; give it whole in '
+                                      'overrides first')
+            if token >= len(node):
+                raise SimulationError(f'{done} has {len(node)} entries in the scene, no '
+                                      f'[{token}]')
+        elif not isinstance(node, dict):
+            raise SimulationError(f'{done} is not a mapping in the scene')
+        elif not last and node.get(token) is None:
+            if isinstance(tokens[depth + 1], int):
+                raise SimulationError(f'{done + "." if done else ""}{token} is not in the '
+                                      'scene; give the whole list in overrides first')
+            node[token] = {}
+        if last:
+            node[token] = value
+        else:
+            node = node[token]
+
+
+def _merged(base: Any, child: Any) -> Any:
+    """``child`` over ``base``: mappings key by key, anything else replaced whole."""
+    if not (isinstance(base, dict) and isinstance(child, dict)):
+        return copy.deepcopy(child)
+    out = copy.deepcopy(base)
+    for key, value in child.items():
+        out[key] = _merged(base.get(key), value)
+    return out
+
+
+def scene_raw(name_or_path: str | pathlib.Path, overrides: Mapping[str, Any] | None = None,
+              _seen: tuple[pathlib.Path, ...] = ()) -> dict[str, Any]:
+    """The keys of a scene: its file's over those of the scene its ``base`` names (a shipped
+    name, or a path relative to the file), mappings merged key by key and anything else
+    replaced whole, then ``overrides`` (dotted key -> value, ``set_key``).
+
+    :raises SimulationError: for an unreadable file, a base that is no scene or names itself
+        in a chain, or a bad override.
+    """
+    path = scene_path(name_or_path)
+    raw = read_yaml(path, 'scene')
+    if isinstance(raw, dict) and 'base' in raw:
+        base = raw.pop('base')
+        if not isinstance(base, str) or not base:
+            raise SimulationError(f'scene {path}: base must be a shipped scene name or the '
+                                  f'path of a scene file, got {base!r}')
+        relative = path.parent / base
+        base_file = scene_path(relative if pathlib.Path(base).suffix and relative.is_file()
+                               else base)
+        if base_file.resolve() in (*_seen, path.resolve()):
+            raise SimulationError(f'scene {path}: its base {base!r} leads back to itself')
+        parent = scene_raw(base_file, None, (*_seen, path.resolve()))
+        raw = _merged(parent, raw)
+    if not isinstance(raw, dict):
+        raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__} '
+                              f'({path})')
+    for key, value in (overrides or {}).items():
+        try:
+            set_key(raw, key, value)
+        except SimulationError as exc:
+            raise SimulationError(f'override {key}: {exc}') from None
+    return raw
+
+
+def load_scene(name_or_path: str | pathlib.Path,
+               validate_inputs: Callable[[str, dict[str, Any]], None] | None = None,
+               overrides: Mapping[str, Any] | None = None) -> Scene:
+    """Load and validate a scene (``scene_raw``: by name or path, with its base and
+    ``overrides``; see ``parse_scene``)."""
+    return parse_scene(scene_raw(name_or_path, overrides), validate_inputs)
