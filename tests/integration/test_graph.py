@@ -180,7 +180,7 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
     assert {p.name for p in out.iterdir()} == (
         {p.name for p in graph_run.headless.iterdir()} | {'params'})
     assert sorted(p.name for p in (out / 'params').iterdir()) == [
-        'gait_manager.yaml', 'simulator.yaml', 'visual_lifting.yaml']
+        'gait_manager.yaml', 'scene.yaml', 'simulator.yaml', 'visual_lifting.yaml']
     assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
 
 

@@ -24,6 +24,7 @@ import array
 from collections.abc import Callable
 import os
 import pathlib
+import signal
 import sys
 import typing
 from typing import Any, TypeVar
@@ -58,7 +59,7 @@ from iceskate_sim.parameters import (
     unflatten,
 )
 from iceskate_sim.recording.bag_types import OFFERED_QOS
-from iceskate_sim.shutdown import StopRequest, process_alive
+from iceskate_sim.shutdown import STOP_SIGNALS, StopRequest, process_alive
 from iceskate_sim.yaml_io import read_yaml
 
 T = TypeVar('T')
@@ -294,4 +295,9 @@ def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None
                     close(stop.signum, f'its parent process {parent} ended' if gone else '')
                 node.destroy_node()
             rclpy.try_shutdown()
-        return int(getattr(node, 'exit_code', 0) or 0)
+        code = int(getattr(node, 'exit_code', 0) or 0)
+    # The node is over: a stop signal now (e.g. a launcher's, while the interpreter ends) has
+    # nothing left to stop and must not turn a clean end into a death by signal.
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+    return code
