@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             'native_us': _time_us(lambda c=contact, s=states:
                                   native.evaluate(c, *next(s)), rep, num),
             'kernel_us': _time_us(lambda a=kernel_arguments:
-                                  native._kernel.evaluate(*a), rep, num),
+                                  native.kernel.evaluate(*a), rep, num),
         })
 
     # The Pinocchio calls evaluate() makes (same 18-joint model in every mode).

@@ -311,9 +311,9 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
         loop._kernel.run(-1)
     for pairs in ([('world', 'nose')], [('nose', 'pelvis')]):  # a link it lacks
         with pytest.raises(ValueError, match="unknown frame 'nose'"):
-            iceskate_native.ControlLoop(loop._periods._kernel, None, [], [],
+            iceskate_native.ControlLoop(session.sim.kernel, None, [], [],
                                         session.psi_initial, pairs)
     with pytest.raises(ValueError, match='child must be a link, not the world'):
-        iceskate_native.ControlLoop(loop._periods._kernel, None, [], [], session.psi_initial,
+        iceskate_native.ControlLoop(session.sim.kernel, None, [], [], session.psi_initial,
                                     [('pelvis', 'world')])
     assert isinstance(loop._kernel, iceskate_native.ControlLoop)

@@ -153,7 +153,7 @@ def test_bad_input_is_a_simulation_error_naming_it(engines, change, match):
 def test_an_unknown_mode_is_refused_by_the_kernel(engines):
     _, native = engines
     with pytest.raises(ValueError, match='unknown gait mode 21'):
-        native._kernel.evaluate(21, 0, 0, 0.0, 1.0, 1.0, np.zeros(18), np.zeros(18),
+        native.kernel.evaluate(21, 0, 0, 0.0, 1.0, 1.0, np.zeros(18), np.zeros(18),
                                 np.zeros(18))
 
 

@@ -1,7 +1,7 @@
 """Whole control periods in C++ against the Python oracle.
 
-``Simulator`` runs every period in C++ (``iceskate_native.HybridSimulator`` through
-``NativePeriods``): integration, event location, transitions with their impacts and re-rooting,
+``Simulator`` runs every period in C++ (``iceskate_native.HybridSimulator``,
+``Simulator.kernel``): integration, event location, transitions with their impacts and re-rooting,
 contact-consistent modes, projection and health checks. The same scene with the same
 controllers must give the same event log (events, modes, sides, steps; times and impulses to
 round-off) and the same trajectory as the oracle's period loop in Python

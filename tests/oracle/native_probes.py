@@ -1,7 +1,7 @@
 """The native kernel's eq. (7), guards and segments called one at a time from Python, for the
 tests and benchmarks that set them beside the oracle's formulation (``oracle.dynamics``,
 ``oracle.integrators``). A run never calls them: its periods run whole inside
-``iceskate_native.HybridSimulator`` (``iceskate_sim.physics.native.NativePeriods``)."""
+``iceskate_native.HybridSimulator`` (``iceskate_sim.physics.simulation.Simulator``)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ class NativeProbes(NativeGaitDynamics):
         support wrench (docs/model.md §4)."""
         try:
             (qdd, multipliers, wrench, normal, tangential, cop_y, heel_friction, applied, heel,
-             heel_velocity, toe_z, passive) = self._kernel.evaluate(
+             heel_velocity, toe_z, passive) = self.kernel.evaluate(
                 *self._arguments(contact, q, v, tau, push, stiffness, damping))
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
@@ -71,10 +71,10 @@ class NativeProbes(NativeGaitDynamics):
         """Accelerations of an implicit step ((M + h D) a = f - D v, D the joint, impedance
         and soft-stop damping), natively.
 
-        The periods run inside ``HybridSimulator`` (``NativePeriods``), which takes its implicit
+        The periods run inside ``HybridSimulator`` (``Simulator.kernel``), which takes its implicit
         steps without this call."""
         try:
-            return self._kernel.implicit_acceleration(
+            return self.kernel.implicit_acceleration(
                 *self._arguments(contact, q, v, tau, push, stiffness, damping), step)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
@@ -91,12 +91,12 @@ class NativeProbes(NativeGaitDynamics):
                      suppressed: dict[str, float]) -> np.ndarray:
         """Values of the guards of ``state.mode`` (rested ones -1), natively.
 
-        The periods run inside ``HybridSimulator`` (``NativePeriods``), which evaluates its
+        The periods run inside ``HybridSimulator`` (``Simulator.kernel``), which evaluates its
         guards without this call."""
         args = self._arguments(state.contact, state.q, state.v, command.bias, push,
                                command.stiffness, command.damping)
         try:
-            return self._kernel.guard_values(
+            return self.kernel.guard_values(
                 *args, *self._guard_arguments(state.mode.number, state.t, suppressed, friction),
                 state.t)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
@@ -110,13 +110,13 @@ class NativeProbes(NativeGaitDynamics):
         method or rk45 (``Integrator.integrate_segment``'s counterpart, natively; rk45 starts
         with ``integrator.step`` and keeps no step history between calls).
 
-        The periods run inside ``HybridSimulator`` (``NativePeriods``), which integrates its
+        The periods run inside ``HybridSimulator`` (``Simulator.kernel``), which integrates its
         segments without this call."""
         (mode, side, pivot, anchor, support_dir, heel_dir, q, v, tau, stiffness, damping,
          frame, force) = self._arguments(state.contact, state.q, state.v, command.bias, push,
                                          command.stiffness, command.damping)
         try:
-            t, x, result, fired, steps, evaluations = self._kernel.integrate_segment(
+            t, x, result, fired, steps, evaluations = self.kernel.integrate_segment(
                 mode, side, pivot, anchor, support_dir, heel_dir, tau, stiffness, damping,
                 frame, force, integrator.method, integrator.step, integrator.rtol,
                 integrator.atol, integrator.event_tolerance,

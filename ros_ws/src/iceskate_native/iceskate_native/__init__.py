@@ -11,7 +11,7 @@ deserialised once into a ``RobotModel`` on the C++ side::
 
 ``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.physics.native``
 wraps it beside the model terms); ``HybridSimulator`` runs whole control periods on it (events,
-transitions, projection, health checks), wrapped by ``iceskate_sim.physics.native.NativePeriods``.
+transitions, projection, health checks), wrapped by ``iceskate_sim.physics.simulation.Simulator``.
 
 The controller interface: a ``Controller`` (the control laws of visual_lifting and
 gait_manager implement it in C++) answers an ``Observation``, reading the robot through a

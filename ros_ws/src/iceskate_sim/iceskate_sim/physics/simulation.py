@@ -1,14 +1,9 @@
-"""The hybrid simulation, seen from Python: a facade over the native simulator.
+"""The hybrid simulation seen from Python: ``Simulator``, a facade over the native simulator.
 
-``Simulator.advance(tau)`` integrates one control period with the input held constant (zero
-order hold) in C++ (``iceskate_native.HybridSimulator`` through ``NativePeriods``), stopping at
-every located event to apply its transition (impacts, re-rooting, coordinate changes) and going
-on in the new mode; many periods with the controllers run as one call of the native control
-loop (``control_loop``, ``run_loop``, ``hold_period``). After every period the kernel checks
-the state's health: non-finite values or constraint residuals beyond a bound raise
-``SimulationError`` naming the time, mode and state; a fall, flight or toe-first touchdown ends
-the run with a reason (``Simulator.ended``) instead. The Python side mirrors the state, the new
-events and the counters after each call, the dynamics only when asked.
+``advance`` integrates one control period with the input held (zero-order hold); many periods
+with the controllers run as one call of the native control loop (``control_loop``,
+``run_loop``, ``hold_period``). Divergence raises ``SimulationError`` naming the time, mode and
+state; a fall, flight or toe-first touchdown ends the run (``Simulator.ended``).
 """
 
 from __future__ import annotations
@@ -19,6 +14,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
+import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import (
@@ -27,12 +23,23 @@ from iceskate_sim.model.dynamics import (
     DynamicsResult,
     ModelTerms,
 )
+from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.observation import Observation
-from iceskate_sim.model.robot import N_COORDINATES, Robot
+from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
-from iceskate_sim.physics.hybrid import FrictionModel, HybridState, Transition
-from iceskate_sim.physics.integrators import FIXED_STEP, IntegratorConfig
-from iceskate_sim.physics.native import NativeControlLoop, NativeGaitDynamics, NativePeriods
+from iceskate_sim.physics.hybrid import (
+    FLIGHT,
+    GUARDS,
+    TOE_FIRST,
+    FrictionModel,
+    HybridState,
+    Transition,
+    fall_reason,
+    guards_of,
+    resolved_cause,
+)
+from iceskate_sim.physics.integrators import FIXED_STEP, GUARD_MARGIN, IntegratorConfig
+from iceskate_sim.physics.native import GUARD_CONSTANTS, NativeControlLoop, NativeGaitDynamics
 
 
 def stamp_time(t: float) -> float:
@@ -146,8 +153,31 @@ class StateQueries:
         return self._head[1]
 
 
+#: Guard causes for the event log, by name.
+_CAUSES = {guard.name: guard.cause for guard in GUARDS}
+
+
+def _state_row(state: HybridState) -> tuple:
+    """A HybridState as the kernel's state tuple."""
+    c = state.contact
+    return (state.t, state.q, state.v, c.mode.number, SIDES.index(c.side),
+            PIVOTS.index(c.pivot), c.heel_anchor_y, c.support_slide_dir, c.heel_slide_dir,
+            state.step_index, state.t_exchange, state.t_touchdown)
+
+
+def _hybrid_state(row: tuple) -> HybridState:
+    """The kernel's state tuple as a HybridState."""
+    (t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step_index, t_exchange,
+     t_touchdown) = row
+    contact = ContactState(MODES[mode], SIDES[side], PIVOTS[pivot], anchor, support_dir,
+                           heel_dir)
+    return HybridState(t, q, v, contact, step_index, t_exchange, t_touchdown)
+
+
 class Simulator(StateQueries):
-    """A hybrid simulation of the humanoid from an initial state, run by the native simulator.
+    """A hybrid simulation of the humanoid from an initial state: a facade over ``kernel``, the
+    native ``iceskate_native.HybridSimulator``, whose state, new events, counters and end it
+    mirrors after every call (the dynamics only when asked).
 
     :param robot: the robot model. :param config: the run's settings.
     :param initial: the initial state.
@@ -158,51 +188,55 @@ class Simulator(StateQueries):
         self.robot = robot
         self.config = config
         self.dynamics = NativeGaitDynamics(robot, replace(config.dynamics, mu=config.friction.mu))
-        self._periods = NativePeriods(
-            self.dynamics, initial, control_period=config.control_period,
-            integrator=config.integrator, friction=config.friction,
-            projection=config.projection, residual_bound=config.residual_bound,
-            fall_height=config.fall_height, max_speed=config.max_speed,
-            max_instant_transitions=config.max_instant_transitions,
-            zeno_window=config.zeno_window, chatter_dwell=config.chatter_dwell)
+        self._fall = fall_reason(config.fall_height)
+        guards = [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]
+        c, integrator = config, config.integrator
+        try:
+            self.kernel = iceskate_native.HybridSimulator(
+                self.dynamics.kernel, _state_row(initial), c.control_period, integrator.method,
+                integrator.step, integrator.rtol, integrator.atol, integrator.event_tolerance,
+                c.friction.mu, c.friction.rule == 'ice', GUARD_CONSTANTS, GUARD_MARGIN, guards,
+                c.projection, c.residual_bound, c.fall_height, c.max_speed,
+                c.max_instant_transitions, c.zeno_window, c.chatter_dwell)
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'native simulator: {exc} (initial state: '
+                                  f'{initial.summary()})') from None
         self.reset()
 
     def reset(self) -> None:
         """Return to the initial state; clear the event log and the statistics."""
         self.events: list[Transition] = []
         self.stats = RunStatistics()
-        self._periods.reset()
-        self._mirror_periods()
+        try:
+            self.kernel.reset()
+        except iceskate_native.NativeError as exc:
+            raise SimulationError(f'native simulator: {exc} (initial state)') from None
+        self._mirror()
 
     def set_state(self, state: HybridState) -> None:
         """Continue from ``state`` (the event log, counters and rested guards kept; a run that
         had ended goes on), as after a period that ended there under the current command."""
-        self._periods.set_state(state)
-        self._mirror_periods()
+        try:
+            self.kernel.set_state(_state_row(state))
+        except (ValueError, TypeError, iceskate_native.NativeError) as exc:
+            raise SimulationError(f'native simulator: {exc} ({state.summary()})') from None
+        self._mirror()
 
-    # -------------------------------------------------------------- accessors
     @property
     def result(self) -> DynamicsResult:
         """The dynamics at the current state under the last input."""
-        if self._result is None:
-            self._result = self._periods.result()
-        return self._result
+        return DynamicsResult(*self.kernel.result)
 
     @property
     def start_state(self) -> HybridState:
         """The state at the start of the last period, after the transitions due then."""
-        if self._start is None:
-            self._start = self._periods.start()
-        return self._start[0]
+        return _hybrid_state(self.kernel.start_state)
 
     @property
     def start_result(self) -> DynamicsResult:
         """The dynamics at ``start_state`` under the last period's input."""
-        if self._start is None:
-            self._start = self._periods.start()
-        return self._start[1]
+        return DynamicsResult(*self.kernel.start_result)
 
-    # ---------------------------------------------------------------- stepping
     def advance(self, command: HeldCommand | np.ndarray,
                 push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
         """Integrate one control period holding the input command (zero-order hold).
@@ -218,26 +252,28 @@ class Simulator(StateQueries):
         """
         self._require_running()
         command = HeldCommand.of_input(command)
-        push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         try:
-            self._periods.advance(command, push)
+            self.kernel.advance(command.bias, command.stiffness, command.damping,
+                                 '' if push is None else push[0],
+                                 None if push is None else np.asarray(push[1], dtype=float))
+        except (iceskate_native.NativeError, ValueError, TypeError) as exc:
+            raise self.failure(exc) from None
         finally:
-            self._mirror_periods()
+            self._mirror()
         return self.result
 
-    def control_loop(self, kinematics: object, controllers: list, pushes: tuple,
+    def control_loop(self, kinematics: iceskate_native.Kinematics | None,
+                     controllers: list[iceskate_native.Controller], pushes: tuple,
                      head_origin: np.ndarray, inbox: tuple[tuple[str, ...], ...] = (),
                      ) -> NativeControlLoop:
         """The native loop of many control periods on this simulator (see
         ``NativeControlLoop``; advance it with ``run_loop`` or, for the commands of its
         ``inbox``, ``hold_period``)."""
-        return NativeControlLoop(self._periods, kinematics, controllers, pushes, head_origin,
-                                 inbox)
+        return NativeControlLoop(self, kinematics, controllers, pushes, head_origin, inbox)
 
     def hold_period(self, loop: NativeControlLoop, clear: bool = True) -> None:
         """One control period of ``loop`` holding the commands it received
-        (``NativeControlLoop.hold``; the sample stays in its block), then this simulator
-        mirrors the native state, events, counters and end (the dynamics when asked).
+        (``NativeControlLoop.hold``; the sample stays in its block), then mirror the kernel.
 
         :raises SimulationError: where the physics failed, as ``advance``.
         """
@@ -245,18 +281,29 @@ class Simulator(StateQueries):
         try:
             loop.hold(clear)
         finally:
-            self._mirror_periods()
+            self._mirror()
 
     def run_loop(self, loop: NativeControlLoop, periods: int) -> tuple[dict, Exception | None]:
         """Up to ``periods`` control periods of ``loop`` (``NativeControlLoop.run``: the samples
-        and what stopped the block early), then this simulator mirrors the native state, events,
-        counters and end."""
+        and what stopped the block early), then mirror the kernel."""
         self._require_running()
         try:
-            block, error = loop.run(periods)
+            return loop.run(periods)
         finally:
-            self._mirror_periods()
-        return block, error
+            self._mirror()
+
+    def failure(self, exc: Exception) -> SimulationError:
+        """The SimulationError of a period that raised ``exc`` (the kernel's state is where it
+        failed): divergence and chattering with the state, a kernel failure with the period's
+        start, bad input as the kernel said it."""
+        state = _hybrid_state(self.kernel.state).summary()
+        if isinstance(exc, iceskate_native.DivergenceError):
+            return SimulationError(f'simulation diverged ({exc}) at {state}')
+        if isinstance(exc, iceskate_native.ChatteringError):
+            return SimulationError(f'{exc} ({state})')
+        if isinstance(exc, iceskate_native.NativeError):
+            return SimulationError(f'{exc} (during the period from {state})')
+        return SimulationError(f'native simulator: {exc}')
 
     def _require_running(self) -> None:
         """:raises SimulationError: once the run has ended (no further period)."""
@@ -265,18 +312,20 @@ class Simulator(StateQueries):
                                   f'{self.state.mode.number} ({self.ended}); no further '
                                   'period can be simulated')
 
-    def _mirror_periods(self) -> None:
-        """Take the state, new events, counters and end of the native periods (their dynamics
-        when asked: ``result``, ``start_state``, ``start_result``)."""
-        periods = self._periods
-        self.state = periods.state()
-        self._result: DynamicsResult | None = None
-        self._start: tuple[HybridState, DynamicsResult] | None = None
-        self.events.extend(periods.events_since(len(self.events)))
+    def _mirror(self) -> None:
+        """Take the kernel's state, new events, counters and end."""
+        kernel = self.kernel
+        self.state = _hybrid_state(kernel.state)
+        self.events.extend(
+            Transition(t, from_mode, to_mode, event,
+                       resolved_cause(guard) if event == 'R' else _CAUSES[event],
+                       tuple(impulse), step_index, SIDES[side])
+            for t, from_mode, to_mode, event, guard, impulse, step_index, side
+            in kernel.events_since(len(self.events)))
         s = self.stats
         (s.steps, s.evaluations, s.control_periods, s.max_constraint_residual,
-         s.max_constraint_drift, s.suppressed_cycles, s.resolved_cycles) = periods.statistics()
-        self.ended: str | None = periods.ended()
+         s.max_constraint_drift, s.suppressed_cycles, s.resolved_cycles) = kernel.statistics
+        self.ended: str | None = (None, FLIGHT, TOE_FIRST, self._fall)[kernel.ended]
 
 
 def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 'toe',
