@@ -7,7 +7,6 @@ instance ``iceskate_sim.model.robot.load_robot().support_model('right', 'toe').m
 deserialised once into a ``RobotModel`` on the C++ side::
 
     native = iceskate_native.load_model(support.model)
-    M = iceskate_native.crba_of(native, q)
 
 ``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.physics.native``
 wraps it beside the model terms); ``HybridSimulator`` runs whole control periods on it (events,
@@ -45,13 +44,12 @@ from ._kernel import (
     NativeError,
     Observation,
     RobotModel,
-    crba_of,
     encode_rows,
 )
 
 __all__ = ['CdrProgram', 'ChatteringError', 'ControlLoop', 'Controller', 'ControllerError',
            'DivergenceError', 'Dynamics', 'HybridSimulator', 'Kinematics', 'ModelKinematics',
-           'NativeError', 'Observation', 'RobotModel', 'crba_of', 'encode_rows', 'load_model',
+           'NativeError', 'Observation', 'RobotModel', 'encode_rows', 'load_model',
            'model_bytes']
 
 

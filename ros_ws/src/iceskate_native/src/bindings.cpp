@@ -28,7 +28,6 @@
 #include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/errors.hpp"
 #include "iceskate_native/guards.hpp"
-#include "iceskate_native/inertia.hpp"
 #include "iceskate_native/integrators.hpp"
 #include "iceskate_native/model.hpp"
 #include "iceskate_native/simulator.hpp"
@@ -293,19 +292,6 @@ NB_MODULE(_kernel, m)
       return "RobotModel(name='" + model.name() + "', nq=" + std::to_string(model.nq())
              + ", nv=" + std::to_string(model.nv()) + ")";
     });
-
-  m.def(
-    "crba_of", &iceskate_native::crba_of, "model"_a, "q"_a,
-    "The joint-space inertia matrix M(q) (nv x nv, symmetric) by Pinocchio's CRBA. "
-    "ValueError if q does not have model.nq finite entries.");
-  m.def(
-    "crba_of",
-    [](const nb::bytes & model, const Vector & q) {
-      return iceskate_native::crba_of(RobotModel::from_bytes(view(model)), q);
-    },
-    "model"_a, "q"_a,
-    "As crba_of(RobotModel, q), from the model's archive bytes (decoded at every call: load a "
-    "RobotModel once instead in a loop).");
 
   nb::class_<Dynamics>(
     m, "Dynamics",
