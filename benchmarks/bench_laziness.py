@@ -90,7 +90,8 @@ def compare_projection(scene: Scene, duration: float, repeat: int, robot: Any, l
     runs = {}
     for _ in range(repeat):
         for name in walls:
-            run = simulate(scene, duration, robot=robot, projection=(name == 'on'))
+            integrator = replace(scene.simulator.integrator, projection=name == 'on')
+            run = simulate(scene, duration, integrator, robot=robot)
             walls[name].append(run.wall)
             runs[name] = run
     on, off = runs['on'], runs['off']

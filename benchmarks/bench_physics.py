@@ -324,7 +324,8 @@ def main(argv: list[str] | None = None) -> int:
           f'{nefc_implicitfast:.2f}, RK4 {nefc_rk4:.2f}')
     print(f'ours: skate scene, {config.integrator.method}, step '
           f'{config.integrator.step * 1e3:g} ms, control period '
-          f'{config.control_period * 1e3:g} ms, projection {config.projection}; states every '
+          f'{config.control_period * 1e3:g} ms, projection '
+          f'{config.integrator.projection}; states every '
           f'{args.spacing} periods from t = {args.warmup:g} s: {len(quiet)} of {len(snaps)} '
           f'fire no event in their period (modes '
           f'{sorted({s.state.mode.number for s in quiet})}); the advance from them reproduces '

@@ -152,7 +152,7 @@ def simulate(scene: Scene, duration: float, integrator: IntegratorConfig | None 
 
     :param integrator: replaces the scene's integrator (None: keep it).
     :param stack_class: the controllers (``ControlStack`` or a variant with its signature).
-    :param config_changes: other ``SimulatorConfig`` fields to replace (e.g. projection).
+    :param config_changes: other ``SimulatorConfig`` fields to replace (e.g. fall_height).
     """
     robot = robot if robot is not None else load_robot()
     cfg = scene.simulator

@@ -15,7 +15,7 @@ implicitly ((M + h D) a = f - D v, as MuJoCo's implicitfast treats damping).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar
+from typing import Callable
 
 import numpy as np
 from scipy import integrate as sp_integrate
@@ -23,6 +23,7 @@ from scipy import optimize
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import DynamicsResult
+from iceskate_sim.parameters import setting
 from iceskate_sim.physics.integrators import (
     FIXED_STEP,
     GUARD_MARGIN,
@@ -56,9 +57,11 @@ GuardFn = Callable[[float, np.ndarray, DynamicsResult], np.ndarray]
 @dataclass(frozen=True)
 class ReferenceIntegratorConfig(IntegratorConfig):
     """``IntegratorConfig`` that also takes 'dop853' (scipy's DOP853), the oracle's tight
-    reference method."""
+    reference method, and any largest step of the adaptive methods."""
 
-    methods: ClassVar[tuple[str, ...]] = (*METHODS, 'dop853')
+    method: str = setting('rk4', 'integration method', choices=(*METHODS, 'dop853'))
+    step: float = setting(1e-4, 'fixed step (largest step of the adaptive methods)', unit='s',
+                          low=0.0, open_low=True)
 
 
 def _remembered(at: Callable[[float], tuple]) -> Callable[[float], tuple]:

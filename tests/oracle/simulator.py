@@ -195,7 +195,7 @@ class ReferenceSimulator(StateQueries):
                     self._transition(guard)
                     self._settle()
             residuals = None
-            if self.config.projection and self.state.mode.constraints:
+            if self.config.integrator.projection and self.state.mode.constraints:
                 residuals = self._project()
             self._check_health(residuals)
         except RunEnded as end:

@@ -17,7 +17,7 @@ gait_manager implement it in C++) answers an ``Observation``, reading the robot 
 ``Kinematics``; ``ModelKinematics`` is that kinematics on the four support models
 (``iceskate_sim.physics.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
 control periods in one call: controllers, zero-order hold, pushes and ``HybridSimulator``
-periods, returning the samples as arrays (``iceskate_sim.physics.native.NativeControlLoop``).
+periods, returning the samples as arrays (``iceskate_sim.physics.simulation.NativeControlLoop``).
 A Python subclass of ``Controller`` implements ``compute(obs, kinematics)`` and runs inside that
 loop too (docs/usage.md, "Your own controller"); its failures are ``ControllerError``.
 

@@ -24,6 +24,7 @@ import pinocchio as pin
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, GaitMode
 from iceskate_sim.model.robot import N_COORDINATES, Q1, SIDES, Y0, Robot
+from iceskate_sim.parameters import check_fields, setting
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)
@@ -31,22 +32,22 @@ _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + 
 
 @dataclass(frozen=True)
 class DynamicsParameters:
-    """Physical options of the contact and joint model.
+    """Physical options of the contact and joint model (a scene's ``dynamics``, whose ``mu`` is
+    the floor's)."""
 
-    :param mu: Coulomb coefficient of a sliding foot (ice: 0.005, forward sliding only).
-    :param baumgarte: Baumgarte constant alpha [1/s] of the swing constraints (0: off).
-    :param joint_limits: apply the soft stops of docs/model.md §2.6.
-    :param limit_stiffness: soft-stop stiffness [N m/rad].
-    :param limit_damping: soft-stop damping [N m s/rad] (acts only while a stop is penetrated).
-    :param damping: apply the joint damping of Table 1.
-    """
+    mu: float = setting(0.005, 'Coulomb coefficient of a sliding foot', low=0.0, high=2.0)
+    baumgarte: float = setting(0.0, 'Baumgarte constant of the swing constraints', unit='1/s',
+                               low=0.0, high=1e4)
+    joint_limits: bool = setting(True, 'soft joint stops on (docs/model.md §2.6)')
+    limit_stiffness: float = setting(1e4, 'stiffness of a soft stop', unit='N m/rad', low=0.0,
+                                     high=1e7)
+    limit_damping: float = setting(100.0, 'damping of a soft stop (while it is penetrated)',
+                                   unit='N m s/rad', low=0.0, high=1e5)
+    damping: bool = setting(True, 'joint damping of Table 1 on')
 
-    mu: float = 0.005
-    baumgarte: float = 0.0
-    joint_limits: bool = True
-    limit_stiffness: float = 1.0e4
-    limit_damping: float = 100.0
-    damping: bool = True
+    def __post_init__(self) -> None:
+        """Check the fields."""
+        check_fields(self, SimulationError)
 
 
 @dataclass

@@ -19,6 +19,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import GaitMode
 from iceskate_sim.model.robot import Q1, Y0
+from iceskate_sim.parameters import check_fields, setting
 
 # Dead bands (hysteresis) of the force-based guards. A guard that is the complement of the
 # transition just made (flat <-> edge, stick <-> slip, flat sole <-> heel only) would otherwise
@@ -33,22 +34,17 @@ TOE_SCUFF = 2.0e-3  # m
 
 @dataclass(frozen=True)
 class FrictionModel:
-    """Floor friction.
+    """Floor friction (a scene's ``floor``)."""
 
-    :param mu: Coulomb coefficient [-] (ice: 0.005 for forward sliding).
-    :param rule: 'ice' (one-way clutch: sliding only forward; a foot that would slide backward
-        is stuck by the toe pick) or 'coulomb' (symmetric |F_t| <= mu N).
-    """
-
-    mu: float = 0.005
-    rule: str = 'ice'
+    mu: float = setting(0.005, 'Coulomb coefficient (ice: 0.005 for forward sliding)', low=0.0,
+                        high=2.0)
+    rule: str = setting('ice', "'ice' (forward sliding only, a foot sliding back is stuck by "
+                        "the toe pick) or 'coulomb' (|F_t| <= mu N both ways)",
+                        choices=('ice', 'coulomb'))
 
     def __post_init__(self) -> None:
-        """Validate the rule and the coefficient."""
-        if self.rule not in ('ice', 'coulomb'):
-            raise SimulationError(f"friction rule must be 'ice' or 'coulomb', got {self.rule!r}")
-        if not (self.mu >= 0.0 and np.isfinite(self.mu)):
-            raise SimulationError(f'friction coefficient mu must be >= 0, got {self.mu!r}')
+        """Check the fields."""
+        check_fields(self, SimulationError)
 
 
 @dataclass(frozen=True)

@@ -16,11 +16,9 @@ explicit method need steps of ~0.1 ms; this one stays stable at much larger step
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
-
-import numpy as np
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.parameters import check_fields, setting
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 METHODS = (*FIXED_STEP, 'rk45')
@@ -29,29 +27,20 @@ GUARD_MARGIN = 1.0e-9  # a guard at most this positive right after a transition 
 
 @dataclass(frozen=True)
 class IntegratorConfig:
-    """Choice and settings of the integrator.
+    """Choice and settings of the integrator, and the drift projection (a scene's
+    ``integrator``)."""
 
-    :param method: 'symplectic_euler', 'implicit_euler', 'rk4' (fixed step) or 'rk45'
-        (adaptive).
-    :param step: fixed step size [s] (fixed-step methods; max step for adaptive ones).
-    :param rtol: relative tolerance (adaptive).
-    :param atol: absolute tolerance (adaptive).
-    :param event_tolerance: tolerance of the event time [s].
-    """
-
-    method: str = 'rk4'
-    step: float = 1.0e-4
-    rtol: float = 1.0e-8
-    atol: float = 1.0e-10
-    event_tolerance: float = 1.0e-10
-    #: the methods this configuration accepts
-    methods: ClassVar[tuple[str, ...]] = METHODS
+    method: str = setting('rk4', 'integration method: fixed step or rk45 (adaptive)',
+                          choices=METHODS)
+    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=0.0,
+                          open_low=True)
+    rtol: float = setting(1e-8, 'relative tolerance (rk45)', low=0.0, open_low=True, high=1.0)
+    atol: float = setting(1e-10, 'absolute tolerance (rk45)', low=0.0, open_low=True, high=1.0)
+    event_tolerance: float = setting(1e-10, 'tolerance of an event time', unit='s', low=0.0,
+                                     open_low=True, high=1e-3)
+    projection: bool = setting(True, 'project positions and velocities onto the active swing '
+                               'constraints after every control period (drift control)')
 
     def __post_init__(self) -> None:
-        """Validate the method and the positive settings."""
-        if self.method not in self.methods:
-            raise SimulationError(f'integrator method {self.method!r} not in {self.methods}')
-        for name in ('step', 'rtol', 'atol', 'event_tolerance'):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0.0):
-                raise SimulationError(f'integrator {name} must be > 0, got {value!r}')
+        """Check the fields."""
+        check_fields(self, SimulationError)

@@ -8,6 +8,7 @@ state; a fall, flight or toe-first touchdown ends the run (``Simulator.ended``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
 
@@ -16,7 +17,7 @@ import pinocchio as pin
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import HeldCommand
+from iceskate_sim.model.command import CommandValues, HeldCommand
 from iceskate_sim.model.dynamics import (
     ContactState,
     DynamicsParameters,
@@ -39,7 +40,7 @@ from iceskate_sim.physics.hybrid import (
     resolved_cause,
 )
 from iceskate_sim.physics.integrators import FIXED_STEP, GUARD_MARGIN, IntegratorConfig
-from iceskate_sim.physics.native import GUARD_CONSTANTS, NativeControlLoop, NativeGaitDynamics
+from iceskate_sim.physics.native import GUARD_CONSTANTS, NativeGaitDynamics
 
 
 def stamp_time(t: float) -> float:
@@ -72,8 +73,6 @@ class SimulatorConfig:
     :param friction: floor friction rule and coefficient.
     :param dynamics: joint damping, soft stops, Baumgarte constant (its mu is replaced by the
         friction model's).
-    :param projection: project positions and velocities onto the active swing constraints
-        after every control period (drift control).
     :param residual_bound: constraint residual [m or rad] beyond which the run fails.
     :param fall_height: head-top height [m] below which the robot has fallen (run ends).
     :param max_speed: largest coordinate speed [rad/s, m/s] a physical run can reach; beyond
@@ -94,7 +93,6 @@ class SimulatorConfig:
     integrator: IntegratorConfig = field(default_factory=IntegratorConfig)
     friction: FrictionModel = field(default_factory=FrictionModel)
     dynamics: DynamicsParameters = field(default_factory=DynamicsParameters)
-    projection: bool = True
     residual_bound: float = 1.0e-3
     fall_height: float = 1.2
     max_speed: float = 200.0
@@ -196,7 +194,7 @@ class Simulator(StateQueries):
                 self.dynamics.kernel, _state_row(initial), c.control_period, integrator.method,
                 integrator.step, integrator.rtol, integrator.atol, integrator.event_tolerance,
                 c.friction.mu, c.friction.rule == 'ice', GUARD_CONSTANTS, GUARD_MARGIN, guards,
-                c.projection, c.residual_bound, c.fall_height, c.max_speed,
+                integrator.projection, c.residual_bound, c.fall_height, c.max_speed,
                 c.max_instant_transitions, c.zeno_window, c.chatter_dwell)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'native simulator: {exc} (initial state: '
@@ -326,6 +324,113 @@ class Simulator(StateQueries):
         (s.steps, s.evaluations, s.control_periods, s.max_constraint_residual,
          s.max_constraint_drift, s.suppressed_cycles, s.resolved_cycles) = kernel.statistics
         self.ended: str | None = (None, FLIGHT, TOE_FIRST, self._fall)[kernel.ended]
+
+
+class NativeControlLoop:
+    """Many control periods in one C++ call (``iceskate_native.ControlLoop``): at each control
+    instant the native ``controllers`` answer the observation through ``kinematics``, the sum of
+    their commands and the active push are held over the period, and ``periods`` advances; the
+    samples come back as arrays (``Session.run_periods``: the headless runner's
+    ``ControlStack`` answers in C++, without Python in between).
+
+    Without controllers it holds the commands of controller nodes received from outside (the
+    ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the
+    block), ``take_block`` the samples held; ``live`` is the live view of the current state.
+    A sample holds what the recording encodes, among it the /tf transforms of the URDF's links
+    (``Robot.tf_frames``).
+
+    :param simulator: the simulator it advances (which mirrors the kernel after each block).
+    :param kinematics: the controllers' view of the robot (``native_control.native_kinematics``;
+        None without controllers).
+    :param controllers: the native laws, in summing order.
+    :param pushes: the scene's pushes (``start``, ``duration``, ``frame``, ``force``).
+    :param head_origin: psi at t = 0, the head target recorded while no controller steers one.
+    :param inbox: the sources of each controller node whose commands ``receive`` takes, in
+        summing order.
+    :raises SimulationError: for an unknown push frame or a non-finite value.
+    """
+
+    def __init__(self, simulator: Simulator, kinematics: iceskate_native.Kinematics | None,
+                 controllers: list[iceskate_native.Controller], pushes: tuple,
+                 head_origin: np.ndarray, inbox: tuple[tuple[str, ...], ...] = ()) -> None:
+        self._simulator = simulator
+        rows = [(p.start, p.duration, p.frame, np.asarray(p.force, dtype=float)) for p in pushes]
+        try:
+            self._kernel = iceskate_native.ControlLoop(
+                simulator.kernel, kinematics, list(controllers), rows,
+                np.asarray(head_origin, dtype=float), simulator.robot.tf_frames,
+                [list(s) for s in inbox])
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'native control loop: {exc}') from None
+
+    def run(self, periods: int) -> tuple[dict, Exception | None]:
+        """Up to ``periods`` control periods: (their samples as ``iceskate_native.ControlLoop.run``
+        returns them, what stopped the block early or None). A failure of the physics comes as
+        the ``SimulationError`` that ``Simulator.advance`` raises; a controller's own error
+        (e.g. a non-finite command) as it was raised."""
+        block = self._kernel.run(periods)
+        error: Exception | None = None
+        if self._kernel.failed:
+            try:
+                self._kernel.raise_error()
+            except Exception as exc:  # noqa: BLE001 - handed back beside the samples taken
+                error = self._simulator.failure(exc) if self._kernel.physics_failed else exc
+        return block, error
+
+    def receive(self, index: int, values: CommandValues) -> None:
+        """Keep the command ``values`` of the inbox's controller node ``index`` for the next
+        ``hold`` (its sources' efforts in the inbox's order).
+
+        :raises SimulationError: naming the field with a wrong size, a non-finite value or a
+            negative gain (the command is not kept).
+        """
+        try:
+            self._kernel.receive(index, *values[:6])
+        except (ValueError, TypeError) as exc:
+            raise SimulationError(f'command: {exc}') from None
+
+    def hold(self, clear: bool = True) -> None:
+        """One control period holding the commands received (``iceskate_native.ControlLoop.hold``;
+        ``clear``: forget them afterwards).
+
+        :raises SimulationError: where the physics failed (``Simulator.failure``).
+        """
+        if not self._kernel.hold(clear):
+            try:
+                self._kernel.raise_error()
+            except Exception as exc:  # noqa: BLE001 - the kernel's failure, in our words
+                raise self._simulator.failure(exc) from None
+
+    def forget(self) -> None:
+        """Drop the commands received (none is held until the next ``receive``)."""
+        self._kernel.forget()
+
+    @property
+    def block_size(self) -> int:
+        """Samples held and not taken yet."""
+        return self._kernel.block_size
+
+    def take_block(self) -> dict:
+        """The samples held since the last call, as ``run`` returns them."""
+        return self._kernel.take_block()
+
+    def live(self) -> dict:
+        """The live view of the current state, what the simulator publishes at t_k before the
+        commands of t_k exist: one sample with ``take_block``'s keys (one row), its dynamics
+        under the inputs held over the last period, the held input's generalized force at the
+        state as the one source ``held`` and that period's head target."""
+        return self._kernel.live()
+
+    def live_fill(self) -> tuple[int, int, int]:
+        """Take ``live``'s sample in the loop for ``live_messages``; its (mode, index of the
+        latest transition or -1, sources present)."""
+        return self._kernel.live_fill()
+
+    def live_messages(self, columns: Sequence[str],
+                      programs: Sequence[iceskate_native.CdrProgram]) -> list[bytes]:
+        """The bytes of one message per program (``cdr.Layout.program``, numbering
+        ``columns``) of the sample ``live_fill`` took."""
+        return self._kernel.live_messages(list(columns), list(programs))
 
 
 def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 'toe',

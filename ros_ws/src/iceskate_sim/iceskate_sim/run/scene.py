@@ -29,7 +29,7 @@ from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.parameters import block, check_fields, keyed_from_mapping, setting
 from iceskate_sim.physics.hybrid import FrictionModel, HybridState
-from iceskate_sim.physics.integrators import METHODS, IntegratorConfig
+from iceskate_sim.physics.integrators import IntegratorConfig
 from iceskate_sim.physics.simulation import SimulatorConfig, initial_state
 from iceskate_sim.yaml_io import read_yaml  # scenes are read by it (and it is found here too)
 
@@ -79,51 +79,11 @@ class Scene:
 
 
 # ------------------------------------------------------------------- the scene's schema
-# Every key of a scene's simulator part is a ``setting`` of these classes (the parameter schema
-# of the project, ``iceskate_sim.parameters``): its default, description, unit and rules.
+# Every key of a scene's simulator part is a ``setting`` of these classes or of the run's own
+# configurations (``FrictionModel``, ``IntegratorConfig``, ``DynamicsParameters``; the parameter
+# schema of the project, ``iceskate_sim.parameters``): its default, description, unit and rules.
 def _checked(obj: Any) -> None:
     check_fields(obj, SimulationError)
-
-
-@dataclass(frozen=True)
-class FloorSettings:
-    """``floor``: the friction rule and coefficient."""
-
-    rule: str = setting('ice', "'ice' (forward sliding only, a foot sliding back is stuck by "
-                        "the toe pick) or 'coulomb' (|F_t| <= mu N both ways)",
-                        choices=('ice', 'coulomb'))
-    mu: float = setting(0.005, 'friction coefficient', low=0.0, high=2.0)
-    __post_init__ = _checked
-
-
-@dataclass(frozen=True)
-class IntegratorSettings:
-    """``integrator``: method, step and tolerances, and the drift projection."""
-
-    method: str = setting('rk4', 'integration method', choices=METHODS)
-    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=0.0,
-                          open_low=True, high=0.1)
-    rtol: float = setting(1e-8, 'relative tolerance (rk45)', low=0.0, open_low=True, high=1.0)
-    atol: float = setting(1e-10, 'absolute tolerance (rk45)', low=0.0, open_low=True, high=1.0)
-    event_tolerance: float = setting(1e-10, 'tolerance of an event time', unit='s', low=0.0,
-                                     open_low=True, high=1e-3)
-    projection: bool = setting(True, 'project onto the active constraints after every period')
-    __post_init__ = _checked
-
-
-@dataclass(frozen=True)
-class DynamicsSettings:
-    """``dynamics``: joint damping, soft joint stops and Baumgarte stabilisation."""
-
-    joint_limits: bool = setting(True, 'soft joint stops on')
-    damping: bool = setting(True, 'joint damping on')
-    baumgarte: float = setting(0.0, 'Baumgarte constant of the swing constraints', unit='1/s',
-                               low=0.0, high=1e4)
-    limit_stiffness: float = setting(1e4, 'stiffness of a soft stop', unit='N m/rad', low=0.0,
-                                     high=1e7)
-    limit_damping: float = setting(100.0, 'damping of a soft stop', unit='N m s/rad', low=0.0,
-                                   high=1e5)
-    __post_init__ = _checked
 
 
 #: ``initial.q`` and ``initial.v``: a value per coordinate name (m, rad; m/s, rad/s), each
@@ -185,10 +145,10 @@ class SceneSettings:
                                     unit='s', low=0.0, open_low=True, high=0.1)
     fall_height: float = setting(1.2, 'head-top height below which the robot has fallen',
                                  unit='m', low=0.0, high=1.7)
-    floor: FloorSettings = block(FloorSettings, 'floor friction')
+    floor: FrictionModel = block(FrictionModel, 'floor friction')
     initial: InitialSettings = block(InitialSettings, 'initial state')
-    integrator: IntegratorSettings = block(IntegratorSettings, 'integrator')
-    dynamics: DynamicsSettings = block(DynamicsSettings, 'contact and joint model')
+    integrator: IntegratorConfig = block(IntegratorConfig, 'integrator')
+    dynamics: DynamicsParameters = block(DynamicsParameters, 'contact and joint model')
     record: RecordSettings = block(RecordSettings, 'what is recorded')
     inputs: Any = setting(MISSING, 'parameter block of each controller node, by node name')
     disturbances: Any = setting(None, 'pushes: a list of PushSettings mappings')
@@ -238,20 +198,16 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__}')
     if 'engine' in raw:  # a scene written for the Python engine, which is gone
         raise _fail('engine', 'the physics always runs on the native core now; remove the key')
+    if isinstance(raw.get('dynamics'), dict) and 'mu' in raw['dynamics']:
+        raise _fail('dynamics.mu', "the friction coefficient is the floor's: set floor.mu")
     top = _settings(SceneSettings, raw, '')
     if not top.scene:
         raise _fail('scene', f'must be a non-empty name, got {top.scene!r}')
-    floor, integ, dyn, init = top.floor, top.integrator, top.dynamics, top.initial
-    friction = FrictionModel(mu=floor.mu, rule=floor.rule)
-    integrator = IntegratorConfig(method=integ.method, step=integ.step, rtol=integ.rtol,
-                                  atol=integ.atol, event_tolerance=integ.event_tolerance)
-    dynamics = DynamicsParameters(
-        joint_limits=dyn.joint_limits, damping=dyn.damping, baumgarte=dyn.baumgarte,
-        limit_stiffness=dyn.limit_stiffness, limit_damping=dyn.limit_damping)
+    init = top.initial
     try:
-        simulator = SimulatorConfig(control_period=top.control_period, integrator=integrator,
-                                    friction=friction, dynamics=dynamics,
-                                    projection=integ.projection, fall_height=top.fall_height)
+        simulator = SimulatorConfig(control_period=top.control_period,
+                                    integrator=top.integrator, friction=top.floor,
+                                    dynamics=top.dynamics, fall_height=top.fall_height)
     except SimulationError as exc:
         raise _fail('control_period', str(exc)) from None
 

@@ -34,7 +34,7 @@ from iceskate_sim.run.scene import Scene
 
 if TYPE_CHECKING:
     from iceskate_native import Controller, Kinematics
-    from iceskate_sim.physics.native import NativeControlLoop
+    from iceskate_sim.physics.simulation import NativeControlLoop
 
 #: Samples of held periods (``Session.hold``) recorded at once by a partial ``flush``.
 HELD_BLOCK = 100
