@@ -251,13 +251,12 @@ def _echo(name: str, scene_arg: str) -> int:
 
     from iceskate_bringup.scene import load_scene, scene_sources
     from iceskate_interfaces.msg import EffortCommand, GaitState
-    from iceskate_sim.model.command import CommandValues, ControllerCommand, JointCommand
+    from iceskate_sim.model.command import EMPTY, CommandValues
     from iceskate_sim.ros.effort_cdr import CommandEncoder
     from iceskate_sim.ros.node_support import LOCKSTEP_READER_QOS, STATE_QOS, spin_until
     sources = scene_sources(load_scene(scene_arg))[name]
-    zero = JointCommand(np.zeros(18))
-    command = CommandValues.of(ControllerCommand.of(dict.fromkeys(sources, zero), np.zeros(18),
-                                                    np.zeros(18)))
+    command = CommandValues(np.zeros(18), EMPTY, EMPTY, EMPTY, np.zeros(18 * len(sources)),
+                            EMPTY, tuple(sources))
     encoder = CommandEncoder(name)
     rclpy.init()
     node = rclpy.create_node(name, parameter_overrides=[

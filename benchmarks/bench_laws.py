@@ -3,13 +3,13 @@
 
 Runs a scene headless for ``--duration`` s (``Session`` with ``ControlStack``, the native laws)
 and, at every control instant, times the laws two ways on the same observation:
-``ControlStack.commands`` (what the headless runner and the nodes pay: the observation
-converted, the C++ laws, the answer turned into ``ControllerCommand`` objects) and the bare
+``native_values`` of each controller (what the nodes pay: the observation converted, the C++
+laws, the answer as the ``CommandValues`` a node sends) and the bare
 ``Controller.compute`` calls (the C++ laws and the binding's conversions, with a native
 observation made once per period; the laws' kinematics answers the second call at the same
 state from its cache, so this is what the laws cost beyond the Pinocchio passes). Prints
 microseconds per period (medians of the per-period times, and means) and each way's share of
-``ControlStack.commands``, all measured in this one run.
+``native_values``, all measured in this one run.
 
 Usage (from the repository root, environment sourced; under the machine's CPU lock):
     python benchmarks/bench_laws.py [skate] [--duration 15]
@@ -22,6 +22,7 @@ from dataclasses import replace
 import statistics
 import time
 
+from bench_period import answers
 from bench_work_precision import machine_info
 
 from iceskate_bringup.composition import ControlStack
@@ -29,7 +30,7 @@ from iceskate_bringup.scene import load_scene
 from iceskate_sim.physics.native_control import native_observation
 from iceskate_sim.run.session import Session
 
-STACK, COMPUTE = 'native laws (ControlStack.commands)', 'native laws (Controller.compute)'
+STACK, COMPUTE = 'native laws (native_values)', 'native laws (Controller.compute)'
 
 
 def main() -> None:
@@ -46,7 +47,7 @@ def main() -> None:
     while not session.done:
         obs = session.observation()
         t0 = clock()
-        stack.commands(obs)
+        answers(stack, obs)
         t1 = clock()
         native = native_observation(obs)
         for controller in stack.controllers.values():

@@ -118,20 +118,22 @@ def per_source_cost(scene: Scene, robot: Any, number: int, log) -> dict[str, flo
     from gait_manager.native import GaitManagerController
     from gait_manager.parameters import SOURCES
     from iceskate_bringup.scene import node_parameters
-    from iceskate_sim.physics.native_control import native_command
+    from iceskate_sim.physics.native_control import native_observation, native_values
+
     obs = _obs(scene, robot)
     stack = ControlStack(scene, robot, obs)
     costs: dict[str, float] = {}
     if 'visual_lifting' in stack.controllers:
         lifting = stack.controllers['visual_lifting']
         costs['visual_lifting'] = _time_us(
-            lambda: native_command(lifting, obs, stack.kinematics), number)
+            lambda: native_values(lifting, native_observation(obs), stack.kinematics), number)
     gm = node_parameters(scene).get('gait_manager')
     if gm is not None:
         for source in SOURCES:
             alone = GaitManagerController(replace(gm, enabled=frozenset({source})))
             costs[source] = _time_us(
-                lambda c=alone: native_command(c, obs, stack.kinematics), number)
+                lambda c=alone: native_values(c, native_observation(obs), stack.kinematics),
+                number)
     enabled = {s for sources in scene_sources(scene).values() for s in sources}
     log('[per source] us per evaluation: ' + ', '.join(
         f'{k} {v:.1f}{"" if k in enabled else " (disabled)"}' for k, v in costs.items()))

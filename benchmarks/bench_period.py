@@ -15,7 +15,7 @@ Runs ``--duration`` s of a scene three ways, in turn, ``--rounds`` times (median
   metrics: recording and outputs included); the project's goal is the run's own >= 80 % of the
   loop's;
 * ``per period (inbox)``: the periods one at a time the way the ROS simulator node runs them,
-  without the messaging: the observation, the control laws (``ControlStack.commands``), each
+  without the messaging: the observation, the control laws (``native_values``), each
   controller's command into the native loop's inbox (``Session.command_inbox``, ``receive``),
   ``Session.hold`` (one period) and ``Session.flush`` (a block of samples at a time), no bag.
 
@@ -48,15 +48,25 @@ from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.model.command import CommandValues
+from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot, load_robot
+from iceskate_sim.physics.native_control import native_observation, native_values
 from iceskate_sim.physics.simulation import Simulator
 from iceskate_sim.run.scene import Scene
 from iceskate_sim.run.session import Session
 
+
+def answers(stack: ControlStack, obs: Observation) -> dict[str, CommandValues]:
+    """What each controller node of ``stack`` sends at ``obs`` (as the nodes compute it)."""
+    native = native_observation(obs)
+    return {node: native_values(controller, native, stack.kinematics)
+            for node, controller in stack.controllers.items()}
+
+
 GOAL = 0.8  # the run's own real-time factor over the native loop's
 WARMUP = 0.1  # s simulated of each variant before the timed runs
 RUN_PARTS = ('native blocks (laws, periods, samples)', 'blocks recorded (trajectory, bag)')
-PERIOD_PARTS = ('observation', 'control laws (ControlStack.commands)',
+PERIOD_PARTS = ('observation', 'control laws (native_values)',
                 'commands into the inbox', 'hold (one period)', 'flush (samples recorded)')
 PARTS = (*PERIOD_PARTS, *RUN_PARTS, 'finish (outputs, metrics, bag closed)')
 NO_BAG, WITH_BAG, PER_PERIOD = 'run, no bag', 'run, with bag', 'per period (inbox)'
@@ -122,16 +132,16 @@ def measure_per_period(scene: Scene, robot: Robot, directory: pathlib.Path) -> d
     cpu_start, wall_start = time.process_time(), clock()
     session = Session(scene, directory, None, robot)
     stack = ControlStack(scene, session.robot, session.observation())
-    first = stack.commands(session.observation())
-    inbox = session.command_inbox(tuple(tuple(c.source_efforts) for c in first.values()))
+    first = answers(stack, session.observation())
+    inbox = session.command_inbox(tuple(values.sources for values in first.values()))
     while not session.done:
         t0 = clock()
         obs = session.observation()
         t1 = clock()
-        commands = stack.commands(obs)
+        commands = answers(stack, obs)
         t2 = clock()
-        for index, command in enumerate(commands.values()):
-            inbox.receive(index, CommandValues.of(command))
+        for index, values in enumerate(commands.values()):
+            inbox.receive(index, values)
         t3 = clock()
         session.hold()
         t4 = clock()

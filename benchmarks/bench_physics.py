@@ -62,6 +62,7 @@ from iceskate_sim.physics.simulation import Simulator
 
 # the native kernel's single calls are test tools (tests/oracle)
 sys.path.append(str(pathlib.Path(__file__).resolve().parents[1] / 'tests'))
+from oracle.commands import held_of_controllers, stack_commands
 from oracle.native_probes import NativeProbes  # noqa: E402
 
 GOAL_RATIO = 4.0  # physics alone <= 4 x mj_step (implicitfast) at the same step
@@ -96,7 +97,7 @@ def collect_states(scene, robot, warmup: float, count: int, spacing: int) -> lis
     snaps: list[Snapshot] = []
     previous = HeldCommand.torque_only(np.zeros(N_COORDINATES))
     for k in range(first + count * spacing):
-        command = HeldCommand.of_controllers(stack.commands(sim.observation()).values())
+        command = held_of_controllers(stack_commands(stack, sim.observation()).values())
         snap = None
         if k >= first and (k - first) % spacing == 0:
             snap = Snapshot(sim.state, previous, command)

@@ -57,17 +57,19 @@ REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 for _package in ('iceskate_sim', 'visual_lifting', 'gait_manager'):
     if importlib.util.find_spec(_package) is None:  # workspace not sourced: use the sources
         sys.path.insert(0, str(REPO_ROOT / 'ros_ws' / 'src' / _package))
+sys.path.append(str(REPO_ROOT / 'tests'))  # the Python oracle's commands
 
 from iceskate_bringup.composition import ControlStack  # noqa: E402
 from iceskate_bringup.runner import BLOCK_PERIODS  # noqa: E402
 from iceskate_bringup.scene import load_scene, parse_scene  # noqa: E402
 from iceskate_sim.errors import SimulationError  # noqa: E402
-from iceskate_sim.model.command import HeldCommand, JointCommand  # noqa: E402
+from iceskate_sim.model.command import HeldCommand  # noqa: E402
 from iceskate_sim.model.robot import N_COORDINATES, load_robot  # noqa: E402
 from iceskate_sim.physics.hybrid import FrictionModel  # noqa: E402
 from iceskate_sim.physics.integrators import IntegratorConfig  # noqa: E402
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state  # noqa: E402
 from iceskate_sim.run.scene import Scene  # noqa: E402
+from oracle.commands import JointCommand, held_of, held_of_controllers, stack_commands  # noqa: E402
 
 OUTCOMES = ('completed', 'ended', 'error', 'nan', 'hang', 'crash')
 GOOD = ('completed', 'ended', 'error')
@@ -200,7 +202,7 @@ def scene_case(edit: Callable[[dict], None], base: str = 'stand',
         stack = ControlStack(scene, robot, sim.observation())
 
         def control(s: Simulator) -> HeldCommand:
-            return HeldCommand.of_controllers(stack.commands(s.observation()).values())
+            return held_of_controllers(stack_commands(stack, s.observation()).values())
         return sim, control, scene
     return build
 
@@ -275,7 +277,7 @@ def repeated_impacts(robot: Any) -> tuple[Simulator, Controller, None]:
         gravity = np.zeros(N_COORDINATES)
         gravity[s.state.mode.active] = s.dynamics.gravity_terms(s.state.contact, s.state.q)
         gravity[:2] = 0.0
-        return HeldCommand.combine([JointCommand(gravity, stiffness, damping,
+        return held_of([JointCommand(gravity, stiffness, damping,
                                                  posture(-0.02 if lowered else 0.06))])
     return sim, control, None
 

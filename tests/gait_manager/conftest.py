@@ -9,15 +9,11 @@ import pytest
 
 from gait_manager.native import GaitManagerController
 from gait_manager.parameters import GaitManagerParameters
-from iceskate_sim.model.command import ControllerCommand
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import load_robot
-from iceskate_sim.physics.native_control import (
-    native_command,
-    native_kinematics,
-    native_observation,
-)
+from iceskate_sim.physics.native_control import native_kinematics, native_observation
 from iceskate_sim.run.scene import standing_posture
+from oracle.commands import ControllerCommand, native_command
 
 
 def _parameters(enabled: tuple[str, ...] | None = None, **blocks: dict[str, Any]

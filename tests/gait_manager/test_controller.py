@@ -11,8 +11,8 @@ from gait_manager.errors import GaitManagerError
 from gait_manager.native import GaitManagerController
 from gait_manager.parameters import SOURCES
 from iceskate_bringup.scene import load_scene, node_parameters
-from iceskate_sim.model.command import JointCommand
-from iceskate_sim.physics.native_control import native_command, native_observation
+from iceskate_sim.physics.native_control import native_observation
+from oracle.commands import JointCommand, native_command
 
 
 def test_every_source_by_default_in_order(make_obs, command, parameters):

@@ -14,6 +14,7 @@ from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import SIDES, load_robot
 from iceskate_sim.physics.simulation import Simulator
+from oracle.commands import stack_commands
 from oracle.dynamics import GaitDynamics
 
 SHORT_SKATE = 5.0  # s: the first steps of the skate scene (past the arm assist's release)
@@ -100,7 +101,7 @@ def test_control_stack_computes_only_the_scene_sources():
     scene = load_scene('stand')
     robot = load_robot()
     sim = Simulator(robot, scene.simulator, scene.initial)
-    commands = ControlStack(scene, robot, sim.observation()).commands(sim.observation())
+    commands = stack_commands(ControlStack(scene, robot, sim.observation()), sim.observation())
     assert list(commands) == ['visual_lifting', 'gait_manager']
     assert {node: tuple(c.source_efforts) for node, c in commands.items()} == scene_sources(scene)
     assert commands['gait_manager'].command.has_impedance  # the posture's

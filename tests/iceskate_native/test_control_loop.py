@@ -1,6 +1,6 @@
 """Many control periods in one native call (``iceskate_native.ControlLoop``, through
 ``Session.run_periods``) against the same session advanced one period per call, and the
-commands of controller nodes (``ControlStack.commands``, as values) held one period at a time
+commands of controller nodes (``oracle.commands.stack_commands``, as values) held one period at a time
 by the same loop (``Session.hold``, the path of the ROS simulator node). The columns derived for
 the recording (head quaternion and pitch, pivot code, root link pose) and the live view equal
 what Pinocchio gives in Python.
@@ -26,13 +26,13 @@ from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import CommandValues, HeldCommand
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import PIVOTS, SIDES, Robot
 from iceskate_sim.physics.hybrid import Transition
 from iceskate_sim.physics.simulation import Simulator
 from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
+from oracle.commands import held_of_controllers, stack_commands, values_of
 from oracle.tf import tf_rows
 
 
@@ -68,9 +68,9 @@ def _held(scene: Scene, out: pathlib.Path | None = None) -> Session:
     stack = ControlStack(scene, session.robot, session.observation())
     inbox = session.command_inbox(tuple(scene_sources(scene).values()))
     while not session.done:
-        commands = stack.commands(session.observation())
+        commands = stack_commands(stack, session.observation())
         for index, command in enumerate(commands.values()):
-            inbox.receive(index, CommandValues.of(command))
+            inbox.receive(index, values_of(command))
         assert session.hold()
         session.flush(whole=False)
     session.finish()
@@ -183,9 +183,9 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
     inbox = session.command_inbox(tuple(scene_sources(scene).values()))
     sim = session.sim
     for period in range(300):  # past the first transitions
-        commands = stack.commands(session.observation())
+        commands = stack_commands(stack, session.observation())
         for index, command in enumerate(commands.values()):
-            inbox.receive(index, CommandValues.of(command))
+            inbox.receive(index, values_of(command))
         session.hold()
         block = inbox.take_block()
         if period % 50 == 49 or period == 0:
@@ -207,7 +207,7 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
                     ('support_tangential', result.support_tangential), ('cop_y', result.cop_y),
                     ('head_target', block['head_target'][-1]), ('present', 1)]:
                 assert np.array_equal(live[key][0], expected, equal_nan=True), key
-            held = HeldCommand.of_controllers(commands.values()).torque(state.q, state.v)
+            held = held_of_controllers(commands.values()).torque(state.q, state.v)
             assert live['sources'] == ['held'] and np.array_equal(live['efforts'][0][0], held)
             head, tf = _placements(session.robot, side, pivot, state.q)
             assert np.array_equal(head.translation, sim.head_placement().translation)
@@ -223,7 +223,7 @@ def test_the_inbox_refuses_bad_commands_and_forgets_on_request() -> None:
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
     inbox = session.command_inbox(tuple(scene_sources(scene).values()))
-    good = CommandValues.of(stack.commands(session.observation())['gait_manager'])
+    good = values_of(stack_commands(stack, session.observation())['gait_manager'])
     assert good.stiffness.size == 18  # with an impedance
     for bad, match in [
             (good._replace(effort=np.zeros(17)), 'effort has 17 entries, expected 18'),

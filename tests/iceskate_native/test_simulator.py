@@ -12,6 +12,7 @@ the states agree to round-off amplified by the gait over the run, not bit for bi
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 import pathlib
 
 import numpy as np
@@ -20,12 +21,12 @@ import pytest
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.physics.hybrid import FrictionModel
 from iceskate_sim.physics.integrators import IntegratorConfig
 from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
 from oracle.automaton import rerooted_command
+from oracle.commands import held_of_controllers, stack_commands
 from oracle.simulator import ReferenceRun, run_reference
 
 #: a fast-stepping skate gait (test data): many events in a short window
@@ -52,7 +53,7 @@ def _reference(scene: Scene, integrator: IntegratorConfig | None = None) -> Refe
     """``scene`` on the oracle with the same controllers."""
     session = Session(scene)  # the robot and the controllers' initial observation
     stack = ControlStack(scene, session.robot, session.observation())
-    return run_reference(scene, session.robot, stack.commands, integrator)
+    return run_reference(scene, session.robot, partial(stack_commands, stack), integrator)
 
 
 def _runs(scene: Scene) -> tuple[ReferenceRun, Session]:
@@ -101,10 +102,10 @@ def test_a_command_held_across_an_exchange_is_rerooted_with_the_tree() -> None:
     side = session.sim.state.contact.side
     while session.sim.state.contact.side == side:
         assert not session.done, 'no exchange in the run'
-        commands = stack.commands(session.observation())
+        commands = stack_commands(stack, session.observation())
         session.run_periods(stack, 1)
     sim = session.sim
-    held = rerooted_command(HeldCommand.of_controllers(commands.values()))
+    held = rerooted_command(held_of_controllers(commands.values()))
     result = sim.result
     np.testing.assert_allclose(result.applied - result.passive,
                                held.torque(sim.state.q, sim.state.v), rtol=0.0, atol=1e-9)

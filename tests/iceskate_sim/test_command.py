@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand, HeldCommand, JointCommand
+from oracle.commands import ControllerCommand, JointCommand, held_of, held_of_controllers
 
 RNG = np.random.default_rng(7)
 
@@ -24,7 +24,7 @@ def test_total_applies_the_sum_of_its_sources_at_any_state(kinds):
         q, v = RNG.normal(size=18), RNG.normal(size=18)
         expected = sum(c.torque(q, v) for c in commands)
         np.testing.assert_allclose(total.torque(q, v), expected, rtol=1e-12, atol=1e-9)
-        held = HeldCommand.combine(commands)
+        held = held_of(commands)
         np.testing.assert_allclose(held.torque(q, v), expected, rtol=1e-12, atol=1e-9)
     if kinds.count('pd') > 1:  # a weighted mean; 0 where no stiffness acts
         assert (total.reference[:3] == 0.0).all()
@@ -46,7 +46,7 @@ def test_controller_command_records_each_source_at_the_state_answered():
     assert list(answer.source_efforts) == ['posture', 'yaw']
     for name, command in sources.items():
         np.testing.assert_array_equal(answer.source_efforts[name], command.torque(q, v))
-    np.testing.assert_allclose(HeldCommand.of_controllers([answer]).torque(q, v),
+    np.testing.assert_allclose(held_of_controllers([answer]).torque(q, v),
                                sum(answer.source_efforts.values()), rtol=1e-12, atol=1e-9)
 
 

@@ -14,16 +14,18 @@ pytestmark = [pytest.mark.ros]
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
 from gait_manager.native import GaitManagerController  # noqa: E402
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
-from iceskate_sim.model.command import ControllerCommand, JointCommand  # noqa: E402
+
+# noqa: E402
 from iceskate_sim.model.robot import load_robot  # noqa: E402
 from iceskate_sim.parameters import flatten  # noqa: E402
-from iceskate_sim.physics.native_control import native_command, native_kinematics  # noqa: E402
+from iceskate_sim.physics.native_control import native_kinematics  # noqa: E402
 from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
 from iceskate_sim.recording.messages import Events, SampleMessages  # noqa: E402
 from iceskate_sim.ros.effort_cdr import CommandDecoder  # noqa: E402
 from iceskate_sim.ros.lockstep import LockstepSession  # noqa: E402
 from iceskate_sim.ros.node_support import write_parameter_file  # noqa: E402
 from iceskate_sim.run.session import Session  # noqa: E402
+from oracle.commands import ControllerCommand, JointCommand, command_of, native_command, values_of  # noqa: E402
 from oracle.messages import observation_from_gait_state  # noqa: E402
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
@@ -43,11 +45,17 @@ def gait_manager(ros_context, tmp_path):
                                                           str(params)])
     sent = []
     decoder = CommandDecoder()
-    node._publisher.publish = lambda data: sent.append(decoder.decode(data)[1:])
+    node._publisher.publish = lambda data: sent.append(_decoded(decoder, data))
     try:
         yield node, sent
     finally:
         node.destroy_node()
+
+
+def _decoded(decoder: CommandDecoder, data: bytes) -> tuple[int, ControllerCommand]:
+    """The stamp [ns] and command of a sent message."""
+    _, stamp_ns, values = decoder.decode(data)
+    return stamp_ns, command_of(values)
 
 
 def assert_command(got, expected) -> None:
@@ -76,8 +84,9 @@ def test_the_answer_to_gait_state_bytes_is_the_laws_command_at_that_state(gait_m
         ns, got = sent[-1]
         assert ns == session.t_ns
         assert_command(got, expected)
-        session.offer('gait_manager', ns, got)
-        session.offer('visual_lifting', ns, ControllerCommand(JointCommand(np.zeros(18)), {}))
+        session.offer('gait_manager', ns, values_of(got))
+        session.offer('visual_lifting', ns,
+                      values_of(ControllerCommand(JointCommand(np.zeros(18)), {})))
         session.step()
     assert len(sent) == 3
 

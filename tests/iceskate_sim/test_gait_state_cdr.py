@@ -18,6 +18,7 @@ from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.ros.gait_state_cdr import GaitStateReader
 from iceskate_sim.ros.lockstep import LockstepSession
 from iceskate_sim.run.session import Session
+from oracle.commands import stack_commands, values_of
 from oracle.messages import observation_from_gait_state, stamp_to_ns
 
 TYPE = 'iceskate_interfaces/msg/GaitState'
@@ -57,8 +58,8 @@ def states(typestore) -> list[bytes]:
         if session.periods % 10 == 0:
             out.append(data)
         obs = session.session.observation()
-        for controller, command in stack.commands(obs).items():
-            session.offer(controller, session.t_ns, command)
+        for controller, command in stack_commands(stack, obs).items():
+            session.offer(controller, session.t_ns, values_of(command))
         session.step()
     return out
 

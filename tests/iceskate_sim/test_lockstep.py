@@ -15,10 +15,10 @@ from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand, JointCommand
 from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.ros.lockstep import LockstepSession
 from iceskate_sim.run.session import Session
+from oracle.commands import ControllerCommand, JointCommand, stack_commands, values_of
 from oracle.messages import observation_from_gait_state
 
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
@@ -37,14 +37,15 @@ def make_session(scene, out=None, bag=None, lockstep=True):
 def controllers(scene, session):
     """The controller side of the graph, from messages (what the two nodes compute)."""
     stack = ControlStack(scene, session.robot, session.session.observation())
-    return stack.commands
+    return lambda obs: {node: values_of(command)
+                        for node, command in stack_commands(stack, obs).items()}
 
 
 def zero(scene, controller, value=0.0):
     """A command of ``controller`` applying ``value`` everywhere, with its breakdown."""
     sources = scene_sources(scene)[controller]
-    return ControllerCommand(JointCommand(np.full(18, value)),
-                             {s: np.zeros(18) for s in sources})
+    return values_of(ControllerCommand(JointCommand(np.full(18, value)),
+                                       {s: np.zeros(18) for s in sources}))
 
 
 def drive(session, answer):
@@ -108,7 +109,8 @@ def test_a_breakdown_that_changes_after_the_first_period_is_refused(scene):
                        r"sources \['posture'\]; scene 'tiny_stand' runs \['posture', "
                        r"'weight_transfer'\] on it"):
         session.offer('gait_manager', seconds_to_ns(obs.t),
-                      ControllerCommand(JointCommand(np.zeros(18)), {'posture': np.zeros(18)}))
+                      values_of(ControllerCommand(JointCommand(np.zeros(18)),
+                                                  {'posture': np.zeros(18)})))
 
 
 def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
@@ -137,17 +139,18 @@ def test_offer_refuses_unknown_senders_and_stale_or_future_stamps(scene):
 def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
     session = make_session(scene)
     assert scene_sources(scene)['gait_manager'] == ('posture', 'weight_transfer')
-    swapped = ControllerCommand(JointCommand(np.zeros(18)),
-                                {'weight_transfer': np.zeros(18), 'posture': np.zeros(18)})
+    swapped = values_of(ControllerCommand(JointCommand(np.zeros(18)), {
+        'weight_transfer': np.zeros(18), 'posture': np.zeros(18)}))
     with pytest.raises(SimulationError, match=r"breaks down into sources \['weight_transfer', "
                                               r"'posture'\]; .* runs \['posture', "
                                               r"'weight_transfer'\]"):
         session.offer('gait_manager', 0, swapped)
     with pytest.raises(SimulationError, match='breaks down into sources'):  # none given
-        session.offer('gait_manager', 0, ControllerCommand(JointCommand(np.zeros(18)), {}))
+        session.offer('gait_manager', 0,
+                      values_of(ControllerCommand(JointCommand(np.zeros(18)), {})))
     # a single-source controller may leave it out: its effort at the state is recorded
     pd = JointCommand(np.ones(18), np.full(18, 10.0), np.full(18, 2.0), np.full(18, 0.1))
-    assert session.offer('visual_lifting', 0, ControllerCommand(pd, {}))
+    assert session.offer('visual_lifting', 0, values_of(ControllerCommand(pd, {})))
     session.offer('gait_manager', 0, zero(scene, 'gait_manager'))
     state = session.sim.state
     session.step()

@@ -3,6 +3,7 @@ its failures and the run's failures still leave a closed, readable bag; the nati
 samples are what the oracle records of the same run."""
 
 from dataclasses import replace
+from functools import partial
 import json
 import os
 import pathlib
@@ -22,6 +23,7 @@ from iceskate_sim.model.stamps import seconds_to_ns
 from iceskate_sim.recording.bag import BagRecorder
 from iceskate_sim.recording.messages import RECORDED_TOPICS, Events, SampleMessages
 from iceskate_sim.run.session import Session
+from oracle.commands import stack_commands
 from oracle.simulator import reference_samples
 
 #: a fast-stepping skate gait (test data): many events in a short window
@@ -166,7 +168,7 @@ def test_the_native_block_holds_what_the_oracle_samples_record(native_blocks):
                for i, name in enumerate(sources)}
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
-    samples = reference_samples(scene, session.robot, stack.commands, 600)
+    samples = reference_samples(scene, session.robot, partial(stack_commands, stack), 600)
     assert len(b['t']) == len(samples) == 600
     close = {'rtol': 1e-6, 'atol': 1e-6}
     for k, sample in enumerate(samples):

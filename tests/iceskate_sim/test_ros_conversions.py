@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand, JointCommand
 from iceskate_sim.model.robot import COORDINATE_NAMES, PIVOTS, SIDES, load_robot
 from iceskate_sim.model.stamps import ns_to_sec_nanosec, seconds_to_ns, set_stamp
 from iceskate_sim.physics.simulation import Simulator, SimulatorConfig, initial_state
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.messages import Events, SampleMessages
 from iceskate_sim.ros.conversions import command_from_message
+from oracle.commands import ControllerCommand, JointCommand, command_of
 from oracle.messages import (
     command_fields,
     observation_from_gait_state,
@@ -202,7 +202,7 @@ def test_command_round_trips_with_and_without_impedance_and_breakdown(typestore)
         msg = empty_command(typestore, 'gait_manager')
         for key, value in command_fields(answer).items():
             setattr(msg, key, value)
-        back = command_from_message(msg)
+        back = command_of(command_from_message(msg))
         np.testing.assert_array_equal(back.command.effort, answer.command.effort)
         assert back.command.has_impedance == answer.command.has_impedance
         if answer.command.has_impedance:
@@ -215,7 +215,7 @@ def test_command_round_trips_with_and_without_impedance_and_breakdown(typestore)
 def test_command_with_a_subset_of_names_in_any_order(typestore):
     msg = effort_message(typestore, names=['q3', 'y0'], effort=[2.0, 5.0])
     msg.source_names, msg.source_efforts = ['posture', 'yaw'], np.array([1.0, 2.0, 3.0, 4.0])
-    answer = command_from_message(msg)
+    answer = command_of(command_from_message(msg))
     command = answer.command
     assert command.effort[3] == 2.0 and command.effort[0] == 5.0
     assert np.count_nonzero(command.effort) == 2

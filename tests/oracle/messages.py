@@ -11,11 +11,11 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.model.stamps import NS_PER_S
 from iceskate_sim.ros.conversions import PIVOT_OF_CODE, finite_vector
+from oracle.commands import ControllerCommand
 
 
 def stamp_to_ns(stamp: Any) -> int:

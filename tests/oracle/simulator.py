@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand, HeldCommand
+from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import ContactState, DynamicsResult
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, SIDES, Robot
@@ -41,6 +41,7 @@ from oracle.automaton import (
     rerooted_command,
     resolve_contact_mode,
 )
+from oracle.commands import ControllerCommand, held_of_controllers
 from oracle.dynamics import GaitDynamics
 from oracle.integrators import Integrator
 
@@ -337,7 +338,7 @@ def run_reference(scene: Scene, robot: Robot,
                   commands: Callable[[Observation], Mapping[str, ControllerCommand]],
                   integrator: IntegratorConfig | None = None) -> ReferenceRun:
     """Run ``scene`` on the oracle with ``commands(observation)`` answering every control
-    instant (e.g. ``ControlStack.commands``), the scene's pushes held as the native loop holds
+    instant (e.g. ``oracle.commands.stack_commands``), the scene's pushes held as the native loop holds
     them; stops at the scene's duration or the run's end.
 
     :raises SimulationError: where the physics failed.
@@ -349,7 +350,7 @@ def run_reference(scene: Scene, robot: Robot,
             break
         t = sim.state.t
         push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)), None)
-        sim.advance(HeldCommand.of_controllers(commands(sim.observation()).values()), push)
+        sim.advance(held_of_controllers(commands(sim.observation()).values()), push)
         start = sim.start_state
         rows.append((start.q, start.v, start.mode.number, SIDES.index(start.contact.side)))
     q, v, mode, side = (np.array(column) for column in zip(*rows, strict=True))
@@ -389,7 +390,7 @@ def reference_samples(scene: Scene, robot: Robot,
         placement = sim.head_placement()
         push = next(((p.frame, np.array(p.force)) for p in scene.pushes if p.active(t)), None)
         answers = commands(sim.observation())
-        sim.advance(HeldCommand.of_controllers(answers.values()), push)
+        sim.advance(held_of_controllers(answers.values()), push)
         state = sim.start_state
         efforts = {source: tau for c in answers.values()
                    for source, tau in c.source_efforts.items()}

@@ -6,14 +6,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from iceskate_sim.model.command import ControllerCommand
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import load_robot
-from iceskate_sim.physics.native_control import (
-    native_command,
-    native_kinematics,
-    native_observation,
-)
+from iceskate_sim.physics.native_control import native_kinematics, native_observation
+from oracle.commands import ControllerCommand, native_command
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from iceskate_bringup.scene import load_scene, node_parameters
-from iceskate_sim.physics.native_control import native_command, native_observation
+from iceskate_sim.physics.native_control import native_observation
+from oracle.commands import native_command
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters
 

@@ -2,7 +2,7 @@
 
 ``GaitManagerController(params)`` takes a ``GaitManagerParameters`` (``gait_manager.parameters``);
 its ``compute(obs, kinematics)`` gives the command of each enabled source, in ``SOURCES`` order
-(see ``iceskate_sim.physics.native_control.native_command``); a command that is not finite raises
+(see ``iceskate_sim.physics.native_control.native_values``); a command that is not finite raises
 ``GaitManagerError``. ``parameters`` shows the values the C++ sources hold, by field name.
 """
 

@@ -4,7 +4,7 @@ The headless runner calls this at every control instant; the ROS controller node
 same native laws (``visual_lifting.native.VisualLiftingController``,
 ``gait_manager.native.GaitManagerController``) with the same parameters (``node_parameters``) on
 the observation they rebuild from a GaitState message, through the same conversion
-(``iceskate_sim.physics.native_control.native_command``), so both paths give the same commands.
+(``iceskate_sim.physics.native_control.native_values``), so both paths give the same commands.
 Sources a scene does not enable are never computed. A controller written in Python that the scene
 names (``iceskate_bringup.plugin``) is built here and runs in the same native loop, under the GIL.
 """
@@ -15,14 +15,9 @@ from gait_manager.native import GaitManagerController
 from gait_manager.parameters import GaitManagerParameters
 from iceskate_bringup.plugin import PluginBlock, make_controller
 from iceskate_bringup.scene import node_parameters
-from iceskate_sim.model.command import ControllerCommand
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot
-from iceskate_sim.physics.native_control import (
-    native_command,
-    native_kinematics,
-    native_observation,
-)
+from iceskate_sim.physics.native_control import native_kinematics, native_observation
 from iceskate_sim.run.scene import Scene
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters
@@ -48,9 +43,3 @@ class ControlStack:
             elif isinstance(params, PluginBlock):
                 self.controllers[node] = make_controller(node, params)
                 self.plugins += (node,)
-
-    def commands(self, obs: Observation) -> dict[str, ControllerCommand]:
-        """What each controller node sends at ``obs`` (the sum of its enabled sources, with
-        their breakdown), keyed by node name, in summing order."""
-        return {node: native_command(controller, obs, self.kinematics)
-                for node, controller in self.controllers.items()}

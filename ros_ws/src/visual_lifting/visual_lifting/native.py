@@ -4,7 +4,7 @@
 ``VisualLiftingController(params)`` takes a ``VisualLiftingParameters``
 (``visual_lifting.parameters``); its ``compute(obs, kinematics)`` gives the command of source
 'visual_lifting' and the head target psi_d (see
-``iceskate_sim.physics.native_control.native_command``).
+``iceskate_sim.physics.native_control.native_values``).
 ``parameters`` shows the values the C++ law holds, by field name.
 """
 

@@ -5,14 +5,14 @@ subclasses of their packages' ``_law`` modules) and read the robot through an
 ``iceskate_native.ModelKinematics`` over the same four support models the dynamics use. This
 module makes that kinematics from a ``Robot``, turns an ``Observation`` into the native one
 (side 0 right / 1 left, pivot 0 toe / 1 heel) and gives a law's answer as the ``CommandValues``
-a controller node sends (or as a ``ControllerCommand``), so that the headless composition and
-the ROS nodes share this one path.
+a controller node sends, so that the headless composition and the ROS nodes share this one
+path.
 """
 
 from __future__ import annotations
 
 import iceskate_native
-from iceskate_sim.model.command import EMPTY, CommandValues, ControllerCommand
+from iceskate_sim.model.command import EMPTY, CommandValues
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
@@ -38,7 +38,7 @@ def native_observation(obs: Observation) -> iceskate_native.Observation:
 def native_values(controller: iceskate_native.Controller, obs: iceskate_native.Observation,
                   kinematics: iceskate_native.Kinematics) -> CommandValues:
     """What ``controller`` sends at ``obs`` (a native observation), as an EffortCommand carries
-    it: the sum of its sources' commands (``JointCommand.total``, summed natively), each
+    it: the sum of its sources' commands (summed natively), each
     source's generalized force at (q, v) and its head target (if it steers one)."""
     # ``command``, not ``compute``: a controller written in Python overrides ``compute`` with
     # its own law; ``command`` is the checked answer of every controller
@@ -50,9 +50,3 @@ def native_values(controller: iceskate_native.Controller, obs: iceskate_native.O
                          values[2 * n:3 * n] if impedance else EMPTY,
                          values[3 * n:m] if impedance else EMPTY, values[m:head],
                          values[head:] if steers else EMPTY, tuple(sources))
-
-
-def native_command(controller: iceskate_native.Controller, obs: Observation,
-                   kinematics: iceskate_native.Kinematics) -> ControllerCommand:
-    """``native_values`` at ``obs`` as a ``ControllerCommand``."""
-    return native_values(controller, native_observation(obs), kinematics).command()

@@ -1,7 +1,7 @@
 """Checked conversions of message fields to the ROS-free core types (no rclpy import).
 
 * ``command_from_message``: an ``EffortCommand``'s fields (``effort_cdr`` reads them from the
-  bytes) -> a ``ControllerCommand`` (the summed command and its per-source breakdown), refusing
+  bytes) -> its ``CommandValues`` (the summed command and its per-source breakdown), refusing
   NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that names the
   problem and the source (all 18 names in order, as the controllers send, skip the reordering);
 * ``finite_vector`` and ``PIVOT_OF_CODE``, which the GaitState reader shares.
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import ControllerCommand, JointCommand, all_finite
+from iceskate_sim.model.command import EMPTY, CommandValues, all_finite
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
 PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
@@ -60,8 +60,8 @@ def _array(msg: Any, field: str, names: list[str], where: str) -> np.ndarray:
                           f' for {len(names)} joint names')
 
 
-def command_from_message(msg: Any) -> ControllerCommand:
-    """The ControllerCommand of an EffortCommand message (18-vectors; unnamed coordinates 0).
+def command_from_message(msg: Any) -> CommandValues:
+    """The CommandValues of an EffortCommand message (18-vectors; unnamed coordinates 0).
 
     An empty breakdown gives empty ``source_efforts`` (a controller with one source named like
     itself: the simulator evaluates its effort).
@@ -86,16 +86,12 @@ def command_from_message(msg: Any) -> ControllerCommand:
 
     effort = field('effort')
     given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]
-    if not any(given):
-        command = JointCommand(effort)
-    elif not all(given):
+    if any(given) and not all(given):
         raise SimulationError(f'{where}: stiffness, damping and position_reference must be '
                               'all empty or all given')
-    else:
-        try:
-            command = JointCommand(effort, *(field(f) for f in _IMPEDANCE))
-        except SimulationError as exc:
-            raise SimulationError(f'{where}: {exc}') from None
+    impedance = [field(f) for f in _IMPEDANCE] if all(given) else [EMPTY] * 3
+    if all(given) and min(min(impedance[0].tolist()), min(impedance[1].tolist())) < 0.0:
+        raise SimulationError(f'{where}: stiffness and damping must be >= 0')
     sources = [str(n) for n in msg.source_names]
     if len(set(sources)) != len(sources):
         raise SimulationError(f'{where}: repeated source names in {sources}')
@@ -110,6 +106,6 @@ def command_from_message(msg: Any) -> ControllerCommand:
     if target.shape not in ((0,), (3,)) or not all_finite(target):
         raise SimulationError(f'{where}: head_target must be empty or 3 finite values '
                               f'(y, z, pitch), got {target.tolist()}')
-    return ControllerCommand(command, {name: coordinates(row.copy())
-                                       for name, row in zip(sources, rows, strict=True)},
-                             target if target.size else None)
+    efforts = [coordinates(row.copy()) for row in rows]
+    return CommandValues(effort, *impedance, np.concatenate(efforts) if efforts else EMPTY,
+                         target, tuple(sources))

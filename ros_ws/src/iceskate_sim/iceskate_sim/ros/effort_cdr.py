@@ -23,7 +23,7 @@ from rosbags.typesys.store import Typestore
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.command import CommandValues, ControllerCommand, all_finite
+from iceskate_sim.model.command import CommandValues, all_finite
 from iceskate_sim.model.robot import COORDINATE_NAMES
 from iceskate_sim.model.stamps import NS_PER_S
 from iceskate_sim.recording.bag_types import make_typestore
@@ -52,15 +52,7 @@ class CommandDecoder:
         #: per source: its last checked message's layout, the places of its values and sources
         self._known: dict[str, tuple[Layout, np.ndarray, tuple[slice, ...], tuple[str, ...]]] = {}
 
-    def decode(self, data: bytes) -> tuple[str, int, ControllerCommand]:
-        """The sender, stamp and ControllerCommand of one message.
-
-        :raises SimulationError: naming the problem (and the source, once it is readable).
-        """
-        source, stamp_ns, values = self.decode_values(data)
-        return source, stamp_ns, values.command()
-
-    def decode_values(self, data: bytes) -> tuple[str, int, CommandValues]:
+    def decode(self, data: bytes) -> tuple[str, int, CommandValues]:
         """The sender, stamp and command values of one message (views of ``data`` when its
         layout is known).
 
@@ -83,7 +75,7 @@ class CommandDecoder:
             source=layout.strings['source'], joint_names=layout.texts('joint_names'),
             source_names=layout.texts('source_names'),
             **{name: layout.read(data, name).copy() for name in ARRAYS})
-        values = CommandValues.of(command_from_message(message))
+        values = command_from_message(message)
         if message.joint_names == list(COORDINATE_NAMES):  # the layout the fast way assumes
             fields = [layout.fields[name] for name in ARRAYS]
             starts = [(f.offset - fields[0].offset) // 8 for f in fields]

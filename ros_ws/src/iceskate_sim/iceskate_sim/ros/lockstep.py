@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.model.command import CommandValues, ControllerCommand
+from iceskate_sim.model.command import CommandValues
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag_types import make_typestore
@@ -143,8 +143,7 @@ class LockstepSession:
         return self.messages.encode_live(self._inbox, self._live[1], self.sim.events, topics)
 
     # -------------------------------------------------------------------------- commands
-    def offer(self, controller: str, stamp_ns: int,
-              command: CommandValues | ControllerCommand) -> bool:
+    def offer(self, controller: str, stamp_ns: int, command: CommandValues) -> bool:
         """Take a controller's command; False for a repeat of its last stamp (ignored).
 
         An empty breakdown is the effort of a controller's only source, named like it,
@@ -159,8 +158,6 @@ class LockstepSession:
             raise SimulationError(f'command from unknown source {controller!r}; scene '
                                   f'{self.scene.name!r} runs the controllers '
                                   f'{list(self.controllers)}')
-        if isinstance(command, ControllerCommand):
-            command = CommandValues.of(command)
         expected = self._breakdown[controller]
         if controller in self._learning and command.sources and command.sources != expected:
             self._adopt(controller, command.sources)
@@ -168,8 +165,7 @@ class LockstepSession:
         self._learning.discard(controller)
         if not command.sources and expected == (controller,):
             state = self.sim.state
-            total = command.command().command
-            command = command._replace(source_efforts=total.torque(state.q, state.v),
+            command = command._replace(source_efforts=command.torque(state.q, state.v),
                                        sources=expected)
         if command.sources != expected:
             raise SimulationError(f'command of {controller!r} breaks down into sources '
@@ -418,7 +414,7 @@ class LockstepLoop:
         if self.phase != 'running':
             return None
         try:
-            source, stamp_ns, command = self._decoder.decode_values(data)
+            source, stamp_ns, command = self._decoder.decode(data)
             self.session.offer(source, stamp_ns, command)
         except SimulationError as exc:
             self.monitor.reject(str(exc))
