@@ -77,6 +77,12 @@ def test_read_bag_refuses_a_truncated_bag(truncated_bag):
         read_bag(truncated_bag)
 
 
+def test_the_mcap_file_of_a_closed_bag_reads_as_the_bag(sim_bag):
+    (mcap,) = sim_bag.glob('*.mcap')
+    bag = read_bag(mcap)
+    assert bag.path == sim_bag and bag.notes == () and bag.scene_name == 'tiny_skate'
+
+
 def test_read_bag_rebuilds_a_bag_without_metadata_from_its_mcap_file(tmp_path, sim_bag):
     """A recording never closed (a killed run) has no metadata.yaml: every message of the
     .mcap file's complete chunks is read, and the notes say so."""

@@ -1,10 +1,6 @@
-"""A picture of a run: stick-figure animation (GIF) and a key-frame strip (PNG), side view.
-
-Link positions come from forward kinematics of the recorded q with the support model of each
-sample (support side and pivot edge), so the figure is what the dynamics integrated. The view
-is the sagittal plane: world y (travel direction) to the right, z up; the right side is drawn
-red, the left side blue. Each frame shows the time, the Table 2 gait mode, the support foot and
-the step (paper numbering: step = step_index + 1).
+"""A run seen from the side (world y to the right, z up; right side red, left blue): a
+stick-figure GIF and a key-frame strip (PNG), drawn from forward kinematics of the recorded q
+in each sample's support model.
 """
 
 from __future__ import annotations

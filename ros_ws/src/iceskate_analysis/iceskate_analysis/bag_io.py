@@ -1,52 +1,40 @@
-"""Read a recorded run (rosbag2 bag) into time-aligned numpy arrays, without ROS.
+"""Read a recorded run (a rosbag2 bag, MCAP storage) into time-aligned numpy arrays, without ROS.
 
-The bag is opened with ``rosbags``' ``AnyReader``. Message definitions come from the bag itself
-(MCAP stores them); for a bag without definitions our typestore
-(``iceskate_sim.recording.bag_types.make_typestore``) is the fallback. A bag that was never closed
-(no metadata.yaml: the recording process was killed, or the power went) or whose file was cut is
-rebuilt from its .mcap file: every message of its complete chunks, read with the ``mcap`` package's
-stream reader (``open_bag``; ``replay`` reads bags the same way); the data's first
-note says so and how much was read. The analysis needs three topics,
-all stamped with the simulation time of the sample (``header.stamp``):
-
-* ``/joint_states`` (sensor_msgs/JointState): q, q̇ and the total input effort,
-* ``/gait_state`` (iceskate_interfaces/GaitState): mode, support side, pivot, step index,
-  multipliers, support forces,
-* ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations and the effort of every
-  input source (plus ``passive``: joint damping and soft stops).
-
-``/robot_description`` (the URDF) and the bag's ``custom_data`` (scene parameters) are read when
-present. Samples are joined on ``header.stamp``; a sample that misses one of the three topics
-(the tail of a run that was cut) is dropped and noted. Everything that cannot be read raises
-``SimulationError`` naming the bag and the missing or broken part.
-
-Times are kept in nanoseconds (``t_ns``, int64) and offered in seconds (``t``).
+``open_bag`` reads a bag record by record, so a bag never closed or cut short gives every message
+of its complete chunks; ``read_bag`` joins the samples of the topics the analysis needs on their
+header stamps. Units: SI; times [ns] as ``t_ns``, [s] as ``t``.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field, replace
 import json
 import pathlib
 from typing import TYPE_CHECKING, Any
 
+from mcap.exceptions import EndOfFile
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 import numpy as np
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
+import yaml
 
 from iceskate_analysis._progress import progress_bar
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
-from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
-from iceskate_sim.recording.bag_types import PASSIVE
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
+from iceskate_sim.ros.conversions import PIVOT_OF_CODE
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
 
-    from rosbags.highlevel import AnyReader
-    from rosbags.interfaces import Connection
+    from mcap.records import McapRecord
     from rosbags.typesys.store import Typestore
 
-__all__ = ['BagData', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'PIVOT_NAMES',
-           'REQUIRED_TOPICS', 'SIDE_NAMES', 'open_bag', 'read_bag', 'resolve_bag_path']
+__all__ = ['BagData', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS',
+           'open_bag', 'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -64,10 +52,6 @@ _WHAT = {
     '/gait_state': 'gait mode, support side and step index',
     '/joint_dynamics': 'joint accelerations and the input effort of every source',
 }
-#: GaitState.support_side code -> support side name.
-SIDE_NAMES = ('right', 'left')
-#: GaitState.pivot code -> pivot name ('none': sole flat; the flat models use the toe pivot).
-PIVOT_NAMES = ('none', 'toe', 'heel')
 
 
 @dataclass(frozen=True)
@@ -140,22 +124,19 @@ class BagData:
     @property
     def scene_parameters(self) -> dict[str, Any]:
         """The scene mapping the run was made with ({} when the bag does not carry it)."""
-        text = self.custom_data.get('scene_parameters', '')
-        if not text:
-            return {}
         try:
-            value = json.loads(text)
+            value = json.loads(self.custom_data.get('scene_parameters', ''))
         except json.JSONDecodeError:
             return {}
         return value if isinstance(value, dict) else {}
 
     def side_name(self, k: int) -> str:
         """Support side of sample k ('right' or 'left')."""
-        return SIDE_NAMES[int(self.side[k])]
+        return SIDES[int(self.side[k])]
 
     def pivot_name(self, k: int) -> str:
         """Pivot edge of the support model of sample k ('toe' while the sole is flat)."""
-        return 'heel' if int(self.pivot[k]) == 2 else 'toe'
+        return PIVOT_OF_CODE[int(self.pivot[k])]
 
     def step_start_time(self, step: int) -> float | None:
         """Time [s] of the first sample with ``step_index >= step`` (None: never reached)."""
@@ -165,11 +146,8 @@ class BagData:
 
 def resolve_bag_path(path: str | pathlib.Path) -> pathlib.Path:
     """Return the bag of ``path``: the path itself (a bag directory, or an .mcap file), or
-    ``path/bag`` for a run directory.
-
-    A bag directory is one with a metadata.yaml or, for a recording that was never closed (a
-    killed run, a power cut), an .mcap file alone (``open_bag`` rebuilds what it needs from
-    it).
+    ``path/bag`` for a run directory. A bag directory holds a metadata.yaml or, for a recording
+    that was never closed, an .mcap file alone.
 
     :raises SimulationError: when the path does not exist or holds no rosbag2 bag.
     """
@@ -190,243 +168,135 @@ def _is_bag_dir(p: pathlib.Path) -> bool:
 
 @dataclass(frozen=True)
 class BagTopic:
-    """One connection of a bag: topic, message type, message count (``key``: the reader's)."""
+    """One channel of a bag: topic, message type, message count (``key``: (file, channel id))."""
 
     topic: str
     msgtype: str
     count: int
-    key: Any = field(compare=False, repr=False)
+    key: tuple[int, int] = field(compare=False, repr=False)
 
 
 class OpenBag:
-    """A bag open for reading, whichever way it was opened (``open_bag``).
+    """A bag's .mcap files, read in file order with the ``mcap`` stream reader: the messages of
+    every complete chunk (CRC-checked), decoded with our typestore plus the definitions the files
+    carry for other types.
 
-    :ivar path: the bag (directory or .mcap file).
-    :ivar topics: its connections (a topic may have several).
-    :ivar custom_data: the metadata's custom_data ({} when there is no metadata.yaml).
-    :ivar recovered: '' for a closed bag read through its index; else what was wrong with it
-        and what could be read (the bag was rebuilt from its .mcap file).
+    :ivar path: the bag (directory, or an .mcap file without a metadata.yaml beside it).
+    :ivar topics: its channels (a topic may have several).
+    :ivar custom_data: the custom_data of metadata.yaml ({} without it).
+    :ivar recovered: '' for a closed bag (metadata.yaml, every file complete to its footer);
+        else what was wrong with it and how much could be read.
+    :ivar incompatible: message types the files define otherwise than our typestore.
     """
 
-    path: pathlib.Path
-    topics: list[BagTopic]
-    custom_data: dict[str, str]
-    recovered: str = ''
+    def __init__(self, path: pathlib.Path, files: list[pathlib.Path],
+                 custom_data: dict[str, str], missing: str) -> None:
+        """Scan ``files`` once for their channels and message counts (``missing``: what the bag
+        lacks, '' for nothing).
 
-    def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
-        """(topic, log time [ns], CDR bytes) of every message of ``topics``, in file order."""
-        raise NotImplementedError
-
-    def deserialize(self, raw: bytes, msgtype: str) -> Any:
-        """The message object of CDR bytes."""
-        raise NotImplementedError
-
-    def knows(self, msgtype: str) -> bool:
-        """Whether messages of ``msgtype`` can be decoded."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Release the files."""
-
-    def __enter__(self) -> OpenBag:
-        """Context manager: closed on exit."""
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        """Close."""
-        self.close()
-
-
-class _IndexedBag(OpenBag):
-    """A closed bag, read by rosbags' AnyReader through metadata.yaml and the MCAP index."""
-
-    def __init__(self, bag: pathlib.Path) -> None:
-        from rosbags.highlevel import AnyReader, AnyReaderError
-        self.path = bag
-        self._reader = AnyReader([bag], default_typestore=_default_typestore())
-        try:
-            self._reader.open()
-        except (AnyReaderError, OSError) as exc:
-            if 'message type' in str(exc).lower():
-                raise SimulationError(f'cannot open bag {bag}: unknown or inconsistent message '
-                                      f'type: the definition stored in the bag does not match '
-                                      f'its type hash ({exc})') from exc
-            raise _Unindexed(str(exc) or type(exc).__name__) from exc
-        self.topics = [BagTopic(c.topic, c.msgtype, c.msgcount, c)
-                       for c in self._reader.connections]
-        self.custom_data = _custom_data(self._reader)
-
-    def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
-        """See ``OpenBag.messages``."""
-        from rosbags.highlevel import AnyReaderError
-        by_key = {_connection_key(t.key): t for t in topics}
-        try:
-            for conn, log_ns, raw in self._reader.messages(
-                    connections=[t.key for t in by_key.values()]):
-                yield by_key[_connection_key(conn)], log_ns, raw
-        except AnyReaderError as exc:
-            raise SimulationError(f'cannot read bag {self.path}: the file is truncated or '
-                                  f'corrupt ({exc})') from exc
-
-    def deserialize(self, raw: bytes, msgtype: str) -> Any:
-        """See ``OpenBag.deserialize``."""
-        return self._reader.deserialize(raw, msgtype)
-
-    def knows(self, msgtype: str) -> bool:
-        """See ``OpenBag.knows``."""
-        return msgtype in self._reader.typestore.fielddefs
-
-    def close(self) -> None:
-        """See ``OpenBag.close``."""
-        self._reader.close()
-
-
-def _connection_key(conn: Connection) -> tuple[int, str, str]:
-    return conn.id, conn.topic, conn.msgtype
-
-
-class _Unindexed(Exception):
-    """rosbags could not open the bag's files (no or a broken index, a truncated file)."""
-
-
-class _RecoveredBag(OpenBag):
-    """A bag rebuilt from its .mcap files alone: every message of their complete chunks, read
-    in order with the ``mcap`` package's stream reader (no summary, footer or metadata.yaml
-    needed); decoded with our typestore (``make_typestore``), plus the definitions the file
-    carries for other types."""
-
-    def __init__(self, bag: pathlib.Path, files: list[pathlib.Path], why: str,
-                 custom_data: dict[str, str]) -> None:
-        self.path, self._files, self.custom_data = bag, files, custom_data
-        self._typestore = _default_typestore()
-        self._channels: dict[tuple[int, int], BagTopic] = {}
-        counts: dict[tuple[int, int], int] = {}
-        schemas: dict[tuple[int, int], Any] = {}
-        channels: dict[tuple[int, int], Any] = {}
-        chunks, problems, last = 0, [], 0
-        for index, record, problem in self._scan():
-            kind = type(record).__name__
-            if kind == 'Schema':
+        :raises SimulationError: when a bag that is not complete holds no complete chunk.
+        """
+        self.path, self._files, self.custom_data = path, files, custom_data
+        self._typestore = _typestore()
+        self.incompatible: set[str] = set()
+        schemas: dict[tuple[int, int], Schema] = {}
+        channels: dict[tuple[int, int], Channel] = {}
+        counts: Counter[tuple[int, int]] = Counter()
+        problems: list[str] = []
+        last = 0
+        for index, record in self._records(problems):
+            if isinstance(record, Schema):
                 schemas[(index, record.id)] = record
-            elif kind == 'Channel':
+            elif isinstance(record, Channel):
                 channels[(index, record.id)] = record
-            elif kind == 'Message':
-                key = (index, record.channel_id)
-                counts[key] = counts.get(key, 0) + 1
+            elif isinstance(record, Message):
+                counts[(index, record.channel_id)] += 1
                 last = max(last, record.log_time)
-            elif kind == 'Chunk':
-                chunks += 1
-            if problem:
-                problems.append(problem)
+        self.topics: list[BagTopic] = []
         for key, channel in channels.items():
             schema = schemas.get((key[0], channel.schema_id))
-            msgtype = schema.name if schema is not None else ''
-            if schema is not None:
-                self._register(msgtype, schema)
-            self._channels[key] = BagTopic(channel.topic, msgtype, counts.get(key, 0), key)
-        self.topics = list(self._channels.values())
+            if schema is not None and schema.encoding == 'ros2msg':
+                self._register(schema)
+            self.topics.append(BagTopic(channel.topic, schema.name if schema else '',
+                                        counts[key], key))
+        why = missing or ('its index cannot be read' if problems else '')
         total = sum(counts.values())
-        if not total:
-            raise SimulationError(f'cannot read bag {bag}: {why}, and its .mcap file holds no '
+        if why and not total:
+            raise SimulationError(f'cannot read bag {path}: {why}, and its .mcap file holds no '
                                   'complete chunk of messages (the file is truncated or '
                                   f'corrupt: {"; ".join(problems) or "empty"})')
         end = f'; {"; ".join(problems)}: the rest did not reach the disk' if problems else ''
-        self.recovered = (f'bag {bag}: {why}; rebuilt from {", ".join(f.name for f in files)}: '
-                          f'{total} messages up to log time {last * 1e-9:.6f} s, from {chunks} '
-                          f'complete chunk(s){end}')
+        self.recovered = '' if not why else (
+            f'bag {path}: {why}; rebuilt from {", ".join(f.name for f in files)}: {total} '
+            f'messages of its complete chunks, up to log time {last * 1e-9:.6f} s{end}')
 
-    def _scan(self, chunks: bool = True) -> Iterator[tuple[int, Any, str]]:
-        """(file index, record, '') of every record of the files (the records inside each
-        complete chunk after it; with ``chunks``, the Chunk too), then (index, None, what
-        ended the file early) where it did."""
-        from mcap.reader import breakup_chunk
-        from mcap.stream_reader import StreamReader
+    def _records(self, problems: list[str]) -> Iterator[tuple[int, McapRecord]]:
+        """(file index, record) of every record of the files, those of a chunk once the whole
+        chunk is read and checked; what ended a file early is appended to ``problems``."""
         for index, path in enumerate(self._files):
             with path.open('rb') as stream:
-                reader = StreamReader(stream, emit_chunks=True, validate_crcs=True,
-                                      record_size_limit=1 << 30)
-                records = reader.records
-                while True:
-                    try:
-                        record = next(records)
-                        inside = (breakup_chunk(record, validate_crc=True)
-                                  if type(record).__name__ == 'Chunk' else [])
-                    except StopIteration:
-                        break
-                    except Exception as exc:  # noqa: BLE001 (the mcap package's many kinds)
-                        what = ('it ends inside a record' if type(exc).__name__ == 'EndOfFile'
-                                else f'a broken record ({str(exc) or type(exc).__name__})')
-                        yield index, None, f'{path.name} stops early, {what}'
-                        break
-                    if chunks or type(record).__name__ != 'Chunk':
-                        yield index, record, ''
-                    for item in inside:
-                        yield index, item, ''
+                try:
+                    for record in StreamReader(stream, validate_crcs=True,
+                                               record_size_limit=1 << 30).records:
+                        yield index, record
+                except Exception as exc:  # noqa: BLE001 (the mcap package's many kinds)
+                    what = ('it ends inside a record' if isinstance(exc, EndOfFile)
+                            else f'a broken record ({str(exc) or type(exc).__name__})')
+                    problems.append(f'{path.name} stops early, {what}')
 
-    def _register(self, msgtype: str, schema: Any) -> None:
-        """Add the file's definition of ``msgtype`` if our typestore lacks it."""
-        if self._typestore is None or msgtype in self._typestore.fielddefs:
+    def _register(self, schema: Schema) -> None:
+        """Add the file's definition of ``schema.name`` to the typestore, or note the type as
+        incompatible when the typestore defines it (or a type it uses) otherwise."""
+        try:
+            types = get_types_from_msg(schema.data.decode(), schema.name)
+        except (TypesysError, UnicodeDecodeError):  # unreadable: the type stays ours or unknown
             return
-        if schema.encoding == 'ros2msg':
-            from rosbags.typesys import get_types_from_msg
-            try:
-                self._typestore.register(get_types_from_msg(schema.data.decode(), msgtype))
-            except Exception:  # noqa: BLE001 (an unreadable definition: the type stays unknown)
-                return
+        try:
+            self._typestore.register(types)
+        except TypesysError:
+            self.incompatible.add(schema.name)
 
     def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
-        """See ``OpenBag.messages``."""
+        """(topic, log time [ns], CDR bytes) of every message of ``topics``, in file order."""
         wanted = {t.key: t for t in topics}
-        for index, record, _problem in self._scan(chunks=False):
-            if record is not None and type(record).__name__ == 'Message':
-                topic = wanted.get((index, record.channel_id))
-                if topic is not None:
-                    yield topic, record.log_time, record.data
+        for index, record in self._records([]):
+            if isinstance(record, Message) and (index, record.channel_id) in wanted:
+                yield wanted[(index, record.channel_id)], record.log_time, record.data
 
     def deserialize(self, raw: bytes, msgtype: str) -> Any:
-        """See ``OpenBag.deserialize``."""
-        if self._typestore is None:
-            raise SimulationError(f'bag {self.path}: no typestore to decode {msgtype}')
+        """The message object of CDR bytes."""
         return self._typestore.deserialize_cdr(raw, msgtype)
 
     def knows(self, msgtype: str) -> bool:
-        """See ``OpenBag.knows``."""
-        return self._typestore is not None and msgtype in self._typestore.fielddefs
+        """Whether messages of ``msgtype`` can be decoded."""
+        return msgtype in self._typestore.fielddefs
 
 
 def open_bag(path: str | pathlib.Path) -> OpenBag:
-    """Open a bag (a bag or run directory, or an .mcap file) for reading.
-
-    A closed bag is read through its metadata.yaml and index (rosbags). A bag without
-    metadata.yaml (the recording was never closed: a killed run, a power cut) or whose index
-    cannot be read (a truncated file) is rebuilt from its .mcap files: every message of their
-    complete chunks; ``recovered`` says so and how much was read.
+    """Open a bag (a bag or run directory, or an .mcap file) for reading. A bag without
+    metadata.yaml (never closed: a killed run, a power cut) or with a file cut short is read as
+    far as it reached the disk; ``recovered`` says so and how much was read.
 
     :raises SimulationError: naming the bag and the problem.
     """
     bag = resolve_bag_path(path)
-    if bag.is_file():  # an .mcap file given directly
-        if (bag.parent / 'metadata.yaml').is_file():
-            return open_bag(bag.parent)
-        return _RecoveredBag(bag, [bag], 'it has no metadata.yaml beside it', {})
+    if bag.is_file() and (bag.parent / 'metadata.yaml').is_file():
+        bag = bag.parent
+    if bag.is_file():
+        return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it')
     files = sorted(bag.glob('*.mcap'))
     metadata = bag / 'metadata.yaml'
     if not metadata.is_file():
-        return _RecoveredBag(bag, files, 'it has no metadata.yaml (the recording was not '
-                             'closed: a killed run or a power cut)', {})
-    try:
-        return _IndexedBag(bag)
-    except _Unindexed as exc:
-        if not files:
-            raise SimulationError(f'cannot open bag {bag}: the file is truncated or corrupt, '
-                                  f'or not a rosbag2 recording ({exc})') from None
-        return _RecoveredBag(bag, files, f'its index cannot be read ({exc})',
-                             _metadata_custom_data(metadata))
+        return OpenBag(bag, files, {}, 'it has no metadata.yaml (the recording was not '
+                       'closed: a killed run or a power cut)')
+    if not files:
+        raise SimulationError(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
+                              'are read)')
+    return OpenBag(bag, files, _metadata_custom_data(metadata), '')
 
 
 def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:
     """custom_data of a rosbag2 metadata.yaml ({} if it cannot be read)."""
-    import yaml
     try:
         info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
         return {str(k): str(v) for k, v in (info.get('custom_data') or {}).items()}
@@ -434,12 +304,13 @@ def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:
         return {}
 
 
-def _default_typestore() -> Typestore | None:
-    from iceskate_sim.recording.bag_types import make_typestore
+def _typestore() -> Typestore:
+    """Our typestore; without iceskate_interfaces installed, ROS 2 Jazzy's (the bag's own
+    definitions then add ours)."""
     try:
         return make_typestore()
-    except (FileNotFoundError, SimulationError):  # not installed: the bag's own definitions
-        return None
+    except (FileNotFoundError, SimulationError):
+        return get_typestore(Stores.ROS2_JAZZY)
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -485,6 +356,10 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
         if conn.msgtype != expected:
             raise SimulationError(f'bag {path}: topic {topic} has message type '
                                   f'{conn.msgtype}, expected {expected}')
+        if expected in reader.incompatible:
+            raise SimulationError(f'bag {path}: topic {topic} was recorded with an incompatible '
+                                  f'message definition: the bag defines {expected} otherwise '
+                                  'than the installed interfaces')
         if not reader.knows(expected):
             raise SimulationError(
                 f'bag {path}: message type {expected} of topic {topic} is unknown: the bag '
@@ -495,15 +370,6 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
                                   f'{_WHAT[topic]} were recorded')
         chosen[topic] = conn
     return chosen
-
-
-def _custom_data(reader: AnyReader) -> dict[str, str]:
-    for sub in getattr(reader, 'readers', []):
-        metadata = getattr(getattr(sub, 'storage', None), 'metadata', None)
-        custom = getattr(metadata, 'custom', None)
-        if isinstance(custom, dict):
-            return {str(k): str(v) for k, v in custom.items()}
-    return {}
 
 
 class _Rows:
@@ -572,7 +438,6 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
     rows = _Rows()
     total = sum(c.count for c in chosen.values())
     bar = progress_bar(total, f'reading {path.name}', progress, unit='msg')
-    topic = ''
     try:
         for conn, log_ns, raw in reader.messages(chosen.values()):
             topic = conn.topic
@@ -617,17 +482,15 @@ def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagDat
         raise SimulationError(f'bag {path}: no sample has all of {sorted(REQUIRED_TOPICS)} '
                               f'at the same header stamp (messages per topic: {counts})')
     n = len(stamps)
-    sources: list[str] = []
-    for k in stamps:
-        for source in rows.dyn[k][2]:
-            if source not in sources:
-                sources.append(source)
+    sources = dict.fromkeys(s for k in stamps for s in rows.dyn[k][2])  # first-seen order
     efforts = {s: np.zeros((n, N_COORDINATES)) for s in sources}
     for i, k in enumerate(stamps):
         for source, tau in rows.dyn[k][2].items():
             efforts[source][i] = tau
-    gait = [rows.gait[k] for k in stamps]
-    head = np.array([rows.head.get(k, np.full(3, np.nan)) for k in stamps])
+    q, v, effort_total = _columns(rows.joint, stamps)
+    qdd, active = (np.array([rows.dyn[k][i] for k in stamps]) for i in (0, 1))
+    mode, side, pivot, step_index, multipliers, normal, friction, zmp_y, anchor_y = _columns(
+        rows.gait, stamps)
     if rows.duplicates:
         notes.append(f'{rows.duplicates} message(s) repeated a header stamp; the later one '
                      'was kept')
@@ -636,23 +499,17 @@ def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagDat
     if not rows.urdf:
         notes.append('no /robot_description: the installed URDF is assumed')
     return BagData(
-        path=path, t_ns=np.array(stamps, dtype=np.int64),
-        q=np.array([rows.joint[k][0] for k in stamps]),
-        v=np.array([rows.joint[k][1] for k in stamps]),
-        qdd=np.array([rows.dyn[k][0] for k in stamps]),
-        active=np.array([rows.dyn[k][1] for k in stamps]),
-        effort_total=np.array([rows.joint[k][2] for k in stamps]),
-        efforts=efforts,
-        mode=np.array([g[0] for g in gait], dtype=int),
-        side=np.array([g[1] for g in gait], dtype=int),
-        pivot=np.array([g[2] for g in gait], dtype=int),
-        step_index=np.array([g[3] for g in gait], dtype=int),
-        multipliers=np.array([g[4] for g in gait]),
-        support_normal=np.array([g[5] for g in gait]),
-        support_friction=np.array([g[6] for g in gait]),
-        zmp_y=np.array([g[7] for g in gait]),
-        heel_anchor_y=np.array([g[8] for g in gait]),
-        head_position=head, urdf=rows.urdf, custom_data=custom, notes=tuple(notes))
+        path=path, t_ns=np.array(stamps, dtype=np.int64), q=q, v=v, qdd=qdd,
+        active=active, effort_total=effort_total, efforts=efforts, mode=mode,
+        side=side, pivot=pivot, step_index=step_index, multipliers=multipliers,
+        support_normal=normal, support_friction=friction, zmp_y=zmp_y, heel_anchor_y=anchor_y,
+        head_position=np.array([rows.head.get(k, np.full(3, np.nan)) for k in stamps]),
+        urdf=rows.urdf, custom_data=custom, notes=tuple(notes))
+
+
+def _columns(table: dict[int, tuple[Any, ...]], stamps: list[int]) -> list[np.ndarray]:
+    """The fields of the rows of ``table`` at ``stamps``, one array per field."""
+    return [np.array(c) for c in zip(*(table[k] for k in stamps), strict=True)]
 
 
 def _validate(data: BagData) -> None:
@@ -684,15 +541,12 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         the wrong or an unknown message type, a file with no complete chunk, or messages that
         lack the fields the analysis needs; the message names what is wrong.
     """
-    with open_bag(path) as reader:
-        bag = reader.path
-        chosen = _check_connections(reader, bag)
-        rows = _collect(reader, chosen, bag, progress)
-        custom = reader.custom_data
-        recovered = reader.recovered
-    data = _assemble(rows, bag, custom)
-    if recovered:
-        extra = '' if custom else ' (without metadata: the scene parameters are not known)'
-        data = replace(data, notes=(recovered + extra, *data.notes))
+    reader = open_bag(path)
+    rows = _collect(reader, _check_connections(reader, reader.path), reader.path, progress)
+    data = _assemble(rows, reader.path, reader.custom_data)
+    if reader.recovered:
+        extra = ('' if reader.custom_data
+                 else ' (without metadata: the scene parameters are not known)')
+        data = replace(data, notes=(reader.recovered + extra, *data.notes))
     _validate(data)
     return data

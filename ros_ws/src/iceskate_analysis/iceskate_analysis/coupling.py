@@ -1,34 +1,6 @@
-"""The paper's eq. (11) at one joint, evaluated on a recorded run (no re-simulation).
-
-Row i of the equations of motion (docs/model.md §13; i = 11 is the right shoulder)::
-
-    M_ii q̈_i = τ_i + M_total − h_i − g_i − d_i q̇_i + limit_i + constraint_i + friction_i
-    M_total := −Σ_{j≠i} M_ij q̈_j
-
-over the active coordinates of the sample's mode (y0 and q1 included when present). M, h (RNEA
-with q̈ = 0 and gravity off) and g (RNEA with q̇ = q̈ = 0) are evaluated at the recorded (q, q̇)
-with the support model of the sample (mode, support side, pivot); q̈ and the input effort of
-every source are the recorded ones. ``limit_i`` is the soft-stop torque (the recorded passive
-effort minus the damping), ``constraint_i`` the generalized force of the swing-foot constraints
-(recorded multipliers, with the Coulomb friction of a sliding heel), ``friction_i`` the floor
-friction on a gliding support foot (y0 only). τ_i is the sum of the recorded sources that act on
-the coordinate: joint inputs never on y0 and on q1 only while it is a coordinate; an external
-push (source ``push``, recorded as J^T f) on every active coordinate. For the upper-body joints
-8..17 the constraint and friction terms are zero: these joints are not on the path from the
-support foot to the swing heel. The closure residual (left side minus right side) shows that the
-bag, the model and this decomposition agree; it must be at solver precision (relative to the sum
-of the magnitudes of all terms).
-
-The arm-swing figures (peak-to-peak, phase) are taken from the paper's 4th step on
-(``step_index >= 3``), or over the whole run when the run never gets there.
-
-Recorded accelerations are instantaneous: at a stiff transient (a soft stop engaging, an
-impact's aftermath) they reach thousands of rad/s² for a fraction of a period and dominate RMS
-figures. ``JointDecomposition.period_averaged`` gives the same row with the accelerations the
-integrator actually produced over each sampling interval, (v_{k+1} - v_k) / (t_{k+1} - t_k)
-(``interval_accelerations``), in the inertia terms; the other terms stay those of the sample.
-That view does not close exactly (the closure check is the instantaneous one); it is the one
-to read the paper's Figs. 7/8 on.
+"""The paper's eq. (11) at one joint, evaluated on a recorded run (no re-simulation), and the
+arm swing of both shoulders. The terms, their signs and the closure check are those of
+docs/model.md §13; the interval-averaged accelerations are described in docs/usage.md.
 """
 
 from __future__ import annotations
@@ -50,6 +22,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
+from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
 __all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LEFT_SHOULDER',
            'TERMS', 'analyse_case', 'arm_swing', 'decompose', 'dynamics_for_bag',
@@ -58,8 +31,6 @@ __all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LE
 RIGHT_SHOULDER = 11
 LEFT_SHOULDER = 14
 TORSO_YAW = 8
-#: First step index of the analysis window: the paper's 4th step (arms unactuated from then).
-WINDOW_STEP = 3
 #: Fewest samples for an arm-swing window; shorter windows fall back to the whole run.
 MIN_WINDOW = 8
 #: Terms of eq. (11), in the order of the equation (keys of JointDecomposition.terms()).
@@ -200,34 +171,36 @@ class JointDecomposition:
 
     def terms(self) -> dict[str, np.ndarray]:
         """The terms of eq. (11), keyed as in TERMS."""
-        return {'own_inertia': self.own_inertia, 'tau': self.tau, 'm_total': self.m_total,
-                'coriolis': self.coriolis, 'gravity': self.gravity, 'damping': self.damping,
-                'limit': self.limit, 'constraint': self.constraint,
-                'support_friction': self.support_friction, 'residual': self.residual}
+        return {name: getattr(self, name) for name in TERMS}
 
     def coupling_series(self) -> dict[str, np.ndarray]:
         """M_ij q̈_j per other coordinate j that is active somewhere, keyed by j's name."""
-        out = {}
-        for j in range(N_COORDINATES):
-            if j != self.joint and np.any(self.coupling[self.valid, j] != 0.0):
-                out[COORDINATE_NAMES[j]] = self.coupling[:, j]
-        return out
+        return {COORDINATE_NAMES[j]: self.coupling[:, j] for j in range(N_COORDINATES)
+                if j != self.joint and np.any(self.coupling[self.valid, j] != 0.0)}
 
     def period_averaged(self, accelerations: np.ndarray, defined: np.ndarray
                         ) -> JointDecomposition:
         """The row with ``accelerations`` (N, 18), e.g. ``interval_accelerations``, in place of
         the recorded q̈ in M_ii q̈_i and M_total; valid only where they are ``defined``."""
         valid = self.valid & defined
-        terms = np.where(valid[:, None], self.mass_row * accelerations, np.nan)
-        own = terms[:, self.joint].copy()
-        terms[:, self.joint] = np.where(valid, 0.0, np.nan)
-        return replace(self, valid=valid, own_inertia=own, coupling=terms)
+        own, coupling = _inertia_terms(self.mass_row, accelerations, valid, self.joint)
+        return replace(self, valid=valid, own_inertia=own, coupling=coupling)
 
     def ranking(self, mask: np.ndarray | None = None) -> list[tuple[str, float]]:
         """Coupling terms M_ij q̈_j by decreasing RMS over ``mask`` (default: valid samples)."""
         mask = self.valid if mask is None else mask & self.valid
         ranked = [(name, rms(x[mask])) for name, x in self.coupling_series().items()]
         return sorted(ranked, key=lambda item: -item[1] if np.isfinite(item[1]) else 0.0)
+
+
+def _inertia_terms(mass_row: np.ndarray, accelerations: np.ndarray, valid: np.ndarray,
+                   joint: int) -> tuple[np.ndarray, np.ndarray]:
+    """M_ii q̈_i (N,) and M_ij q̈_j with column i zeroed (N, 18) [N m] of ``accelerations``
+    (N, 18), nan where not ``valid``."""
+    terms = np.where(valid[:, None], mass_row * accelerations, np.nan)
+    own = terms[:, joint].copy()
+    terms[:, joint] = np.where(valid, 0.0, np.nan)
+    return own, terms
 
 
 def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
@@ -248,16 +221,16 @@ def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
     return out, defined
 
 
-def _constraint_force(dyn: ModelTerms, robot: Robot, contact: ContactState, q: np.ndarray,
-                      v: np.ndarray, multipliers: np.ndarray,
-                      data: dict[tuple[str, str], pin.Data]) -> np.ndarray:
+def _constraint_force(dyn: ModelTerms, contact: ContactState, q: np.ndarray, v: np.ndarray,
+                      multipliers: np.ndarray, data: dict[tuple[str, str], pin.Data]
+                      ) -> np.ndarray:
     """Generalized force of the active swing constraints (18,), heel friction included."""
     mode = contact.mode
     rows = dyn.constraint_jacobian(contact, q)
     lam = np.array([multipliers[MULTIPLIER_NAMES.index(m)] for m in mode.multipliers])
     cols = rows.copy()
     if mode.swing_sliding:  # Coulomb friction mu f_nz on the heel, against its y velocity
-        sm = robot.support_model(contact.side, contact.pivot)
+        sm = dyn.robot.support_model(contact.side, contact.pivot)
         d = data.setdefault((sm.side, sm.pivot), sm.new_data())
         jac = pin.computeFrameJacobian(sm.model, d, q, sm.frame_ids['swing_heel'],
                                        pin.LOCAL_WORLD_ALIGNED)
@@ -282,11 +255,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     """
     joints = tuple(parse_joint(j) for j in joints)
     dyn = dynamics or dynamics_for_bag(bag)
-    robot = dyn.robot
     n = bag.n_samples
     nj = len(joints)
-    own = np.full((nj, n), np.nan)
-    coupling = np.zeros((nj, n, N_COORDINATES))
     mass_row = np.zeros((nj, n, N_COORDINATES))
     coriolis = np.full((nj, n), np.nan)
     gravity = np.full((nj, n), np.nan)
@@ -299,14 +269,13 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
             mode = get_mode(int(bag.mode[k]))
             contact = ContactState(mode, bag.side_name(k), bag.pivot_name(k),
                                    float(bag.heel_anchor_y[k]))
-            q, v, qdd = bag.q[k], bag.v[k], bag.qdd[k]
+            q, v = bag.q[k], bag.v[k]
             act = mode.active
             try:
                 M = dyn.mass_matrix(contact, q)
                 h = dyn.bias_terms(contact, q, v)
                 g = dyn.gravity_terms(contact, q)
-                force = (_constraint_force(dyn, robot, contact, q, v, bag.multipliers[k],
-                                           pin_data)
+                force = (_constraint_force(dyn, contact, q, v, bag.multipliers[k], pin_data)
                          if mode.constraints else np.zeros(N_COORDINATES))
             except SimulationError as exc:
                 raise SimulationError(f'{bag.path}: cannot evaluate the model at sample {k} '
@@ -317,13 +286,7 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
                 if not where.size:
                     continue
                 p = int(where[0])
-                row = np.zeros(N_COORDINATES)
-                row[act] = M[p]
-                mass_row[a, k] = row
-                terms = row * qdd
-                own[a, k] = terms[i]
-                terms[i] = 0.0
-                coupling[a, k] = terms
+                mass_row[a, k, act] = M[p]
                 coriolis[a, k] = h[p]
                 gravity[a, k] = g[p]
                 constraint[a, k] = force[i]
@@ -341,9 +304,9 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
         friction = (np.where(bag.active[:, Y0], bag.support_friction, 0.0) if i == Y0
                     else np.zeros(n))
         nan = ~valid[a]
+        own, coupling = _inertia_terms(mass_row[a], bag.qdd, valid[a], i)
         out[i] = JointDecomposition(
-            joint=i, t=bag.t, valid=valid[a], own_inertia=own[a],
-            coupling=np.where(nan[:, None], np.nan, coupling[a]),
+            joint=i, t=bag.t, valid=valid[a], own_inertia=own, coupling=coupling,
             coriolis=coriolis[a], gravity=gravity[a],
             damping=_masked(damping_coefficients[i] * bag.v[:, i], nan),
             tau=_masked(tau, nan), tau_by_source={s: _masked(x, nan) for s, x in
@@ -407,7 +370,8 @@ class ArmSwing:
                 'phase_difference_deg': self.phase_difference_deg}
 
 
-def analysis_window(bag: BagData, from_step: int = WINDOW_STEP) -> tuple[np.ndarray, int | None]:
+def analysis_window(bag: BagData, from_step: int = ARM_SWING_FROM_STEP
+                    ) -> tuple[np.ndarray, int | None]:
     """Mask of the samples from ``step_index >= from_step`` on, or all when too few."""
     mask = bag.step_index >= from_step
     if int(mask.sum()) >= MIN_WINDOW:
@@ -424,7 +388,7 @@ def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
     return float(freqs[1:][np.argmax(spectrum[1:])]) if freqs.size > 1 else float('nan')
 
 
-def arm_swing(bag: BagData, from_step: int = WINDOW_STEP) -> ArmSwing:
+def arm_swing(bag: BagData, from_step: int = ARM_SWING_FROM_STEP) -> ArmSwing:
     """Peak-to-peak, frequency, correlation and phase of q11 versus q14."""
     from scipy.signal import detrend, hilbert
     mask, step = analysis_window(bag, from_step)
@@ -472,7 +436,7 @@ class CaseResult:
     @property
     def fourth_step_s(self) -> float | None:
         """Start of the paper's 4th step [s] (first sample with step_index >= 3)."""
-        return self.bag.step_start_time(WINDOW_STEP)
+        return self.bag.step_start_time(ARM_SWING_FROM_STEP)
 
     @functools.cached_property
     def interval(self) -> tuple[np.ndarray, np.ndarray]:
@@ -548,11 +512,8 @@ class CaseResult:
             'closure_residual_max_rel': main['closure_residual_max_rel'],
             'closure_residual_max_abs': main['closure_residual_max_abs'],
             'arms': self.arms.as_dict(),
-            'rms': main['rms'],
-            'rms_tau_by_source': main['rms_tau_by_source'],
-            'rms_m_total_minus_g': main['rms_m_total_minus_g'],
-            'rms_sum_minus_g': main['rms_sum_minus_g'],
-            'coupling_ranking': main['coupling_ranking'],
+            **{key: main[key] for key in ('rms', 'rms_tau_by_source', 'rms_m_total_minus_g',
+                                          'rms_sum_minus_g', 'coupling_ranking')},
             'joints': {d.name: self.joint_summary(d) for d in self.decompositions.values()},
             'notes': list(bag.notes),
         }

@@ -1,10 +1,6 @@
-"""``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``.
-
-The paper's eq. (11) analysis of a recorded run (no re-simulation): figures, CSV and
-summary.json (see ``iceskate_analysis.report``). Exit status 0 on success, 1 on a bag or
-argument the analysis refuses (the message names what is wrong). The notes of the reading go to
-stderr (e.g. that a bag without metadata, from a killed run, was rebuilt from its .mcap file
-and how much of it was read).
+"""``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``: the
+eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0, or 1 with a
+one-line message for a bag or argument it refuses; the notes of the reading go to stderr.
 """
 
 from __future__ import annotations

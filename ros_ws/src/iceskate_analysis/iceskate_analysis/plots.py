@@ -1,12 +1,5 @@
-"""The paper's Figs. 5-8 from analysed runs, as PNG (matplotlib, Agg; no pyplot state).
-
-* Figs. 5 and 6: both shoulder angles q11 and q14 against time, the 4th step marked (Fig. 5:
-  the run without the torso-yaw input τ8, Fig. 6: with it).
-* Figs. 7 and 8: the terms of eq. (11) at the chosen joint against time: M_total and its
-  negative Σ M_ij q̈_j (the sign caveat of docs/model.md §13, A38), g_i, h_i, d_i q̇_i, τ_i
-  and M_ii q̈_i;
-  below, M_total − g_i against h_i (the cancellation claim), and the closure residual.
-* The coupling terms M_ij q̈_j with the largest RMS, to show which joint drives the arm.
+"""The paper's Figs. 5-8 from analysed runs as PNG (matplotlib, Agg; no pyplot state): shoulder
+angles (Figs. 5/6), the terms of eq. (11) at a joint (Figs. 7/8) and the largest coupling terms.
 """
 
 from __future__ import annotations
@@ -78,20 +71,25 @@ def _mark_steps(ax: Axes, case: CaseResult, legend: bool = True) -> None:
         ax.axvline(fourth, color='k', lw=1.2, ls='--', label='4th step' if legend else None)
 
 
+def _shoulder_lines(ax: Axes, case: CaseResult, lw: float, label: str = '') -> None:
+    """q11 (right) and q14 (left shoulder) [deg] against time, the steps marked."""
+    for joint, colour, side in ((11, 'tab:red', 'right'), (14, 'tab:blue', 'left')):
+        ax.plot(case.bag.t, np.degrees(case.bag.q[:, joint]), color=colour, lw=lw,
+                label=f'q{joint} {side}{label}')
+    _mark_steps(ax, case)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='upper right', fontsize=8)
+
+
 def plot_shoulders(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
                    ) -> pathlib.Path:
     """Figs. 5/6: q11 (right) and q14 (left shoulder) against time [deg]."""
-    bag = case.bag
     fig, (ax,) = _figure(1, height=3.4)
-    ax.plot(bag.t, np.degrees(bag.q[:, 11]), color='tab:red', lw=1.3, label='q11 right shoulder')
-    ax.plot(bag.t, np.degrees(bag.q[:, 14]), color='tab:blue', lw=1.3, label='q14 left shoulder')
-    _mark_steps(ax, case)
+    _shoulder_lines(ax, case, 1.3, ' shoulder')
     arms = case.arms
     ax.set_title(title or f'{case.label}: shoulder angles')
     ax.set_xlabel('time [s]')
     ax.set_ylabel('joint angle [deg]')
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc='upper right', fontsize=8)
     ax.text(0.01, 0.02, f'from {"step 4" if arms.window_from_step is not None else "start"}: '
             f'p-p q11 {np.degrees(arms.peak_to_peak["q11"]):.2f}°, '
             f'q14 {np.degrees(arms.peak_to_peak["q14"]):.2f}°, '
@@ -105,23 +103,18 @@ def plot_compare_shoulders(cases: list[CaseResult], path: str | pathlib.Path,
     """Both cases' shoulder angles one above the other, on the same scales."""
     fig, axes = _figure(len(cases), height=2.8)
     for ax, case in zip(axes, cases, strict=True):
-        t = case.bag.t
-        ax.plot(t, np.degrees(case.bag.q[:, 11]), color='tab:red', lw=1.2, label='q11 right')
-        ax.plot(t, np.degrees(case.bag.q[:, 14]), color='tab:blue', lw=1.2, label='q14 left')
-        _mark_steps(ax, case)
+        _shoulder_lines(ax, case, 1.2)
         yaw = 'with' if case.torso_yaw_input else 'without'
         ax.set_title(f'{case.label} ({yaw} torso-yaw input τ8)', fontsize=10)
         ax.set_ylabel('angle [deg]')
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc='upper right', fontsize=8)
     axes[-1].set_xlabel('time [s]')
     return _save(fig, path)
 
 
 def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
                joint: int | None = None, averaged: bool = False) -> pathlib.Path:
-    """Figs. 7/8: the terms of eq. (11) at the joint against time, and the closure (always the
-    exact one of the recorded accelerations).
+    """Figs. 7/8: the terms of eq. (11) at the joint against time, M_total − g_i against h_i,
+    and the closure (always the exact one of the recorded accelerations).
 
     :param averaged: the inertia terms with the accelerations averaged over each sampling
         interval (``CaseResult.averaged``) instead of the instantaneous ones.

@@ -1,12 +1,8 @@
-"""``ros2 run iceskate_sim replay <bag> [--rate X | --fast]``: republish a recorded bag.
+"""``ros2 run iceskate_analysis replay <bag> [--rate X | --fast]``: republish a recorded bag.
 
-Every topic of the bag is published under its recorded name with its recorded type, from the
-bag's CDR bytes as they are (raw publishing, no re-serialization), in log-time order, paced to
-``rate`` times the recorded time (``--fast``: no pacing). ``/clock`` is republished as recorded
-(our bags carry the simulation clock); a bag without it gets a synthesized ``/clock`` from the
-log times. ``robot_description`` is latched (transient local) as in the live graph. A bag that
-was never closed (no metadata.yaml: a killed run) or whose file was cut is rebuilt from what
-reached the disk (``iceskate_analysis.bag_io.open_bag``), with a warning saying how much.
+Every topic as recorded (raw CDR bytes, log-time pacing scaled by ``rate``), ``/clock``
+synthesized when the bag has none; a bag never closed or cut is read as far as it reached the
+disk (``bag_io.open_bag``), with a warning saying how much (docs/usage.md).
 """
 
 from __future__ import annotations
@@ -96,16 +92,12 @@ class ReplayNode(Node):
             publisher.wait_for_all_acked(Duration(seconds=2.0))
         return self.count
 
-    def close(self) -> None:
-        """Close the bag."""
-        self.reader.close()
-
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point."""
     argv = sys.argv if argv is None else argv
     parser = argparse.ArgumentParser(prog='replay', description=__doc__.split('\n\n')[0])
-    parser.add_argument('bag', type=pathlib.Path, help='rosbag2 directory (MCAP or sqlite3)')
+    parser.add_argument('bag', type=pathlib.Path, help='rosbag2 directory (MCAP)')
     pace = parser.add_mutually_exclusive_group()
     pace.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     pace.add_argument('--fast', action='store_true', help='as fast as possible')
@@ -134,7 +126,6 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         if node is not None:
-            node.close()
             node.destroy_node()
         rclpy.try_shutdown()
 

@@ -1,14 +1,6 @@
-"""The whole offline analysis of one bag, or of a pair (``--compare``), into a directory.
-
-For each case (label: the scene name, else the bag's directory name) it writes
-``<label>_shoulders.png``, ``<label>_terms_<joint>.png``, ``<label>_coupling_<joint>.png`` and
-``<label>_series.csv`` (every series: arm state and every term of eq. (11) at the joint and,
-for a shoulder, at the other shoulder), and with ``animate`` ``<label>_animation.gif`` and
-``<label>_keyframes.png``. A pair also gives the paper's figures: ``fig5_shoulders.png`` (the
-run without the torso-yaw input τ8), ``fig6_shoulders.png`` (with it), ``fig7_terms_<joint>.png``
-and ``fig8_terms_<joint>.png``, plus ``compare_shoulders.png``. ``summary.json`` holds one entry
-per case (closure residual, arm swing, RMS of every term, RMS of M_total − g_i, coupling
-ranking) and, for a pair, the comparison.
+"""The whole offline analysis of one bag, or of a pair (``--compare``: the paper's Figs. 5-8),
+into a directory: per case (labelled by scene) the figures, a CSV of every series, optionally
+the animation, and ``summary.json`` (docs/usage.md).
 """
 
 from __future__ import annotations
@@ -117,26 +109,18 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
 
         def reading(case: CaseResult, joint: str) -> dict[str, float]:
             return summaries[case.label]['joints'][joint]['paper_reading']
-        paper = [
-            plots.plot_shoulders(without, out / 'fig5_shoulders.png',
-                                 f'Fig. 5: shoulder angles without torso-yaw input τ8 '
-                                 f'({without.label})'),
-            plots.plot_shoulders(with_yaw, out / 'fig6_shoulders.png',
-                                 f'Fig. 6: shoulder angles with torso-yaw input τ8 '
-                                 f'({with_yaw.label})'),
-            plots.plot_terms(without, out / f'fig7_terms_{name}.png',
-                             f'Fig. 7: terms of eq. (11) at {name} without τ8 '
-                             f'({without.label})'),
-            plots.plot_terms(with_yaw, out / f'fig8_terms_{name}.png',
-                             f'Fig. 8: terms of eq. (11) at {name} with τ8 ({with_yaw.label})'),
-            plots.plot_terms(without, out / f'fig7_terms_{name}_averaged.png',
-                             f'Fig. 7, q̈ averaged over each interval ({without.label})',
-                             averaged=True),
-            plots.plot_terms(with_yaw, out / f'fig8_terms_{name}_averaged.png',
-                             f'Fig. 8, q̈ averaged over each interval ({with_yaw.label})',
-                             averaged=True),
-            plots.plot_compare_shoulders([without, with_yaw], out / 'compare_shoulders.png'),
-        ]
+        pairs = ((without, 'without', 5), (with_yaw, 'with', 6))
+        paper = [plots.plot_shoulders(case, out / f'fig{n}_shoulders.png',
+                                      f'Fig. {n}: shoulder angles {which} torso-yaw input τ8 '
+                                      f'({case.label})') for case, which, n in pairs]
+        paper += [plots.plot_terms(case, out / f'fig{n + 2}_terms_{name}.png',
+                                   f'Fig. {n + 2}: terms of eq. (11) at {name} {which} τ8 '
+                                   f'({case.label})') for case, which, n in pairs]
+        paper += [plots.plot_terms(case, out / f'fig{n + 2}_terms_{name}_averaged.png',
+                                   f'Fig. {n + 2}, q̈ averaged over each interval ({case.label})',
+                                   averaged=True) for case, _, n in pairs]
+        paper.append(plots.plot_compare_shoulders([without, with_yaw],
+                                                  out / 'compare_shoulders.png'))
         files['comparison'] = [p.name for p in paper]
         a, b = without.arms, with_yaw.arms
         summary['comparison'] = {

@@ -1,21 +1,6 @@
-"""The picture of a run: ``summary.png`` from its trajectory and metrics (no bag, no ROS).
-
-``draw_summary(columns, metrics, path)`` draws it from the run's trajectory columns in memory
-(the headless runner); ``write_summary(out_dir)`` from the ``trajectory.npz`` and
-``metrics.json`` of a run folder (a ROS run, whose samples are in the simulator node). One
-figure whose panels share the time axis:
-
-1. head height z [m] against the visual-lifting target;
-2. head pitch [deg] against its target;
-3. gait mode (Table 2, 1-20) as a step plot, the support exchanges marked and the spans on the
-   left foot shaded;
-4. shoulder angles q11 (right) and q14 (left) [deg], the 4th step (arm-swing window) marked;
-5. forward speed of the head, d(head y)/dt by ``np.gradient`` [m/s], with the target's.
-
-The title holds the scene, simulated time, steps, forward distance and the fall or failure.
-The support exchanges (dotted) are drawn in every panel. Long runs are decimated for drawing
-(min/max per bucket, so peaks and spikes stay visible); the mode plot uses its change points.
-matplotlib (Agg, no pyplot state) is imported on the first call only.
+"""The picture of a run, ``summary.png``, from its trajectory and metrics (no bag, no ROS): head
+height and pitch against their targets, gait mode, shoulder angles and forward speed over time,
+the support exchanges marked. Long series are decimated (min/max per bucket) for drawing.
 """
 
 from __future__ import annotations
@@ -31,6 +16,7 @@ import numpy as np
 
 from iceskate_analysis.plots import clip_to_bulk
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -38,15 +24,13 @@ if TYPE_CHECKING:
 __all__ = ['SUMMARY_NAME', 'draw_summary', 'write_summary']
 
 SUMMARY_NAME = 'summary.png'
-ARM_SWING_FROM_STEP = 3  # step_index >= 3: the 4th step, as iceskate_sim.run.metrics
 MAX_POINTS = 3000  # per drawn series (decimated above)
 _DPI = 100
 _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # first mode: swing
 _COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
-
-
 #: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
 _DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
+
 
 def draw_summary(columns: Iterable[tuple[str, np.ndarray]], metrics: Mapping[str, Any],
                  path: pathlib.Path) -> pathlib.Path:
@@ -134,19 +118,14 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     fig.text(0.1, 0.960, failure, fontsize=9, va='top',
              color='firebrick' if metrics.get('fell') else 'darkgreen')
 
-    ax = axes[0]
-    _line(ax, t, psi[:, 1], color='tab:blue', lw=1.1, label='head z' + _rms(rms, 'z', 1e3, 'mm'))
-    _line(ax, t, psi_d[:, 1], color='k', lw=1.0, ls='--', label='target z_d')
-    ax.set_ylabel('head height z [m]')
-    ax.ticklabel_format(axis='y', useOffset=False)
-    clip_to_bulk(ax, (psi[:, 1], psi_d[:, 1]), **_DIVERGENCE)
-
-    ax = axes[1]
-    _line(ax, t, np.degrees(psi[:, 2]), color='tab:purple', lw=1.0,
-          label='head pitch' + _rms(rms, 'pitch', np.degrees(1.0), 'deg'))
-    _line(ax, t, np.degrees(psi_d[:, 2]), color='k', lw=1.0, ls='--', label='target')
-    ax.set_ylabel('head pitch [deg]')
-    clip_to_bulk(ax, (np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2])), **_DIVERGENCE)
+    _tracking(axes[0], t, psi[:, 1], psi_d[:, 1], 'target z_d', color='tab:blue', lw=1.1,
+              label='head z' + _rms(rms, 'z', 1e3, 'mm'))
+    axes[0].set_ylabel('head height z [m]')
+    axes[0].ticklabel_format(axis='y', useOffset=False)
+    _tracking(axes[1], t, np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2]), 'target',
+              color='tab:purple', lw=1.0,
+              label='head pitch' + _rms(rms, 'pitch', np.degrees(1.0), 'deg'))
+    axes[1].set_ylabel('head pitch [deg]')
 
     _mode_panel(axes[2], t, a['mode'], a['side'], exchanges)
 
@@ -162,15 +141,12 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
 
     ax = axes[4]
     if t.size >= 2:
-        speed = np.gradient(psi[:, 0], t)
-        target = np.gradient(psi_d[:, 0], t)
-        _line(ax, t, speed, color='tab:green', lw=1.0, label='head dy/dt')
-        _line(ax, t, target, color='k', lw=1.0, ls='--', label='target dy_d/dt')
+        _tracking(ax, t, np.gradient(psi[:, 0], t), np.gradient(psi_d[:, 0], t),
+                  'target dy_d/dt', color='tab:green', lw=1.0, label='head dy/dt')
         if t[-1] > t[0]:
             mean = (psi[-1, 0] - psi[0, 0]) / (t[-1] - t[0])
             ax.axhline(mean, color='darkgreen', lw=0.9, ls=':',
                        label=f'mean {round(mean, 2) + 0.0:.2f} m/s')  # + 0.0: no '-0.00'
-        clip_to_bulk(ax, (speed, target), **_DIVERGENCE)
     ax.set_ylabel('forward speed\nd(head y)/dt [m/s]')
     ax.set_xlabel('time t [s]')
 
@@ -230,6 +206,15 @@ def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS
 
 def _line(ax: Axes, t: np.ndarray, y: np.ndarray, **style: Any) -> None:
     ax.plot(*_decimate(t, np.asarray(y, dtype=float)), **style)
+
+
+def _tracking(ax: Axes, t: np.ndarray, y: np.ndarray, target: np.ndarray, target_label: str,
+              **style: Any) -> None:
+    """``y`` (drawn with ``style``) against its ``target`` (dashed black), y range clipped
+    only for a blow-up."""
+    _line(ax, t, y, **style)
+    _line(ax, t, target, color='k', lw=1.0, ls='--', label=target_label)
+    clip_to_bulk(ax, (y, target), **_DIVERGENCE)
 
 
 def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
