@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from iceskate_analysis._progress import progress_bar
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import LINK_NAMES, Robot
+from iceskate_sim.progress import ProgressBar
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -62,7 +62,7 @@ def link_positions(bag: BagData, robot: Robot, indices: np.ndarray | None = None
     indices = np.arange(bag.n_samples) if indices is None else np.asarray(indices)
     out = {name: np.zeros((indices.size, 3)) for name in POINTS}
     data: dict[tuple[str, str], pin.Data] = {}
-    bar = progress_bar(indices.size, 'forward kinematics', progress)
+    bar = ProgressBar(indices.size, 'forward kinematics', 'sample', progress, leave=False)
     try:
         for row, k in enumerate(indices):
             side, pivot = bag.side_name(k), bag.pivot_name(k)
@@ -167,7 +167,7 @@ def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames:
     stick = _Stick(ax, half_width=0.9, animated=True)
     canvas.draw()  # the static part once (axes, labels, floor); frames are blitted on it
     background = canvas.copy_from_bbox(fig.bbox)
-    bar = progress_bar(indices.size, 'animation', progress, unit='frame')
+    bar = ProgressBar(indices.size, 'animation', 'frame', progress, leave=False)
     try:
         with imageio.get_writer(path, mode='I', duration=1000.0 / fps, loop=0) as writer:
             for row, k in enumerate(indices):

@@ -20,10 +20,10 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 import yaml
 
-from iceskate_analysis._progress import progress_bar
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
+from iceskate_sim.progress import ProgressBar
 from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
 from iceskate_sim.ros.conversions import PIVOT_OF_CODE
 
@@ -437,7 +437,7 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
              progress: bool) -> _Rows:
     rows = _Rows()
     total = sum(c.count for c in chosen.values())
-    bar = progress_bar(total, f'reading {path.name}', progress, unit='msg')
+    bar = ProgressBar(total, f'reading {path.name}', 'msg', progress, leave=False)
     try:
         for conn, log_ns, raw in reader.messages(chosen.values()):
             topic = conn.topic

@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from iceskate_analysis._progress import progress_bar
 from iceskate_analysis.bag_io import PASSIVE, BagData
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
+from iceskate_sim.progress import ProgressBar
 from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
 __all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LEFT_SHOULDER',
@@ -263,7 +263,7 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     constraint = np.zeros((nj, n))
     valid = np.zeros((nj, n), dtype=bool)
     pin_data: dict[tuple[str, str], pin.Data] = {}
-    bar = progress_bar(n, f'eq. (11) {bag.path.name}', progress)
+    bar = ProgressBar(n, f'eq. (11) {bag.path.name}', 'sample', progress, leave=False)
     try:
         for k in range(n):
             mode = get_mode(int(bag.mode[k]))

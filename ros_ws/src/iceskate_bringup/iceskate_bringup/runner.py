@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.progress import ProgressBar
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_sim.yaml_io import yaml_value
 
@@ -96,7 +97,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         if plotting is not None:
             plotting.start()
             signals.callback(plotting.join)
-        bar = _progress(session.n_periods, scene.name, progress)
+        bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
         ended: SimulationError | None = None
         controller_failed = False
 
@@ -135,39 +136,6 @@ def _import_plotting() -> None:
     the interpreter while it runs, so this happens meanwhile)."""
     import matplotlib.backends.backend_agg  # noqa: F401
     import matplotlib.figure  # noqa: F401
-
-
-class _NoBar:
-    def update(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-class _Bar:
-    """A tqdm bar on stderr that goes quiet when stderr is gone (a closed terminal)."""
-
-    def __init__(self, bar: Any) -> None:
-        self._bar: Any = bar
-
-    def update(self, n: int) -> None:
-        try:
-            self._bar.update(n)
-        except (OSError, ValueError):
-            self._bar = _NoBar()
-
-    def close(self) -> None:
-        with contextlib.suppress(OSError, ValueError):
-            self._bar.close()
-
-
-def _progress(total: int, name: str, enabled: bool) -> Any:
-    if not enabled:
-        return _NoBar()
-    from tqdm import tqdm
-    return _Bar(tqdm(total=total, desc=f'scene {name}', unit='period', mininterval=1.0,
-                     file=sys.stderr))
 
 
 def main(argv: list[str] | None = None) -> int:
