@@ -228,4 +228,4 @@ def test_a_run_without_the_picture_writes_the_other_outputs(tmp_path):
                   picture=False)
     assert not metrics['fell']
     assert {p.name for p in tmp_path.iterdir()} == {'metrics.json', 'events.json',
-                                                    'trajectory.npz', 'bag'}
+                                                    'trajectory.npz', 'bag', '.run.lock'}

@@ -1,9 +1,9 @@
 """Many control periods in one native call (``iceskate_native.ControlLoop``, through
 ``Session.run_periods``) against the same session advanced one period per call, and the
-commands of controller nodes (``oracle.commands.stack_commands``, as values) held one period at a time
-by the same loop (``Session.hold``, the path of the ROS simulator node). The columns derived for
-the recording (head quaternion and pitch, pivot code, root link pose) and the live view equal
-what Pinocchio gives in Python.
+commands of controller nodes (``oracle.commands.stack_commands``, as values) held one period at
+a time by the same loop (``Session.hold``, the path of the ROS simulator node). The columns
+derived for the recording (head quaternion and pitch, pivot code, root link pose) and the live
+view equal what Pinocchio gives in Python.
 
 All run the same C++ laws, sums, zero-order hold and periods, so the runs must agree bit for
 bit: every trajectory column, the event log, the counters, the bag's messages and the way a run

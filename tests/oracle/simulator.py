@@ -338,8 +338,8 @@ def run_reference(scene: Scene, robot: Robot,
                   commands: Callable[[Observation], Mapping[str, ControllerCommand]],
                   integrator: IntegratorConfig | None = None) -> ReferenceRun:
     """Run ``scene`` on the oracle with ``commands(observation)`` answering every control
-    instant (e.g. ``oracle.commands.stack_commands``), the scene's pushes held as the native loop holds
-    them; stops at the scene's duration or the run's end.
+    instant (e.g. ``oracle.commands.stack_commands``), the scene's pushes held as the native loop
+    holds them; stops at the scene's duration or the run's end.
 
     :raises SimulationError: where the physics failed.
     """

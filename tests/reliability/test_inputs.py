@@ -71,6 +71,65 @@ def test_an_out_holding_a_recorded_run_is_refused(tmp_path, capsys, ros):
     assert f'already holds a recorded run: {tmp_path / "bag"} already exists' in line
 
 
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+def test_an_out_holding_a_finished_run_without_a_bag_is_refused(tmp_path, capsys, ros):
+    """A run recorded with record.bag: false is never overwritten by the next run."""
+    scene = _scene(tmp_path, record={'bag': False})
+    out = tmp_path / 'run'
+    assert main([str(scene), '--out', str(out), '--quiet']) == 0
+    capsys.readouterr()
+    before = (out / 'metrics.json').read_bytes()
+    line = _refused(capsys, [str(scene), '--out', str(out), *(['--ros'] if ros else [])])
+    assert f'already holds a recorded run: {out / "metrics.json"} already exists' in line
+    assert (out / 'metrics.json').read_bytes() == before
+
+
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+def test_an_out_another_run_writes_into_is_refused(tmp_path, capsys, ros):
+    """The lock of a run in progress (another process's) refuses a second run there before it
+    writes anything."""
+    out = tmp_path / 'run'
+    out.mkdir()
+    holder = subprocess.Popen(
+        [sys.executable, '-c', 'import sys, time\n'
+         'from iceskate_sim.run.session import prepare_output\n'
+         'prepare_output(sys.argv[1]); print("held", flush=True); time.sleep(60)', str(out)],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == 'held'
+        line = _refused(capsys, [str(TINY), '--out', str(out), *(['--ros'] if ros else [])])
+        assert f'output directory {out} is in use by another run' in line
+        assert sorted(p.name for p in out.iterdir()) == ['.run.lock']
+    finally:
+        holder.kill()
+        holder.wait(timeout=10)
+
+
+def test_a_launcher_hands_its_lock_to_the_process_it_starts(tmp_path):
+    """The simulator started by ``run_scene --ros`` takes the folder with the launcher's lock
+    (an inherited descriptor named by ICESKATE_OUTPUT_LOCK_FD); any other process is refused."""
+    from iceskate_sim.run.session import LOCK_FD_ENV, prepare_output, release_output
+    out = tmp_path / 'run'
+    fd = prepare_output(out)
+    child = ('import sys\nfrom iceskate_sim.errors import SimulationError\n'
+             'from iceskate_sim.run.session import prepare_output\n'
+             'try:\n    prepare_output(sys.argv[1]); print("taken")\n'
+             'except SimulationError as exc:\n    print(exc)')
+    try:
+        for env, fds, expected in (({LOCK_FD_ENV: str(fd)}, (fd,), 'taken'),
+                                   ({}, (), 'is in use by another run'),
+                                   ({LOCK_FD_ENV: '999'}, (), 'is in use by another run')):
+            done = subprocess.run([sys.executable, '-c', child, str(out)], pass_fds=fds,
+                                  env={**os.environ, **env}, capture_output=True, text=True,
+                                  timeout=60)
+            assert expected in done.stdout, done.stdout + done.stderr
+    finally:
+        release_output(out)
+    done = subprocess.run([sys.executable, '-c', child, str(out)], capture_output=True,
+                          text=True, timeout=60)
+    assert done.stdout.strip() == 'taken', done.stdout + done.stderr
+
+
 # ------------------------------------------------------------------------------ files
 def test_a_binary_scene_is_refused(tmp_path, capsys):
     scene = tmp_path / 'binary.yaml'

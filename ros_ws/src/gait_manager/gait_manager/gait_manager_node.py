@@ -1,13 +1,7 @@
-"""``ros2 run gait_manager gait_manager``: the gait-manager sources as one ROS node.
-
-Subscribes ``gait_state`` (the hybrid state), publishes per instant one ``EffortCommand``
-(source 'gait_manager') on ``effort_commands``, stamped with the state's time: the sum of its
-enabled sources ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw'; the
-posture command carries the joint impedance) and each source's share (``source_names``).
-Its parameters are the fields of ``GaitManagerParameters`` as typed ROS parameters, one per
-field of each block (``posture.stiffness``, ``yaw.amplitude``, ..., ``enabled``); a scene's
-``inputs.gait_manager`` block becomes a parameter file at launch. The sources run natively
-(``gait_manager.native``).
+"""``ros2 run gait_manager gait_manager``: the gait-manager sources (``gait_manager.native``) as
+one ROS node: ``gait_state`` in, one ``EffortCommand`` (source 'gait_manager') per instant out;
+its parameters are ``GaitManagerParameters``' fields (``posture.stiffness``, ..., ``enabled``).
+See docs/usage.md, 'Through ROS 2: the node graph, bags, replay, analysis'.
 """
 
 from __future__ import annotations

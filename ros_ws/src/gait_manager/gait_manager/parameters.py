@@ -1,13 +1,7 @@
-"""The gait-manager parameters: one frozen dataclass per source block and ``GaitManagerParameters``
-with all of them and the enabled sources (docs/model.md §11).
-
-This is the one schema of the gait manager's parameters. Each field is a ``setting`` (default,
-description, unit, range, choices) of ``iceskate_sim.parameters``: scenes (``from_dict``), the
-node's typed ROS parameters and ``ros2 param set`` are checked by it, and at build time CMake
-generates the C++ structs the sources read (``gait_manager/parameters.hpp``, one member per
-field, choices as enums named after the tuple constants below) and their by-name readers from
-it (``iceskate_native/cmake/generate_parameters.py``). The sources themselves are C++ only
-(``src/``, ``gait_manager.native``).
+"""The gait-manager parameters (docs/model.md §11): a frozen dataclass per source block,
+``GaitManagerParameters`` with all of them and the enabled sources, and the tuples of choices
+(``SOURCES``, ...), from which the C++ structs and enums are generated at build time.
+See docs/architecture.md, 'One parameter schema'.
 """
 
 from __future__ import annotations

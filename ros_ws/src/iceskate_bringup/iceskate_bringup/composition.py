@@ -1,12 +1,6 @@
-"""The controllers of a scene in one process: Observation -> the command of each node.
-
-The headless runner calls this at every control instant; the ROS controller nodes run the very
-same native laws (``visual_lifting.native.VisualLiftingController``,
-``gait_manager.native.GaitManagerController``) with the same parameters (``node_parameters``) on
-the observation they rebuild from a GaitState message, through the same conversion
-(``iceskate_sim.physics.native_control.native_values``), so both paths give the same commands.
-Sources a scene does not enable are never computed. A controller written in Python that the scene
-names (``iceskate_bringup.plugin``) is built here and runs in the same native loop, under the GIL.
+"""The controllers of a scene in one process, for the headless runner: ``ControlStack`` (the
+native laws and the plug-ins, in the scene's order). See docs/architecture.md, 'The control
+laws in C++'.
 """
 
 from __future__ import annotations

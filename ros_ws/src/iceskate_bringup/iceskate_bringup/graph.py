@@ -42,7 +42,8 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.node_support import write_parameter_file
-from iceskate_sim.run.session import prepare_output
+from iceskate_sim.run.scene import Scene
+from iceskate_sim.run.session import LOCK_FD_ENV, prepare_output, release_output
 from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
@@ -219,18 +220,22 @@ def realtime_scheduling(priority: int) -> Iterator[None]:
         os.sched_setscheduler(0, policy, param)
 
 
-def start(spec: NodeSpec, env: dict[str, str]) -> subprocess.Popen:
-    """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log.
+def start(spec: NodeSpec, env: dict[str, str], lock: int | None = None) -> subprocess.Popen:
+    """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log; ``lock``:
+    the output folder's lock descriptor, handed to it (the simulator writes there).
 
     The node dies with this process: the kernel sends it SIGTERM when this process ends, even
     by SIGKILL (``die_with_parent``), and the node then ends its run cleanly.
     """
+    if lock is not None:
+        env = {**env, LOCK_FD_ENV: str(lock)}
     log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.node}.log', 'wb')  # noqa: SIM115
     parent = os.getpid()
     with log:
         try:
             return subprocess.Popen(command_of(spec) + spec.ros_args(), env=env, stdout=log,
                                     stderr=subprocess.STDOUT, start_new_session=True,
+                                    pass_fds=() if lock is None else (lock,),
                                     preexec_fn=lambda: die_with_parent(signal.SIGTERM, parent))
         except OSError as exc:  # e.g. a broken install: the executable cannot be run
             raise SimulationError(f'node {spec.node} could not be started: '
@@ -271,8 +276,21 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
                stop: StopRequest, overrides: dict[str, Any] | None,
                simulator_parameters: dict[str, Any]) -> dict[str, Any]:
     scene = load_scene(scene_arg, overrides)
-    prepare_output(out, out / 'bag' if scene.record_bag else None)
-    before = _file_stamp(out / 'metrics.json')  # an earlier run's file is never reported
+    lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
+    try:
+        return _run_locked(scene, scene_arg, out, lock, duration, single_process, domain_id,
+                           timeout, rt_priority, stop, overrides, simulator_parameters)
+    finally:
+        release_output(out)
+
+
+def _run_locked(scene: Scene, scene_arg: str, out: pathlib.Path, lock: int,
+                duration: float | None, single_process: bool, domain_id: int | None,
+                timeout: float | None, rt_priority: int, stop: StopRequest,
+                overrides: dict[str, Any] | None, simulator_parameters: dict[str, Any]
+                ) -> dict[str, Any]:
+    """``_run_graph`` once the output folder is this run's (``lock``: its descriptor, handed
+    to the simulator)."""
     specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
     env = ros_environment(domain_id)
     say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
@@ -285,7 +303,8 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
         try:
             with realtime_scheduling(rt_priority):
                 for spec in specs:
-                    processes.append(start(spec, env))
+                    processes.append(start(spec, env, lock if spec.node == 'simulator'
+                                           else None))
             why = _wait(processes, specs, timeout,
                         float(simulator_parameters.get('control_timeout', 5.0)) + GRACE, stop)
             early = {s.node: p.returncode for p, s in zip(processes, specs, strict=True)
@@ -293,7 +312,7 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
         finally:
             codes = stop_graph(processes, stop.signum)
         code = codes[0] if codes else None
-    metrics = _metrics_since(out / 'metrics.json', before)
+    metrics = _read_metrics(out / 'metrics.json')
     if metrics is not None:
         _report_rejected(metrics, env)
     if stop.requested and (metrics is None or metrics.get('interrupted')):
@@ -317,21 +336,8 @@ def stop_graph(processes: list[subprocess.Popen], signum: int | None = None) -> 
     return codes + [stop(p) for p in processes[1:]]
 
 
-def _file_stamp(path: pathlib.Path) -> tuple[int, int, int] | None:
-    """What tells one version of a file from another (None: no file)."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return st.st_mtime_ns, st.st_ino, st.st_size
-
-
-def _metrics_since(path: pathlib.Path, before: tuple[int, int, int] | None
-                   ) -> dict[str, Any] | None:
-    """The metrics the run wrote (None: it wrote none; an older file does not count)."""
-    stamp = _file_stamp(path)
-    if stamp is None or stamp == before:
-        return None
+def _read_metrics(path: pathlib.Path) -> dict[str, Any] | None:
+    """The metrics the run wrote (None: it wrote none; the folder held none before it)."""
     try:
         metrics = json.loads(path.read_text(encoding='utf-8'))
     except (OSError, ValueError):

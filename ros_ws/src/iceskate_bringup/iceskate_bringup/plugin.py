@@ -1,15 +1,6 @@
-"""Controllers written in Python that a scene names: ``inputs.<name>: {plugin: 'pkg.mod:Class',
-parameters: {...}}`` (docs/usage.md, "Your own controller").
-
-The class is a subclass of ``iceskate_native.Controller`` (or any class with a method
-``compute(obs, kinematics)``, run through ``PluginAdapter``), built as ``Class(**parameters)``;
-its ``compute`` answers an ``iceskate_native.Observation`` through an
-``iceskate_native.Kinematics`` with the generalized force (18,) [N m, N] of its one source, or a
-dict (``effort`` and an impedance, ``head_target``, or ``sources``: one command per source). It
-runs inside the native control loop headless, and in the node ``plugin_controller`` through
-ROS. The composition names it by its scene key (attribute ``name``, also its one source's name
-unless it declares ``sources``). A bad path, a missing class or parameters the class refuses
-are one ``SimulationError`` sentence naming the scene key, before the run.
+"""Controllers written in Python that a scene names (``inputs.<name>: {plugin: 'pkg.mod:Class',
+parameters: {...}}``): ``PluginBlock``, ``make_controller``, ``PluginAdapter``.
+See docs/usage.md, 'Your own controller'.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
 """``plugin_controller``: a controller written in Python (``iceskate_bringup.plugin``) as a ROS
-node, as ``visual_lifting`` and ``gait_manager`` run theirs::
-
-    plugin_controller --ros-args -r __node:=lifting -p use_sim_time:=true \\
-        -p plugin:=iceskate_bringup.examples.visual_lifting_numpy:VisualLifting \\
-        -p parameters:='{"desired_y": "fixed"}'
-
-It answers every ``gait_state`` with one ``EffortCommand`` (source: the node's name, set with
-``-r __node:=NAME``; its sources: the controller's) through the same checked conversion as the
-headless loop (``iceskate_native.Controller.command``), so both paths give the same run.
-``run_scene SCENE --ros`` starts one per plug-in the scene names, with its scene block as the
-parameters ``plugin`` and ``parameters`` (the class's keyword arguments as a JSON mapping).
-A failing controller logs its error and sends nothing at that instant (the simulator's timeout
-then names the node); ``ros2 param set`` of either parameter builds a new instance.
+node, named with ``-r __node:=NAME``; its parameters ``plugin`` ('package.module:Class') and
+``parameters`` (the class's keyword arguments, a JSON mapping). See docs/usage.md, 'Your own
+controller'.
 """
 
 from __future__ import annotations

@@ -1,12 +1,6 @@
-"""Scenes with their controllers: shipped names, validation of every block, the sources.
-
-``iceskate_sim.run.scene`` validates what the simulator uses; here the ``inputs`` blocks are
-validated too, by the controller packages' own parameter classes (``VisualLiftingParameters``,
-``GaitManagerParameters``), and a controller written in Python (a block with ``plugin``,
-``iceskate_bringup.plugin``) by importing its class and building it with its ``parameters``,
-so a scene is checked whole before anything starts. Shipped scenes
-live in ``share/iceskate_bringup/scenes/<name>.yaml`` (found by name through the ament index:
-``iceskate_sim.run.scene.scene_path``).
+"""Scenes with their controllers: shipped names, the whole validation (the ``inputs`` blocks and
+plug-ins too), each node's parameters (``node_parameters``) and sources (``scene_sources``).
+See docs/architecture.md, 'Packages, bottom up'.
 """
 
 from __future__ import annotations

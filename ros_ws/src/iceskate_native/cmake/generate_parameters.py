@@ -1,29 +1,8 @@
-"""Generate a controller package's C++ parameter structs and their readers from its Python
-parameter dataclasses, the one schema (``iceskate_sim.parameters``: ``setting``, ``block``).
+"""Generate a controller package's C++ parameter structs and readers from its parameter classes.
 
-Run by CMake at build time (``iceskate_controller_package(... PARAMETERS <module>.py)``)::
-
-    generate_parameters.py --path SOURCE_DIR --module gait_manager.parameters \
-        --namespace gait_manager --out BUILD/generated/include/gait_manager
-
-It imports the module (``--path`` first on ``sys.path``; ``iceskate_sim`` comes from the build
-environment) and writes two headers into ``--out``:
-
-* ``parameters.hpp``: per dataclass of the module, in the order defined, ``struct <Class>`` with
-  one member per field, its default and, as a comment, its description, unit and range; per
-  module-level tuple of choices (``SOURCES``, ``PHASE_READINGS``, ...) an ``enum class`` named
-  after the constant in the singular (``Source``, ``PhaseReading``) with ``k<Enum>Names``.
-  Eigen-free and nanobind-free: the laws include it.
-* ``parameter_readers.hpp``: ``<Class> read_<name>(const iceskate_native::binding::Fields &)``,
-  which reads every field by its name (``Fields`` checks it again: finite, range of joints,
-  known choice; a bad field is a ``ValueError`` naming it), and ``nanobind::dict
-  as_dict(const <Class> &)``, the struct back as Python values (what a test compares with the
-  dataclass). Binding code only.
-
-Field types: ``float``, ``float | None``, ``bool``, ``int``, ``str`` with choices,
-``tuple[int, ...]`` (joint numbers), ``tuple[float, ...n]`` of fixed length, ``frozenset[str]``
-with choices (a set of an enum: ``std::array<bool, n>``) and nested parameter blocks; anything
-else stops the build naming the field.
+Run by CMake at build time; writes ``parameters.hpp`` (a struct per dataclass, an enum per tuple
+of choices) and ``parameter_readers.hpp`` (``read_<name>``, ``as_dict``) into ``--out``.
+See docs/architecture.md, 'One parameter schema'.
 """
 
 from __future__ import annotations

@@ -1,33 +1,7 @@
-"""Native (C++) kernels of the iceskate simulator, with their Python bindings.
-
-The C++ code is the static library ``iceskate_native_core`` (``src/``, ``include/``) on
-Pinocchio's C++ API; ``iceskate_native._kernel`` is its nanobind module. Models cross the
-boundary as Pinocchio's binary archive: the same ``pinocchio.Model`` that Python built (for
-instance ``iceskate_sim.model.robot.load_robot().support_model('right', 'toe').model``) is
-deserialised once into a ``RobotModel`` on the C++ side::
-
-    native = iceskate_native.load_model(support.model)
-
-``Dynamics`` solves the paper's eq. (7) in every gait mode (``iceskate_sim.physics.native``
-wraps it beside the model terms); ``HybridSimulator`` runs whole control periods on it (events,
-transitions, projection, health checks), wrapped by ``iceskate_sim.physics.simulation.Simulator``.
-
-The controller interface: a ``Controller`` (the control laws of visual_lifting and
-gait_manager implement it in C++) answers an ``Observation``, reading the robot through a
-``Kinematics``; ``ModelKinematics`` is that kinematics on the four support models
-(``iceskate_sim.physics.native_control`` makes it from a ``Robot``). A ``ControlLoop`` runs many
-control periods in one call: controllers, zero-order hold, pushes and ``HybridSimulator``
-periods, returning the samples as arrays (``iceskate_sim.physics.simulation.NativeControlLoop``).
-A Python subclass of ``Controller`` implements ``compute(obs, kinematics)`` and runs inside that
-loop too (docs/usage.md, "Your own controller"); its failures are ``ControllerError``.
-
-Messages: a ``CdrProgram`` writes CDR messages of one layout from columns of samples
-(``encode_rows`` for a block of numpy columns, ``ControlLoop.live_messages`` for the live
-sample); ``iceskate_sim.recording.cdr.Layout.program`` makes it from a message definition.
-
-Bad input (wrong length, NaN, bytes that are no model) raises ``ValueError``; a failure inside a
-kernel raises ``NativeError`` (a ``RuntimeError``; ``DivergenceError`` and ``ChatteringError`` are
-its kinds for a run that left the physical range), which the simulator wraps in its own error.
+"""Native (C++) kernels of the iceskate simulator: re-exports the nanobind module ``_kernel``
+(``Dynamics``, ``HybridSimulator``, ``ControlLoop``, ``Controller``, ``ModelKinematics``,
+``CdrProgram``, ``NativeError``, ...) and makes a model's C++ copy (``load_model``).
+See this package's ``README.md`` and docs/architecture.md, 'The native core and its test oracle'.
 """
 
 from ._kernel import (

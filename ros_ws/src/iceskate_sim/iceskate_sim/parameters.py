@@ -1,17 +1,6 @@
-"""One schema for every parameter set: frozen dataclasses whose fields say their rules.
-
-A parameter class declares each field with ``setting(default, description, unit=..., low=...,
-high=..., choices=...)``; its ``__post_init__`` calls ``check_fields(self, ErrorType)``, which
-checks and normalises every field from its type annotation and its rules (numbers finite and in
-range, integers, booleans, a choice among names, sequences of a fixed or any length, distinct
-entries, optional numbers, nested parameter blocks) and raises ``ErrorType`` with a message that
-starts with the field's name. ``from_mapping`` builds a class from a (YAML) mapping and names an
-unknown key with its dotted path. Scenes, the controllers' parameter classes and the ROS nodes'
-typed parameters (``iceskate_sim.ros.node_support.declare_parameters``) all use these rules, so a
-value is judged the same way wherever it comes from.
-
-ROS parameters are flat: ``flatten`` turns a (nested) parameter object into ``{dotted name:
-value}`` with lists for sequences and NaN for an unset optional number; ``unflatten`` undoes it.
+"""One schema for every parameter set: frozen dataclasses whose fields say their rules
+(``setting``, ``block``, ``check_fields``, ``from_mapping``, ``flatten``, ``unflatten``).
+See docs/architecture.md, 'Parameters'.
 """
 
 from __future__ import annotations

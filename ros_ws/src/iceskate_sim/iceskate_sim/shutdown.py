@@ -1,16 +1,6 @@
-"""Ending a run on a signal, and child processes that never outlive their parent.
-
-* ``STOP_SIGNALS``: SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, a service manager) and
-  SIGHUP (a closed terminal).
-* ``StopRequest``: while its ``with`` block runs, those signals set ``signum`` (the first one
-  counts; later ones are only counted) instead of killing the process or raising
-  KeyboardInterrupt. The run's loop reads ``requested`` between two control periods and ends the
-  run itself, so the bag is closed with its metadata and the outputs say why
-  (``RunInterrupted``). The handlers are installed only from the main thread (elsewhere the
-  block changes nothing).
-* ``die_with_parent``: the kernel signals this process when its parent dies (Linux
-  ``prctl(PR_SET_PDEATHSIG)``), for the processes a run starts (nodes, the bag writer).
-* ``say``: one line on stderr, also when stderr is gone (a closed terminal).
+"""Ending a run on a signal (``STOP_SIGNALS``, ``StopRequest``), child processes that never
+outlive their parent (``die_with_parent``, ``process_alive``) and ``say``. See docs/usage.md,
+'Ending a run early'.
 """
 
 from __future__ import annotations

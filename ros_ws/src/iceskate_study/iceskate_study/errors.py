@@ -4,6 +4,5 @@ from __future__ import annotations
 
 
 class StudyError(RuntimeError):
-    """Raised for a sweep that cannot go on: a bad SPEC (the message names its key), a scene
-    it generates that fails validation, an output folder that cannot hold the results, a
-    results table of another SPEC, a table that cannot be plotted."""
+    """A sweep that cannot go on, in one line: a bad SPEC (naming its key) or scene it makes,
+    an output folder or results table that cannot be used, a table that cannot be plotted."""

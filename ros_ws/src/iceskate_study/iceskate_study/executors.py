@@ -1,26 +1,12 @@
-"""Where a sweep's runs go: a local process pool (the default) or Ray tasks on a cluster.
-
-Both take ``Task`` objects and hand back ``(key, row)`` pairs as runs finish (``row`` None for
-a run a signal ended), run the same ``iceskate_study.worker.run_task``, and so give the same
-rows for the same tasks.
-
-* ``LocalExecutor``: ``concurrent.futures.ProcessPoolExecutor`` of forked workers (one per core
-  by default), each warmed up once (``worker.warm_up``: modules and robot model loaded). A
-  worker that dies (a crash in native code) breaks the pool: a new one is made and the runs in
-  flight are given again; a run that was running in a worker at two such deaths is recorded as
-  failed.
-* ``RayExecutor``: ``ray.init(address=...)`` joins a running cluster, ``'local'`` starts an
-  instance on this machine bound to the loopback address (no dashboard). Ray's usage-statistics
-  reporting is switched off (``RAY_USAGE_STATS_ENABLED=0``) unless the environment says
-  otherwise. A local instance's processes start with a private ``HOME`` holding an empty
-  ``ray_bootstrap_config.yaml``: without that file Ray's head asks the cloud metadata address
-  (169.254.169.254) what machine it runs on, even with the reporting off, and nothing may
-  leave this machine (the tasks see that ``HOME`` too). Each run is one task of one CPU;
-  Ray keeps its worker processes, and with them the loaded model, between tasks.
+"""Where a sweep's runs go: a local process pool (the default) or Ray tasks on a cluster. Both run
+``iceskate_study.worker.run_task`` on the same ``Task`` objects, so they give the same rows;
+docs/usage.md ("Executors") says how each handles a dying worker, signals and the network.
 """
 
 from __future__ import annotations
 
+import abc
+from collections import deque
 from collections.abc import Iterable
 import concurrent.futures as cf
 import contextlib
@@ -34,6 +20,8 @@ from typing import Any
 from iceskate_study.errors import StudyError
 from iceskate_study.worker import Task, run_marked, run_task, warm_up
 
+#: The row of a run in the results table.
+Row = dict[str, Any]
 #: Deaths of a worker process during the same run before the run is recorded as failed.
 MAX_CRASHES = 2
 
@@ -44,20 +32,69 @@ def cpu_count() -> int:
         os.cpu_count() or 1)
 
 
-def crashed_row(task: Task, failure: str) -> dict[str, Any]:
+def crashed_row(task: Task, failure: str) -> Row:
     """The row of a run whose worker process died."""
     return {'key': task.key, 'status': 'failed', 'failure': failure, 'run_dir': task.run_dir,
             'worker_time_s': None}
 
 
-class LocalExecutor:
-    """Runs on a pool of ``workers`` forked processes of this machine."""
+class _Executor(abc.ABC):
+    """Runs queued and, at most two per worker at a time, in flight as futures."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
+        self._queue: deque[Task] = deque()
+        self._futures: dict[cf.Future[Row | None], Task] = {}
+
+    @abc.abstractmethod
+    def _start(self, task: Task) -> cf.Future[Row | None]:
+        """Start ``task``: its future row."""
+
+    @abc.abstractmethod
+    def _failed(self, failed: list[tuple[Task, BaseException]]) -> list[Row]:
+        """The rows of the runs whose future raised (at least one)."""
+
+    @property
+    def pending(self) -> int:
+        """Runs given and not yet handed back."""
+        return len(self._queue) + len(self._futures)
+
+    def submit(self, tasks: Iterable[Task]) -> None:
+        """Queue ``tasks``."""
+        self._queue.extend(tasks)
+        self._feed()
+
+    def _feed(self) -> None:
+        while self._queue and len(self._futures) < 2 * self.workers:
+            task = self._queue.popleft()
+            self._futures[self._start(task)] = task
+
+    def completed(self, timeout: float) -> list[Row]:
+        """The rows of the runs that finished within ``timeout`` s (a run a signal ended, or
+        cancelled, has none)."""
+        done, _ = cf.wait(self._futures, timeout, return_when=cf.FIRST_COMPLETED)
+        rows: list[Row] = []
+        failed: list[tuple[Task, BaseException]] = []
+        for future in [f for f in self._futures if f in done]:  # in the order given
+            task = self._futures.pop(future)
+            if future.cancelled():
+                continue
+            if (error := future.exception()) is not None:
+                failed.append((task, error))
+            elif (row := future.result()) is not None:
+                rows.append(row)
+        rows += self._failed(failed) if failed else []
+        self._feed()
+        return rows
+
+
+class LocalExecutor(_Executor):
+    """Runs on a pool of ``workers`` forked processes of this machine."""
+
+    def __init__(self, workers: int) -> None:
+        super().__init__(workers)
         self._marks = tempfile.TemporaryDirectory(prefix='iceskate-sweep-')
         self._pool = self._new_pool()
-        self._futures: dict[cf.Future[dict[str, Any] | None], Task] = {}
         self._crashes: dict[str, int] = {}
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
@@ -68,65 +105,42 @@ class LocalExecutor:
         """Where the runs go, in words."""
         return f'{self.workers} local worker process{"es" if self.workers > 1 else ""}'
 
-    @property
-    def pending(self) -> int:
-        """Runs given and not yet handed back."""
-        return len(self._futures)
+    def _start(self, task: Task) -> cf.Future[Row | None]:
+        return self._pool.submit(run_marked, task, self._marks.name)
 
-    def submit(self, tasks: Iterable[Task]) -> None:
-        """Queue ``tasks``."""
-        for task in tasks:
-            self._futures[self._pool.submit(run_marked, task, self._marks.name)] = task
-
-    def completed(self, timeout: float) -> list[tuple[str, dict[str, Any] | None]]:
-        """The runs that finished within ``timeout`` s."""
-        done, _ = cf.wait(self._futures, timeout, return_when=cf.FIRST_COMPLETED)
-        out: list[tuple[str, dict[str, Any] | None]] = []
-        broken = ''
-        for future in done:
-            if future.cancelled():
-                out.append((self._futures.pop(future).key, None))
-                continue
-            try:
-                row = future.result()
-            except cf.process.BrokenProcessPool as exc:
-                broken = str(exc) or type(exc).__name__
-                continue
-            out.append((self._futures.pop(future).key, row))
-        if broken:
-            out += self._restart(broken)
-        return out
-
-    def _restart(self, reason: str) -> list[tuple[str, dict[str, Any] | None]]:
-        """A new pool after a worker died: the runs that were running in a worker then count
-        a crash (at MAX_CRASHES they are failed rows), every other one is given again."""
-        marks = pathlib.Path(self._marks.name)
-        running = {mark.read_text(encoding='ascii') for mark in marks.iterdir()}
-        for mark in marks.iterdir():
+    def _failed(self, failed: list[tuple[Task, BaseException]]) -> list[Row]:
+        """A worker died (the pool is broken): a new pool; the runs that were running in a
+        worker then count a crash (failed rows at MAX_CRASHES), the others are queued again."""
+        for _task, error in failed:
+            if not isinstance(error, cf.process.BrokenProcessPool):
+                raise error
+        reason = str(failed[0][1]) or type(failed[0][1]).__name__
+        running = set()
+        for mark in pathlib.Path(self._marks.name).iterdir():
+            running.add(mark.read_text(encoding='ascii'))
             mark.unlink()
-        rest = list(self._futures.values())
+        rest = [task for task, _ in failed] + list(self._futures.values())
         self._futures.clear()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = self._new_pool()
-        rows: list[tuple[str, dict[str, Any] | None]] = []
+        rows: list[Row] = []
         again = []
         for task in rest:
             self._crashes[task.key] = self._crashes.get(task.key, 0) + (task.key in running)
             if self._crashes[task.key] >= MAX_CRASHES:
-                rows.append((task.key, crashed_row(
-                    task, f'the worker process died while running it, {MAX_CRASHES} times '
-                          f'({reason})')))
+                rows.append(crashed_row(task, f'the worker process died while running it, '
+                                              f'{MAX_CRASHES} times ({reason})'))
             else:
                 again.append(task)
-        self.submit(again)
+        self._queue.extendleft(reversed(again))
         return rows
 
     def interrupt(self, signum: int) -> None:
         """End the runs in flight cleanly (``signum`` to every worker: each ends its run
         between two control periods) and drop the queued ones."""
-        for future in list(self._futures):
-            if future.cancel():
-                self._futures.pop(future)
+        self._queue.clear()
+        for future in self._futures:
+            future.cancel()
         for child in multiprocessing.active_children():
             with contextlib.suppress(OSError):
                 os.kill(child.pid or 0, signum)
@@ -137,7 +151,7 @@ class LocalExecutor:
         self._marks.cleanup()
 
 
-class RayExecutor:
+class RayExecutor(_Executor):
     """Runs as Ray tasks: on a running cluster (``address``) or a local instance
     (``'local'``, ``workers`` CPUs, bound to 127.0.0.1).
 
@@ -149,8 +163,6 @@ class RayExecutor:
         import ray
         self._ray: Any = ray
         sigterm = signal.getsignal(signal.SIGTERM)  # ray.init installs its own handler
-        options: dict[str, Any] = {'include_dashboard': False, 'log_to_driver': False,
-                                   'logging_level': 'ERROR'}
         self._home: tempfile.TemporaryDirectory[str] | None = None
         home = os.environ.get('HOME')
         try:
@@ -158,10 +170,9 @@ class RayExecutor:
                 self._home = tempfile.TemporaryDirectory(prefix='iceskate-ray-home-')
                 (pathlib.Path(self._home.name) / 'ray_bootstrap_config.yaml').write_text('{}\n')
                 os.environ['HOME'] = self._home.name  # for the processes ray.init starts
-                ray.init(num_cpus=workers or cpu_count(), _node_ip_address='127.0.0.1',
-                         **options)
-            else:
-                ray.init(address=address, **options)
+            ray.init(**({'num_cpus': workers or cpu_count(), '_node_ip_address': '127.0.0.1'}
+                        if address == 'local' else {'address': address}),
+                     include_dashboard=False, log_to_driver=False, logging_level='ERROR')
         except Exception as exc:  # Ray's errors (a cluster not reached, ...) in one line
             raise StudyError(f'cannot start Ray at {address!r}: '
                              f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
@@ -173,58 +184,36 @@ class RayExecutor:
                 signal.signal(signal.SIGTERM, sigterm)
         self.address = address
         cpus = int(ray.cluster_resources().get('CPU', 1))
-        self.workers = max(1, min(workers or cpus, cpus))
+        super().__init__(max(1, min(workers or cpus, cpus)))
         self._remote = ray.remote(num_cpus=1)(run_task)
-        self._queue: list[Task] = []
-        self._refs: dict[Any, Task] = {}
+        #: the object ref of each run in flight, by its future
+        self._refs: dict[cf.Future[Row | None], Any] = {}
 
     def describe(self) -> str:
         """Where the runs go, in words."""
         where = 'a local Ray instance' if self.address == 'local' else f'Ray at {self.address}'
         return f'{where}, {self.workers} run{"s" if self.workers > 1 else ""} at once'
 
-    @property
-    def pending(self) -> int:
-        """Runs given and not yet handed back."""
-        return len(self._refs) + len(self._queue)
+    def _start(self, task: Task) -> cf.Future[Row | None]:
+        self._refs = {f: ref for f, ref in self._refs.items() if f in self._futures}
+        ref = self._remote.remote(task)
+        future = ref.future()
+        self._refs[future] = ref
+        return future
 
-    def submit(self, tasks: Iterable[Task]) -> None:
-        """Queue ``tasks`` (at most ``2 workers`` are Ray tasks at a time)."""
-        self._queue.extend(tasks)
-        self._feed()
-
-    def _feed(self) -> None:
-        while self._queue and len(self._refs) < 2 * self.workers:
-            task = self._queue.pop(0)
-            self._refs[self._remote.remote(task)] = task
-
-    def completed(self, timeout: float) -> list[tuple[str, dict[str, Any] | None]]:
-        """The runs that finished within ``timeout`` s."""
-        ray = self._ray
-        if not self._refs:
-            return []
-        ready, _ = ray.wait(list(self._refs), num_returns=1, timeout=timeout)
-        if ready:  # and whatever else is ready now
-            ready, _ = ray.wait(list(self._refs), num_returns=len(self._refs), timeout=0)
-        out: list[tuple[str, dict[str, Any] | None]] = []
-        for ref in ready:
-            task = self._refs.pop(ref)
-            try:
-                out.append((task.key, ray.get(ref)))
-            except ray.exceptions.TaskCancelledError:
-                out.append((task.key, None))
-            except ray.exceptions.RayError as exc:  # the worker died (after Ray's retries)
-                out.append((task.key, crashed_row(
-                    task, f'the Ray task failed: {str(exc).splitlines()[0]}')))
-        self._feed()
-        return out
+    def _failed(self, failed: list[tuple[Task, BaseException]]) -> list[Row]:
+        """A cancelled run has no row; a task Ray gave up on (its worker died) is a failed
+        row."""
+        return [crashed_row(task, f'the Ray task failed: {str(error).splitlines()[0]}')
+                for task, error in failed
+                if not isinstance(error, self._ray.exceptions.TaskCancelledError)]
 
     def interrupt(self, signum: int) -> None:
         """Cancel the runs in flight (their workers are stopped) and drop the queued ones."""
         self._queue.clear()
-        for ref in self._refs:
+        for future in self._futures:
             with contextlib.suppress(Exception):
-                self._ray.cancel(ref, force=True)
+                self._ray.cancel(self._refs[future], force=True)
 
     def close(self) -> None:
         """Leave the cluster (a local instance is stopped)."""

@@ -1,17 +1,13 @@
 """Heat maps of a sweep's table: ``sweep-plot DIR --x KEY --y KEY --metric NAME``.
 
-One PNG per metric, ``DIR/maps/<metric>.png``: over a grid, each cell is the mean of the metric
-over the runs at that (x, y) (the repeats, and the other axes' values, averaged; the count is
-in the title when it is above 1), with its value written in it; cells without a value (every
-run failed there) are grey. ``fell`` is drawn as the fraction of runs that fell. Sampled sweeps
-(random, Latin hypercube) are drawn as coloured points. Grid axes are evenly spaced by index,
-labelled with their values (a logspace axis then reads as a log scale). Reads only the table
-(``iceskate_study.table``); matplotlib (Agg) is imported on the first call.
+One PNG per metric, ``DIR/maps/<metric>.png``: a grid sweep as cells (the mean over the runs at
+each (x, y), grid axes evenly spaced by index), a sampled one as coloured points.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 import math
 import pathlib
 import re
@@ -35,7 +31,9 @@ LABELS = {
     'arm_swing_steady.q11_peak_to_peak': 'q11 peak to peak, steady [rad]',
     'arm_swing_steady.q14_peak_to_peak': 'q14 peak to peak, steady [rad]',
 }
-_CMAPS = {'fell': ('Reds', 0.0, 1.0)}
+#: The maps drawn when neither the command nor the SPEC names any (those the table has).
+DEFAULT_METRICS = ('steps', 'fell', 'forward_distance_m', 'arm_swing_ratio',
+                   'arm_swing_steady.corr_q11_q14')
 _MAX_ANNOTATED = 400  # cells: values are written in the cells of grids up to this size
 
 
@@ -45,11 +43,7 @@ def _label(value: Any) -> str:
 
 def _numbers(values: list[Any]) -> np.ndarray:
     """Floats of a column (booleans as 0/1, missing as NaN)."""
-    out = np.full(len(values), np.nan)
-    for i, v in enumerate(values):
-        if isinstance(v, (bool, int, float)) and not (isinstance(v, float) and math.isnan(v)):
-            out[i] = float(v)
-    return out
+    return np.array([float(v) if isinstance(v, (bool, int, float)) else math.nan for v in values])
 
 
 def _hashable(value: Any) -> Any:
@@ -66,25 +60,25 @@ def _ordered(values: list[Any]) -> list[Any]:
         return unique
 
 
-def file_name(metric: str) -> str:
-    """The PNG's name of a metric."""
-    return re.sub(r'[^A-Za-z0-9_.-]', '_', metric) + '.png'
-
-
-def draw_maps(table_path: pathlib.Path, x: str, y: str, metrics: tuple[str, ...] | list[str],
-              out_dir: pathlib.Path) -> list[pathlib.Path]:
+def draw_maps(table_path: pathlib.Path, x: str | None, y: str | None,
+              metrics: Sequence[str] | None, out_dir: pathlib.Path) -> list[pathlib.Path]:
     """Draw one heat map per metric of the table at ``table_path`` over axes ``x`` and ``y``
-    into ``out_dir``; the files written.
+    into ``out_dir``; the files written. None: the SPEC's maps, else the first two axes and
+    DEFAULT_METRICS.
 
     :raises StudyError: a table that cannot be read, an unknown axis or metric.
     """
     table, meta = read_table(table_path)
-    axes = meta.get('axes', {})
+    axes, maps, columns = meta.get('axes', {}), meta.get('maps') or {}, table.column_names
+    x = x or maps.get('x') or next(iter(axes), '')
+    y = y or maps.get('y') or (list(axes)[1] if len(axes) > 1 else '')
+    if not y:
+        raise StudyError(f'{table_path} has one axis ({x}): a map needs two')
+    metrics = metrics or maps.get('metrics') or [m for m in DEFAULT_METRICS if m in columns]
     for name, what in ((x, '--x'), (y, '--y')):
         if name not in axes:
             raise StudyError(f'{what} {name!r} is not an axis of {table_path}; its axes: '
                              f'{list(axes)}')
-    columns = table.column_names
     declared = [*meta.get('ratios', {}), *meta.get('metrics', [])]
     for metric in metrics:  # a metric the SPEC keeps may have no value in any run yet
         known = metric in declared or any(metric.startswith(f'{m}.') for m in declared)
@@ -99,6 +93,7 @@ def draw_maps(table_path: pathlib.Path, x: str, y: str, metrics: tuple[str, ...]
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise StudyError(f'cannot create {out_dir}: {exc.strerror or exc}') from None
+    import matplotlib
     from matplotlib.figure import Figure
     xs, ys = table.column(x).to_pylist(), table.column(y).to_pylist()
     grid = meta.get('sampling', 'grid') == 'grid'
@@ -108,28 +103,34 @@ def draw_maps(table_path: pathlib.Path, x: str, y: str, metrics: tuple[str, ...]
                   else np.full(table.num_rows, np.nan))
         fig = Figure(figsize=(7.0, 5.2), dpi=100, layout='constrained')
         ax = fig.add_subplot()
-        cmap, low, high = _CMAPS.get(metric, ('viridis', None, None))
-        if 'corr' in metric:
-            cmap, low, high = 'coolwarm', -1.0, 1.0
+        cmap, low, high = (('coolwarm', -1.0, 1.0) if 'corr' in metric else
+                           ('Reds', 0.0, 1.0) if metric == 'fell' else ('viridis', None, None))
+        style = {'cmap': matplotlib.colormaps[cmap].with_extremes(bad='0.85'), 'vmin': low,
+                 'vmax': high}
         if grid:
-            per_cell = _grid(ax, fig, xs, ys, values, cmap, low, high, metric)
-        else:
+            image, per_cell = _grid(ax, xs, ys, values, style)
+        else:  # a coloured point per run, a grey cross where the run has no value
+            ok, px, py = np.isfinite(values), _numbers(xs), _numbers(ys)
+            image = ax.scatter(px[ok], py[ok], c=values[ok], s=36, edgecolors='none', **style)
+            ax.scatter(px[~ok], py[~ok], marker='x', color='0.5', s=24)
             per_cell = 1
-            _scatter(ax, fig, xs, ys, values, cmap, low, high, metric,
-                     axes[x].get('log', False), axes[y].get('log', False))
+            ax.set_xscale('log' if axes[x].get('log') else 'linear')
+            ax.set_yscale('log' if axes[y].get('log') else 'linear')
+        fig.colorbar(image, ax=ax, label=LABELS.get(metric, metric))
         ax.set_xlabel(x)
         ax.set_ylabel(y)
         note = f' (mean of {per_cell} runs per cell)' if per_cell > 1 else ''
         ax.set_title(f'{meta.get("study", "sweep")}: {metric}{note}', fontsize=10)
-        path = out_dir / file_name(metric)
+        path = out_dir / (re.sub(r'[^A-Za-z0-9_.-]', '_', metric) + '.png')
         fig.savefig(path)
         written.append(path)
     return written
 
 
-def _grid(ax: Any, fig: Any, xs: list[Any], ys: list[Any], values: np.ndarray, cmap: str,
-          low: float | None, high: float | None, metric: str) -> int:
-    """A cell per (x, y) value pair: the mean of ``values``; the most runs in a cell."""
+def _grid(ax: Any, xs: list[Any], ys: list[Any], values: np.ndarray, style: dict[str, Any]
+          ) -> tuple[Any, int]:
+    """A cell per (x, y) value pair: the mean of ``values`` (grey: none); the image and the
+    most runs in a cell."""
     col, row = _ordered(xs), _ordered(ys)
     sums = np.zeros((len(row), len(col)))
     counts = np.zeros((len(row), len(col)), dtype=int)
@@ -143,12 +144,8 @@ def _grid(ax: Any, fig: Any, xs: list[Any], ys: list[Any], values: np.ndarray, c
             sums[i, j] += value
             counts[i, j] += 1
     mean = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
-    masked = np.ma.masked_invalid(mean)
-    import matplotlib
-    colours = matplotlib.colormaps[cmap].with_extremes(bad='0.85')
-    image = ax.imshow(masked, origin='lower', aspect='auto', cmap=colours, vmin=low, vmax=high,
-                      interpolation='nearest')
-    fig.colorbar(image, ax=ax, label=LABELS.get(metric, metric))
+    image = ax.imshow(np.ma.masked_invalid(mean), origin='lower', aspect='auto',
+                      interpolation='nearest', **style)
     ax.set_xticks(range(len(col)), [_label(v) for v in col],
                   rotation=45 if len(col) > 6 else 0)
     ax.set_yticks(range(len(row)), [_label(v) for v in row])
@@ -158,26 +155,10 @@ def _grid(ax: Any, fig: Any, xs: list[Any], ys: list[Any], values: np.ndarray, c
         for i in range(len(row)):
             for j in range(len(col)):
                 text = f'{mean[i, j]:.2g}' if counts[i, j] else ('failed' if runs[i, j] else '')
-                dark = cmap in ('viridis',) and counts[i, j] and mean[i, j] < middle
+                dark = style['cmap'].name == 'viridis' and counts[i, j] and mean[i, j] < middle
                 ax.text(j, i, text, ha='center', va='center', fontsize=8,
                         color='white' if dark else 'black')
-    return int(runs.max()) if runs.size else 0
-
-
-def _scatter(ax: Any, fig: Any, xs: list[Any], ys: list[Any], values: np.ndarray, cmap: str,
-             low: float | None, high: float | None, metric: str, log_x: bool,
-             log_y: bool) -> None:
-    """One coloured point per run (a grey cross where the run has no value)."""
-    x, y = _numbers(xs), _numbers(ys)
-    ok = np.isfinite(values)
-    points = ax.scatter(x[ok], y[ok], c=values[ok], cmap=cmap, vmin=low, vmax=high, s=36,
-                        edgecolors='none')
-    ax.scatter(x[~ok], y[~ok], marker='x', color='0.5', s=24)
-    fig.colorbar(points, ax=ax, label=LABELS.get(metric, metric))
-    if log_x:
-        ax.set_xscale('log')
-    if log_y:
-        ax.set_yscale('log')
+    return image, int(runs.max()) if runs.size else 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,18 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if not path.is_file():
             raise StudyError(f'{path} does not exist: give the --out folder of a sweep')
-        _table, meta = read_table(path)
-        axes = list(meta.get('axes', {}))
-        maps = meta.get('maps') or {}
-        x = args.x or maps.get('x') or (axes[0] if axes else '')
-        y = args.y or maps.get('y') or (axes[1] if len(axes) > 1 else '')
-        if not y:
-            raise StudyError(f'{path} has one axis ({axes[0]}): a map needs two')
-        columns = _table.column_names
-        metrics = args.metric or maps.get('metrics') or [
-            m for m in ('steps', 'fell', 'forward_distance_m', 'arm_swing_ratio',
-                        'arm_swing_steady.corr_q11_q14') if m in columns]
-        written = draw_maps(path, x, y, metrics, args.out or path.parent / 'maps')
+        written = draw_maps(path, args.x, args.y, args.metric, args.out or path.parent / 'maps')
     except StudyError as exc:
         say(f'sweep-plot: error: {exc}')
         return 1

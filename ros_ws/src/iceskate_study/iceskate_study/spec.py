@@ -1,35 +1,12 @@
-"""SPEC files of parameter studies: a base scene, overrides, axes; the runs they generate.
-
-A SPEC (YAML) names a base scene (a shipped name or a path, relative to the SPEC's folder),
-optional ``overrides`` (dotted scene key -> value, for every run) and ``axes`` (dotted scene
-key -> the values it takes). A key is any scene key in dotted form, with ``[i]`` for an entry of
-a list: ``floor.mu``, ``inputs.gait_manager.yaw.amplitude``, ``inputs.visual_lifting.kp[1]``,
-``disturbances[0].force[1]``. An axis is
-
-* a list of values, ``{linspace: [start, stop, count]}`` or ``{logspace: [start, stop, count]}``
-  (``count`` values evenly spaced on a linear or a logarithmic scale, both ends included) with
-  ``sampling: grid`` (the default: every combination of the axes' values); or
-* ``{range: [low, high]}`` (``scale: log`` to sample on a logarithmic scale) with
-  ``sampling: random`` or ``latin_hypercube`` (``samples`` points drawn with ``seed``).
-
-Each point runs ``repeats`` times. ``metrics`` names what the table keeps of each run's
-``metrics.json`` (dotted; a block such as ``arm_swing_steady`` keeps all its entries); ``bags``
-(``all`` or a list of axis values to match) selects the points recorded with a bag; ``ratios``
-defines derived metrics (a metric over its value at a baseline value of one axis, the other axes
-and the repeat equal); ``maps`` names the heat maps drawn at the end (``x``, ``y``,
-``metrics``).
-
-Every generated scene is validated (``iceskate_bringup.scene.parse_scene``) before any run
-starts; anything wrong is a ``StudyError`` naming the SPEC key (``SPEC key 'axes.floor.mu':
-...``), with the scene's own message when a value makes a bad scene. Each run is keyed by a
-hash of its whole scene mapping and its repeat index, so the same run has the same key in
-every sweep.
+"""SPEC files of parameter studies: a base scene, overrides and axes over dotted scene keys, and
+the runs they generate, every scene validated before any run starts (the format: docs/usage.md,
+"Parameter studies"). A bad SPEC is a one-line ``StudyError`` naming its key.
 """
 
 from __future__ import annotations
 
 import copy
-from dataclasses import MISSING, dataclass
+from dataclasses import MISSING, asdict, dataclass, replace
 import hashlib
 import itertools
 import json
@@ -46,7 +23,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_files, shipped_or_path
 from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
-from iceskate_sim.run.scene import Scene, key_tokens, scene_path, scene_raw
+from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
@@ -86,7 +63,8 @@ class StudySettings:
                                   "'latin_hypercube')", low=1)
     seed: int | None = setting(None, 'seed of the draw', low=0)
     repeats: int = setting(1, 'runs of each point', low=1)
-    metrics: Any = setting(None, 'the entries of metrics.json the table keeps (dotted)')
+    metrics: tuple[str, ...] | None = setting(None, 'the entries of metrics.json the table '
+                                              'keeps (dotted; None: DEFAULT_METRICS)')
     bags: Any = setting(None, "'all' or the axis values of the points recorded with a bag")
     ratios: Any = setting(None, 'derived metrics: a metric over its value at a baseline')
     maps: Any = setting(None, 'the heat maps drawn at the end')
@@ -115,13 +93,16 @@ class Ratio:
     baseline_value: Any
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MapSpec:
-    """The heat maps drawn at the end of a sweep: ``metrics`` over axes ``x`` and ``y``."""
+    """``maps``: the heat maps drawn at the end of a sweep, ``metrics`` over axes ``x`` and
+    ``y``."""
 
-    x: str
-    y: str
-    metrics: tuple[str, ...]
+    x: str = setting(MISSING, 'axis along x')
+    y: str = setting(MISSING, 'axis along y, another than x')
+    metrics: tuple[str, ...] | None = setting(None, 'the columns drawn (None: '
+                                              'DEFAULT_MAP_METRICS and the ratios)')
+    __post_init__ = _study_rules
 
 
 @dataclass(frozen=True)
@@ -146,7 +127,7 @@ class Point:
 
 @dataclass(frozen=True)
 class Spec:
-    """A validated SPEC (see the module's docstring)."""
+    """A validated SPEC."""
 
     study: str
     description: str
@@ -178,8 +159,7 @@ class Spec:
                 'ratios': {r.name: {'metrics': list(r.metrics),
                                     'baseline': {r.baseline_key: r.baseline_value}}
                            for r in self.ratios},
-                'maps': ({'x': self.maps.x, 'y': self.maps.y, 'metrics': list(self.maps.metrics)}
-                         if self.maps is not None else None)}
+                'maps': asdict(self.maps) if self.maps is not None else None}
 
 
 def _fail(key: str, message: str) -> StudyError:
@@ -208,49 +188,42 @@ def run_key(raw: dict[str, Any], repeat: int) -> str:
 
 
 # ------------------------------------------------------------------------- axes
-def _count(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-        raise _fail(where, f'the count of values must be an integer >= 1, got {value!r}')
-    return int(value)
-
-
 def _axis(key: str, raw: Any, sampling: str) -> Axis:
     where = f'axes.{key}'
     try:
         key_tokens(key)
     except SimulationError as exc:
         raise _fail(where, str(exc)) from None
+    kinds = list(raw.keys() & {'linspace', 'logspace', 'range'}) if isinstance(raw, dict) else []
+    if not isinstance(raw, list) and len(kinds) != 1:
+        raise _fail(where, 'an axis is a list of values, {linspace: [start, stop, count]}, '
+                           f'{{logspace: [start, stop, count]}} or {{range: [low, high]}}, got '
+                           f'{raw!r}')
+    kind = kinds[0] if kinds else 'values'
+    if kind == 'range' and sampling == 'grid':
+        raise _fail(where, "a range is sampled: set sampling to 'random' or "
+                           "'latin_hypercube', or give the values (a list, linspace, logspace)")
+    if kind != 'range' and sampling != 'grid':
+        raise _fail(where, f'sampling {sampling!r} draws from a range: give {{range: [low, '
+                           'high]}')
     if isinstance(raw, list):
-        if sampling != 'grid':
-            raise _fail(where, f'sampling {sampling!r} draws from a range: give '
-                               '{range: [low, high]}')
         if not raw:
             raise _fail(where, 'an axis needs at least one value, got []')
         texts = [json.dumps(v, sort_keys=True, default=str) for v in raw]
         if len(set(texts)) != len(texts):
             raise _fail(where, f'an axis must not repeat a value, got {raw}')
         return Axis(key, tuple(raw))
-    if not isinstance(raw, dict) or len(raw.keys() & {'linspace', 'logspace', 'range'}) != 1:
-        raise _fail(where, 'an axis is a list of values, {linspace: [start, stop, count]}, '
-                           f'{{logspace: [start, stop, count]}} or {{range: [low, high]}}, got '
-                           f'{raw!r}')
-    (kind,) = raw.keys() & {'linspace', 'logspace', 'range'}
-    unknown = set(raw) - {kind} - ({'scale'} if kind == 'range' else set())
+    allowed = [kind, 'scale'] if kind == 'range' else [kind]
+    unknown = sorted(set(raw) - set(allowed))
     if unknown:
-        raise _fail(f'{where}.{sorted(unknown)[0]}', f'unknown key; allowed with {kind}: '
-                                                    f'{[kind] + (["scale"] * (kind == "range"))}')
+        raise _fail(f'{where}.{unknown[0]}', f'unknown key; allowed with {kind}: {allowed}')
     args = raw[kind]
-    size = 2 if kind == 'range' else 3
-    if not isinstance(args, list) or len(args) != size or not all(
+    if not isinstance(args, list) or len(args) != (2 if kind == 'range' else 3) or not all(
             _is_number(a) for a in args[:2]):
         form = '[low, high]' if kind == 'range' else '[start, stop, count]'
         raise _fail(f'{where}.{kind}', f'must be {form} (finite numbers), got {args!r}')
     low, high = float(args[0]), float(args[1])
     if kind == 'range':
-        if sampling == 'grid':
-            raise _fail(where, "a range is sampled: set sampling to 'random' or "
-                               "'latin_hypercube', or give the values (a list, linspace, "
-                               'logspace)')
         scale = raw.get('scale', 'linear')
         if scale not in ('linear', 'log'):
             raise _fail(f'{where}.scale', f"must be 'linear' or 'log', got {scale!r}")
@@ -259,42 +232,37 @@ def _axis(key: str, raw: Any, sampling: str) -> Axis:
         if scale == 'log' and low <= 0.0:
             raise _fail(f'{where}.range', f'a log scale needs low > 0, got {low:g}')
         return Axis(key, low=low, high=high, log=scale == 'log')
-    if sampling != 'grid':
-        raise _fail(where, f'sampling {sampling!r} draws from a range: give {{range: [low, '
-                           'high]}')
-    count = _count(args[2], f'{where}.{kind}')
+    count = args[2]
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
+        raise _fail(f'{where}.{kind}', f'the count of values must be an integer >= 1, got '
+                                       f'{count!r}')
     if count > 1 and low == high:
         raise _fail(f'{where}.{kind}', f'start and stop are equal ({low:g}): {count} equal values')
-    if kind == 'logspace':
-        if low <= 0.0 or high <= 0.0:
-            raise _fail(f'{where}.logspace', f'start and stop must be > 0, got [{low:g}, '
-                                             f'{high:g}]')
-        values = np.geomspace(low, high, count)
-    else:
-        values = np.linspace(low, high, count)
+    if kind == 'logspace' and (low <= 0.0 or high <= 0.0):
+        raise _fail(f'{where}.logspace', f'start and stop must be > 0, got [{low:g}, {high:g}]')
+    values = (np.geomspace if kind == 'logspace' else np.linspace)(low, high, int(count))
     return Axis(key, tuple(float(v) for v in values), log=kind == 'logspace')
 
 
-def sample_points(axes: tuple[Axis, ...], sampling: str, samples: int, seed: int
-                  ) -> list[tuple[Any, ...]]:
-    """The axes' values of every point: the grid's combinations (first axis slowest), or
-    ``samples`` random or Latin-hypercube points (``seed``) mapped onto the ranges."""
-    if sampling == 'grid':
+def points_values(spec: Spec) -> list[tuple[Any, ...]]:
+    """The axes' values of every parameter point of ``spec``: the grid's combinations (first
+    axis slowest), or ``samples`` random or Latin-hypercube points (``seed``) mapped onto the
+    ranges."""
+    axes, samples = spec.axes, spec.samples
+    if spec.sampling == 'grid':
         return list(itertools.product(*(axis.values or () for axis in axes)))
-    rng = np.random.default_rng(seed)
-    if sampling == 'random':
+    rng = np.random.default_rng(spec.seed)
+    if spec.sampling == 'random':
         unit = rng.random((samples, len(axes)))
     else:
         from scipy.stats import qmc
         unit = qmc.LatinHypercube(d=len(axes), rng=rng).random(samples)
-    columns = []
-    for j, axis in enumerate(axes):
-        low, high = float(axis.low or 0.0), float(axis.high or 0.0)
-        if axis.log:
-            columns.append(np.exp(np.log(low) + unit[:, j] * (np.log(high) - np.log(low))))
-        else:
-            columns.append(low + unit[:, j] * (high - low))
-    return [tuple(float(c[i]) for c in columns) for i in range(samples)]
+    log = np.array([axis.log for axis in axes])
+    bounds = np.array([(axis.low, axis.high) for axis in axes], dtype=float)
+    bounds[log] = np.log(bounds[log])
+    values = bounds[:, 0] + unit * (bounds[:, 1] - bounds[:, 0])
+    values[:, log] = np.exp(values[:, log])
+    return [tuple(float(v) for v in point) for point in values]
 
 
 def _match(value: Any, wanted: Any) -> bool:
@@ -339,23 +307,21 @@ def load_spec(name_or_path: str | pathlib.Path) -> Spec:
     return parse_spec(raw, path)
 
 
-def _base_scene(raw: Any, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, Any]]:
-    if not isinstance(raw, str) or not raw:
-        raise _fail('scene', f'must be a shipped scene name or the path of a scene file, got '
-                             f'{raw!r}')
-    candidate = pathlib.Path(raw)
-    if candidate.suffix and not candidate.is_absolute() and (path.parent / candidate).is_file():
-        candidate = path.parent / candidate
+def _base_scene(raw: str, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, Any]]:
+    if not raw:  # text, by StudySettings
+        raise _fail('scene', "must be a shipped scene name or the path of a scene file, got ''")
+    relative = path.parent / raw  # a path is relative to the SPEC's folder, as a scene's base
     try:
-        scene_file = scene_path(candidate if candidate.suffix else raw)
+        scene_file = scene_path(relative if pathlib.Path(raw).suffix and relative.is_file()
+                                else raw)
         return scene_file.resolve(), scene_raw(scene_file)
     except SimulationError as exc:
         raise _fail('scene', str(exc)) from None
 
 
-def _check_scene(raw: dict[str, Any], where: str, what: str) -> Scene:
+def _check_scene(raw: dict[str, Any], where: str, what: str) -> None:
     try:
-        return parse_scene(raw)
+        parse_scene(raw)
     except SimulationError as exc:
         raise _fail(where, f'{what} gives a bad scene: {exc}') from None
 
@@ -365,9 +331,8 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
     if not isinstance(raw, dict):
         raise StudyError(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
     top = keyed_from_mapping(StudySettings, raw, StudyError, _fail)
-    study = top.study
-    if not re.fullmatch(r'[A-Za-z0-9_.-]+', study):
-        raise _fail('study', f'must be a name (letters, digits, _ . -), got {study!r}')
+    if not re.fullmatch(r'[A-Za-z0-9_.-]+', top.study):
+        raise _fail('study', f'must be a name (letters, digits, _ . -), got {top.study!r}')
     scene_file, base = _base_scene(top.scene, path)
 
     overrides = top.overrides or {}
@@ -377,15 +342,13 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
         set_key(base, key, value, f'overrides.{key}')
     _check_scene(base, 'overrides', 'the base scene with the overrides')
 
-    sampling, samples, seed, repeats = top.sampling, top.samples, top.seed, top.repeats
+    sampling = top.sampling
     if sampling == 'grid':
         for k in ('samples', 'seed'):
             if getattr(top, k) is not None:
                 raise _fail(k, "is for sampling 'random' or 'latin_hypercube'")
-        samples, seed = 0, 0
-    elif samples is None:
+    elif top.samples is None:
         raise _fail('samples', f'must be given for sampling {sampling!r} (the points to draw)')
-    seed = seed or 0
 
     if not isinstance(top.axes, dict) or not top.axes:
         raise _fail('axes', f'must map at least one scene key to its values, got '
@@ -397,16 +360,16 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
             set_key(scene, axis.key, value, f'axes.{axis.key}')
             _check_scene(scene, f'axes.{axis.key}', f'the value {value!r}')
 
-    metrics = list(DEFAULT_METRICS) if top.metrics is None else top.metrics
-    if not isinstance(metrics, list) or not metrics:
-        raise _fail('metrics', f'must be a list of metric names, got {metrics!r}')
+    metrics = DEFAULT_METRICS if top.metrics is None else top.metrics
+    if not metrics:
+        raise _fail('metrics', 'must name at least one metric, got []')
     metrics = tuple(dict.fromkeys(_metric_name(m, 'metrics') for m in metrics))
     keys = tuple(axis.key for axis in axes)
     ratios = _ratios(top.ratios, axes, metrics, sampling)
-    spec = Spec(study, top.description, path, scene_file, base, axes, sampling, int(samples),
-                int(seed), repeats, metrics, _bags(top.bags, keys), ratios,
-                _maps(top.maps, keys, metrics, ratios))
-    if len(points_values(spec)) * repeats > MAX_RUNS:
+    spec = Spec(top.study, top.description, path, scene_file, base, axes, sampling,
+                top.samples or 0, top.seed or 0, top.repeats, metrics, _bags(top.bags, keys),
+                ratios, _maps(top.maps, keys, metrics, ratios))
+    if len(points_values(spec)) * spec.repeats > MAX_RUNS:
         raise _fail('axes', f'the SPEC generates more than {MAX_RUNS} runs')
     return spec
 
@@ -473,52 +436,44 @@ def _maps(raw: Any, keys: tuple[str, ...], metrics: tuple[str, ...],
           ratios: tuple[Ratio, ...]) -> MapSpec | None:
     if raw is None:
         return None
-    if not isinstance(raw, dict) or not {'x', 'y'} <= set(raw) or set(raw) - {'x', 'y',
-                                                                             'metrics'}:
-        raise _fail('maps', f'must be {{x: AXIS, y: AXIS, metrics: [NAMES]}}, got {raw!r}')
-    for k in ('x', 'y'):
-        if raw[k] not in keys:
-            raise _fail(f'maps.{k}', f'{raw[k]!r} is not an axis; the axes: {list(keys)}')
-    if raw['x'] == raw['y']:
+    maps = keyed_from_mapping(MapSpec, raw, StudyError, _fail, 'maps')
+    for k, axis in (('x', maps.x), ('y', maps.y)):
+        if axis not in keys:
+            raise _fail(f'maps.{k}', f'{axis!r} is not an axis; the axes: {list(keys)}')
+    if maps.x == maps.y:
         raise _fail('maps.y', 'must be another axis than x')
-    names = raw.get('metrics', [*DEFAULT_MAP_METRICS, *(r.name for r in ratios)])
-    if not isinstance(names, list) or not names:
-        raise _fail('maps.metrics', f'must be a list of metric names, got {names!r}')
+    names = (maps.metrics if maps.metrics is not None
+             else (*DEFAULT_MAP_METRICS, *(r.name for r in ratios)))
+    if not names:
+        raise _fail('maps.metrics', 'must name at least one metric, got []')
     for name in names:
-        if not (name in {r.name for r in ratios} or name in ('status',) or kept(name, metrics)):
+        if not (name in {r.name for r in ratios} or name == 'status' or kept(name, metrics)):
             raise _fail('maps.metrics', f'{name!r} is neither a metric kept nor a ratio')
-    return MapSpec(raw['x'], raw['y'], tuple(names))
+    return replace(maps, metrics=names)
 
 
 # ---------------------------------------------------------------------- the runs
-def points_values(spec: Spec) -> list[tuple[Any, ...]]:
-    """The axes' values of every parameter point of ``spec``."""
-    return sample_points(spec.axes, spec.sampling, spec.samples, spec.seed)
-
-
 def expand(spec: Spec) -> list[Point]:
     """Every run of ``spec`` (parameter points in order, each ``repeats`` times), each scene
     validated; StudyError naming the point whose scene is refused."""
     keys = spec.axis_keys
     combos = points_values(spec)
-    selected = [False] * len(combos)
+    selected: set[int] = set()
     for i, selector in enumerate(spec.bags or ()):
-        hits = [j for j, combo in enumerate(combos)
-                if all(_match(combo[keys.index(k)], v) for k, v in selector.items())]
+        hits = {j for j, combo in enumerate(combos)
+                if all(_match(combo[keys.index(k)], v) for k, v in selector.items())}
         if not hits:
             raise _fail(f'bags[{i}]', f'selects no point of the sweep: {selector}')
-        for j in hits:
-            selected[j] = True
+        selected |= hits
     points = []
     for index, combo in enumerate(combos):
-        raw = copy.deepcopy(spec.base)
-        for key, value in zip(keys, combo, strict=True):
+        raw, values = copy.deepcopy(spec.base), dict(zip(keys, combo, strict=True))
+        for key, value in values.items():
             set_key(raw, key, value, f'axes.{key}')
-        bag = spec.bags is None or selected[index]
+        bag = spec.bags is None or index in selected
         set_key(raw, 'record.bag', bag, 'bags')
-        where = ', '.join(f'{k}={v!r}' for k, v in zip(keys, combo, strict=True))
+        where = ', '.join(f'{k}={v!r}' for k, v in values.items())
         _check_scene(raw, 'axes', f'the point {where}')
-        for repeat in range(spec.repeats):
-            points.append(Point(index, repeat, dict(zip(keys, combo, strict=True)), raw,
-                                run_key(raw, repeat), bag))
+        points += [Point(index, repeat, values, raw, run_key(raw, repeat), bag)
+                   for repeat in range(spec.repeats)]
     return points

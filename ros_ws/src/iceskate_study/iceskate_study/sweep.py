@@ -1,37 +1,29 @@
 """Parameter sweeps: ``sweep SPEC --out DIR [--workers N] [--ray ADDRESS|local]``.
 
-Runs every point of a SPEC (``iceskate_study.spec``: a base scene, overrides, axes over any
-scene key) headless, on a local process pool (one worker per core by default) or as Ray tasks
-(``--ray local`` starts a Ray instance on this machine, ``--ray ADDRESS`` joins a running
-cluster), and writes one table, ``DIR/results.parquet`` (``iceskate_study.table``), as runs
-finish. Every generated scene is validated before any run starts. A run that falls or fails is
-a row with its reason, never the end of the sweep. Running the same SPEC into the same DIR
-again resumes: runs already in the table are not done again. SIGINT (Ctrl-C), SIGTERM and
-SIGHUP end the sweep cleanly: the runs in flight end between two control periods (and are done
-again on resume), the finished rows are in the table, one line says so, and the exit status is
-128 + the signal's number. When the SPEC names ``maps``, their heat maps are drawn into
-``DIR/maps/`` at the end (``iceskate_study.plot``). Points selected by the SPEC's ``bags`` are
-recorded with a bag and all of ``run_scene``'s files in ``DIR/runs/<key>/``.
+Every run of a SPEC, headless, on local worker processes or Ray tasks, into one resumable table
+``DIR/results.parquet``, then the SPEC's heat maps into ``DIR/maps/`` (docs/usage.md).
 """
 
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 import contextlib
 from dataclasses import dataclass, field
 import pathlib
 import signal
 import sys
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.progress import ProgressBar
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_study.errors import StudyError
 
 if TYPE_CHECKING:
-    from iceskate_study.spec import Spec
+    from iceskate_study.spec import Point, Spec
 
 #: Seconds between two writes of the table while runs finish.
 WRITE_INTERVAL = 1.0
@@ -60,15 +52,6 @@ class SweepResult:
     signum: int | None = None
 
 
-def make_executor(workers: int | None, ray: str | None, runs: int) -> Any:
-    """The local pool (``ray`` None; ``workers`` or one per CPU, at most ``runs``) or a Ray
-    executor (``'local'`` or a cluster address)."""
-    from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
-    if ray is not None:
-        return RayExecutor(ray, workers)
-    return LocalExecutor(min(workers or cpu_count(), runs))
-
-
 def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: str | None = None,
               progress: bool = True, stop: StopRequest | None = None,
               maps: bool = True) -> SweepResult:
@@ -82,49 +65,63 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
 
     :raises StudyError: a bad output folder, a table of another SPEC, Ray not reached.
     """
-    from iceskate_sim.run.session import prepare_output
+    from iceskate_sim.run.session import prepare_output, release_output
     from iceskate_study.spec import expand
-    from iceskate_study.table import ResultTable
-    from iceskate_study.worker import Task
     points = expand(spec)
     try:
         prepare_output(out)
     except SimulationError as exc:
         raise StudyError(str(exc)) from None
+    try:
+        return _sweep(spec, out, points, workers, ray, maps, progress, stop)
+    finally:
+        release_output(out)
+
+
+def _sweep(spec: Spec, out: pathlib.Path, points: list[Point], workers: int | None,
+           ray: str | None, maps: bool, progress: bool, stop: StopRequest | None
+           ) -> SweepResult:
+    """``run_sweep`` once the output folder is this sweep's."""
+    from iceskate_study.table import ResultTable
+    from iceskate_study.worker import Task
     table = ResultTable(out, spec, points)
-    todo = [p for p in points if p.key not in table.done]
+    todo = [p for p in points if p.key not in table.rows]
     result = SweepResult(len(points), len(points) - len(todo), table=table.path)
     with contextlib.ExitStack() as stack:
         if stop is None:
             stop = stack.enter_context(StopRequest())
         if todo and not stop.requested:
-            executor = make_executor(workers, ray, len(todo))
+            from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
+            executor = (RayExecutor(ray, workers) if ray is not None
+                        else LocalExecutor(min(workers or cpu_count(), len(todo))))
             stack.callback(executor.close)
-            bar = stack.enter_context(_Progress(len(todo), spec.study, progress))
+            bar = stack.enter_context(ProgressBar(len(todo), f'sweep {spec.study}', 'run',
+                                                  progress))
             bar.note(f'{len(todo)} runs on {executor.describe()}'
                      + (f' ({result.resumed} done before)' if result.resumed else ''))
             start = time.perf_counter()
             executor.submit(Task(p.key, p.raw, spec.metrics,
                                  str((out / 'runs' / p.key).resolve()) if p.bag else None)
                             for p in todo)
-            interrupted, written = False, time.perf_counter()
+            interrupted, written, statuses = False, time.perf_counter(), Counter()
             while executor.pending:
                 if stop.requested and not interrupted:
                     executor.interrupt(stop.signum or 0)
                     interrupted = True
-                for _key, row in executor.completed(POLL):
-                    if row is not None:
-                        table.add(row)
-                        result.ran += 1
-                        bar.done(row['status'])
+                for row in executor.completed(POLL):
+                    table.add(row)
+                    result.ran += 1
+                    statuses[row['status']] += 1
+                    minutes = (time.perf_counter() - start) / 60.0
+                    bar.update(1, f'{result.ran / minutes:.1f} runs/min, fell '
+                                  f'{statuses["fell"]}, failed {statuses["failed"]}')
                 if table.dirty and time.perf_counter() - written >= WRITE_INTERVAL:
                     table.write()
                     written = time.perf_counter()
             result.wall_time_s = time.perf_counter() - start
         if table.dirty or not table.path.exists():
             table.write()
-        for row in table.rows.values():
-            result.counts[row['status']] = result.counts.get(row['status'], 0) + 1
+        result.counts = dict(Counter(row['status'] for row in table.rows.values()))
         if stop.requested:
             result.signum = stop.signum
             return result
@@ -135,55 +132,9 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
     return result
 
 
-class _Progress:
-    """A tqdm bar on stderr: runs done, ETA, runs per minute, falls and failures (silent when
-    not enabled or when stderr is gone)."""
-
-    def __init__(self, total: int, study: str, enabled: bool) -> None:
-        self._bar: Any = None
-        self._counts = {'fell': 0, 'failed': 0}
-        self._start = time.perf_counter()
-        if enabled:
-            from tqdm import tqdm
-            self._bar = tqdm(total=total, desc=f'sweep {study}', unit='run', file=sys.stderr,
-                             mininterval=0.5, dynamic_ncols=True)
-
-    def __enter__(self) -> _Progress:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            with contextlib.suppress(OSError, ValueError):
-                self._bar.close()
-
-    def note(self, text: str) -> None:
-        """One line above the bar."""
-        if self._bar is not None:
-            with contextlib.suppress(OSError, ValueError):
-                self._bar.write(text, file=sys.stderr)
-
-    def done(self, status: str) -> None:
-        """One more run finished with ``status``."""
-        if status in self._counts:
-            self._counts[status] += 1
-        if self._bar is None:
-            return
-        minutes = (time.perf_counter() - self._start) / 60.0
-        try:
-            self._bar.set_postfix_str(
-                f'{(self._bar.n + 1) / minutes:.1f} runs/min, fell {self._counts["fell"]}, '
-                f'failed {self._counts["failed"]}', refresh=False)
-            self._bar.update(1)
-        except (OSError, ValueError):
-            self._bar = None
-
-
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point.
-
-    Exit status: 0 (every run of the SPEC has its row, whatever its status), 1 (refused, one
-    line on stderr saying why), 128 + the signal's number after SIGINT, SIGTERM or SIGHUP.
-    """
+    """Console entry point: exit 0 (every run of the SPEC has its row, whatever its status),
+    1 (refused, one line on stderr), 128 + the signal's number (SIGINT, SIGTERM, SIGHUP)."""
     with StopRequest() as stop:  # first of all: a signal never leaves the table half-written
         return _main(argv, stop)
 

@@ -1,15 +1,6 @@
-"""The results table of a sweep: ``DIR/results.parquet``, one row per finished run.
-
-Columns: the run's ``key`` (hash of its scene and repeat), ``point`` and ``repeat``, one column
-per axis (its dotted key), ``status`` (ok, fell, failed), ``failure`` (the reason, or null),
-``run_dir`` (the run's folder, relative to the table's, when it was recorded with a bag),
-``worker_time_s`` (the run's time in its worker [s]), the kept metrics (dotted names, e.g.
-``arm_swing_steady.corr_q11_q14``) and the SPEC's ratios. Rows are in the order of the SPEC's
-points. The SPEC's description (axes, ratios, maps) is in the file's metadata
-(``iceskate_study``, JSON).
-
-The file is rewritten whole as rows arrive (into a temporary file renamed over it), so it is
-always complete and readable, also after a crash: it holds every row up to the last write.
+"""The results table of a sweep, ``DIR/results.parquet``: one row per finished run, the SPEC's
+description in its metadata (columns: docs/usage.md). It is rewritten whole into a temporary
+file renamed over it, so it is always complete and readable, also after a crash.
 """
 
 from __future__ import annotations
@@ -33,16 +24,6 @@ METADATA_KEY = b'iceskate_study'
 TIMING_COLUMNS = ('worker_time_s', 'wall_time_s', 'real_time_factor')
 
 
-def read_rows(path: pathlib.Path) -> list[dict[str, Any]]:
-    """The rows of a results table (none if there is no file)."""
-    if not path.exists():
-        return []
-    try:
-        return pq.read_table(path).to_pylist()
-    except (OSError, pa.ArrowException) as exc:
-        raise StudyError(f'cannot read the results table {path}: {exc}') from None
-
-
 def read_table(path: pathlib.Path) -> tuple[pa.Table, dict[str, Any]]:
     """A results table and the SPEC description in its metadata."""
     try:
@@ -56,10 +37,13 @@ def read_table(path: pathlib.Path) -> tuple[pa.Table, dict[str, Any]]:
     return table, json.loads(meta)
 
 
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+def _mean(row: dict[str, Any], names: tuple[str, ...]) -> float | None:
+    """The mean of the columns ``names`` of ``row`` (None if one is no number, or NaN)."""
+    values = [row.get(name) for name in names]
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v)
+           for v in values):
         return None
-    return float(value)
+    return float(np.mean(values))
 
 
 class ResultTable:
@@ -72,20 +56,14 @@ class ResultTable:
     def __init__(self, out: pathlib.Path, spec: Spec, points: list[Point]) -> None:
         self.path = out / RESULTS
         self.spec = spec
-        self._points = {p.key: p for p in points}
-        self._order = {p.key: i for i, p in enumerate(points)}
+        self._points = {p.key: p for p in points}  # in the order of the rows
         self.rows: dict[str, dict[str, Any]] = {}
-        for row in read_rows(self.path):
+        for row in read_table(self.path)[0].to_pylist() if self.path.exists() else []:
             if row.get('key') not in self._points:
                 raise StudyError(f'{self.path} holds runs this SPEC does not make (another '
                                  'SPEC, or the base scene changed); choose a new --out')
             self.rows[row['key']] = {k: v for k, v in row.items() if v is not None}
         self.dirty = False
-
-    @property
-    def done(self) -> set[str]:
-        """Keys of the finished runs."""
-        return set(self.rows)
 
     def add(self, row: dict[str, Any]) -> None:
         """Record the row of a finished run."""
@@ -99,29 +77,22 @@ class ResultTable:
 
     def _ratios(self, rows: list[dict[str, Any]]) -> None:
         """Fill in each ratio's column (null where the run or its baseline lacks a value)."""
-        keys = self.spec.axis_keys
         for ratio in self.spec.ratios:
-            others = [k for k in keys if k != ratio.baseline_key]
-
-            def where(row: dict[str, Any], others: list[str] = others) -> str:
-                return json.dumps([row['repeat'], *(row.get(k) for k in others)], default=str)
-
-            def value(row: dict[str, Any], names: tuple[str, ...] = ratio.metrics
-                      ) -> float | None:
-                values = [_number(row.get(name)) for name in names]
-                return None if None in values else float(np.mean(values))
-
-            base = {where(r): value(r) for r in rows
+            others = [k for k in self.spec.axis_keys if k != ratio.baseline_key]
+            wheres = [json.dumps([r['repeat'], *(r.get(k) for k in others)], default=str)
+                      for r in rows]  # the run's place but for the ratio's axis
+            means = [_mean(r, ratio.metrics) for r in rows]
+            base = {where: mean for where, mean, r in zip(wheres, means, rows, strict=True)
                     if r.get(ratio.baseline_key) == ratio.baseline_value}
-            for row in rows:
-                top, bottom = value(row), base.get(where(row))
+            for row, where, top in zip(rows, wheres, means, strict=True):
+                bottom = base.get(where)
                 row.pop(ratio.name, None)
                 if top is not None and bottom:
                     row[ratio.name] = top / bottom
 
     def write(self) -> None:
         """Write every row into the table file (atomically)."""
-        rows = sorted(self.rows.values(), key=lambda r: self._order[r['key']])
+        rows = [self.rows[key] for key in self._points if key in self.rows]
         self._ratios(rows)
         first = [*RUN_COLUMNS[:3], *self.spec.axis_keys, *RUN_COLUMNS[3:]]
         later = dict.fromkeys(k for row in rows for k in row if k not in first)

@@ -1,10 +1,6 @@
-"""One run of a sweep, in a worker process (a local pool's or a Ray task's): its table row.
-
-A worker process keeps everything a run needs loaded between runs (the modules, the robot
-model: ``iceskate_sim.model.robot.load_robot`` is cached per process). Outside a run it ignores
-SIGINT, SIGTERM and SIGHUP; during one, ``iceskate_bringup.runner.simulate`` turns them into a
-clean end of the run (``RunInterrupted``), which gives no row: the run is done again when the
-sweep resumes.
+"""One run of a sweep in a worker process (a local pool's or a Ray task's): its table row. The
+process keeps the modules and the robot model loaded between runs; a signal during a run ends
+it cleanly, without a row (the run is done again when the sweep resumes).
 """
 
 from __future__ import annotations
@@ -37,16 +33,12 @@ class Task:
     run_dir: str | None = None
 
 
-def warm_up(local: bool = True) -> None:
-    """Prepare a worker process: signals ignored between runs, modules and robot loaded.
-
-    :param local: a local pool's worker, which also ends with the sweep's process (SIGKILL on
-        its parent's death: its rows are lost anyway).
-    """
+def warm_up() -> None:
+    """Prepare a local pool's worker process: signals ignored between runs, SIGKILL on the
+    sweep's death (its rows are lost anyway), modules and robot loaded."""
     for signum in STOP_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
-    if local:
-        die_with_parent(signal.SIGKILL)
+    die_with_parent(signal.SIGKILL)
     import iceskate_bringup.composition  # noqa: F401  (the control laws)
     from iceskate_sim.model.robot import load_robot
     load_robot()

@@ -1,11 +1,6 @@
-"""The visual-lifting parameters (docs/model.md §10): ``VisualLiftingParameters``.
-
-This is the one schema of the law's parameters. Each field is a ``setting`` (default,
-description, unit, range, choices) of ``iceskate_sim.parameters``: scenes (``from_dict``), the
-node's typed ROS parameters and ``ros2 param set`` are checked by it, and at build time CMake
-generates the C++ struct the law reads (``visual_lifting/parameters.hpp``) and its by-name reader
-from it (``iceskate_native/cmake/generate_parameters.py``). The law itself, eqs. (8)-(9), is C++
-only (``src/law.cpp``, ``visual_lifting.native``).
+"""The visual-lifting parameters (docs/model.md §10): ``VisualLiftingParameters``, from which the
+C++ struct the law reads is generated at build time. See docs/architecture.md, 'One parameter
+schema'.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
-"""``ros2 run visual_lifting visual_lifting``: the eq. (9) head-pose controller as a ROS node.
-
-Subscribes ``gait_state`` (the hybrid state), publishes one ``EffortCommand`` (source
-'visual_lifting') per instant on ``effort_commands``, stamped with the state's time, with the
-head target psi_d it steers to (``head_target``, recorded beside the head pose). Its parameters
-are the fields of ``VisualLiftingParameters`` as typed ROS parameters (``ros2 param list
-/visual_lifting``; a scene's ``inputs.visual_lifting`` block becomes a parameter file at launch).
-The target's origin psi(0) is the head pose of the state at t = 0 (latched again after a reset).
-The law runs natively (``visual_lifting.native``).
+"""``ros2 run visual_lifting visual_lifting``: the eq. (9) head-pose controller as a ROS node:
+``gait_state`` in, one ``EffortCommand`` (source 'visual_lifting', with its head target) per
+instant out; its parameters are ``VisualLiftingParameters``' fields. See docs/usage.md,
+'Through ROS 2: the node graph, bags, replay, analysis'.
 """
 
 from __future__ import annotations

@@ -1,15 +1,8 @@
-"""Visual lifting, eqs. (8)-(9) (docs/model.md §10), as a controller written in Python.
-
-tau_h = J_H(q)^T K_p (psi_d - psi) on the listed joints active in the mode, with the head-top
-pose psi = (y [m], z [m], pitch [rad]) and its Jacobian J_H from the kinematics. The target psi_d
-starts at psi(0), latched at t = 0, moves as ``desired_y`` says and follows the moving stance
-(``shift_*``, docs/model.md §11.2). The keyword arguments are those of
-``visual_lifting.parameters.VisualLiftingParameters``, and the answer equals the C++ law's
-(``visual_lifting/src/law.cpp``) to the last bit: the same operations in the same order.
-
-A scene runs it as ``inputs: {lifting: {plugin:
-'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting', parameters: {desired_y: fixed}}}``
-(the shipped scene ``stand_python``).
+"""Visual lifting, eqs. (8)-(9) (docs/model.md §10), as a controller written in Python:
+``VisualLifting``, tau_h = J_H(q)^T K_p (psi_d - psi), taking ``VisualLiftingParameters``' fields
+as keyword arguments; the C++ law's operations in the same order, so its answer to the last bit.
+A scene names it as ``plugin: 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'``
+(the shipped scene ``stand_python``); docs/usage.md, 'Your own controller'.
 """
 
 from __future__ import annotations

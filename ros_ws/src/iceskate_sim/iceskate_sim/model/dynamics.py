@@ -1,17 +1,7 @@
-"""The humanoid's model terms in every Table 2 gait mode: what the paper's eq. (7) is made of.
-
-For a mode (``iceskate_sim.model.modes``: which of the 18 coordinates ``[y0, q1, ..., q17]`` are
-active, which swing-foot constraints act) and a support side and pivot, ``ModelTerms`` gives the
-mass matrix M, the Coriolis/centrifugal and gravity terms h and g, the constraint rows J, frame
-placements, the head-top pose psi and its Jacobian and the energy, on Pinocchio's algorithms
-over the four support-rooted models. The coupling analysis of eq. (11) reads them from recorded
-states.
-
-Eq. (7) itself, the constrained solve with friction, runs in C++ (``iceskate_native.Dynamics``,
-wrapped by ``iceskate_sim.physics.native.NativeGaitDynamics``); ``DynamicsResult`` is its
-answer at one state.
-
-Units: SI (m, rad, s, kg, N, N m).
+"""The humanoid's model terms in every Table 2 gait mode (SI units): ``ModelTerms`` (M, h, g,
+constraint rows, frames, the head-top pose and its Jacobian), ``DynamicsParameters`` and
+``DynamicsResult``, the answer of eq. (7), which runs in C++. See docs/model.md §4 and
+docs/architecture.md, 'The native core and its test oracle'.
 """
 
 from __future__ import annotations

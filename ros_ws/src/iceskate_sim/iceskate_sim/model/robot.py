@@ -1,16 +1,6 @@
-"""The humanoid of the paper's Table 1 as Pinocchio models rooted at the support foot.
-
-The URDF (``share/iceskate_sim/urdf/iceskate_humanoid.urdf``) describes the robot rooted at the
-pelvis with anatomical joint names, as viewers expect. The paper's Table 2 coordinates are
-different: the tree is rooted at the *support* foot, q1 tips that foot about its toe or heel
-edge, y0 slides it along the world y axis, q2..q7 run along the legs from the support ankle to
-the swing ankle, q8..q17 are the torso yaw/pitch, arms and neck. This module reads the URDF with
-Pinocchio, takes every link's mass, centre of mass and inertia and every joint's location in the
-zero configuration (all link frames world-aligned), and rebuilds the tree rooted at the support
-foot, once for each support side and pivot edge (4 models, prepared once).
-
-Coordinate vector (always length 18): ``[y0, q1, q2, ..., q17]``, so ``q[i]`` is joint i.
-Units: m, rad, kg, kg m^2, N m s/rad.
+"""The humanoid of the paper's Table 1 as Pinocchio models rooted at the support foot:
+``load_robot`` -> ``Robot`` with a ``SupportModel`` per side and pivot, from the pelvis-rooted
+URDF; coordinates ``[y0, q1, ..., q17]``, SI units. See docs/model.md §1.3 and §2.7.
 """
 
 from __future__ import annotations

@@ -1,10 +1,5 @@
-"""The moving stance: a scheduled shift of the body after each support exchange (ROS-free).
-
-After the support exchange at t_e the stance moves +dy1 forward and dz1 down over T1, then,
-once the swing heel has struck at t_touchdown, a further +dy2 forward over T2 (smoothstep
-ramps; docs/model.md, the posture stabiliser). Two controllers follow the same schedule: the
-gait manager's posture reference moves the pelvis with it, and visual lifting shifts its head
-target by it, so both are configured with this one value (the ramps run in the C++ laws).
+"""The moving stance's schedule, ``StanceSchedule`` (m, s), which the controllers that follow
+the stance share (the ramps run in the C++ laws). See docs/model.md §11.2.
 """
 
 from __future__ import annotations

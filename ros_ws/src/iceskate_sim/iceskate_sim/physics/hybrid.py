@@ -1,11 +1,7 @@
-"""The discrete side of the hybrid gait automaton (docs/model.md §6-§7): the state, the guards
-as data, the event log and the reasons a run ends.
-
-The discrete state is a ``HybridState``: Table 2 mode, support side, pivot edge, anchors,
-slide directions, step index and the times t_e (last exchange) and touchdown. ``GUARDS`` names
-each guard, its cause and the modes it applies in; the native simulator
-(``iceskate_native.HybridSimulator``) receives this table and evaluates, locates and applies
-the guards (``iceskate_native/src/guards.cpp``, ``transitions.cpp``).
+"""The discrete side of the hybrid gait automaton: ``HybridState``, the floor's
+``FrictionModel``, the guard table ``GUARDS`` the native simulator receives, ``Transition`` and
+the reasons a run ends. See docs/model.md §6-§7 and docs/architecture.md, 'The native core and
+its test oracle'.
 """
 
 from __future__ import annotations

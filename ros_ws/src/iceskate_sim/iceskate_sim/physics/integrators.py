@@ -1,16 +1,5 @@
-"""The integrator settings of a run (docs/model.md, integrators).
-
-The native simulator (``iceskate_native/src/integrators.cpp``, ``integrators_adaptive.cpp``)
-advances the state x = [q (18), v (18)] from t0 towards t_end with fixed inputs and stops at the
-first guard whose value crosses zero from below, located by TOMS 748: by re-taking the step
-with a shorter size for the fixed-step methods (semi-implicit Euler, implicit Euler, classic
-RK4), on the dense output for the adaptive Dormand-Prince 5(4) (``rk45``), so the event time is
-as accurate as the method itself.
-
-``implicit_euler`` is semi-implicit Euler with the joint, impedance and soft-stop damping taken
-implicitly ((M + h D) a = f - D v, as MuJoCo's implicitfast treats damping): the light, heavily
-damped links of this model (pelvis, torso segments, hands: d/I up to ~1e4 1/s) make every
-explicit method need steps of ~0.1 ms; this one stays stable at much larger steps.
+"""The integrator settings of a run: ``IntegratorConfig`` (step and tolerances in s) and the
+methods ``FIXED_STEP``, ``METHODS``; the integrators run in C++. See docs/model.md §8.1 and §6.4.
 """
 
 from __future__ import annotations

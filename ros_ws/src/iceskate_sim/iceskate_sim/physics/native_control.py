@@ -1,12 +1,6 @@
-"""The native control laws seen from Python: their robot model, their input, their answer.
-
-The laws of visual_lifting and gait_manager run in C++ (``iceskate_native.Controller``
-subclasses of their packages' ``_law`` modules) and read the robot through an
-``iceskate_native.ModelKinematics`` over the same four support models the dynamics use. This
-module makes that kinematics from a ``Robot``, turns an ``Observation`` into the native one
-(side 0 right / 1 left, pivot 0 toe / 1 heel) and gives a law's answer as the ``CommandValues``
-a controller node sends, so that the headless composition and the ROS nodes share this one
-path.
+"""The native control laws seen from Python: ``native_kinematics`` (their robot model),
+``native_observation`` (their input) and ``native_values`` (their answer as ``CommandValues``).
+See docs/architecture.md, 'The control laws in C++'.
 """
 
 from __future__ import annotations

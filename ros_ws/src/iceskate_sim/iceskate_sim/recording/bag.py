@@ -1,13 +1,6 @@
-"""Recording a run to a rosbag2 bag (MCAP) with ``rosbags``, without ROS.
-
-One sample per control period, stamped with the simulation time of the state, on the topics
-the ROS simulator node publishes (``messages.RECORDED_TOPICS``), so a headless run and a ROS run
-give the same bag layout and the offline analysis reads either. Bag metadata (``custom_data``)
-holds the scene, its parameters, the integrator and the project version.
-
-``BagRecorder(..., background=True)`` hands the native loop's blocks of samples to a writer
-process that encodes them (``messages.SampleMessages``) and writes the messages while the
-simulation goes on; the bag's messages are byte-identical to an in-process recording.
+"""Recording a run to a rosbag2 bag (MCAP) without ROS: ``BagRecorder``, which hands the native
+loop's blocks to a writer process (or writes them in-process), with the run in the metadata.
+See docs/architecture.md, 'Bags'.
 """
 
 from __future__ import annotations

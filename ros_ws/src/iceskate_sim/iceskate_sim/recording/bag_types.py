@@ -1,11 +1,6 @@
-"""Register the iceskate_interfaces message types in a rosbags typestore (ROS-free).
-
-The bag writer (recorder) and the offline analysis read and write rosbag2 bags with ``rosbags``
-and need our custom message definitions. They come from the ``.msg`` files of the
-``iceskate_interfaces`` package, so no ROS build and no ``rclpy`` import are needed.
-
-The ``.msg`` files are those the package installs (``share/iceskate_interfaces/msg``, found
-through the ament index).
+"""Register the iceskate_interfaces message types in a rosbags typestore (ROS-free):
+``make_typestore``, from the ``.msg`` files the package installs (found through the ament index).
+See docs/usage.md, 'Through ROS 2: the node graph, bags, replay, analysis'.
 """
 
 from __future__ import annotations

@@ -1,19 +1,8 @@
 """Byte layouts of ROS messages in CDR, computed from their ``.msg`` definitions.
 
-The bag writer, the simulator node and the controller nodes move whole blocks of samples
-through messages; building and parsing message objects (rosbags, rclpy) costs more per message
-than a control period. So they work on bytes: ``Layout`` says where each number of a message
-lies, given its strings and sequence lengths. ``program`` writes messages from columns of
-samples in the native core (one call for a block, or for the live sample); ``read`` and
-``unpacker`` take numbers out of received bytes. The layout is computed from rosbags' type
-store (the ``.msg`` definitions), never guessed from sample bytes.
-
-The encoding is XCDR1 little endian, as rosbags, rclpy and Fast DDS write it: a 4-byte
-encapsulation header; each primitive aligned to its size counted from the end of that header;
-a string as a uint32 length (NUL counted), its bytes and a NUL; a sequence as a uint32 count
-then its elements; a fixed-size array as its elements. Field paths join names with ``.``; the
-elements of a sequence or array of messages or strings are named by their index
-(``transforms.3.header.frame_id``); a sequence or array of numbers is one ``Field``.
+``Layout`` (where each number lies; ``program``, ``read``, ``unpacker``), ``layout_for``,
+``layout_of``, ``LayoutCache``. See docs/architecture.md, 'Byte layouts come from the ``.msg``
+definitions'.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
 """A rosbag2 bag (MCAP storage) written many messages at a time with the ``mcap`` records.
 
-``rosbags``' and ``mcap``'s writers take one message per call (3.6 and about 10 us a message); a
-control instant has six, more than the native core takes for a whole control period. ``Bag``
-takes the messages of many instants in one call: it packs their MCAP Message records into the
-open chunk in one join and writes a chunk (uncompressed, with its message indexes) when it
-passes 1 MiB. On close it writes what rosbag2's MCAP storage writes: the ``rosbag2`` metadata
-record, the summary (schemas, channels, statistics, chunk and metadata indexes, summary
-offsets), the footer, and ``metadata.yaml`` beside the file (format version 9), so ``ros2 bag``,
-Foxglove, ``rosbags`` and ``mcap`` all read the bag.
+``Bag`` (``write_instants``: the messages of many control instants in one call; ``close``).
+See docs/architecture.md, 'Bags'.
 """
 
 from __future__ import annotations

@@ -1,29 +1,8 @@
-"""The messages of recorded samples: what each topic holds of a sample, as CDR bytes.
+"""What each topic's message holds of a recorded sample, written as CDR bytes by the native core.
 
-A sample is a row of the native control loop's block (``iceskate_native.ControlLoop.run``,
-``take_block``, ``live``: columns t, q, v, qdd, passive, mode, side, pivot_code, step_index,
-multipliers, support forces, cop_y, head_position, head_orientation, tf, last_event,
-stamps_ns, the mode's flags, effort_total and the efforts of its sources). What each field of
-each topic's message holds is written once, below: for a message shape (the strings and
-sequence lengths it has, e.g. a gait mode's multiplier names), the column and element of each
-of its numbers. From that and the topic's ``cdr.Layout`` the native core writes the messages:
-``SampleMessages.encode`` those of a block (the bag), ``encode_live`` those of the live sample
-(the simulator node's topics).
-
-Topics (one message per sample, stamped with its simulation time):
-
-* ``/clock`` (rosgraph_msgs/Clock)
-* ``/joint_states`` (sensor_msgs/JointState): the 18 coordinates y0, q1..q17; position,
-  velocity and the total input effort held over the period
-* ``/head_pose`` (geometry_msgs/PoseStamped, frame ``world``): the head-top frame
-* ``/gait_state`` (iceskate_interfaces/GaitState): the whole hybrid state, what the
-  controllers read
-* ``/joint_dynamics`` (iceskate_interfaces/JointDynamics): accelerations and the effort of
-  every input source (plus ``passive``: damping and soft stops)
-* ``/tf`` (tf2_msgs/TFMessage): every URDF link (``Robot.tf_frames``: the world to the root
-  link, then one per URDF joint, parent link to child link; the loop's ``tf`` column)
-
-and ``/robot_description`` (std_msgs/String) once.
+``SampleMessages`` gives, per topic and message shape, the sample column and element of each
+number (``encode``: a block's messages, the bag; ``encode_live``: the simulator node's topics);
+``TOPICS``, ``RECORDED_TOPICS``. See docs/architecture.md, 'One sample form'.
 """
 
 from __future__ import annotations

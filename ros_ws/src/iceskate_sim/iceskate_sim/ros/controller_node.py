@@ -1,19 +1,7 @@
-"""The part the controller nodes (visual_lifting, gait_manager) share: state in, commands out.
-
-A ``ControllerNode`` declares its law's parameters as typed ROS parameters, generated from the
-law's parameter class (``declare_parameters``: ``ros2 param list/describe/get/set`` show and
-change them, a change is checked by the class's own rules), subscribes ``gait_state`` (the whole
-hybrid state of an instant: one message in per instant, best effort), taken as CDR bytes and
-read straight into the native observation (``gait_state_cdr.GaitStateReader``: no message
-object), asks the subclass's law (``compute``: a native law, reading the robot through
-``kinematics``) for its command values and publishes them, with the per-source breakdown, as
-one ``EffortCommand`` (source: the node's name)
-on ``effort_commands``, stamped with the state's stamp (the lockstep key): one message out per
-instant and node, published raw (``effort_cdr.CommandEncoder``: the values written into the
-message's layout, where an rclpy message costs 15 us). ``use_sim_time`` is true unless
-overridden. A law failing at one instant logs an error and sends nothing: the simulator's
-timeout then names the node. The node logs once that it is ready, and ends (exit code 0) when
-the simulator it served is gone: the run is over.
+"""The part the controller nodes share: ``ControllerNode`` (its law's typed parameters,
+``gait_state`` bytes in, one raw ``EffortCommand`` per instant out). See docs/usage.md,
+'Through ROS 2: the node graph, bags, replay, analysis', and docs/architecture.md, 'One run:
+many periods per native call'.
 """
 
 from __future__ import annotations

@@ -1,14 +1,6 @@
-"""Checked conversions of message fields to the ROS-free core types (no rclpy import).
-
-* ``command_from_message``: an ``EffortCommand``'s fields (``effort_cdr`` reads them from the
-  bytes) -> its ``CommandValues`` (the summed command and its per-source breakdown), refusing
-  NaN, wrong lengths, repeated or unknown joint names with a ``SimulationError`` that names the
-  problem and the source (all 18 names in order, as the controllers send, skip the reordering);
-* ``finite_vector`` and ``PIVOT_OF_CODE``, which the GaitState reader shares.
-
-Known loss: GaitState carries ``pivot = PIVOT_NONE`` while the support sole is flat, so the
-observation then says 'toe'. The support models of either pivot give the same kinematics while
-q1 = 0, which is all a flat-sole law evaluates.
+"""Checked conversions of message fields to the ROS-free core types (no rclpy import):
+``command_from_message`` (an ``EffortCommand`` -> ``CommandValues``), ``finite_vector``,
+``PIVOT_OF_CODE``. See docs/architecture.md, 'The control laws in C++'.
 """
 
 from __future__ import annotations

@@ -1,17 +1,6 @@
-"""``EffortCommand`` as CDR bytes, both ways, without message objects (the lockstep's hot path).
-
-The simulator takes ``effort_commands`` raw and the controller nodes publish them raw: rclpy's
-message objects cost 15-21 us to deserialize and 10-35 us more to convert, per command and
-period, on the lockstep's critical path. A controller's command has the same layout at every
-instant (its names, sources and array lengths do not change), so both sides work on the
-message's ``cdr.Layout``:
-
-* ``CommandDecoder`` checks one sender's first message with ``command_from_message``, which
-  names any problem, and keeps its layout. A later message of that layout (same counts and
-  strings, so the same sender) is read from the known places (its values checked: finite,
-  gains >= 0) into ``CommandValues``, views of its bytes that the native loop takes as they
-  are; any other goes the checked way again.
-* ``CommandEncoder`` writes a controller's command into its layout (stamp and values).
+"""``EffortCommand`` as CDR bytes, both ways, without message objects (the lockstep's hot path):
+``CommandDecoder`` (the simulator) and ``CommandEncoder`` (the controller nodes).
+See docs/performance.md, 'End to end: recording, start-up, the whole command, the graph'.
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
 """``GaitState`` CDR bytes -> the observation a native control law takes, without message
-objects (the controller nodes' hot path: rosbags' deserialisation and the conversion of its
-message cost 30 us per instant).
-
-``GaitStateReader.read`` reads the fields a law needs at their places in the message's
-``cdr.Layout`` and checks them as ``ros_conversions.observation_from_gait_state`` does, with
-the same words.
+objects (the controller nodes' hot path): ``GaitStateReader``. See docs/architecture.md, 'One
+run: many periods per native call'.
 """
 
 from __future__ import annotations

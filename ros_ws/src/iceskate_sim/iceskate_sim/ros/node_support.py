@@ -1,21 +1,7 @@
-"""What every iceskate node shares: QoS, parameter declaration and the Jazzy main() idiom.
-
-* ``STATE_QOS``: reliable, keep-last 10, volatile (what the state and command topics are
-  published with: every reader matches it);
-  ``LOCKSTEP_READER_QOS``: best effort, keep-last 10, volatile (the lockstep's own readers);
-  ``LATCHED_QOS``: transient-local depth 1 (robot_description).
-* ``declare_parameters``: every field of a parameter class (``iceskate_sim.parameters``) as a
-  typed parameter with its descriptor (description, unit, range), changes at run time checked
-  by the class's own rules; a value out of range or of the wrong type raises ``ConfigError``
-  naming the parameter, and so does a parameter the node does not have (``check_unknown``: a
-  typo in a params file);
-  ``write_parameter_file``: a ROS 2 parameter file of such values.
-* ``run_node``: rclpy.init, construct, spin an ``EventsExecutor`` with a ``spin_once`` loop
-  (its ``spin()`` busy-waits and ignores SIGTERM in rclpy 7.1), stop cleanly on SIGINT, SIGTERM
-  or SIGHUP (``iceskate_sim.shutdown.StopRequest``; the node's ``close`` gets the signal),
-  destroy and shut down; a ``ConfigError`` or ``SimulationError`` while starting (a parameter
-  file that is not UTF-8 YAML among them: ``check_parameter_files``) exits 1 with one line
-  naming the problem.
+"""What every iceskate node shares: the QoS profiles (``STATE_QOS``, ``LOCKSTEP_READER_QOS``,
+``LATCHED_QOS``), typed parameters from a parameter class (``declare_parameters``,
+``ConfigError``) and the Jazzy main() (``run_node``). See docs/usage.md, 'Through ROS 2: the
+node graph, bags, replay, analysis', and docs/architecture.md, 'Parameters'.
 """
 
 from __future__ import annotations

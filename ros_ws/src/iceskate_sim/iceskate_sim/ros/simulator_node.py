@@ -1,16 +1,8 @@
 """``ros2 run iceskate_sim simulator``: the simulator node, a thin adapter over LockstepLoop.
 
-Publishes ``gait_state``, ``/clock``, ``joint_states`` and ``head_pose`` at every control
-instant (the CDR bytes of the bag's message types, published raw; a topic nobody subscribes to
-is neither built nor sent: its readers are counted by the 20 ms timer, not at every instant)
-and ``robot_description`` once (transient local); takes ``effort_commands`` (best effort:
-see ``LOCKSTEP_READER_QOS``; raw, decoded by ``effort_cdr.CommandDecoder``); services
-``~/step``, ``~/pause``, ``~/resume``, ``~/reset``.
-Lockstep: state t_k out, a command stamped t_k from every source the scene runs, one period,
-repeat; a source silent for ``control_timeout`` s ends the run with an error naming it and its
-node. The bag is written while the controllers compute.
-``~/step`` answers at once with the time the steps will reach
-(the EventsExecutor cannot defer a response): watch /clock.
+Publishes ``gait_state``, ``/clock``, ``joint_states``, ``head_pose`` and ``robot_description``,
+takes ``effort_commands`` in lockstep, serves ``~/step``, ``~/pause``, ``~/resume``, ``~/reset``.
+See docs/usage.md, 'Through ROS 2: the node graph, bags, replay, analysis'.
 """
 
 from __future__ import annotations

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import asdict
+import fcntl
 import json
+import os
 import pathlib
 import tempfile
 import time
@@ -57,12 +59,25 @@ def scene_metadata(scene: Scene) -> dict[str, str]:
             'integrator': json.dumps(asdict(scene.simulator.integrator), sort_keys=True)}
 
 
-def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> None:
-    """Create the output directory ``out`` (with its parents) and check that a run can write
-    into it, and that the bag path ``bag`` (if any) is free.
+#: The lock file of an output directory, held by the one run that writes into it.
+LOCK_NAME = '.run.lock'
+#: How a launcher hands its lock on the output directory to the simulator process it starts:
+#: the number of the inherited descriptor.
+LOCK_FD_ENV = 'ICESKATE_OUTPUT_LOCK_FD'
+#: The output directories this process holds, by resolved path: their lock descriptors.
+_HELD: dict[pathlib.Path, int] = {}
+
+
+def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> int:
+    """Create the output directory ``out`` (with its parents), check that a run can write into
+    it, take it for this run (an exclusive lock on ``out/.run.lock``, kept until
+    ``release_output`` or the end of the process; a lock this process or its launcher holds
+    already is taken as it is) and check that it holds no finished run and that the bag path
+    ``bag`` (if any) is free. Returns the lock's descriptor.
 
     :raises SimulationError: one sentence naming the path and the problem (a file in the way,
-        no permission, a read-only file system, the bag of an earlier run).
+        no permission, a read-only file system, another run writing there, an earlier run's
+        bag or metrics).
     """
     out = pathlib.Path(out)
     for path in (out, *out.parents):
@@ -83,9 +98,48 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> None:
     except OSError as exc:
         raise SimulationError(f'output directory {out} is not writable: {_reason(exc)}') \
             from None
-    if bag is not None and (bag.exists() or bag.is_symlink()):
-        raise SimulationError(f'output directory {out} already holds a recorded run: {bag} '
-                              'already exists; choose a new --out')
+    fd = _lock(out)
+    for earlier in ([bag] if bag is not None else []) + [out / 'metrics.json']:
+        if earlier.exists() or earlier.is_symlink():
+            release_output(out)
+            raise SimulationError(f'output directory {out} already holds a recorded run: '
+                                  f'{earlier} already exists; choose another output directory')
+    return fd
+
+
+def _lock(out: pathlib.Path) -> int:
+    """The descriptor of this process's exclusive lock on ``out`` (taken now if need be)."""
+    path, key = out / LOCK_NAME, out.resolve()
+    if key in _HELD:
+        return _HELD[key]
+    try:
+        fd = int(os.environ.get(LOCK_FD_ENV, ''))
+        held, there = os.fstat(fd), os.stat(path)
+        if (held.st_dev, held.st_ino) == (there.st_dev, there.st_ino):
+            _HELD[key] = fd  # the launcher's, inherited
+            return fd
+    except (ValueError, OSError):
+        pass
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise SimulationError(f'output directory {out} cannot be locked: {_reason(exc)}') \
+            from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise SimulationError(f'output directory {out} is in use by another run; choose '
+                              'another output directory or wait until that run ends') from None
+    _HELD[key] = fd
+    return fd
+
+
+def release_output(out: pathlib.Path) -> None:
+    """Give up this process's lock on ``out`` (if it holds one)."""
+    fd = _HELD.pop(pathlib.Path(out).resolve(), None)
+    if fd is not None:
+        os.close(fd)
 
 
 def _reason(exc: OSError) -> str:
@@ -117,9 +171,14 @@ class Session:
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         if out is not None:
             prepare_output(out, bag)
-        self.recorder = (BagRecorder(bag, scene_metadata(scene),
-                                     self.robot.urdf_path.read_text(encoding='utf-8'),
-                                     background=True) if bag is not None else None)
+        try:
+            self.recorder = (BagRecorder(bag, scene_metadata(scene),
+                                         self.robot.urdf_path.read_text(encoding='utf-8'),
+                                         background=True) if bag is not None else None)
+        except BaseException:
+            if out is not None:
+                release_output(out)
+            raise
         self.metrics: dict[str, Any] | None = None
         #: the native loop holding commands received from outside (``command_inbox``)
         self._inbox: NativeControlLoop | None = None
@@ -290,6 +349,8 @@ class Session:
             self._write_metrics(extra, closed)
             if written is not None:
                 written()
+        if self.out is not None:
+            release_output(self.out)
         return self.metrics
 
     def _write_metrics(self, extra: Mapping[str, Any] | None,
