@@ -4,7 +4,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
 ROOT := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
-# Run a command inside the project environment (venv + ros_ws/install + LOCALHOST DDS).
+# Run a command inside the project environment (venv + ros_ws/install + DDS on loopback).
 IN_ENV := cd $(ROOT) && . ./env.sh &&
 
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.

@@ -2,7 +2,7 @@
 # Environment of the iceskate project. Use it from bash by sourcing:   . ./env.sh
 #
 # It activates .venv, sources the colcon workspace ros_ws/install, keeps DDS on loopback
-# (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), gives this shell its own ROS_LOG_DIR and puts the
+# (the project's Fast DDS profile), gives this shell its own ROS_LOG_DIR and puts the
 # packages' executable dirs (ros_ws/install/<pkg>/lib/<pkg>) on PATH.
 # Needs `make setup` (scripts/bootstrap.sh) to have run; on failure it returns 1 and leaves the
 # shell as it was.
@@ -34,8 +34,17 @@ case ":${AMENT_PREFIX_PATH:-}:" in
   *) export AMENT_PREFIX_PATH="${AMENT_PREFIX_PATH:+$AMENT_PREFIX_PATH:}$VIRTUAL_ENV" ;;
 esac
 
-# DDS discovery never leaves the machine (mandatory here).
-export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# DDS never leaves the machine (mandatory here): the project's Fast DDS profile puts every socket
+# on 127.0.0.1 and discovers by unicast to 127.0.0.1; under it the discovery range is SUBNET, as
+# rmw_fastrtps opens sockets on every interface in its LOCALHOST mode (docs/usage.md, "DDS
+# stays on loopback"). Without the profile (not built yet), LOCALHOST.
+_iceskate_dds="$_iceskate_root/ros_ws/install/iceskate_sim/share/iceskate_sim/config/fastdds_loopback.xml"
+if [ -f "$_iceskate_dds" ]; then
+  export FASTRTPS_DEFAULT_PROFILES_FILE="$_iceskate_dds" FASTDDS_DEFAULT_PROFILES_FILE="$_iceskate_dds"
+  export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET
+else
+  export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+fi
 # Ray (sweep --ray) never reports usage statistics.
 export RAY_USAGE_STATS_ENABLED=0
 
@@ -57,5 +66,5 @@ done
 export PATH
 
 if [ "$_iceskate_had_u" = 1 ]; then set -u; fi
-unset _iceskate_root _iceskate_had_u _iceskate_dir _iceskate_pkg
+unset _iceskate_root _iceskate_had_u _iceskate_dir _iceskate_pkg _iceskate_dds
 return 0 2>/dev/null || true

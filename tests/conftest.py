@@ -20,13 +20,6 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 #: colcon workspace sources.
 ROS_SRC = REPO_ROOT / 'ros_ws' / 'src'
 
-# Session-wide guard, set at import time so that it holds before any test module imports rclpy:
-# Fast DDS discovery never leaves the machine (with the default range it sends multicast out of
-# the network interface). Child processes inherit it through os.environ.
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ.pop('ROS_LOCALHOST_ONLY', None)  # deprecated, and warns when set with the range
-
-
 def _add_unbuilt_packages_to_path() -> None:
     """Make our ament_python packages importable when the workspace is not built/sourced.
 
@@ -47,6 +40,16 @@ _add_unbuilt_packages_to_path()
 # a real package.
 sys.path.append(str(REPO_ROOT / 'tests'))
 
+# Session-wide guard, set at import time so that it holds before any test creates a participant:
+# Fast DDS stays on loopback (the shipped rule, ``loopback_dds``). Child processes inherit it
+# through os.environ.
+from iceskate_sim.ros.loopback import loopback_dds  # noqa: E402
+
+loopback_dds(os.environ)
+_DDS = {key: os.environ.get(key) for key in (
+    'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTRTPS_DEFAULT_PROFILES_FILE',
+    'FASTDDS_DEFAULT_PROFILES_FILE')}
+
 # Domain ids handed out in this run: start from the pid so that parallel runs on one machine
 # (several checkouts, pytest-xdist workers) use different DDS domains; 4 runs in one domain
 # cross-talk. Fast DDS accepts ids 0..232; 0 (the default) is never used.
@@ -55,11 +58,11 @@ _domain_ids = itertools.count(os.getpid() % _MAX_DOMAIN_ID)
 
 
 @pytest.fixture(autouse=True, scope='session')
-def _ros_discovery_localhost() -> Iterator[None]:
-    """Re-assert LOCALHOST discovery for the whole session (a test may have changed it)."""
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+def _ros_dds_on_loopback() -> Iterator[None]:
+    """Re-assert DDS on loopback for the whole session (a test may have changed it)."""
+    loopback_dds(os.environ)
     yield
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    loopback_dds(os.environ)
 
 
 @pytest.fixture(autouse=True)
@@ -68,7 +71,9 @@ def _ros_log_dir(tmp_path_factory: pytest.TempPathFactory,
     """Give every test its own ``ROS_LOG_DIR`` (rclpy.init fails if it cannot create it)."""
     log_dir = tmp_path_factory.mktemp('ros_log')
     monkeypatch.setenv('ROS_LOG_DIR', str(log_dir))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    for key, value in _DDS.items():
+        if value is not None:
+            monkeypatch.setenv(key, value)
     return log_dir
 
 
@@ -86,7 +91,7 @@ def ros_env(ros_domain_id: int) -> dict[str, str]:
     """Return an environment for ROS child processes: this one plus the test's domain id."""
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(ros_domain_id)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    loopback_dds(env)
     return env
 
 

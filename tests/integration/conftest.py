@@ -1,6 +1,6 @@
 """Fixtures of the ROS graph integration tests: the graph's processes and a listening test node.
 
-Every process runs on the test's own DDS domain with LOCALHOST discovery, its own ROS_LOG_DIR and
+Every process runs on the test's own DDS domain with DDS on loopback, its own ROS_LOG_DIR and
 UDPv4 only (a killed process leaves no shared-memory files behind). Every wait has a deadline.
 """
 

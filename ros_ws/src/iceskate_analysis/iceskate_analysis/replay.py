@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pathlib
 import sys
 import time
@@ -25,6 +26,7 @@ from rosgraph_msgs.msg import Clock
 from iceskate_analysis.bag_io import open_bag
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.stamps import set_stamp
+from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS
 
 
@@ -106,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(remove_ros_args(argv)[1:])
     if not args.fast and not args.rate > 0:
         parser.error('--rate must be > 0')
+    loopback_dds(os.environ)
     rclpy.init(args=argv)
     node = None
     try:

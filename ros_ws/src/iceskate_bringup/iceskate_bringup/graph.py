@@ -3,7 +3,7 @@
 Starts the simulator and the controller nodes the scene needs (visual_lifting, gait_manager,
 one ``plugin_controller`` named after its scene key per controller written in Python) as
 separate processes, each in its own process group, on one DDS domain (see
-``ros_environment``) with LOCALHOST discovery and a per-run ROS_LOG_DIR; waits for the
+``ros_environment``) with DDS on loopback and a per-run ROS_LOG_DIR; waits for the
 simulator to end the run; stops the controllers with SIGTERM (SIGKILL after a grace period).
 The nodes never outlive the launcher: they get SIGTERM when it dies, even by SIGKILL
 (``start``), and a SIGINT, SIGTERM or SIGHUP to the launcher is passed on to the simulator,
@@ -41,6 +41,7 @@ from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.parameters import flatten
+from iceskate_sim.ros.loopback import PROFILE_VARIABLES, loopback_dds
 from iceskate_sim.ros.node_support import write_parameter_file
 from iceskate_sim.run.scene import Scene
 from iceskate_sim.run.session import LOCK_FD_ENV, prepare_output, release_output
@@ -133,7 +134,8 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
 
 def ros_environment(domain_id: int | None = None, log_dir: pathlib.Path | None = None
                     ) -> dict[str, str]:
-    """This environment plus a domain, LOCALHOST discovery and a ROS_LOG_DIR of the run.
+    """This environment plus a domain, DDS on loopback (``loopback_dds``) and a ROS_LOG_DIR of
+    the run.
 
     The domain is ``domain_id``, else $ROS_DOMAIN_ID when set (to watch the run from a shell),
     else one derived from this process id (1..232; runs started side by side do not meet).
@@ -142,8 +144,7 @@ def ros_environment(domain_id: int | None = None, log_dir: pathlib.Path | None =
     if domain_id is None:
         domain_id = int(env.get('ROS_DOMAIN_ID') or 1 + os.getpid() % 232)
     env['ROS_DOMAIN_ID'] = str(domain_id)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env.pop('ROS_LOCALHOST_ONLY', None)
+    loopback_dds(env)
     env['ROS_LOG_DIR'] = str(log_dir or tempfile.mkdtemp(prefix='iceskate-ros-log-'))
     env['PYTHONUNBUFFERED'] = '1'
     return env
@@ -448,7 +449,7 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
     from rclpy.signals import SignalHandlerOptions
 
     from iceskate_sim.ros.node_support import ConfigError, spin_until
-    keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE')
+    keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE', *PROFILE_VARIABLES)
     saved = {key: os.environ.get(key) for key in keys}
     os.environ.update({key: env[key] for key in keys})
     context = rclpy.Context()

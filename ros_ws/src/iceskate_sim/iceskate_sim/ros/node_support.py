@@ -45,6 +45,7 @@ from iceskate_sim.parameters import (
     unflatten,
 )
 from iceskate_sim.recording.bag_types import OFFERED_QOS
+from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.shutdown import STOP_SIGNALS, StopRequest, process_alive
 from iceskate_sim.yaml_io import read_yaml
 
@@ -258,6 +259,7 @@ def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None
     with StopRequest() as stop:
         try:
             check_parameter_files(sys.argv if args is None else args)
+            loopback_dds(os.environ)
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = make()
             executor = EventsExecutor()
