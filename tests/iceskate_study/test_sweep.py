@@ -6,6 +6,7 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import pyarrow.parquet as pq
@@ -27,8 +28,12 @@ def test_the_local_pool_and_local_ray_give_the_same_table(tmp_path, grid):
     spec = parse_spec(grid, tmp_path / 'spec.yaml')
     local = run_sweep(spec, tmp_path / 'local', workers=2, progress=False)
     assert (local.total, local.ran, local.resumed) == (4, 4, 0)
+    temp = Path(tempfile.gettempdir())
+    before = set(temp.glob('iceskate-ray-*')) | set(Path('/tmp/ray').glob('session_*'))
     on_ray = run_sweep(spec, tmp_path / 'ray', workers=2, ray='local', progress=False)
     assert on_ray.ran == 4 and not ray.is_initialized()  # the local instance is stopped
+    # its session files lived in a private folder of its own, removed with it
+    assert set(temp.glob('iceskate-ray-*')) | set(Path('/tmp/ray').glob('session_*')) == before
     rows = _rows(tmp_path / 'local')
     assert rows == _rows(tmp_path / 'ray')
     assert [r['status'] for r in rows] == ['ok'] * 4

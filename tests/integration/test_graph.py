@@ -185,7 +185,7 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
 
 
 def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
-    """The simulator's own one-line error, not an older run's metrics.json left in --out."""
+    """The simulator's own one-line error, from the node that refused the scene."""
     import subprocess
     import sys
 
@@ -197,8 +197,6 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
     scene = tmp_path / 'toe_down.yaml'
     scene.write_text(yaml.safe_dump(raw))
     out = tmp_path / 'cli'
-    out.mkdir()
-    (out / 'metrics.json').write_text('{"failure": "the failure of an older run"}')
     result = subprocess.run(
         [sys.executable, '-m', 'iceskate_bringup.runner', str(scene), '--ros', '--out', str(out)],
         env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
@@ -206,7 +204,7 @@ def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
     assert result.returncode == 1
     assert 'run_scene: error: the simulator exited with 1: scene ' in result.stderr
     assert 'the initial state cannot be simulated' in result.stderr
-    assert 'older run' not in result.stderr and 'Traceback' not in result.stderr
+    assert 'Traceback' not in result.stderr
 
 
 def test_run_scene_ros_refuses_an_out_holding_a_run_before_starting_nodes(tmp_path, ros_env):
@@ -228,9 +226,9 @@ def test_rt_priority_starts_the_nodes_under_sched_fifo_with_the_same_trajectory(
         needs_fifo, graph_run, tmp_path, ros_domain_id, monkeypatch, assert_same_trajectory):
     started = []
 
-    def spy(spec, env, start=graph.start):
+    def spy(spec, env, lock=None, start=graph.start):
         started.append((spec.executable, os.sched_getscheduler(0), os.sched_getparam(0)))
-        return start(spec, env)
+        return start(spec, env, lock)
     monkeypatch.setattr(graph, 'start', spy)
     before = (os.sched_getscheduler(0), os.sched_getparam(0))
     out = tmp_path / 'fifo'

@@ -131,6 +131,35 @@ def test_a_launcher_hands_its_lock_to_the_process_it_starts(tmp_path):
 
 
 # ------------------------------------------------------------------------------ files
+def test_a_key_given_twice_is_refused_naming_its_line(tmp_path, capsys):
+    scene = tmp_path / 'twice.yaml'
+    scene.write_text(TINY.read_text() + 'duration: 5.0\n')
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert f'malformed YAML in scene {scene} at line' in line
+    assert "the key 'duration' is given twice" in line
+
+
+@pytest.mark.parametrize('kind', ['fifo', 'device', 'directory'])
+def test_a_scene_that_is_no_regular_file_is_refused_at_once(tmp_path, capsys, kind):
+    """A FIFO would block the read forever and /dev/zero would fill the memory."""
+    scene = tmp_path / 'scene.yaml'
+    if kind == 'fifo':
+        os.mkfifo(scene)
+    elif kind == 'device':
+        scene.symlink_to('/dev/zero')
+    else:
+        scene.mkdir()
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert f'scene {scene} is not a regular file' in line
+
+
+def test_a_scene_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, capsys):
+    from iceskate_sim.yaml_io import MAX_YAML_BYTES
+    scene = _scene(tmp_path, description='x' * MAX_YAML_BYTES)
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert f'scene {scene} is {scene.stat().st_size} bytes, more than the {MAX_YAML_BYTES}' in line
+
+
 def test_a_binary_scene_is_refused(tmp_path, capsys):
     scene = tmp_path / 'binary.yaml'
     scene.write_bytes(bytes(range(256)) * 4)

@@ -166,11 +166,13 @@ class RayExecutor(_Executor):
         self._home: tempfile.TemporaryDirectory[str] | None = None
         home = os.environ.get('HOME')
         try:
-            if address == 'local':
-                self._home = tempfile.TemporaryDirectory(prefix='iceskate-ray-home-')
+            if address == 'local':  # its home and session files private (0700), removed after
+                self._home = tempfile.TemporaryDirectory(prefix='iceskate-ray-',
+                                                         ignore_cleanup_errors=True)
                 (pathlib.Path(self._home.name) / 'ray_bootstrap_config.yaml').write_text('{}\n')
                 os.environ['HOME'] = self._home.name  # for the processes ray.init starts
-            ray.init(**({'num_cpus': workers or cpu_count(), '_node_ip_address': '127.0.0.1'}
+            ray.init(**({'num_cpus': workers or cpu_count(), '_node_ip_address': '127.0.0.1',
+                         '_temp_dir': self._home.name}
                         if address == 'local' else {'address': address}),
                      include_dashboard=False, log_to_driver=False, logging_level='ERROR')
         except Exception as exc:  # Ray's errors (a cluster not reached, ...) in one line
