@@ -53,7 +53,8 @@ def test_stand_runs_only_what_it_declares():
 @pytest.mark.parametrize(('path', 'value', 'match'), [
     (('integrator', 'stepp'), 1e-3, r'integrator\.stepp.*unknown key'),
     (('integrator', 'step'), 'fast', r'integrator\.step.*number'),
-    (('integrator', 'step'), -1e-3, r'integrator\.step.*must be > 0'),
+    (('integrator', 'step'), -1e-3, r'integrator\.step.*must be >= 1e-06'),
+    (('integrator', 'step'), 1e-9, r'integrator\.step.*must be >= 1e-06, got 1e-09'),
     (('integrator', 'method'), 'euler', r'integrator\.method.*one of'),
     (('floor', 'mu'), -0.1, r'floor\.mu.*must be in \[0, 2\]'),
     (('floor', 'rule'), 'sand', r'floor\.rule'),

@@ -44,7 +44,8 @@ def test_a_bad_key_is_refused_naming_it(make, axes, message):
 
 @pytest.mark.parametrize(('axis', 'message'), [
     ({'linspace': [0.001, 0.01, 0]}, r"'axes.floor.mu.linspace': the count of values must be an "
-                                     r'integer >= 1, got 0'),
+                                     r'integer in \[1, 1000000\], got 0'),
+    ({'linspace': [0.001, 0.02, 100_000_000]}, r'integer in \[1, 1000000\], got 100000000'),
     ({'linspace': [0.001, 0.01]}, r"'axes.floor.mu.linspace': must be \[start, stop, count\]"),
     ({'logspace': [0.0, 0.01, 3]}, r"'axes.floor.mu.logspace': start and stop must be > 0"),
     ({'linspace': [0.01, 0.01, 3]}, r'start and stop are equal'),
@@ -56,6 +57,15 @@ def test_a_bad_key_is_refused_naming_it(make, axes, message):
 def test_a_bad_range_is_refused_naming_the_axis(make, axis, message):
     with pytest.raises(StudyError, match=message):
         make(axes={'floor.mu': axis})
+
+
+def test_a_spec_of_too_many_runs_is_refused_before_any_scene_is_made(make):
+    """Two axes of 1,000 values each: a million points, refused at once (counted, not made)."""
+    with pytest.raises(StudyError, match=r"'axes': the SPEC generates 2000000 runs, more than "
+                                         r'1000000'):
+        make(axes={'floor.mu': {'linspace': [0.001, 0.01, 1000]},
+                   'inputs.gait_manager.yaw.amplitude': {'linspace': [0.0, 30.0, 1000]}},
+             repeats=2)
 
 
 def test_an_empty_axis_is_refused(make):

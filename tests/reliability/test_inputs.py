@@ -204,9 +204,13 @@ def test_a_coordinate_the_initial_mode_lacks_is_refused_naming_the_key(tmp_path,
     assert "scene key 'initial.v.q1'" in line
 
 
-def test_an_impossible_initial_posture_is_one_sentence(tmp_path, capsys):
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+def test_an_impossible_initial_posture_is_one_sentence(tmp_path, capsys, ros):
+    """Refused before anything starts, the nodes of --ros included (no parameter files)."""
     scene = _scene(tmp_path, initial={'mode': 1, 'q': {'q5': 0.05, 'q6': -0.3, 'q7': -0.6}})
-    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out'),
+                             *(['--ros'] if ros else [])])
+    assert not (tmp_path / 'out' / 'params').exists()
     assert line == ("run_scene: error: scene 'tiny_stand': the initial state cannot be "
                     'simulated, it ends the run at once in mode 1 (toe-first touchdown of the '
                     "swing foot (not representable in the paper's model)); change "

@@ -62,6 +62,28 @@ def test_headless_run_ends_cleanly_on_a_signal(launch, proc, name, group):
     proc.assert_all_gone(run.seen)
 
 
+def test_a_signal_ends_a_run_of_costly_periods_at_once(launch, proc, tmp_path):
+    """Periods of thousands of steps each (the smallest integrator step): the blocks of periods
+    shrink to their cost, so the signal is answered within a fraction of a second, not after a
+    block of a thousand periods (tens of seconds here)."""
+    import yaml
+
+    from iceskate_sim.yaml_io import read_yaml
+    raw = read_yaml(proc.TINY, 'scene')
+    raw['integrator'] = {'method': 'rk4', 'step': 1.0e-6}
+    scene = tmp_path / 'tiny_step.yaml'
+    scene.write_text(yaml.safe_dump(raw))
+    run = launch(str(scene), '--duration', '3600')
+    proc.wait_until(lambda: run.watch() or (run.out / 'bag' / 'bag.mcap').is_file(), 60.0,
+                    'the run to start')
+    time.sleep(1.0)
+    run.signal(signal.SIGINT, False)
+    code, _stdout, stderr = run.communicate(timeout=5.0)
+    assert code == 128 + signal.SIGINT, stderr
+    assert run.metrics()['failure'].startswith('interrupted by SIGINT at t=')
+    proc.assert_all_gone(run.seen)
+
+
 def test_timeout_ends_a_headless_run_cleanly(launch, proc):
     """``timeout`` sends SIGTERM to the whole group (the bag writer too)."""
     if shutil.which('timeout') is None:

@@ -40,11 +40,17 @@ from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
+from iceskate_sim.model.robot import load_robot
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.loopback import PROFILE_VARIABLES, loopback_dds
 from iceskate_sim.ros.node_support import write_parameter_file
 from iceskate_sim.run.scene import Scene
-from iceskate_sim.run.session import LOCK_FD_ENV, prepare_output, release_output
+from iceskate_sim.run.session import (
+    LOCK_FD_ENV,
+    prepare_output,
+    release_output,
+    start_simulator,
+)
 from iceskate_sim.shutdown import StopRequest, die_with_parent, say
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
@@ -277,6 +283,7 @@ def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single
                stop: StopRequest, overrides: dict[str, Any] | None,
                simulator_parameters: dict[str, Any]) -> dict[str, Any]:
     scene = load_scene(scene_arg, overrides)
+    start_simulator(scene, load_robot())  # an initial state the run cannot start from: refused
     lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
     try:
         return _run_locked(scene, scene_arg, out, lock, duration, single_process, domain_id,

@@ -34,6 +34,7 @@ import math
 import pathlib
 import sys
 import threading
+import time
 from typing import TYPE_CHECKING, Any
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
@@ -45,10 +46,15 @@ from iceskate_sim.yaml_io import yaml_value
 if TYPE_CHECKING:
     from iceskate_sim.run.scene import Scene
 
-#: Control periods run per call of ``Session.run_periods`` (one native call, ~30 ms): a signal
-#: is answered, and the progress shown, between two such blocks; the bag writer encodes a
-#: block at once (longer blocks: fewer, larger array operations).
+#: Control periods run per call of ``Session.run_periods`` at the most (one native call, ~20 ms
+#: at the shipped settings): a signal is answered, and the progress shown, between two such
+#: blocks; the bag writer encodes a block at once (longer blocks: fewer, larger array operations).
 BLOCK_PERIODS = 1000
+#: Wall time [s] a block is sized to (fewer periods where a period costs more, e.g. a tiny
+#: integrator step), so that a signal ends any run within about this long.
+BLOCK_SECONDS = 0.2
+#: Periods of the first block (then at most ten times the last, as their cost allows).
+FIRST_BLOCK = 10
 
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
@@ -110,12 +116,16 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                 draw_summary(session.trajectory.columns(), session.metrics, out / SUMMARY_NAME)
 
         crashed = False
+        block = FIRST_BLOCK
         try:
             while not session.done:
                 if stop.requested:
                     ended = stop.error(session.sim.time)
                     break
-                bar.update(session.run_periods(stack, BLOCK_PERIODS))
+                started = time.perf_counter()
+                bar.update(session.run_periods(stack, block))
+                spent = max(time.perf_counter() - started, 1e-6)
+                block = max(1, min(BLOCK_PERIODS, 10 * block, int(block * BLOCK_SECONDS / spent)))
         except ControllerError as exc:  # the samples before it are recorded: the run ends here
             ended = SimulationError(str(exc))
             controller_failed = True

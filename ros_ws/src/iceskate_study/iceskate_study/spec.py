@@ -233,9 +233,10 @@ def _axis(key: str, raw: Any, sampling: str) -> Axis:
             raise _fail(f'{where}.range', f'a log scale needs low > 0, got {low:g}')
         return Axis(key, low=low, high=high, log=scale == 'log')
     count = args[2]
-    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
-        raise _fail(f'{where}.{kind}', f'the count of values must be an integer >= 1, got '
-                                       f'{count!r}')
+    if (isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1
+            or count > MAX_RUNS):
+        raise _fail(f'{where}.{kind}', f'the count of values must be an integer in [1, '
+                                       f'{MAX_RUNS}], got {count!r}')
     if count > 1 and low == high:
         raise _fail(f'{where}.{kind}', f'start and stop are equal ({low:g}): {count} equal values')
     if kind == 'logspace' and (low <= 0.0 or high <= 0.0):
@@ -354,6 +355,11 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
         raise _fail('axes', f'must map at least one scene key to its values, got '
                             f'{top.axes!r}')
     axes = tuple(_axis(str(key), value, sampling) for key, value in top.axes.items())
+    points = (top.samples if sampling != 'grid'
+              else math.prod(len(axis.values or ()) for axis in axes))
+    if points * top.repeats > MAX_RUNS:  # before any run's scene is made
+        raise _fail('axes', f'the SPEC generates {points * top.repeats} runs, more than '
+                            f'{MAX_RUNS}')
     for axis in axes:  # each axis alone, at each value (or both ends of its range)
         for value in axis.values if axis.values is not None else (axis.low, axis.high):
             scene = copy.deepcopy(base)
@@ -369,8 +375,6 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
     spec = Spec(top.study, top.description, path, scene_file, base, axes, sampling,
                 top.samples or 0, top.seed or 0, top.repeats, metrics, _bags(top.bags, keys),
                 ratios, _maps(top.maps, keys, metrics, ratios))
-    if len(points_values(spec)) * spec.repeats > MAX_RUNS:
-        raise _fail('axes', f'the SPEC generates more than {MAX_RUNS} runs')
     return spec
 
 

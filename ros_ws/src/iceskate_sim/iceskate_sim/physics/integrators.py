@@ -21,8 +21,7 @@ class IntegratorConfig:
 
     method: str = setting('rk4', 'integration method: fixed step or rk45 (adaptive)',
                           choices=METHODS)
-    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=0.0,
-                          open_low=True)
+    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=1e-6)
     rtol: float = setting(1e-8, 'relative tolerance (rk45)', low=0.0, open_low=True, high=1.0)
     atol: float = setting(1e-10, 'absolute tolerance (rk45)', low=0.0, open_low=True, high=1.0)
     event_tolerance: float = setting(1e-10, 'tolerance of an event time', unit='s', low=0.0,

@@ -148,6 +148,21 @@ def _reason(exc: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
+def start_simulator(scene: Scene, robot: Robot) -> Simulator:
+    """The simulator of ``scene`` at its initial state.
+
+    :raises SimulationError: for an initial state the run would end in at once (e.g. a foot
+        below the floor: nothing to simulate), naming its mode and the reason.
+    """
+    sim = Simulator(robot, scene.simulator, scene.initial)
+    if sim.ended is not None:
+        raise SimulationError(
+            f'scene {scene.name!r}: the initial state cannot be simulated, it ends the run at '
+            f'once in mode {sim.state.mode.number} ({sim.ended}); change initial.posture, '
+            'initial.q, initial.v or initial.mode')
+    return sim
+
+
 class Session:
     """One run of ``scene``.
 
@@ -162,12 +177,7 @@ class Session:
         self.scene = scene
         self.out = out
         self.robot = robot or load_robot()
-        self.sim = Simulator(self.robot, scene.simulator, scene.initial)
-        if self.sim.ended is not None:  # e.g. a foot below the floor: nothing to simulate
-            raise SimulationError(
-                f'scene {scene.name!r}: the initial state cannot be simulated, it ends the run '
-                f'at once in mode {self.sim.state.mode.number} ({self.sim.ended}); change '
-                'initial.posture, initial.q, initial.v or initial.mode')
+        self.sim = start_simulator(scene, self.robot)
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         if out is not None:
             prepare_output(out, bag)
