@@ -2,6 +2,7 @@
 the disk, by the analysis and by replay, which say so and name the file."""
 
 from pathlib import Path
+import random
 import shutil
 import subprocess
 import sys
@@ -35,6 +36,54 @@ def _cut(bag: Path, target: Path, fraction: float, metadata: bool = True) -> Pat
     if not metadata:
         (target / 'metadata.yaml').unlink()
     return target
+
+
+def test_a_bag_damaged_in_the_middle_is_read_up_to_the_damage_never_beyond(long_bag, tmp_path):
+    """64 KiB of noise in the middle of the file, metadata.yaml present: the samples before the
+    damage, no gap, and a note that says so."""
+    whole = read_bag(long_bag)
+    target = tmp_path / 'damaged'
+    shutil.copytree(long_bag, target)
+    data = bytearray((target / 'bag.mcap').read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 65536] = random.Random(1).randbytes(65536)
+    (target / 'bag.mcap').write_bytes(bytes(data))
+    damaged = read_bag(target)
+    assert 0 < damaged.n_samples < whole.n_samples
+    assert np.array_equal(damaged.t_ns, whole.t_ns[:damaged.n_samples])  # no gap
+    assert np.array_equal(damaged.q, whole.q[:damaged.n_samples])
+    note = next(n for n in damaged.notes if 'rebuilt from bag.mcap' in n)
+    assert 'bag.mcap is damaged, a broken record' in note and 'nothing after it is read' in note
+
+
+def test_a_bag_with_a_gap_is_read_with_a_note_of_it(long_bag, tmp_path):
+    """The messages of [0.4 s, 0.5 s) left out of a copy: the samples around the gap are read
+    and a note names the gap (the analysis never takes it for a whole run)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+    target = tmp_path / 'gap.mcap'
+    with (long_bag / 'bag.mcap').open('rb') as source, target.open('wb') as sink:
+        writer = Writer(sink)
+        writer.start(profile='ros2', library='test')
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(source).iter_messages():
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id],
+                    dict(channel.metadata))
+            if not 400_000_000 <= message.log_time < 500_000_000:
+                writer.add_message(channels[channel.id], message.log_time, message.data,
+                                   message.publish_time)
+        writer.finish()
+    data = read_bag(target)
+    assert data.n_samples == read_bag(long_bag).n_samples - 100
+    note = next(n for n in data.notes if n.startswith('the samples have'))
+    assert 'the samples have 1 gap(s) (sampled every 0.001 s); the longest from t = 0.399000 s ' \
+           'to 0.500000 s' in note
 
 
 def test_a_cut_bag_is_read_up_to_its_last_complete_chunk(long_bag, tmp_path):

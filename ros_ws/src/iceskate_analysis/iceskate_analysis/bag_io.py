@@ -225,7 +225,7 @@ class OpenBag:
             raise SimulationError(f'cannot read bag {path}: {why}, and its .mcap file holds no '
                                   'complete chunk of messages (the file is truncated or '
                                   f'corrupt: {"; ".join(problems) or "empty"})')
-        end = f'; {"; ".join(problems)}: the rest did not reach the disk' if problems else ''
+        end = f'; {"; ".join(problems)}' if problems else ''
         self.recovered = '' if not why else (
             f'bag {path}: {why}; rebuilt from {", ".join(f.name for f in files)}: {total} '
             f'messages of its complete chunks, up to log time {last * 1e-9:.6f} s{end}')
@@ -240,9 +240,11 @@ class OpenBag:
                                                record_size_limit=1 << 30).records:
                         yield index, record
                 except Exception as exc:  # noqa: BLE001 (the mcap package's many kinds)
-                    what = ('it ends inside a record' if isinstance(exc, EndOfFile)
-                            else f'a broken record ({str(exc) or type(exc).__name__})')
-                    problems.append(f'{path.name} stops early, {what}')
+                    problems.append(
+                        f'{path.name} stops early, it ends inside a record: the rest did not '
+                        'reach the disk' if isinstance(exc, EndOfFile) else
+                        f'{path.name} is damaged, a broken record '
+                        f'({str(exc) or type(exc).__name__}): nothing after it is read')
 
     def _register(self, schema: Schema) -> None:
         """Add the file's definition of ``schema.name`` to the typestore, or note the type as
@@ -498,6 +500,13 @@ def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagDat
         notes.append('no /head_pose: head positions are nan')
     if not rows.urdf:
         notes.append('no /robot_description: the installed URDF is assumed')
+    steps = np.diff(np.array(stamps, dtype=np.int64))
+    if steps.size and steps.max() > steps.min():
+        gaps = np.flatnonzero(steps > steps.min())
+        k = int(gaps[np.argmax(steps[gaps])])
+        notes.append(f'the samples have {gaps.size} gap(s) (sampled every {steps.min() * 1e-9:g} '
+                     f's); the longest from t = {stamps[k] * 1e-9:.6f} s to '
+                     f'{stamps[k + 1] * 1e-9:.6f} s')
     return BagData(
         path=path, t_ns=np.array(stamps, dtype=np.int64), q=q, v=v, qdd=qdd,
         active=active, effort_total=effort_total, efforts=efforts, mode=mode,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import pathlib
 import struct
 from typing import Any, BinaryIO
+import zlib
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -141,7 +142,7 @@ class Bag:
         start = self._file.tell()
         start_time, end_time = self._chunk_times
         self._write([Chunk(compression='', data=data, message_start_time=start_time,
-                           message_end_time=end_time, uncompressed_crc=0,
+                           message_end_time=end_time, uncompressed_crc=zlib.crc32(data),
                            uncompressed_size=len(data))])
         chunk_end = self._file.tell()
         offsets = {}
