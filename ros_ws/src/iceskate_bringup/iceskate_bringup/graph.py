@@ -1,23 +1,10 @@
 """``run_scene <scene> --ros --out DIR``: a scene through the ROS 2 graph (what a launch would do).
 
-Starts the simulator and the controller nodes the scene needs (visual_lifting, gait_manager,
-one ``plugin_controller`` named after its scene key per controller written in Python) as
-separate processes, each in its own process group, on one DDS domain (see
-``ros_environment``) with DDS on loopback and a per-run ROS_LOG_DIR; waits for the
-simulator to end the run; stops the controllers with SIGTERM (SIGKILL after a grace period).
-The nodes never outlive the launcher: they get SIGTERM when it dies, even by SIGKILL
-(``start``), and a SIGINT, SIGTERM or SIGHUP to the launcher is passed on to the simulator,
-which ends the run cleanly (``run_graph``). DIR then holds what the headless runner writes:
-metrics.json, events.json, trajectory.npz and bag/. ``single_process=True`` runs the three
-nodes in one process on one EventsExecutor instead.
-``rt_priority=N`` (``--rt-priority N``) runs the nodes under real-time scheduling (SCHED_FIFO
-at priority N, as ``chrt --fifo N`` would; every thread inherits it, the bag writer runs under
-SCHED_IDLE): the processes are started from a thread switched to it for that moment (or, in one
-process, the run's thread is switched while it runs).
-
-The executables are the installed ones (``<prefix>/lib/<pkg>/<exe>``, as ``ros2 run`` finds
-them). Node logs go to
-``$ROS_LOG_DIR/<node>.log`` (printed on failure).
+``run_graph`` starts the simulator and the controller nodes the scene needs as separate
+processes (the installed executables, each in its own process group, on one DDS domain with DDS
+on loopback; node logs in ``$ROS_LOG_DIR/<node>.log``), waits for the simulator to end the run
+and stops the controllers; ``run_single_process`` runs them on one executor instead. Signals,
+the nodes' lifetime and real-time scheduling: docs/usage.md, "Through ROS 2".
 """
 
 from __future__ import annotations

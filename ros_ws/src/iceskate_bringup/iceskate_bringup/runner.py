@@ -1,27 +1,9 @@
 """Headless scene runner: ``run_scene <scene> --out DIR``.
 
-Runs a scene in one process without ROS transport: at every control instant t_k it gives the
-controllers (``ControlStack``: the same law functions the ROS nodes call) the observation of
-the session, and the session holds their commands over [t_k, t_k+1] (zero-order hold) and
-advances the hybrid simulation (``iceskate_sim.run.session.Session``, the loop the simulator node
-runs too). It writes into DIR:
-
-* ``metrics.json``: the figures of the run (see ``iceskate_sim.run.metrics``);
-* ``events.json``: every transition (time, from/to mode, event, cause, impulse);
-* ``trajectory.npz``: the sampled state (t, q, v, qdd, mode, side, pivot, step, multipliers,
-  support forces, CoP, head pose and target, torques by source);
-* ``bag/``: the same run as a rosbag2 MCAP bag (unless the scene turns it off), written by a
-  forked writer process while the simulation goes on;
-* ``summary.png``: head height and pitch against their targets, gait mode, shoulder angles and
-  forward speed over time.
-
-A run that diverges stops with its error after the files are written; a fall ends the run with
-``fell: true`` and the reason in ``failure``. SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``)
-and SIGHUP (a closed terminal), to the process or its whole group, end the run between two
-control periods: the bag is closed with its metadata, the files are written with
-``interrupted: true`` and ``failure: "interrupted by SIGTERM at t=... s"``, one line says so and
-the exit status is 128 + the signal's number (130, 143, 129). The output folder is checked
-before anything starts (``prepare_output``).
+Runs a scene in one process without ROS transport (``run``: ``ControlStack``'s laws and the
+``Session`` loop the simulator node runs too) and writes metrics.json, events.json,
+trajectory.npz, bag/ and summary.png into DIR; how a run ends (a fall, a divergence, a signal)
+and what it leaves: docs/usage.md, "Run a scene".
 """
 
 from __future__ import annotations

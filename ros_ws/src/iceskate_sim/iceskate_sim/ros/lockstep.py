@@ -1,30 +1,7 @@
-"""The simulator side of the ROS graph, ROS-free: commands in, one control period, sample out.
-
-``LockstepSession`` is what the simulator node drives. At every control instant t_k it gives the
-state messages to publish (``state_bytes``), takes the controllers' commands (``offer``: one
-per controller node, its sources summed; checked sender, stamp, content and breakdown), and once
-every controller the scene runs has answered (``missing()`` is empty) integrates one period
-with the ``Session`` the headless runner uses: the same zero-order hold of the summed
-commands, the same push, the same samples in the same trajectory and bag. So a lockstep ROS run
-gives the headless trajectory and ``metrics.json``. The commands go straight into the native
-loop the headless runner uses (``Session.command_inbox``), which holds them and keeps the
-samples, so a period costs no Python objects.
-
-Two views of instant t_k exist. The bag (and the trajectory) hold the sample of the period that
-*starts* at t_k: efforts of the commands answering t_k, accelerations and multipliers under
-them. The live topics at t_k are published *before* those commands exist: their efforts and
-multipliers are those of the command still held from the previous period, evaluated at t_k (what
-a real robot's sensors would report). Positions, velocities and the gait state agree.
-
-In the free-running mode (``lockstep=False``) each controller's latest command is held until it
-sends a newer one; stamps may lag the state but never lead it.
-
-``LoopMonitor`` is the wall-clock side of the node's loop: the command timeout, the resend of a
-state nobody answered (a message can be lost while discovery completes), the free-running pace
-and the loop timings. ``LockstepLoop`` is the rest of the node's logic, also ROS-free: phases
-(starting, running, finished), pause and the ~/step budget, commands in, state out, the end of
-the run; the node gives it a publish function and a report function and wires the callbacks.
-"""
+"""The simulator side of the ROS graph, ROS-free: ``LockstepSession`` (commands in, one period of
+the shared ``Session``, state out), ``LoopMonitor`` (the node loop's wall clock: timeouts,
+resends, pace) and ``LockstepLoop`` (phases, pause and ~/step, the end of the run). The two
+views of an instant and the free-running mode: docs/architecture.md, "One loop"."""
 
 from __future__ import annotations
 
