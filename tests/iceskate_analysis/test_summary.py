@@ -166,7 +166,7 @@ def test_a_run_that_ends_in_a_fall_is_summarised(tmp_path):
     raw['disturbances'] = [{'start': 0.2, 'duration': 0.1, 'frame': 'chest',
                             'force': [0.0, 900.0, 0.0]}]
     metrics = run(parse_scene(raw), tmp_path, progress=False)
-    assert metrics['fell'] and metrics['sim_time_s'] < 2.0
+    assert metrics['end'] == 'fell' and metrics['fell'] and metrics['sim_time_s'] < 2.0
     _assert_picture(tmp_path / 'summary.png')
 
 

@@ -30,7 +30,7 @@ def skate_run(tmp_path_factory):
 
 def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
     out, metrics = skate_run
-    assert not metrics['fell'], metrics['failure']
+    assert metrics['end'] == 'completed' and not metrics['fell'], metrics['failure']
     assert metrics['sim_time_s'] == pytest.approx(SHORT_SKATE, abs=1e-9)
     for name in ('metrics.json', 'events.json', 'trajectory.npz', 'bag/metadata.yaml'):
         assert (out / name).is_file(), name

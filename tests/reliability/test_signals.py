@@ -42,7 +42,8 @@ def _check_interrupted(run, code: int, stderr: str, name: str) -> None:
     assert len(lines) == 1 and lines[0].startswith(f'run_scene: interrupted by {name} at t='), \
         stderr
     metrics = run.metrics()
-    assert metrics['interrupted'] and not metrics['fell'], metrics
+    assert metrics['interrupted'] and metrics['end'] == 'interrupted' and not metrics['fell'], \
+        metrics
     assert metrics['failure'].startswith(f'interrupted by {name} at t='), metrics['failure']
     samples = len(np.load(run.out / 'trajectory.npz')['t'])
     assert _messages(run.out / 'bag') == samples > 0

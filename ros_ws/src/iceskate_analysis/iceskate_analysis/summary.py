@@ -116,7 +116,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     head, failure = _title(metrics, t)
     fig.text(0.1, 0.982, head, fontsize=11, weight='bold', va='top')
     fig.text(0.1, 0.960, failure, fontsize=9, va='top',
-             color='firebrick' if metrics.get('fell') else 'darkgreen')
+             color='darkgreen' if metrics.get('failure') is None else 'firebrick')
 
     _tracking(axes[0], t, psi[:, 1], psi_d[:, 1], 'target z_d', color='tab:blue', lw=1.1,
               label='head z' + _rms(rms, 'z', 1e3, 'mm'))
@@ -181,10 +181,11 @@ def _title(metrics: dict[str, Any], t: np.ndarray) -> tuple[str, str]:
     rtf = metrics.get('real_time_factor')
     rtf_text = (f' (real-time factor {rtf:.2f})'
                 if isinstance(rtf, int | float) and np.isfinite(rtf) else '')
-    if not metrics.get('fell'):
+    if metrics.get('failure') is None:
         return head, 'no fall, no failure' + rtf_text
-    failure = ' '.join(str(metrics.get('failure') or 'unknown').split())
-    return head, textwrap.shorten(f'FELL / FAILED: {failure}', 170, placeholder=' …')
+    failure = ' '.join(str(metrics['failure']).split())
+    what = {'fell': 'FELL', 'interrupted': 'INTERRUPTED'}.get(metrics.get('end'), 'FAILED')
+    return head, textwrap.shorten(f'{what}: {failure}', 170, placeholder=' …')
 
 
 def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS

@@ -342,7 +342,8 @@ def _read_metrics(path: pathlib.Path) -> dict[str, Any] | None:
 
 def _write_metrics(out: pathlib.Path, scene: str, failure: str, interrupted: bool) -> None:
     """metrics.json of a run whose simulator wrote none (it was killed or never started)."""
-    metrics = {'scene': scene, 'sim_time_s': None, 'steps': None, 'fell': False,
+    metrics = {'scene': scene, 'sim_time_s': None, 'steps': None,
+               'end': 'interrupted' if interrupted else 'failed', 'fell': False,
                'failure': failure, 'interrupted': interrupted}
     with contextlib.suppress(OSError):
         (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n')

@@ -18,7 +18,7 @@ ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs 
 #: The top-level entries of ``metrics.json`` (``compute_metrics``): from ``head_error_rms`` on
 #: only for a run with samples, ``head_error_final_max`` only for a scene with pushes.
 METRIC_NAMES = (
-    'scene', 'sim_time_s', 'wall_time_s', 'real_time_factor', 'steps', 'fell', 'failure',
+    'scene', 'sim_time_s', 'wall_time_s', 'real_time_factor', 'steps', 'end', 'fell', 'failure',
     'interrupted', 'transitions', 'max_constraint_residual', 'max_constraint_drift',
     'physics_steps', 'dynamics_evaluations', 'suppressed_cycles', 'resolved_cycles', 'sources',
     'rejected_commands', 'head_error_rms', 'forward_distance_m', 'head_error_final_max',
@@ -174,10 +174,12 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     sim_time = float(sim.time)
     failure = str(error) if error is not None else sim.ended
     interrupted = isinstance(error, RunInterrupted)  # stopped from outside: not a fall
+    end = ('interrupted' if interrupted else 'failed' if error is not None
+           else 'fell' if sim.ended is not None else 'completed')
     metrics: dict[str, Any] = {
         'scene': scene.name, 'sim_time_s': sim_time, 'wall_time_s': wall_time,
         'real_time_factor': sim_time / wall_time if wall_time > 0 else float('nan'),
-        'steps': int(sim.state.step_index), 'fell': failure is not None and not interrupted,
+        'steps': int(sim.state.step_index), 'end': end, 'fell': end == 'fell',
         'failure': failure, 'interrupted': interrupted, 'transitions': len(sim.events),
         'max_constraint_residual': float(sim.stats.max_constraint_residual),
         'max_constraint_drift': float(sim.stats.max_constraint_drift),
