@@ -108,7 +108,7 @@ def test_a_bad_answer_or_an_exception_ends_the_run_cleanly_in_one_sentence(tmp_p
     assert text.startswith("controller 'bad' (plugin_controllers.FailsAt) at t=0.200000 s: ")
     assert __import__('re').search(message, text), text
     assert metrics['failure'] == text
-    assert metrics['end'] == 'failed' and not metrics['fell']  # a controller failed: no fall
+    assert metrics['end'] == 'controller_failed' and not metrics['fell']  # no fall
     assert metrics['sim_time_s'] == pytest.approx(0.2, abs=1e-9)
     assert len(np.load(tmp_path / 'trajectory.npz')['t']) == 200
     assert (tmp_path / 'bag' / 'metadata.yaml').is_file()

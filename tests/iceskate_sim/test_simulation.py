@@ -279,6 +279,24 @@ def test_blow_up_error_names_time_and_mode(robot, runs):
         for _ in range(10):
             run.advance(tau)
     assert 't=' in str(error.value) and 'mode' in str(error.value), str(error.value)
+    if isinstance(run.sim, Simulator):  # the shipped one: metrics.json's end, not a fall
+        assert error.value.end == 'diverged'
+
+
+
+def test_a_run_ends_as_completed_fell_diverged_or_interrupted(robot):
+    """metrics.json's end names how a run ended; fell only for a physical end."""
+    from iceskate_sim.errors import RunInterrupted
+    from iceskate_sim.run.metrics import Trajectory, compute_metrics
+    q, _ = _standing(robot)
+    sim = Simulator(robot, SimulatorConfig(), initial_state(q, 1))
+    scene = type('Scene', (), {'name': 'x', 'pushes': ()})()
+    trajectory = Trajectory()
+    cases = {'completed': None, 'diverged': SimulationError('boom', end='diverged'),
+             'interrupted': RunInterrupted(2, 0.5), 'failed': SimulationError('bad')}
+    for end, error in cases.items():
+        metrics = compute_metrics(scene, sim, trajectory, 1.0, error)
+        assert (metrics['end'], metrics['fell']) == (end, False), metrics
 
 
 def _until_ended(run: Run, tau: np.ndarray, max_periods: int) -> None:

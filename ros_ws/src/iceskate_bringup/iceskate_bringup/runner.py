@@ -109,7 +109,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                 spent = max(time.perf_counter() - started, 1e-6)
                 block = max(1, min(BLOCK_PERIODS, 10 * block, int(block * BLOCK_SECONDS / spent)))
         except ControllerError as exc:  # the samples before it are recorded: the run ends here
-            ended = SimulationError(str(exc))
+            ended = SimulationError(str(exc), end='controller_failed')
             controller_failed = True
         except BaseException as exc:  # a bug: the outputs still say where the run stopped
             ended = SimulationError(f'the run stopped on {type(exc).__name__}: {exc}')

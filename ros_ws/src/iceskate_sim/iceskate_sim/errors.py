@@ -10,7 +10,16 @@ class SimulationError(RuntimeError):
 
     The message names the problem (the offending key, value, coordinate or event) and, for a
     failure during a run, the simulation time, the gait mode and a summary of the state.
+
+    :param end: how it ends a run, as ``metrics.json``'s ``end`` names it: 'failed' (the
+        default), 'diverged' (the physics broke down), 'controller_failed' (a controller raised
+        or answered a bad command), 'controller_timeout' (no answer in time), 'io_error' (an
+        output could not be written).
     """
+
+    def __init__(self, message: str = '', end: str = 'failed') -> None:
+        super().__init__(message)
+        self.end = end
 
 
 class RunInterrupted(SimulationError):
@@ -30,6 +39,7 @@ class RunInterrupted(SimulationError):
         except ValueError:
             name = f'signal {signum}'
         when = f'at t={t:.6f} s' if t is not None else 'before the simulation started'
-        super().__init__(f'interrupted by {name} {when}' + (f' ({detail})' if detail else ''))
+        super().__init__(f'interrupted by {name} {when}' + (f' ({detail})' if detail else ''),
+                         end='interrupted')
         self.signum, self.t, self.signal_name = int(signum), t, name
         self.exit_code = 128 + int(signum)

@@ -296,11 +296,11 @@ class Simulator(StateQueries):
         start, bad input as the kernel said it."""
         state = _hybrid_state(self.kernel.state).summary()
         if isinstance(exc, iceskate_native.DivergenceError):
-            return SimulationError(f'simulation diverged ({exc}) at {state}')
+            return SimulationError(f'simulation diverged ({exc}) at {state}', end='diverged')
         if isinstance(exc, iceskate_native.ChatteringError):
-            return SimulationError(f'{exc} ({state})')
+            return SimulationError(f'{exc} ({state})', end='diverged')
         if isinstance(exc, iceskate_native.NativeError):
-            return SimulationError(f'{exc} (during the period from {state})')
+            return SimulationError(f'{exc} (during the period from {state})', end='diverged')
         return SimulationError(f'native simulator: {exc}')
 
     def _require_running(self) -> None:

@@ -150,7 +150,8 @@ class BagRecorder:
                  background: bool = False) -> None:
         self.path = pathlib.Path(path)
         if self.path.exists():
-            raise SimulationError(f'bag {self.path} already exists; choose a new --out')
+            raise SimulationError(f'bag {self.path} already exists; choose another output '
+                                  'directory')
         self.messages = SampleMessages(typestore or make_typestore(),
                                        (robot or load_robot()).tf_frames)
         self.count = 0
@@ -199,7 +200,7 @@ class BagRecorder:
             process.join(timeout=5.0)
             self._batches.cancel_join_thread()
             raise SimulationError(f'bag writer for {self.path} failed: '
-                                  f'{self._writer_status(process)}')
+                                  f'{self._writer_status(process)}', end='io_error')
     def _writer_status(self, process: multiprocessing.process.BaseProcess) -> str:
         """The writer's report ('ok' or the error), or its exit code if it sent none."""
         if self._status.poll():
@@ -227,7 +228,7 @@ class BagRecorder:
         self._batches.close()
         status = self._writer_status(process)
         if status != 'ok':
-            raise SimulationError(f'bag writer for {self.path} failed: {status}')
+            raise SimulationError(f'bag writer for {self.path} failed: {status}', end='io_error')
 
     def __enter__(self) -> BagRecorder:
         """Context manager: the bag is closed on exit, also after an exception."""

@@ -353,7 +353,8 @@ class LockstepLoop:
         if time.monotonic() - self.monitor.started_at > startup_timeout:
             self.finish(SimulationError(
                 f'controller node(s) {sorted(nodes - up)} not up within {startup_timeout} s '
-                '(publishing effort_commands, subscribed to gait_state)'))
+                '(publishing effort_commands, subscribed to gait_state)',
+                end='controller_timeout'))
         return False
 
     def publish_state(self, again: bool = False) -> None:
@@ -411,7 +412,8 @@ class LockstepLoop:
         if overdue:
             return self.finish(SimulationError(
                 f'controller timeout at t={s.sim.time:.6f} s: no command from node(s) '
-                f'{", ".join(map(repr, overdue))} within {m.timeout} s'))
+                f'{", ".join(map(repr, overdue))} within {m.timeout} s',
+                end='controller_timeout'))
         if s.lockstep and s.missing() and m.resend_due():
             self.publish_state(again=True)
         # free-running: keep the pace; lockstep without controllers: nothing to wait for

@@ -174,7 +174,7 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     sim_time = float(sim.time)
     failure = str(error) if error is not None else sim.ended
     interrupted = isinstance(error, RunInterrupted)  # stopped from outside: not a fall
-    end = ('interrupted' if interrupted else 'failed' if error is not None
+    end = (error.end if error is not None
            else 'fell' if sim.ended is not None else 'completed')
     metrics: dict[str, Any] = {
         'scene': scene.name, 'sim_time_s': sim_time, 'wall_time_s': wall_time,
