@@ -184,29 +184,6 @@ def test_run_scene_ros_cli_runs_three_processes(graph_run, tmp_path, ros_env,
     assert_same_trajectory(out / 'trajectory.npz', graph_run.headless / 'trajectory.npz')
 
 
-def test_run_scene_ros_cli_reports_a_simulator_failure(tmp_path, ros_env):
-    """The simulator's own one-line error, from the node that refused the scene."""
-    import subprocess
-    import sys
-
-    import yaml
-
-    from iceskate_sim.yaml_io import read_yaml
-    raw = read_yaml(TINY, 'scene')
-    raw['initial'] = {'mode': 1, 'q': {'q5': 0.05, 'q6': -0.3, 'q7': -0.6}}  # toe below floor
-    scene = tmp_path / 'toe_down.yaml'
-    scene.write_text(yaml.safe_dump(raw))
-    out = tmp_path / 'cli'
-    result = subprocess.run(
-        [sys.executable, '-m', 'iceskate_bringup.runner', str(scene), '--ros', '--out', str(out)],
-        env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
-        timeout=120)
-    assert result.returncode == 1
-    assert 'run_scene: error: the simulator exited with 1: scene ' in result.stderr
-    assert 'the initial state cannot be simulated' in result.stderr
-    assert 'Traceback' not in result.stderr
-
-
 def test_run_scene_ros_refuses_an_out_holding_a_run_before_starting_nodes(tmp_path, ros_env):
     import subprocess
     import sys
