@@ -50,11 +50,16 @@ _DDS = {key: os.environ.get(key) for key in (
     'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTRTPS_DEFAULT_PROFILES_FILE',
     'FASTDDS_DEFAULT_PROFILES_FILE')}
 
-# Domain ids handed out in this run: start from the pid so that parallel runs on one machine
-# (several checkouts, pytest-xdist workers) use different DDS domains; 4 runs in one domain
-# cross-talk. Fast DDS accepts ids 0..232; 0 (the default) is never used.
+# Domain ids handed out in this run: start from the pid of the pytest command so that parallel
+# runs on one machine (several checkouts) use different DDS domains; 4 runs in one domain
+# cross-talk. The workers of one ``pytest -n N`` (pytest-xdist) share that start and take every
+# N-th id from their own offset, so no two of them ever hand out the same id. Fast DDS accepts
+# ids 0..232; 0 (the default) is never used.
 _MAX_DOMAIN_ID = 232
-_domain_ids = itertools.count(os.getpid() % _MAX_DOMAIN_ID)
+_WORKER = os.environ.get('PYTEST_XDIST_WORKER')  # 'gw0', 'gw1', ... or unset
+_WORKERS = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
+_domain_ids = itertools.count(
+    (os.getppid() if _WORKER else os.getpid()) + (int(_WORKER[2:]) if _WORKER else 0), _WORKERS)
 
 
 @pytest.fixture(autouse=True, scope='session')

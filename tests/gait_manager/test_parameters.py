@@ -279,7 +279,7 @@ def test_the_binding_refuses_bad_parameters_in_one_sentence(blocks, message):
 def test_the_binding_refuses_an_unknown_source_and_a_missing_field():
     fields_ = _fields()
     fields_.enabled = frozenset({'posture', 'dance'})
-    with pytest.raises(ValueError, match="^enabled holds 'dance', which is not one of posture, "
+    with pytest.raises(ValueError, match="^enabled 'dance' is not one of posture, "
                                          'feedforward, weight_transfer, heel, arm_assist, yaw$'):
         GaitManagerController(fields_)
     fields_ = _fields()

@@ -187,9 +187,9 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
         for index, command in enumerate(commands.values()):
             inbox.receive(index, values_of(command))
         session.hold()
-        block = inbox.take_block()
+        block = inbox.kernel.take_block()
         if period % 50 == 49 or period == 0:
-            live = inbox.live()
+            live = inbox.kernel.live()
             assert live.keys() == block.keys()
             assert all(len(value) == 1 for value in live.values() if isinstance(value, np.ndarray))
             state, result = sim.state, sim.result
@@ -210,7 +210,8 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
             held = held_of_controllers(commands.values()).torque(state.q, state.v)
             assert live['sources'] == ['held'] and np.array_equal(live['efforts'][0][0], held)
             head, tf = _placements(session.robot, side, pivot, state.q)
-            assert np.array_equal(head.translation, sim.head_placement().translation)
+            assert np.array_equal(head.translation, sim.dynamics.frame_placement(
+                sim.state.contact, sim.state.q, 'head_top').translation)
             _assert_head(live, 0, head)
             _assert_tf(live['tf'][0], tf)
             last = int(live['last_event'][0])
@@ -244,7 +245,7 @@ def test_the_inbox_refuses_bad_commands_and_forgets_on_request() -> None:
     assert reference.hold()
     reference.flush()
     inbox.receive(1, good)
-    inbox.forget()
+    inbox.kernel.forget()
     session.hold()
     session.flush()
     assert np.array_equal(session.trajectory.arrays()['q'], reference.trajectory.arrays()['q'])
@@ -308,7 +309,7 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
         sim.control_loop(stack.kinematics, [controllers[0], object()], (), session.psi_initial)
     loop = sim.control_loop(stack.kinematics, controllers, (), session.psi_initial)
     with pytest.raises(ValueError, match='number of periods must be >= 0'):
-        loop._kernel.run(-1)
+        loop.kernel.run(-1)
     for pairs in ([('world', 'nose')], [('nose', 'pelvis')]):  # a link it lacks
         with pytest.raises(ValueError, match="unknown frame 'nose'"):
             iceskate_native.ControlLoop(session.sim.kernel, None, [], [],
@@ -316,4 +317,4 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
     with pytest.raises(ValueError, match='child must be a link, not the world'):
         iceskate_native.ControlLoop(session.sim.kernel, None, [], [], session.psi_initial,
                                     [('pelvis', 'world')])
-    assert isinstance(loop._kernel, iceskate_native.ControlLoop)
+    assert isinstance(loop.kernel, iceskate_native.ControlLoop)

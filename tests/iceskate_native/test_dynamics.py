@@ -159,8 +159,8 @@ def test_an_unknown_mode_is_refused_by_the_kernel(engines):
 
 def test_a_bad_mode_table_is_refused(robot):
     import iceskate_native
-    from iceskate_sim.physics.native import _native_robot
-    models, frames = _native_robot(robot)
+    from iceskate_sim.physics.native import native_robot
+    models, frames = native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]
     rows[4] = rows[4][:5] + (['hy', 'hz'],)
@@ -319,8 +319,8 @@ def test_a_segment_without_event_reaches_the_end(robot):
 ])
 def test_a_mode_table_that_contradicts_itself_is_refused(robot, row, match):
     import iceskate_native
-    from iceskate_sim.physics.native import _native_robot
-    models, frames = _native_robot(robot)
+    from iceskate_sim.physics.native import native_robot
+    models, frames = native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]
     rows[3] = row(rows[3])
@@ -331,8 +331,8 @@ def test_a_mode_table_that_contradicts_itself_is_refused(robot, row, match):
 
 def test_non_finite_physical_options_are_refused(robot):
     import iceskate_native
-    from iceskate_sim.physics.native import _native_robot
-    models, frames = _native_robot(robot)
+    from iceskate_sim.physics.native import native_robot
+    models, frames = native_robot(robot)
     rows = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
              list(m.constraints)) for m in MODES.values()]
     with pytest.raises(ValueError, match='must be finite and >= 0'):

@@ -426,19 +426,19 @@ def test_the_cache_walks_a_new_shape_once(typestore, monkeypatch):
         return _serialize(typestore, build(typestore, msgtype, shape, rng)[0], msgtype)
 
     cache = LayoutCache(typestore, msgtype, capacity=2)
-    a = cache.layout(data(3))
+    a = cache.lookup(data(3))[0]
     assert len(walks) == 1
-    assert cache.layout(data(3)) is a and len(walks) == 1  # other numbers, same shape
-    assert cache.layout(data(3) + b'\0') is a and len(walks) == 1  # padded
-    b = cache.layout(data(4))
+    assert cache.lookup(data(3))[0] is a and len(walks) == 1  # other numbers, same shape
+    assert cache.lookup(data(3) + b'\0')[0] is a and len(walks) == 1  # padded
+    b = cache.lookup(data(4))[0]
     assert b is not a and len(walks) == 2 and b.size > a.size
-    assert cache.layout(data(3)) is a and len(walks) == 2  # both kept
-    c = cache.layout(data(5))  # evicts the least recently used: 4
+    assert cache.lookup(data(3))[0] is a and len(walks) == 2  # both kept
+    c = cache.lookup(data(5))[0]  # evicts the least recently used: 4
     assert len(walks) == 3
-    assert cache.layout(data(3)) is a and cache.layout(data(5)) is c and len(walks) == 3
-    assert cache.layout(data(4)) is not b and len(walks) == 4
+    assert cache.lookup(data(3))[0] is a and cache.lookup(data(5))[0] is c and len(walks) == 3
+    assert cache.lookup(data(4))[0] is not b and len(walks) == 4
     # what the cache gives is the walk of the bytes
     sample = data(4)
-    assert cache.layout(sample).fields == real(typestore, msgtype, sample).fields
+    assert cache.lookup(sample)[0].fields == real(typestore, msgtype, sample).fields
     with pytest.raises(LayoutError):
-        cache.layout(sample[:-9])
+        cache.lookup(sample[:-9])

@@ -228,7 +228,7 @@ def test_equations_of_motion_residual(robot, random_state, rng, number, side, pi
         lhs = pin.rnea(model, model.createData(), q, v, qdd)  # M qdd + h + g
         j_heel = pin.getFrameJacobian(model, data, sm.frame_ids['swing_heel'], LWA)
         j_foot = pin.getFrameJacobian(model, data, sm.frame_ids[f'{_swing(side)}_foot'], LWA)
-        f_nz, f_ny, tau_n = (result.multiplier(n) for n in ('f_nz', 'f_ny', 'tau_n'))
+        f_nz, f_ny, tau_n = result.multipliers
         heel_friction = -mu * heel_dir * f_nz if mode.swing_sliding else 0.0
         assert result.heel_friction == pytest.approx(heel_friction, abs=1e-12)
         constraint = np.zeros(N_COORDINATES)
@@ -463,7 +463,7 @@ def test_straight_legs_are_regular_without_c_fr_or_with_q1(dynamics, number, piv
     zero = np.zeros(N_COORDINATES)
     result = dynamics.evaluate(ContactState(get_mode(number), pivot=pivot), zero, zero, zero)
     assert np.all(np.isfinite(result.multipliers))
-    assert abs(result.multiplier('f_nz')) < 2 * MASS * G  # weight-sized, not a singular 1e17
+    assert abs(result.multipliers[0]) < 2 * MASS * G  # weight-sized, not a singular 1e17
 
 
 @pytest.mark.parametrize('number', [13, 17])
@@ -479,7 +479,7 @@ def test_bent_knee_double_support_solves(dynamics, side, number, assert_close):
     assert_close(position, np.zeros(len(mode.constraints)), atol=1e-12,
                  what='constraints of the bent stance')
     result = dynamics.evaluate(contact, q, zero, zero)
-    f_nz = result.multiplier('f_nz')
+    f_nz = result.multipliers[0]  # (f_nz, f_ny, tau_n)
     assert np.all(np.isfinite(result.multipliers)) and np.all(np.isfinite(result.qdd))
     # the swing foot carries part of the weight, not a singular 1e17
     assert 0.0 < f_nz < MASS * G

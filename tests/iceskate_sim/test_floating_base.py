@@ -88,7 +88,7 @@ def test_formulations_agree(solvers, random_state, number, side, pivot, limits):
                 -MU * support_dir * result.support_normal, rel=1e-9, abs=1e-9)
         if mode.swing_sliding:
             assert result.heel_friction == pytest.approx(
-                -MU * heel_dir * result.multiplier('f_nz'), rel=1e-12)
+                -MU * heel_dir * result.multipliers[0], rel=1e-12)  # f_nz
     assert worst  # every case compared something
 
 

@@ -53,9 +53,9 @@ def states(typestore) -> list[bytes]:
     session = LockstepSession(Session(scene), scene_sources(scene))
     stack = ControlStack(scene, session.robot, session.session.observation())
     out = []
-    while not session.done:
+    while not session.session.done:
         data = session.state_bytes(('/gait_state',))['/gait_state']
-        if session.periods % 10 == 0:
+        if session.session.periods % 10 == 0:
             out.append(data)
         obs = session.session.observation()
         for controller, command in stack_commands(stack, obs).items():

@@ -50,7 +50,7 @@ def zero(scene, controller, value=0.0):
 
 def drive(session, answer):
     ts = session.messages.typestore
-    while not session.done:
+    while not session.session.done:
         obs = observation_from_gait_state(ts.deserialize_cdr(
             session.state_bytes(('/gait_state',))['/gait_state'],
             'iceskate_interfaces/msg/GaitState'))
@@ -58,8 +58,8 @@ def drive(session, answer):
             assert session.offer(controller, seconds_to_ns(obs.t), command)
         assert session.missing() == []
         session.step()
-        session.flush()
-    return session.finish()
+        session.session.flush()
+    return session.session.finish()
 
 
 def test_lockstep_session_reproduces_the_headless_run(scene, tmp_path):
@@ -154,7 +154,7 @@ def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
     session.offer('gait_manager', 0, zero(scene, 'gait_manager'))
     state = session.sim.state
     session.step()
-    session.flush()
+    session.session.flush()
     recorded = session.session.trajectory.arrays()['tau_visual_lifting'][0]
     np.testing.assert_array_equal(recorded, pd.torque(state.q, state.v))
 
@@ -163,13 +163,14 @@ def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path
     recording = make_session(scene, bag=tmp_path / 'bag')
     with pytest.raises(SimulationError, match='refused while'):
         recording.reset()
-    recording.finish()
+    recording.session.finish()
     session = make_session(scene)
     for controller in session.controllers:
         session.offer(controller, 0, zero(scene, controller))
     session.step()
     session.reset()
-    assert session.t_ns == 0 and session.periods == 0 and len(session.session.trajectory) == 0
+    assert session.t_ns == 0 and session.session.periods == 0
+    assert len(session.session.trajectory) == 0
 
 
 def test_free_running_holds_the_latest_command(scene):
@@ -180,7 +181,7 @@ def test_free_running_holds_the_latest_command(scene):
     session.step()
     with pytest.raises(SimulationError, match='stale'):  # older than the controller's last
         session.offer('gait_manager', -1, zero(scene, 'gait_manager'))
-    assert session.periods == 2
+    assert session.session.periods == 2
 
 
 def test_rejected_commands_are_summarised_per_reason(capsys):
@@ -216,5 +217,5 @@ def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):
     assert loop.try_begin(set(), 0, 1.0)
     for _ in range(10):
         loop.tick()
-    assert loop.phase == 'finished' and loop.session.metrics['failure'] is None
-    assert loop.session.periods == 120
+    assert loop.phase == 'finished' and loop.session.session.metrics['failure'] is None
+    assert loop.session.session.periods == 120

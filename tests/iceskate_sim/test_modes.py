@@ -5,6 +5,7 @@ import pytest
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MODES, get_mode
+from iceskate_sim.model.robot import COORDINATE_NAMES
 from oracle.automaton import mode_for
 
 # Table 2 as printed (docs/model.md §3.3): number -> (support, swing, coordinates, multipliers,
@@ -53,10 +54,10 @@ def test_mode_matches_table_2(number):
     mode = get_mode(number)
     assert mode.number == number
     assert (mode.support, mode.swing) == (support, swing)
-    assert mode.coordinate_names() == _coordinates(coords)
+    assert tuple(COORDINATE_NAMES[i] for i in mode.active) == _coordinates(coords)
     assert mode.n_coordinates == n == len(_coordinates(coords))
     assert len(mode.constraints) == n_c
-    assert mode.dof == dof == n - n_c
+    assert mode.n_coordinates - len(mode.constraints) == dof == n - n_c  # degrees of freedom
     assert mode.multipliers == multipliers
     assert mode.constraints == tuple(CONSTRAINT_OF[m] for m in multipliers)
     assert mode.y0_active == ('y0' in coords) == support.endswith('G')

@@ -100,7 +100,7 @@ def decoded(typestore, data: bytes):
 def gait_state_message(typestore, messages, simulator):
     """The simulator's gait_state, through CDR (as a subscriber gets it): the message of its
     native loop's live sample."""
-    live = simulator.control_loop(None, [], (), np.zeros(3)).live()
+    live = simulator.control_loop(None, [], (), np.zeros(3)).kernel.live()
     events = Events.of(live['last_event'], simulator.events)
     return decoded(typestore, messages.encode(live, events, ('/gait_state',))['/gait_state'][0])
 
@@ -129,7 +129,7 @@ def skate_run(messages, native_loop_run):
     block, loop, sim = native_loop_run(scene, 1500)
     encoded = messages.encode(block, Events.of(block['last_event'], sim.events),
                               ('/gait_state',))['/gait_state']
-    live = loop.live()
+    live = loop.kernel.live()
     final = messages.encode(live, Events.of(live['last_event'], sim.events),
                             ('/gait_state',))['/gait_state'][0]
     return block, encoded, final, sim.observation()

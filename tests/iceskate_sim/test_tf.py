@@ -87,7 +87,7 @@ def random_block(random_state) -> dict:
                 q, v = random_state(mode)
                 session.sim.set_state(HybridState(len(rows) * 1e-3, q, v,
                                                   ContactState(mode, side, pivot)))
-                rows.append(loop.live())
+                rows.append(loop.kernel.live())
     return {key: np.concatenate([row[key] for row in rows])
             for key in ('t', 'q', 'side', 'pivot', 'tf', 'head_position', 'last_event',
                         'stamps_ns')}

@@ -7,9 +7,15 @@ import pytest
 
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene, parse_scene
+from iceskate_sim.installed import shipped_files
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_study.errors import StudyError
-from iceskate_study.spec import expand, load_spec, parse_spec, run_key, set_key, shipped_studies
+from iceskate_study.spec import STUDY_RESOURCE, expand, load_spec, parse_spec, run_key, set_key
+
+
+def shipped_studies():
+    """Names of the shipped studies."""
+    return list(shipped_files(STUDY_RESOURCE, 'studies'))
 
 
 @pytest.fixture

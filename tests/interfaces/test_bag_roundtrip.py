@@ -15,7 +15,8 @@ pytest.importorskip('rosbags')
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer  # noqa: E402
 
 from iceskate_sim.errors import SimulationError  # noqa: E402
-from iceskate_sim.recording.bag_types import find_msg_dir, make_typestore, msg_types  # noqa: E402
+from iceskate_sim.installed import share_path  # noqa: E402
+from iceskate_sim.recording.bag_types import make_typestore, msg_types  # noqa: E402
 
 GAIT_STATE = 'iceskate_interfaces/msg/GaitState'
 EFFORT_COMMAND = 'iceskate_interfaces/msg/EffortCommand'
@@ -117,7 +118,7 @@ def test_make_typestore_registers_all_interface_messages():
     assert typestore.types[GAIT_STATE].PIVOT_HEEL == 2
 
 
-def test_find_msg_dir_is_the_installed_packages(tmp_path, monkeypatch):
+def test_the_msg_dir_is_the_installed_packages(tmp_path, monkeypatch):
     """The first prefix of AMENT_PREFIX_PATH whose ament index holds iceskate_interfaces; none:
     one sentence saying the workspace is not built."""
     prefix = tmp_path / 'prefix'
@@ -129,11 +130,11 @@ def test_find_msg_dir_is_the_installed_packages(tmp_path, monkeypatch):
     index.mkdir(parents=True)
     (index / 'iceskate_interfaces').touch()
     monkeypatch.setenv('AMENT_PREFIX_PATH', f'{tmp_path / "empty"}:{prefix}')
-    assert find_msg_dir() == share
+    assert share_path('iceskate_interfaces', 'msg') == share
     assert make_typestore().types['iceskate_interfaces/msg/GaitState'].PIVOT_HEEL == 2
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'empty'))
     with pytest.raises(SimulationError, match='package iceskate_interfaces is not installed'):
-        find_msg_dir()
+        make_typestore()
 
 
 def test_msg_types_raises_on_directory_without_msg_files(tmp_path):

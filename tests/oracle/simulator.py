@@ -49,7 +49,7 @@ from oracle.integrators import Integrator
 class ReferenceSimulator(StateQueries):
     """The hybrid simulation loop in Python: the interface of
     ``iceskate_sim.physics.simulation.Simulator`` (``advance``, ``state``, ``events``,
-    ``stats``, ``ended``, ``result``, ``start_state``, ``start_result``) on the oracle's
+    ``stats``, ``ended``, ``result``; and ``start_state``, ``start_result``) on the oracle's
     automaton and integrators and ``GaitDynamics``' eq. (7) (or the ``dynamics`` given, e.g.
     the native eq. (7) behind the same interface).
     """
@@ -105,6 +105,14 @@ class ReferenceSimulator(StateQueries):
         coordinates of the current support foot."""
         return self._command
 
+    def head_placement(self) -> pin.SE3:
+        """World placement of the head-top frame in the current state (kept until the state
+        changes)."""
+        if self._head[0] is not self.state:
+            self._head = (self.state, self.dynamics.frame_placement(
+                self.state.contact, self.state.q, 'head_top'))
+        return self._head[1]
+
     @property
     def start_state(self) -> HybridState:
         """The state at the start of the last period, after the transitions due then."""
@@ -154,7 +162,8 @@ class ReferenceSimulator(StateQueries):
         """``Simulator.advance`` in Python: one control period holding ``command`` (and
         ``push``); returns the dynamics at its end."""
         self._require_running()
-        command = HeldCommand.of_input(command)
+        if not isinstance(command, HeldCommand):
+            command = HeldCommand.torque_only(command)
         self._command = command
         self._push = None if push is None else (push[0], np.asarray(push[1], dtype=float))
         self.result = self._evaluate(self.state.q, self.state.v)

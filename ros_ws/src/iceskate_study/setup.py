@@ -19,16 +19,11 @@ setup(
     zip_safe=True,
     maintainer='iceskate developers',
     maintainer_email='iceskate@example.com',
-    description=(
-        'Parameter studies of iceskate scenes: sweep (local processes or a Ray cluster, one '
-        'resumable Parquet table) and sweep-plot (heat maps of the metrics).'
-    ),
+    description=('Parameter studies of iceskate scenes: sweep (local processes or a Ray '
+                 'cluster, one resumable Parquet table) and sweep-plot (heat maps of the '
+                 'metrics).'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
-    entry_points={
-        'console_scripts': [
-            'sweep = iceskate_study.sweep:main',
-            'sweep-plot = iceskate_study.plot:main',
-        ],
-    },
+    entry_points={'console_scripts': ['sweep = iceskate_study.sweep:main',
+                                      'sweep-plot = iceskate_study.plot:main']},
 )

@@ -12,7 +12,7 @@ from typing import Any, Self
 
 from gait_manager.errors import GaitManagerError
 from iceskate_sim.model.stance import StanceSchedule
-from iceskate_sim.parameters import block, check_fields, from_mapping, setting
+from iceskate_sim.parameters import block, checked, from_mapping, setting
 
 #: The torque sources, in the order they are computed, sent and summed.
 SOURCES = ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw')
@@ -25,19 +25,17 @@ PHASE_READINGS = ('A', 'B', 'B_clipped')
 
 
 class _Block:
-    """What every gait-manager parameter class does: check and normalise its fields when built,
-    and build from a mapping; errors are GaitManagerError naming the (dotted) key."""
+    """What every gait-manager parameter class does: check and normalise its fields (each a
+    ``setting``: description, unit, range) when built, and build from a mapping; errors are
+    GaitManagerError naming the (dotted) key."""
 
     _prefix = ''
+    __post_init__ = checked(GaitManagerError)
 
     def __init_subclass__(cls, prefix: str = '', **kwargs: Any) -> None:
         """``prefix``: the block's name with a dot ('posture.'), '' for the top level."""
         super().__init_subclass__(**kwargs)
         cls._prefix = prefix
-
-    def __post_init__(self) -> None:
-        """Check and normalise every field (GaitManagerError naming the key)."""
-        check_fields(self, GaitManagerError)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Self:
@@ -48,7 +46,7 @@ class _Block:
 @dataclass(frozen=True)
 class PostureParameters(_Block, prefix='posture.'):
     """Parameters of the posture stabiliser and its stance reference (docs/model.md, posture
-    stabiliser). Each field's description, unit and range are its ``setting``."""
+    stabiliser)."""
 
     reference: str = setting(
         'moving', "reference posture: 'moving' stance, fixed 'standing' posture, or 'balance' "
@@ -83,7 +81,6 @@ class PostureParameters(_Block, prefix='posture.'):
                               unit='m', low=-0.4, high=0.4)
     shift_time2: float = setting(0.5, 'duration T2 of the second shift', unit='s', low=0.0)
 
-
     @property
     def stance(self) -> StanceSchedule:
         """The moving stance schedule of the shift_* fields."""
@@ -94,7 +91,7 @@ class PostureParameters(_Block, prefix='posture.'):
 @dataclass(frozen=True)
 class BalanceParameters(_Block, prefix='balance.'):
     """Parameters of the walking stabiliser (values found by random search, see
-    scripts/tune_gait.py). Each field's description, unit and range are its ``setting``."""
+    scripts/tune_gait.py)."""
 
     swing_time: float = setting(0.45, 'duration of the swing-foot path after the exchange',
                                 unit='s', low=0.05, high=2.0)
@@ -171,8 +168,7 @@ class BalanceParameters(_Block, prefix='balance.'):
 
 @dataclass(frozen=True)
 class FeedforwardParameters(_Block, prefix='feedforward.'):
-    """Parameters of the feed-forward leg torques (docs/model.md, feed-forward pulses). Each
-    field's description, unit and range are its ``setting``."""
+    """Parameters of the feed-forward leg torques (docs/model.md, feed-forward pulses)."""
 
     hip_amplitude: float = setting(40.0, 'A5, amplitude of the swing-hip pulse', unit='N m',
                                    low=0.0)
@@ -199,8 +195,7 @@ class FeedforwardParameters(_Block, prefix='feedforward.'):
 
 @dataclass(frozen=True)
 class WeightTransferParameters(_Block, prefix='weight_transfer.'):
-    """Parameters of the weight transfer after heel strike (docs/model.md, weight transfer).
-    Each field's description, unit and range are its ``setting``."""
+    """Parameters of the weight transfer after heel strike (docs/model.md, weight transfer)."""
 
     share: float = setting(1.0, 'final f_des as a fraction of the weight m g (1: full '
                            'transfer, the rear normal force reaches 0; 0.3 settles in double '
@@ -228,8 +223,7 @@ class WeightTransferParameters(_Block, prefix='weight_transfer.'):
 
 @dataclass(frozen=True)
 class HeelParameters(_Block, prefix='heel.'):
-    """Parameters of the heel-first landing input (docs/model.md, heel-first landing). Each
-    field's description, unit and range are its ``setting``."""
+    """Parameters of the heel-first landing input (docs/model.md, heel-first landing)."""
 
     stiffness: float = setting(150.0, 'K7 of the swing-sole pitch PD in the air (30 lets the '
                                'toe scuff)', unit='N m/rad', low=0.0)
@@ -247,8 +241,7 @@ class HeelParameters(_Block, prefix='heel.'):
 
 @dataclass(frozen=True)
 class ArmAssistParameters(_Block, prefix='arm_assist.'):
-    """Parameters of the arm assist (docs/model.md, arm assist). Each field's description, unit
-    and range are its ``setting``."""
+    """Parameters of the arm assist (docs/model.md, arm assist)."""
 
     amplitude: float = setting(2.0, 'A_arm, amplitude of the shoulder sinusoid', unit='N m',
                                low=0.0)
@@ -271,8 +264,7 @@ class ArmAssistParameters(_Block, prefix='arm_assist.'):
 
 @dataclass(frozen=True)
 class YawParameters(_Block, prefix='yaw.'):
-    """Parameters of the torso-yaw input, eq. (10) (docs/model.md, torso yaw). Each
-    field's description, unit and range are its ``setting``."""
+    """Parameters of the torso-yaw input, eq. (10) (docs/model.md, torso yaw)."""
 
     amplitude: float = setting(30.0, 'A of eq. (10)', unit='N m', low=0.0)
     period: float = setting(1.85, 'T of eq. (10)', unit='s', low=0.0, open_low=True)
@@ -283,10 +275,9 @@ class YawParameters(_Block, prefix='yaw.'):
 
 @dataclass(frozen=True)
 class GaitManagerParameters(_Block):
-    """All gait-manager parameter blocks and the set of enabled sources (default: all). Each
-    block and ``enabled`` is a ``block``/``setting`` with its description; ``from_dict`` takes a
-    nested mapping {block: {key: value}, 'enabled': [sources]} (missing blocks keep their
-    defaults; an error names the dotted key, e.g. 'posture.stiffness')."""
+    """All gait-manager parameter blocks and the set of enabled sources (default: all);
+    ``from_dict`` takes a nested mapping {block: {key: value}, 'enabled': [sources]} (missing
+    blocks keep their defaults; an error names the dotted key, e.g. 'posture.stiffness')."""
 
     posture: PostureParameters = block(
         PostureParameters, "posture stabiliser and stance reference (source 'posture')")

@@ -17,6 +17,7 @@ namespace
 using iceskate_native::Frame;
 using iceskate_native::Kinematics;
 using iceskate_native::Observation;
+using iceskate_native::stance_schedule;
 using iceskate_native::Vector18;
 
 constexpr int kYawJoint = 8;
@@ -52,20 +53,7 @@ LegGeometry geometry(const Observation & obs, const Kinematics & kinematics)
           kinematics.frame_offset(obs.side, obs.pivot, Frame::kPelvisCentre).tail<2>()};
 }
 
-void require_finite(const Vector18 & a, const Vector18 & b, const char * what, double t)
-{
-  if (!a.allFinite() || !b.allFinite()) {
-    throw GaitManagerError(std::string(what) + " is not finite at t = " + std::to_string(t));
-  }
-}
-
 }  // namespace
-
-iceskate_native::StanceSchedule stance_schedule(const PostureParameters & params)
-{
-  return {params.shift_y1, params.shift_z1, params.shift_time1, params.shift_y2,
-          params.shift_time2};
-}
 
 Vector18 standing_posture(double bend)
 {
@@ -154,7 +142,9 @@ void posture_command(
   }
   out.stiffness[kYawJoint] += params.yaw_stiffness;
   out.damping[kYawJoint] += params.yaw_damping;
-  require_finite(out.effort, out.reference, "posture command", obs.t);
+  if (!out.effort.allFinite() || !out.reference.allFinite()) {
+    throw GaitManagerError("posture command is not finite at t = " + std::to_string(obs.t));
+  }
 }
 
 Vector18 posture_torque(
@@ -162,35 +152,22 @@ Vector18 posture_torque(
 {
   Vector18 tau = Vector18::Zero();
   if (!params.joints.empty()) {
-    const auto n = static_cast<Eigen::Index>(params.joints.size());
+    const auto & joints = params.joints;
     const Vector18 q_ref = stance_reference(obs, kinematics, params).q_ref;
-    Eigen::VectorXd pd(n);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const int j = params.joints[static_cast<std::size_t>(i)];
-      pd[i] = params.stiffness * (q_ref[j] - obs.q[j]) - params.damping * obs.v[j];
-    }
+    Eigen::VectorXd pd =
+      params.stiffness * (q_ref(joints) - obs.q(joints)) - params.damping * obs.v(joints);
     if (params.null_space) {  // pd - J_d^T (J_d^+)^T pd, J_d: J_H over the driven joints
-      const auto jacobian = kinematics.head_pose(obs.support(), obs.q).jacobian;
-      Eigen::MatrixXd jd(3, n);
-      for (Eigen::Index i = 0; i < n; ++i) {
-        jd.col(i) = jacobian.col(params.joints[static_cast<std::size_t>(i)]);
-      }
+      const Eigen::MatrixXd jd =
+        kinematics.head_pose(obs.support(), obs.q).jacobian(Eigen::all, joints);
       const Eigen::JacobiSVD<Eigen::MatrixXd> svd(jd, Eigen::ComputeThinU | Eigen::ComputeThinV);
       const Eigen::VectorXd & s = svd.singularValues();
       const double cutoff = kPinvTolerance * (s.size() > 0 ? s.maxCoeff() : 0.0);
-      Eigen::VectorXd inverse = Eigen::VectorXd::Zero(s.size());
-      for (Eigen::Index i = 0; i < s.size(); ++i) {
-        if (s[i] > cutoff) {
-          inverse[i] = 1.0 / s[i];
-        }
-      }
+      const Eigen::VectorXd inverse = (s.array() > cutoff).select(s.array().inverse(), 0.0);
       const Eigen::MatrixXd pinv =
         svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose();
       pd -= jd.transpose() * (pinv.transpose() * pd);
     }
-    for (Eigen::Index i = 0; i < n; ++i) {
-      tau[params.joints[static_cast<std::size_t>(i)]] = pd[i];
-    }
+    tau(joints) = pd;
   }
   if (params.gravity_compensation && !params.gravity_joints.empty()) {
     const Vector18 g = kinematics.gravity(obs.support(), obs.q);

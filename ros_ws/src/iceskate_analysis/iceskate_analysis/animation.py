@@ -53,31 +53,24 @@ def frame_indices(n: int, max_frames: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, count).round().astype(int))
 
 
-def link_positions(bag: BagData, robot: Robot, indices: np.ndarray | None = None,
-                   progress: bool = False) -> dict[str, np.ndarray]:
+def link_positions(bag: BagData, robot: Robot, indices: np.ndarray) -> dict[str, np.ndarray]:
     """World positions [m] of every point of POINTS at the samples ``indices``.
 
     :return: point name -> (len(indices), 3) array.
     """
-    indices = np.arange(bag.n_samples) if indices is None else np.asarray(indices)
-    out = {name: np.zeros((indices.size, 3)) for name in POINTS}
+    out = {name: np.zeros((len(indices), 3)) for name in POINTS}
     data: dict[tuple[str, str], pin.Data] = {}
-    bar = ProgressBar(indices.size, 'forward kinematics', 'sample', progress, leave=False)
-    try:
-        for row, k in enumerate(indices):
-            side, pivot = bag.side_name(k), bag.pivot_name(k)
-            sm = robot.support_model(side, pivot)
-            d = data.setdefault((side, pivot), sm.model.createData())
-            pin.framesForwardKinematics(sm.model, d, bag.q[k])
-            for name in POINTS:
-                frame = name
-                if name.endswith(('_heel', '_toe')):  # sole corners: support or swing foot
-                    foot_side, corner = name.split('_')
-                    frame = f'{"support" if foot_side == side else "swing"}_{corner}'
-                out[name][row] = d.oMf[sm.frame_ids[frame]].translation
-            bar.update(1)
-    finally:
-        bar.close()
+    for row, k in enumerate(indices):
+        side, pivot = bag.side_name(k), bag.pivot_name(k)
+        sm = robot.support_model(side, pivot)
+        d = data.setdefault((side, pivot), sm.model.createData())
+        pin.framesForwardKinematics(sm.model, d, bag.q[k])
+        for name in POINTS:
+            frame = name
+            if name.endswith(('_heel', '_toe')):  # sole corners: support or swing foot
+                foot_side, corner = name.split('_')
+                frame = f'{"support" if foot_side == side else "swing"}_{corner}'
+            out[name][row] = d.oMf[sm.frame_ids[frame]].translation
     return out
 
 

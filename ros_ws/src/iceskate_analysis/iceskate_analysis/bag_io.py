@@ -374,34 +374,16 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
     return chosen
 
 
-class _Rows:
-    """Per-topic records keyed by stamp."""
-
-    def __init__(self) -> None:
-        self.joint: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.gait: dict[int, tuple[Any, ...]] = {}
-        self.dyn: dict[int, tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]] = {}
-        self.head: dict[int, np.ndarray] = {}
-        self.urdf = ''
-        self.duplicates = 0
-
-    def put(self, table: dict[int, Any], stamp: int, row: Any) -> None:
-        """Store a row; a repeated stamp keeps the later message and is counted."""
-        if stamp in table:
-            self.duplicates += 1
-        table[stamp] = row
-
-
-def _read_joint_states(rows: _Rows, msg: Any, where: str) -> None:
+def _joint_states(msg: Any, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     order = _order(msg.name, '/joint_states', where)
     q = _vector(msg.position, order, '/joint_states', 'position', where)
     v = _vector(msg.velocity, order, '/joint_states', 'velocity', where)
     effort = (_vector(msg.effort, order, '/joint_states', 'effort', where)
               if len(msg.effort) else np.zeros(N_COORDINATES))
-    rows.put(rows.joint, _stamp_ns(msg), (q, v, effort))
+    return q, v, effort
 
 
-def _read_gait_state(rows: _Rows, msg: Any, where: str) -> None:
+def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
     multipliers = np.zeros(len(MULTIPLIER_NAMES))
     if len(msg.multiplier_names) != len(msg.multipliers):
         raise SimulationError(f'/gait_state at {where}: {len(msg.multiplier_names)} multiplier '
@@ -409,13 +391,13 @@ def _read_gait_state(rows: _Rows, msg: Any, where: str) -> None:
     for name, value in zip(msg.multiplier_names, msg.multipliers, strict=True):
         if name in MULTIPLIER_NAMES:
             multipliers[MULTIPLIER_NAMES.index(name)] = float(value)
-    rows.put(rows.gait, _stamp_ns(msg), (
-        int(msg.mode), int(msg.support_side), int(msg.pivot), int(msg.step_index), multipliers,
-        float(msg.support_normal_force), float(msg.support_friction_force), float(msg.zmp.y),
-        float(msg.heel_anchor_y)))
+    return (int(msg.mode), int(msg.support_side), int(msg.pivot), int(msg.step_index),
+            multipliers, float(msg.support_normal_force), float(msg.support_friction_force),
+            float(msg.zmp.y), float(msg.heel_anchor_y))
 
 
-def _read_joint_dynamics(rows: _Rows, msg: Any, where: str) -> None:
+def _joint_dynamics(msg: Any, where: str
+                    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     if len(msg.acceleration) == 0:
         raise SimulationError(f'/joint_dynamics at {where}: the message carries no joint '
                               'accelerations (empty acceleration array)')
@@ -432,12 +414,25 @@ def _read_joint_dynamics(rows: _Rows, msg: Any, where: str) -> None:
                               f'values for {len(sources)} sources x {n} names')
     efforts = {source: _vector(row, order, '/joint_dynamics', f'effort of {source!r}', where)
                for source, row in zip(sources, values.reshape(len(sources), n), strict=True)}
-    rows.put(rows.dyn, _stamp_ns(msg), (qdd, active, efforts))
+    return qdd, active, efforts
+
+
+def _head_pose(msg: Any, where: str) -> np.ndarray:
+    p = msg.pose.position
+    return np.array([p.x, p.y, p.z], dtype=float)
+
+
+#: What a message of each sampled topic gives: reader(msg, where) -> its row.
+_READERS = {'/joint_states': _joint_states, '/gait_state': _gait_state,
+            '/joint_dynamics': _joint_dynamics, '/head_pose': _head_pose}
 
 
 def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
-             progress: bool) -> _Rows:
-    rows = _Rows()
+             progress: bool) -> tuple[dict[str, dict[int, Any]], str, int]:
+    """The rows of each sampled topic by header stamp (the later of a repeated one), the URDF,
+    the count of repeated stamps."""
+    tables: dict[str, dict[int, Any]] = {topic: {} for topic in _READERS}
+    urdf, duplicates = '', 0
     total = sum(c.count for c in chosen.values())
     bar = ProgressBar(total, f'reading {path.name}', 'msg', progress, leave=False)
     try:
@@ -450,17 +445,13 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
                 raise SimulationError(f'bag {path}: cannot decode a {conn.msgtype} message of '
                                       f'{topic} at {where} ({exc})') from exc
             try:
-                if topic == '/joint_states':
-                    _read_joint_states(rows, msg, where)
-                elif topic == '/gait_state':
-                    _read_gait_state(rows, msg, where)
-                elif topic == '/joint_dynamics':
-                    _read_joint_dynamics(rows, msg, where)
-                elif topic == '/head_pose':
-                    p = msg.pose.position
-                    rows.head[_stamp_ns(msg)] = np.array([p.x, p.y, p.z], dtype=float)
-                elif topic == '/robot_description':
-                    rows.urdf = str(msg.data)
+                if topic == '/robot_description':
+                    urdf = str(msg.data)
+                else:
+                    row = _READERS[topic](msg, where)
+                    stamp = _stamp_ns(msg)
+                    duplicates += topic in REQUIRED_TOPICS and stamp in tables[topic]
+                    tables[topic][stamp] = row
             except AttributeError as exc:
                 raise SimulationError(f'bag {path}: {topic} message at {where} lacks a field '
                                       f'the analysis needs ({exc}); the bag was recorded with '
@@ -468,37 +459,39 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
             bar.update(1)
     finally:
         bar.close()
-    return rows
+    return tables, urdf, duplicates
 
 
-def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagData:
-    stamps = sorted(set(rows.joint) & set(rows.gait) & set(rows.dyn))
+def _assemble(tables: dict[str, dict[int, Any]], urdf: str, duplicates: int,
+              path: pathlib.Path, custom: dict[str, str]) -> BagData:
+    joint, gait, dyn, head = (tables[t] for t in ('/joint_states', '/gait_state',
+                                                 '/joint_dynamics', '/head_pose'))
+    stamps = sorted(set(joint) & set(gait) & set(dyn))
     notes = []
-    union = set(rows.joint) | set(rows.gait) | set(rows.dyn)
+    union = set(joint) | set(gait) | set(dyn)
     if len(union) > len(stamps):
         notes.append(f'{len(union) - len(stamps)} sample(s) miss one of '
                      f'{sorted(REQUIRED_TOPICS)} and were dropped')
     if not stamps:
-        counts = {'/joint_states': len(rows.joint), '/gait_state': len(rows.gait),
-                  '/joint_dynamics': len(rows.dyn)}
+        counts = {topic: len(tables[topic]) for topic in REQUIRED_TOPICS}
         raise SimulationError(f'bag {path}: no sample has all of {sorted(REQUIRED_TOPICS)} '
                               f'at the same header stamp (messages per topic: {counts})')
     n = len(stamps)
-    sources = dict.fromkeys(s for k in stamps for s in rows.dyn[k][2])  # first-seen order
+    sources = dict.fromkeys(s for k in stamps for s in dyn[k][2])  # first-seen order
     efforts = {s: np.zeros((n, N_COORDINATES)) for s in sources}
     for i, k in enumerate(stamps):
-        for source, tau in rows.dyn[k][2].items():
+        for source, tau in dyn[k][2].items():
             efforts[source][i] = tau
-    q, v, effort_total = _columns(rows.joint, stamps)
-    qdd, active = (np.array([rows.dyn[k][i] for k in stamps]) for i in (0, 1))
+    q, v, effort_total = _columns(joint, stamps)
+    qdd, active = (np.array([dyn[k][i] for k in stamps]) for i in (0, 1))
     mode, side, pivot, step_index, multipliers, normal, friction, zmp_y, anchor_y = _columns(
-        rows.gait, stamps)
-    if rows.duplicates:
-        notes.append(f'{rows.duplicates} message(s) repeated a header stamp; the later one '
+        gait, stamps)
+    if duplicates:
+        notes.append(f'{duplicates} message(s) repeated a header stamp; the later one '
                      'was kept')
-    if not rows.head:
+    if not head:
         notes.append('no /head_pose: head positions are nan')
-    if not rows.urdf:
+    if not urdf:
         notes.append('no /robot_description: the installed URDF is assumed')
     steps = np.diff(np.array(stamps, dtype=np.int64))
     if steps.size and steps.max() > steps.min():
@@ -512,8 +505,8 @@ def _assemble(rows: _Rows, path: pathlib.Path, custom: dict[str, str]) -> BagDat
         active=active, effort_total=effort_total, efforts=efforts, mode=mode,
         side=side, pivot=pivot, step_index=step_index, multipliers=multipliers,
         support_normal=normal, support_friction=friction, zmp_y=zmp_y, heel_anchor_y=anchor_y,
-        head_position=np.array([rows.head.get(k, np.full(3, np.nan)) for k in stamps]),
-        urdf=rows.urdf, custom_data=custom, notes=tuple(notes))
+        head_position=np.array([head.get(k, np.full(3, np.nan)) for k in stamps]),
+        urdf=urdf, custom_data=custom, notes=tuple(notes))
 
 
 def _columns(table: dict[int, tuple[Any, ...]], stamps: list[int]) -> list[np.ndarray]:
@@ -551,8 +544,9 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         lack the fields the analysis needs; the message names what is wrong.
     """
     reader = open_bag(path)
-    rows = _collect(reader, _check_connections(reader, reader.path), reader.path, progress)
-    data = _assemble(rows, reader.path, reader.custom_data)
+    tables, urdf, duplicates = _collect(reader, _check_connections(reader, reader.path),
+                                        reader.path, progress)
+    data = _assemble(tables, urdf, duplicates, reader.path, reader.custom_data)
     if reader.recovered:
         extra = ('' if reader.custom_data
                  else ' (without metadata: the scene parameters are not known)')

@@ -370,12 +370,12 @@ class ArmSwing:
                 'phase_difference_deg': self.phase_difference_deg}
 
 
-def analysis_window(bag: BagData, from_step: int = ARM_SWING_FROM_STEP
-                    ) -> tuple[np.ndarray, int | None]:
-    """Mask of the samples from ``step_index >= from_step`` on, or all when too few."""
-    mask = bag.step_index >= from_step
+def analysis_window(bag: BagData) -> tuple[np.ndarray, int | None]:
+    """Mask of the samples from ``step_index >= ARM_SWING_FROM_STEP`` on (and that step), or
+    all (and None) when too few."""
+    mask = bag.step_index >= ARM_SWING_FROM_STEP
     if int(mask.sum()) >= MIN_WINDOW:
-        return mask, from_step
+        return mask, ARM_SWING_FROM_STEP
     return np.ones(bag.n_samples, dtype=bool), None
 
 
@@ -388,10 +388,10 @@ def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
     return float(freqs[1:][np.argmax(spectrum[1:])]) if freqs.size > 1 else float('nan')
 
 
-def arm_swing(bag: BagData, from_step: int = ARM_SWING_FROM_STEP) -> ArmSwing:
-    """Peak-to-peak, frequency, correlation and phase of q11 versus q14."""
+def arm_swing(bag: BagData) -> ArmSwing:
+    """Peak-to-peak, frequency, correlation and phase of q11 versus q14 (``analysis_window``)."""
     from scipy.signal import detrend, hilbert
-    mask, step = analysis_window(bag, from_step)
+    mask, step = analysis_window(bag)
     t = bag.t[mask]
     right, left = bag.q[mask, RIGHT_SHOULDER], bag.q[mask, LEFT_SHOULDER]
     p2p = {'q11': float(np.ptp(right)) if right.size else float('nan'),
@@ -534,23 +534,13 @@ def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
 def write_csv(path: str | pathlib.Path, columns: dict[str, np.ndarray]) -> pathlib.Path:
     """Write equal-length columns to a CSV file with a header row (nan written as 'nan')."""
     path = pathlib.Path(path)
-    names = list(columns)
-    arrays = [np.asarray(columns[c]) for c in names]
-    lengths = {a.shape[0] for a in arrays}
-    if len(lengths) > 1:
-        raise SimulationError(f'CSV {path}: columns of different lengths {sorted(lengths)}')
-    text = [_csv_strings(a) for a in arrays]
+    text = [[str(int(x)) for x in a] if a.dtype.kind in 'biu' else [repr(float(x)) for x in a]
+            for a in map(np.asarray, columns.values())]
     with path.open('w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
-        writer.writerow(names)
+        writer.writerow(columns)
         writer.writerows(zip(*text, strict=True))
     return path
-
-
-def _csv_strings(a: np.ndarray) -> list[str]:
-    if a.dtype.kind in 'biu':
-        return [str(int(x)) for x in a]
-    return [repr(float(x)) for x in a]
 
 
 def case_columns(case: CaseResult) -> dict[str, np.ndarray]:

@@ -75,8 +75,7 @@ class ReplayNode(Node):
     def play(self, rate: float | None) -> int:
         """Publish every message; pace to ``rate`` x recorded time (None: no pacing)."""
         start_wall, first, last_clock = time.monotonic(), None, None
-        topics = list(self.publishers_by_topic)
-        connections = [c for c in self.reader.topics if c.topic in topics]
+        connections = [c for c in self.reader.topics if c.topic in self.publishers_by_topic]
         for conn, timestamp, raw in self.reader.messages(connections):
             first = timestamp if first is None else first
             if rate is not None:

@@ -49,10 +49,9 @@ def jsonable(value: Any) -> Any:
 
 def _order_pair(cases: list[CaseResult]) -> tuple[CaseResult, CaseResult, str]:
     """(without τ8, with τ8, how it was decided)."""
-    first, second = cases
+    first, second = sorted(cases, key=lambda case: case.torso_yaw_input)  # stable
     if first.torso_yaw_input != second.torso_yaw_input:
-        return (second, first, 'yaw source') if first.torso_yaw_input else (first, second,
-                                                                            'yaw source')
+        return first, second, 'yaw source'
     return first, second, 'argument order (both or neither have a torso-yaw source)'
 
 

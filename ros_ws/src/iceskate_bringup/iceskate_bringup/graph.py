@@ -1,10 +1,8 @@
 """``run_scene <scene> --ros --out DIR``: a scene through the ROS 2 graph (what a launch would do).
 
 ``run_graph`` starts the simulator and the controller nodes the scene needs as separate
-processes (the installed executables, each in its own process group, on one DDS domain with DDS
-on loopback; node logs in ``$ROS_LOG_DIR/<node>.log``), waits for the simulator to end the run
-and stops the controllers; ``run_single_process`` runs them on one executor instead. Signals,
-the nodes' lifetime and real-time scheduling: docs/usage.md, "Through ROS 2".
+processes (``graph_nodes``, ``start``), or on one executor (``run_single_process``); signals,
+the nodes' lifetime, logs and real-time scheduling: docs/usage.md, "Through ROS 2".
 """
 
 from __future__ import annotations
@@ -31,14 +29,13 @@ from iceskate_sim.model.robot import load_robot
 from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.loopback import PROFILE_VARIABLES, loopback_dds
 from iceskate_sim.ros.node_support import write_parameter_file
-from iceskate_sim.run.scene import Scene
 from iceskate_sim.run.session import (
     LOCK_FD_ENV,
     prepare_output,
     release_output,
     start_simulator,
 )
-from iceskate_sim.shutdown import StopRequest, die_with_parent, say
+from iceskate_sim.shutdown import StopRequest, die_with_parent, process_alive, say
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
 STOP_GRACE = 30.0  # s the simulator has to end a run it was signalled to end (bag, outputs)
@@ -127,12 +124,9 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
 
 def ros_environment(domain_id: int | None = None, log_dir: pathlib.Path | None = None
                     ) -> dict[str, str]:
-    """This environment plus a domain, DDS on loopback (``loopback_dds``) and a ROS_LOG_DIR of
-    the run.
-
-    The domain is ``domain_id``, else $ROS_DOMAIN_ID when set (to watch the run from a shell),
-    else one derived from this process id (1..232; runs started side by side do not meet).
-    """
+    """This environment plus DDS on loopback, a ROS_LOG_DIR of the run and a domain:
+    ``domain_id``, else $ROS_DOMAIN_ID when set, else one derived from this process id (1..232;
+    runs started side by side do not meet)."""
     env = dict(os.environ)
     if domain_id is None:
         domain_id = int(env.get('ROS_DOMAIN_ID') or 1 + os.getpid() % 232)
@@ -177,11 +171,9 @@ def _group_alive(pgid: int) -> bool:
     except PermissionError:
         return True
     for entry in pathlib.Path('/proc').iterdir():  # members may be zombies awaiting their reaper
-        if entry.name.isdigit():
-            with contextlib.suppress(OSError, IndexError, ValueError):
-                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
-                if int(fields[2]) == pgid and fields[0] != 'Z':
-                    return True
+        with contextlib.suppress(OSError, ValueError):
+            if os.getpgid(int(entry.name)) == pgid and process_alive(int(entry.name)):
+                return True
     return False
 
 
@@ -216,11 +208,8 @@ def realtime_scheduling(priority: int) -> Iterator[None]:
 
 def start(spec: NodeSpec, env: dict[str, str], lock: int | None = None) -> subprocess.Popen:
     """Start one node in its own process group, its output in $ROS_LOG_DIR/<node>.log; ``lock``:
-    the output folder's lock descriptor, handed to it (the simulator writes there).
-
-    The node dies with this process: the kernel sends it SIGTERM when this process ends, even
-    by SIGKILL (``die_with_parent``), and the node then ends its run cleanly.
-    """
+    the output folder's lock descriptor, handed to it. The node gets SIGTERM when this process
+    ends, even by SIGKILL (``die_with_parent``)."""
     if lock is not None:
         env = {**env, LOCK_FD_ENV: str(lock)}
     log = open(pathlib.Path(env['ROS_LOG_DIR']) / f'{spec.node}.log', 'wb')  # noqa: SIM115
@@ -242,91 +231,63 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
               stop: StopRequest | None = None, overrides: dict[str, Any] | None = None,
               **simulator_parameters: Any) -> dict[str, Any]:
     """Run a scene (with ``overrides``: dotted key -> value) through the ROS graph; return its
-    metrics (also in ``out/metrics.json``).
-
-    The output folder is checked first (``prepare_output``). A SIGINT, SIGTERM or SIGHUP
-    (``stop``) is passed on to the simulator, which ends the run cleanly (bag closed, outputs
-    written, 'interrupted by ...' in the metrics); then the controllers are stopped. The nodes
-    never outlive this process (``start``). The rejected commands of the run, if any, are
-    summarised on stderr.
+    metrics (also in ``out/metrics.json``). A signal (``stop``) is passed on to the simulator,
+    which ends the run cleanly; then the controllers are stopped (docs/usage.md, "Through ROS 2").
 
     :param timeout: wall-clock limit of the whole run [s] (None: none).
     :param rt_priority: SCHED_FIFO priority of the nodes (0: the default scheduling).
     :param stop: the caller's StopRequest (None: one is installed for the call).
     :param simulator_parameters: extra simulator parameters (e.g. control_timeout=2.0).
     :raises RunInterrupted: after a signal (the outputs are written).
-    :raises SimulationError: when the run failed; the message is this run's error (the
-        simulator's, or why a node had to be stopped).
+    :raises SimulationError: when the run failed (the simulator's error, or why a node had to
+        be stopped).
     """
+    out = out.resolve()
     with contextlib.ExitStack() as stack:
         if stop is None:
             stop = stack.enter_context(StopRequest())
-        return _run_graph(scene_arg, out.resolve(), duration, single_process, domain_id,
-                          timeout, rt_priority, stop, overrides, simulator_parameters)
-
-
-def _run_graph(scene_arg: str, out: pathlib.Path, duration: float | None, single_process: bool,
-               domain_id: int | None, timeout: float | None, rt_priority: int,
-               stop: StopRequest, overrides: dict[str, Any] | None,
-               simulator_parameters: dict[str, Any]) -> dict[str, Any]:
-    scene = load_scene(scene_arg, overrides)
-    start_simulator(scene, load_robot())  # an initial state the run cannot start from: refused
-    lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
-    try:
-        return _run_locked(scene, scene_arg, out, lock, duration, single_process, domain_id,
-                           timeout, rt_priority, stop, overrides, simulator_parameters)
-    finally:
-        release_output(out)
-
-
-def _run_locked(scene: Scene, scene_arg: str, out: pathlib.Path, lock: int,
-                duration: float | None, single_process: bool, domain_id: int | None,
-                timeout: float | None, rt_priority: int, stop: StopRequest,
-                overrides: dict[str, Any] | None, simulator_parameters: dict[str, Any]
-                ) -> dict[str, Any]:
-    """``_run_graph`` once the output folder is this run's (``lock``: its descriptor, handed
-    to the simulator)."""
-    specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
-    env = ros_environment(domain_id)
-    say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
-    why, early = '', {}
-    if single_process:
-        with realtime_scheduling(rt_priority):
-            code = run_single_process(specs, env, timeout, stop)
-    else:
-        processes: list[subprocess.Popen] = []
-        try:
+        scene = load_scene(scene_arg, overrides)
+        start_simulator(scene, load_robot())  # refuses an initial state the run cannot start from
+        lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
+        stack.callback(release_output, out)
+        specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
+        env = ros_environment(domain_id)
+        say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
+        why, early = '', {}
+        if single_process:
             with realtime_scheduling(rt_priority):
-                for spec in specs:
-                    processes.append(start(spec, env, lock if spec.node == 'simulator'
-                                           else None))
-            why = _wait(processes, specs, timeout,
-                        float(simulator_parameters.get('control_timeout', 5.0)) + GRACE, stop)
-            early = {s.node: p.returncode for p, s in zip(processes, specs, strict=True)
-                     if s.node != 'simulator' and p.poll() is not None}
-        finally:
-            codes = stop_graph(processes, stop.signum)
-        code = codes[0] if codes else None
-    metrics = _read_metrics(out / 'metrics.json')
-    if metrics is not None:
-        _report_rejected(metrics, env)
-    if stop.requested and (metrics is None or metrics.get('interrupted')):
-        error = stop.error(metrics.get('sim_time_s') if metrics else None)
-        if metrics is None:
-            _write_metrics(out, scene.name, str(error), interrupted=True)
-        raise error
-    if why or code != 0 or metrics is None:
-        _fail(out, env, scene.name, why, code, early, metrics)
-    _write_summary(out)
-    return metrics
+                code = run_single_process(specs, env, timeout, stop)
+        else:
+            processes: list[subprocess.Popen] = []
+            try:
+                with realtime_scheduling(rt_priority):
+                    for spec in specs:
+                        processes.append(start(spec, env, lock if spec.node == 'simulator'
+                                               else None))
+                patience = float(simulator_parameters.get('control_timeout', 5.0)) + GRACE
+                why = _wait(processes, specs, timeout, patience, stop)
+                early = {s.node: p.returncode for p, s in zip(processes, specs, strict=True)
+                         if s.node != 'simulator' and p.poll() is not None}
+            finally:
+                codes = stop_graph(processes, stop.signum)
+            code = codes[0] if codes else None
+        metrics = _read_metrics(out / 'metrics.json')
+        if metrics is not None:
+            _report_rejected(metrics, env)
+        if stop.requested and (metrics is None or metrics.get('interrupted')):
+            error = stop.error(metrics.get('sim_time_s') if metrics else None)
+            if metrics is None:
+                _write_metrics(out, scene.name, str(error), interrupted=True)
+            raise error
+        if why or code != 0 or metrics is None:
+            _fail(out, env, scene.name, why, code, early, metrics)
+        _write_summary(out)
+        return metrics
 
 
 def stop_graph(processes: list[subprocess.Popen], signum: int | None = None) -> list[int]:
-    """Stop the graph's processes (the simulator first); return their exit codes in order.
-
-    The simulator gets ``signum`` (the signal that stopped the run; SIGTERM if None) and
-    ``STOP_GRACE`` s to end its run and close its bag; the controllers get SIGTERM.
-    """
+    """Stop the graph's processes; return their exit codes in order. The simulator (first) gets
+    ``signum`` (None: SIGTERM) and ``STOP_GRACE`` s to end its run; the controllers SIGTERM."""
     codes = [stop(p, STOP_GRACE, signum or signal.SIGTERM) for p in processes[:1]]
     return codes + [stop(p) for p in processes[1:]]
 
@@ -412,15 +373,12 @@ def _write_summary(out: pathlib.Path) -> None:
 
 
 def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: float | None,
-          patience: float, stop: StopRequest | None = None) -> str:
-    """Wait for the simulator to exit; '' or why it had to be stopped ('' for a signal:
-    ``stop`` tells).
-
-    A controller that exits first is the simulator's to report (its control timeout names the
-    source); only if the simulator is still up ``patience`` s later is the run stopped here.
-    """
+          patience: float, stop: StopRequest) -> str:
+    """Wait for the simulator to exit; '' or why it had to be stopped ('' for a signal). A
+    controller that exits first is the simulator's to report; only if the simulator is still up
+    ``patience`` s later is the run stopped here."""
     start_time, dead_since = time.monotonic(), None
-    while processes[0].poll() is None and not (stop is not None and stop.requested):
+    while processes[0].poll() is None and not stop.requested:
         now = time.monotonic()
         if timeout is not None and now - start_time > timeout:
             return f'the run took longer than {timeout} s (stopped)'
@@ -433,8 +391,8 @@ def _wait(processes: list[subprocess.Popen], specs: list[NodeSpec], timeout: flo
     return ''
 
 
-def run_single_process(specs: list[NodeSpec], env: dict[str, str],
-                       timeout: float | None = None, stop: StopRequest | None = None) -> int:
+def run_single_process(specs: list[NodeSpec], env: dict[str, str], timeout: float | None,
+                       stop: StopRequest) -> int:
     """All nodes in this process on one EventsExecutor; return the simulator's exit code
     (after a signal of ``stop``: the run ended cleanly, 128 + its number)."""
     import importlib
@@ -462,11 +420,10 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str],
         for node in nodes:
             executor.add_node(node)
         deadline = time.monotonic() + (timeout if timeout is not None else float('inf'))
-        signum = (lambda: stop.signum) if stop is not None else (lambda: None)
-        spin_until(executor, lambda: (nodes[0].finished or signum() is not None
+        spin_until(executor, lambda: (nodes[0].finished or stop.signum is not None
                                       or time.monotonic() > deadline), context, period=0.05)
         if not nodes[0].finished:
-            nodes[0].close(signum())
+            nodes[0].close(stop.signum)
         return nodes[0].exit_code
     finally:
         for node in nodes:

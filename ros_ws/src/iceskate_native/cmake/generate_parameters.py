@@ -57,9 +57,6 @@ class Enum:
         self.name = camel(singular.lower())
         self.choices = choices
 
-    def value(self, choice: str) -> str:
-        return f'{self.name}::k{camel(choice)}'
-
     def names(self) -> str:
         return f'k{self.name}Names'
 
@@ -71,17 +68,13 @@ class Enum:
                 f'constexpr std::array<const char *, {len(self.choices)}> {self.names()} = '
                 f'{{{names}}};\n')
 
-    def options(self) -> str:
-        """The choice list ``Fields::choice`` takes."""
-        return '{' + ', '.join(f'{{{quoted(c)}, {self.value(c)}}}' for c in self.choices) + '}'
-
 
 class Field:
     """One dataclass field in C++: member declaration, reader and writer statements."""
 
-    def __init__(self, cls: type, f: Any, tp: Any, rules: Any, path: str,
+    def __init__(self, cls: type, f: Any, tp: Any, rules: Any,
                  enums: dict[tuple[str, ...], Enum]) -> None:
-        self.name, self.tp, self.rules, self.path = f.name, tp, rules, path
+        self.name, self.tp, self.rules = f.name, tp, rules
         self.default = f.default if f.default is not MISSING else f.default_factory()
         self.where = f'{cls.__name__}.{f.name}'
         self.enum: Enum | None = None
@@ -140,7 +133,7 @@ class Field:
         if kind == 'int':
             return f' = {int(d)}'
         if kind == 'choice':
-            return f' = {self.enum.value(d)}'
+            return f' = {self.enum.name}::k{camel(d)}'
         if kind == 'optional':
             return '' if d is None else f' = {double(d)}'
         if kind == 'ints':
@@ -176,7 +169,7 @@ class Field:
             low = INT_LOW if r.low is None else str(int(r.low))
             return f'  p.{n} = f.integer({q}, {low});\n'
         if self.kind == 'choice':
-            return f'  p.{n} = f.choice<{self.enum.name}>({q}, {self.enum.options()});\n'
+            return f'  p.{n} = f.choice<{self.enum.name}>({q}, {self.enum.names()});\n'
         if self.kind == 'optional':
             return f'  p.{n} = f.optional_number({q});\n'
         if self.kind == 'ints':
@@ -187,17 +180,7 @@ class Field:
             size = len(typing.get_args(self.tp))
             return (f'  {{\n    const std::vector<double> values = f.numbers({q}, {size});\n'
                     f'    std::copy(values.begin(), values.end(), p.{n}.begin());\n  }}\n')
-        enum = self.enum
-        head = quoted(f"{self.path} holds '")
-        tail = quoted(f"', which is not one of {', '.join(enum.choices)}")
-        return (f'  p.{n}.fill(false);\n'
-                f'  for (const std::string & text : f.texts({q})) {{\n'
-                f'    std::size_t k = 0;\n'
-                f'    while (k < {enum.names()}.size() && text != {enum.names()}[k]) {{\n'
-                f'      ++k;\n    }}\n'
-                f'    if (k == {enum.names()}.size()) {{\n'
-                f'      throw std::invalid_argument({head} + text + {tail});\n    }}\n'
-                f'    p.{n}[k] = true;\n  }}\n')
+        return f'  p.{n} = f.set({q}, {self.enum.names()});\n'
 
     def write(self) -> str:
         n, q = self.name, quoted(self.name)
@@ -226,21 +209,6 @@ def choice_enums(module: Any) -> dict[tuple[str, ...], Enum]:
             and all(isinstance(v, str) for v in value)}
 
 
-def paths(classes: list[type], field_types: Any) -> dict[type, str]:
-    """The dotted path each class is read at ('' for a top-level class, 'posture.' ...)."""
-    out = {cls: '' for cls in classes}
-    seen: set[type] = set()
-    for cls in reversed(classes):
-        for name, tp in field_types(cls).items():
-            if tp in out:
-                if tp in seen:
-                    raise SystemExit(f'{tp.__name__} is the block of two fields; give each its '
-                                     'own class (its readers name one path)')
-                seen.add(tp)
-                out[tp] = f'{out[cls]}{name}.'
-    return out
-
-
 def generate(module_name: str, namespace: str) -> tuple[str, str]:
     """(parameters.hpp, parameter_readers.hpp) of ``module_name``."""
     module = importlib.import_module(module_name)
@@ -249,7 +217,6 @@ def generate(module_name: str, namespace: str) -> tuple[str, str]:
     if not classes:
         raise SystemExit(f'{module_name} defines no parameter dataclass')
     enums = choice_enums(module)
-    prefix = paths(classes, field_types)
     source = module_name.replace('.', '/') + '.py'
     banner = (f'// Generated at build time from {source} by iceskate_native/cmake/'
               'generate_parameters.py: do not edit.\n')
@@ -257,8 +224,7 @@ def generate(module_name: str, namespace: str) -> tuple[str, str]:
     structs, readers, writers = [], [], []
     for cls in classes:
         types_, rules = field_types(cls), rules_of(cls)
-        items = [Field(cls, f, types_[f.name], rules[f.name], prefix[cls] + f.name, enums)
-                 for f in fields(cls)]
+        items = [Field(cls, f, types_[f.name], rules[f.name], enums) for f in fields(cls)]
         used.update({id(x.enum): x.enum for x in items if x.enum is not None})
         summary = comment((cls.__doc__ or cls.__name__).split('\n\n')[0]).split('. ')[0]
         doc = summary.rstrip('.') + '.'

@@ -5,7 +5,6 @@
 //
 // Errors: see errors.hpp. std::invalid_argument -> ValueError (nanobind's own translation),
 // iceskate_native::NativeError -> iceskate_native.NativeError (a RuntimeError).
-#include <array>
 #include <cmath>
 #include <map>
 #include <optional>
@@ -36,31 +35,17 @@
 namespace nb = nanobind;
 using nb::literals::operator""_a;
 
+namespace iceskate_native::bindings
+{
+
 namespace
 {
 
-using iceskate_native::RobotModel;
-using Vector = Eigen::Ref<const Eigen::VectorXd>;
-
 std::string_view view(const nb::bytes & data) { return {data.c_str(), data.size()}; }
 
-using iceskate_native::Dynamics;
-using iceskate_native::DynamicsResult;
-using iceskate_native::Vector18;
-
-using iceskate_native::bindings::mode_table;
-using iceskate_native::bindings::ModeRow;
 /// (mu, baumgarte, joint_limits, limit_stiffness, limit_damping, damping)
 using ParameterRow = std::tuple<double, double, bool, double, double, bool>;
-using iceskate_native::bindings::Frames;
 using Optional = std::optional<Eigen::VectorXd>;
-
-Vector18 vector18(const Vector & value, const char * name)
-{
-  iceskate_native::require_finite_vector(value, iceskate_native::kCoordinates, name,
-                                         "[y0, q1..q17]");
-  return value;
-}
 
 /// Construct a Dynamics in place at `self` from the Python-side description of the robot.
 void construct_dynamics(
@@ -68,23 +53,10 @@ void construct_dynamics(
   const std::vector<ModeRow> & modes, const Vector & damping, double total_mass,
   const std::vector<std::tuple<int, double, double>> & limits, const ParameterRow & params)
 {
-  if (models.size() != 4 || frames.size() != 4) {
-    throw std::invalid_argument(
-      "four support models (index side * 2 + pivot) and their frames are needed");
-  }
   if (!(total_mass > 0.0) || !std::isfinite(total_mass)) {
     throw std::invalid_argument("total_mass must be a finite mass > 0 kg");
   }
-  std::array<iceskate_native::SupportModel, 4> supports{
-    iceskate_native::SupportModel{models[0], frames[0]},
-    iceskate_native::SupportModel{models[1], frames[1]},
-    iceskate_native::SupportModel{models[2], frames[2]},
-    iceskate_native::SupportModel{models[3], frames[3]}};
-  std::vector<iceskate_native::JointLimit> joint_limits;
-  for (const auto & [index, lower, upper] : limits) {
-    joint_limits.push_back({index, lower, upper});
-  }
-  iceskate_native::DynamicsParameters p;
+  DynamicsParameters p;
   std::tie(p.mu, p.baumgarte, p.joint_limits, p.limit_stiffness, p.limit_damping, p.damping) =
     params;
   for (double value : {p.mu, p.baumgarte, p.limit_stiffness, p.limit_damping}) {
@@ -93,17 +65,19 @@ void construct_dynamics(
         "mu, baumgarte, limit_stiffness and limit_damping must be finite and >= 0");
     }
   }
+  std::vector<JointLimit> joint_limits;
   for (const auto & [index, lower, upper] : limits) {
     if (!std::isfinite(lower) || !std::isfinite(upper)) {
       throw std::invalid_argument("joint limit " + std::to_string(index) + " is not finite");
     }
+    joint_limits.push_back({index, lower, upper});
   }
   new (self) Dynamics(
-    std::move(supports), mode_table(modes), vector18(damping, "damping"), total_mass,
+    support_models(models, frames), mode_table(modes), vector18(damping, "damping"), total_mass,
     std::move(joint_limits), p);
 }
 
-iceskate_native::Contact contact_of(
+Contact contact_of(
   int mode, int side, int pivot, double heel_anchor_y, double support_slide_dir,
   double heel_slide_dir)
 {
@@ -118,13 +92,13 @@ iceskate_native::Contact contact_of(
 /// (cop_band, force_band, moment_band, toe_scuff, sole_toe_y, sole_heel_y)
 using ConstantRow = std::tuple<double, double, double, double, double, double>;
 
-iceskate_native::GuardSet guard_set(
+GuardSet guard_set(
   const std::vector<std::string> & names, const std::vector<double> & rested_until,
   double mu, bool ice, const ConstantRow & constants, double margin)
 {
-  iceskate_native::GuardSet set;
+  GuardSet set;
   for (const auto & name : names) {
-    set.guards.push_back(iceskate_native::guard_named(name));
+    set.guards.push_back(guard_named(name));
   }
   if (!rested_until.empty() && rested_until.size() != names.size()) {
     throw std::invalid_argument("rested_until needs one time per guard (or none)");
@@ -156,11 +130,11 @@ auto result_tuple(const DynamicsResult & r)
     Eigen::VectorXd(r.swing_heel_velocity), r.swing_toe_z, Eigen::VectorXd(r.passive));
 }
 
-iceskate_native::Inputs inputs_of(
+Inputs inputs_of(
   const Vector & tau, const Optional & stiffness, const Optional & damping,
   const std::string & push_frame, const Optional & push_force)
 {
-  iceskate_native::Inputs inputs;
+  Inputs inputs;
   inputs.tau = vector18(tau, "tau");
   if (stiffness.has_value() != damping.has_value()) {
     throw std::invalid_argument("stiffness and damping come together (a joint impedance)");
@@ -174,15 +148,12 @@ iceskate_native::Inputs inputs_of(
     if (!push_force) {
       throw std::invalid_argument("a push needs its force");
     }
-    iceskate_native::require_finite_vector(*push_force, 3, "push_force", "world force [N]");
+    require_finite_vector(*push_force, 3, "push_force", "world force [N]");
     inputs.push_frame = push_frame;
     inputs.push_force = *push_force;
   }
   return inputs;
 }
-
-using iceskate_native::HybridSimulator;
-using iceskate_native::HybridState;
 
 /// (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir, step_index,
 /// t_exchange, t_touchdown)
@@ -191,7 +162,6 @@ using StateRow = std::tuple<double, Eigen::VectorXd, Eigen::VectorXd, int, int, 
 
 HybridState state_of(const StateRow & row)
 {
-  HybridState s;
   const auto & [t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step, t_e, t_td] = row;
   if (!std::isfinite(t) || !std::isfinite(t_e) || std::isinf(t_td)) {
     throw std::invalid_argument("the state's times must be finite (t_touchdown: or NaN)");
@@ -199,14 +169,8 @@ HybridState state_of(const StateRow & row)
   if (side < 0 || side > 1 || pivot < 0 || pivot > 1 || step < 0) {
     throw std::invalid_argument("side and pivot must be 0 or 1, step_index >= 0");
   }
-  s.t = t;
-  s.q = vector18(q, "q");
-  s.v = vector18(v, "v");
-  s.contact = contact_of(mode, side, pivot, anchor, support_dir, heel_dir);
-  s.step_index = step;
-  s.t_exchange = t_e;
-  s.t_touchdown = t_td;
-  return s;
+  return {t, vector18(q, "q"), vector18(v, "v"),
+          contact_of(mode, side, pivot, anchor, support_dir, heel_dir), step, t_e, t_td};
 }
 
 StateRow state_row(const HybridState & s)
@@ -226,12 +190,12 @@ void construct_simulator(
   double fall_height, double max_speed, int max_instant_transitions, double zeno_window,
   double chatter_dwell)
 {
-  if (guards.size() != iceskate_native::kModes) {
+  if (guards.size() != kModes) {
     throw std::invalid_argument("the guard table needs the guards of each of the 20 modes");
   }
-  iceskate_native::SimulatorSettings s;
+  SimulatorSettings s;
   s.control_period = control_period;
-  s.method = iceskate_native::method_named(method);
+  s.method = method_named(method);
   s.step = step;
   s.rtol = rtol;
   s.atol = atol;
@@ -242,7 +206,7 @@ void construct_simulator(
   s.margin = margin;
   for (std::size_t k = 0; k < guards.size(); ++k) {
     for (const auto & name : guards[k]) {
-      s.guards[k].push_back(iceskate_native::guard_named(name));
+      s.guards[k].push_back(guard_named(name));
     }
   }
   s.projection = projection;
@@ -256,7 +220,7 @@ void construct_simulator(
 }
 
 /// (t, from_mode, to_mode, event, guard, impulse, step_index, side)
-auto record_tuple(const iceskate_native::TransitionRecord & r)
+auto record_tuple(const TransitionRecord & r)
 {
   return std::make_tuple(r.t, r.from_mode, r.to_mode, r.event, r.guard, r.impulse,
                          r.step_index, r.side);
@@ -264,16 +228,19 @@ auto record_tuple(const iceskate_native::TransitionRecord & r)
 
 }  // namespace
 
+}  // namespace iceskate_native::bindings
+
 NB_MODULE(_kernel, m)
 {
+  using namespace iceskate_native;
+  using namespace iceskate_native::bindings;
   m.doc() = "Native (C++) kernels of the iceskate simulator on Pinocchio's C++ API.";
 
   // Translators are tried newest first: the subclasses after their base.
-  const auto native_error =
-    nb::exception<iceskate_native::NativeError>(m, "NativeError", PyExc_RuntimeError);
-  nb::exception<iceskate_native::DivergenceError>(m, "DivergenceError", native_error.ptr());
-  nb::exception<iceskate_native::ChatteringError>(m, "ChatteringError", native_error.ptr());
-  iceskate_native::bindings::bind_controller_error(m, native_error);
+  const auto native_error = nb::exception<NativeError>(m, "NativeError", PyExc_RuntimeError);
+  nb::exception<DivergenceError>(m, "DivergenceError", native_error.ptr());
+  nb::exception<ChatteringError>(m, "ChatteringError", native_error.ptr());
+  bind_controller_error(m, native_error);
 
   nb::class_<RobotModel>(
     m, "RobotModel",
@@ -344,12 +311,11 @@ NB_MODULE(_kernel, m)
         const auto contact =
           contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
         const Vector18 q18 = vector18(q, "q"), v18 = vector18(v, "v");
-        const auto result =
-          self.evaluate(contact, q18, v18, inputs_of(tau, stiffness, damping, push_frame,
-                                                     push_force));
-        iceskate_native::State x;
+        const auto result = self.evaluate(
+          contact, q18, v18, inputs_of(tau, stiffness, damping, push_frame, push_force));
+        State x;
         x << q18, v18;
-        return iceskate_native::guard_values(
+        return guard_values(
           guard_set(guards, rested_until, mu, ice, constants, margin), contact, t, x, result);
       },
       "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
@@ -369,22 +335,20 @@ NB_MODULE(_kernel, m)
          double t_end) {
         const auto contact =
           contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
-        iceskate_native::require_finite_vector(x0, 2 * iceskate_native::kCoordinates, "x0",
-                                               "[q, v]");
-        const iceskate_native::State x = x0;
+        require_finite_vector(x0, 2 * kCoordinates, "x0", "[q, v]");
+        const State x = x0;
         const auto inputs = inputs_of(tau, stiffness, damping, push_frame, push_force);
-        const auto start = self.evaluate(
-          contact, x.head<iceskate_native::kCoordinates>(),
-          x.tail<iceskate_native::kCoordinates>(), inputs);
-        const auto kind = iceskate_native::method_named(method);
+        const auto start =
+          self.evaluate(contact, x.head<kCoordinates>(), x.tail<kCoordinates>(), inputs);
+        const auto kind = method_named(method);
         const auto set = guard_set(guards, rested_until, mu, ice, constants, margin);
         double first_step = step;
         const auto segment =
-          kind == iceskate_native::Method::kRk45
-            ? iceskate_native::integrate_adaptive(
+          kind == Method::kRk45
+            ? integrate_adaptive(
                 self, contact, inputs, {rtol, atol, step}, event_tolerance, set, t0, x, t_end,
                 start, first_step)
-            : iceskate_native::integrate_fixed(
+            : integrate_fixed(
                 self, contact, inputs, kind, step, event_tolerance, set, t0, x, t_end, start);
         return std::make_tuple(
           segment.t, Eigen::VectorXd(segment.x), result_tuple(segment.result), segment.fired,
@@ -436,8 +400,6 @@ NB_MODULE(_kernel, m)
       "start_result",
       [](const HybridSimulator & self) { return result_tuple(self.start_result()); })
     .def_prop_ro("result", [](const HybridSimulator & self) { return result_tuple(self.result()); })
-    .def_prop_ro(
-      "event_count", [](const HybridSimulator & self) { return self.events().size(); })
     .def(
       "events_since",
       [](const HybridSimulator & self, std::size_t first) {
@@ -465,7 +427,7 @@ NB_MODULE(_kernel, m)
       "ended", [](const HybridSimulator & self) { return static_cast<int>(self.ended()); },
       "0 running, 1 flight, 2 toe-first touchdown, 3 fall.");
 
-  iceskate_native::bindings::bind_controller(m);
-  iceskate_native::bindings::bind_cdr(m);
-  iceskate_native::bindings::bind_control_loop(m);
+  bind_controller(m);
+  bind_cdr(m);
+  bind_control_loop(m);
 }

@@ -1,9 +1,10 @@
 // What the translation units of the module iceskate_native._kernel share (private: not
-// installed): the Python-side description of the mode table, and the entry point of the
-// controller interface's bindings (bindings_controller.cpp, python_controller.cpp) and of the
-// control loop (bindings_loop.cpp), called from bindings.cpp.
+// installed): the checks of array arguments, the Python-side description of the mode table and
+// the support models, and the entry points of the other bindings, called from bindings.cpp.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -12,6 +13,8 @@
 
 #include <nanobind/nanobind.h>
 
+#include "iceskate_native/checks.hpp"
+#include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/modes.hpp"
 
 namespace iceskate_native::bindings
@@ -19,6 +22,8 @@ namespace iceskate_native::bindings
 
 /// (number, y0_active, q1_active, swing_sliding, active coordinates, constraint names)
 using ModeRow = std::tuple<int, bool, bool, bool, std::vector<int>, std::vector<std::string>>;
+/// A read-only array argument of doubles.
+using Vector = Eigen::Ref<const Eigen::VectorXd>;
 /// Frame name -> index of one support model.
 using Frames = std::map<std::string, int>;
 
@@ -36,18 +41,35 @@ inline ModeTable mode_table(const std::vector<ModeRow> & rows)
     std::tie(mode.number, mode.y0_active, mode.q1_active, mode.swing_sliding, mode.active,
              names) = rows[k];
     for (const auto & name : names) {
-      if (name == "hz") {
-        mode.constraints.push_back(Constraint::kHeelZ);
-      } else if (name == "hy") {
-        mode.constraints.push_back(Constraint::kHeelY);
-      } else if (name == "fr") {
-        mode.constraints.push_back(Constraint::kSoleFlat);
-      } else {
+      constexpr std::array<const char *, 3> codes = {"hz", "hy", "fr"};  // Constraint's order
+      const auto code = std::find(codes.begin(), codes.end(), name);
+      if (code == codes.end()) {
         throw std::invalid_argument("unknown swing constraint '" + name + "' (hz, hy or fr)");
       }
+      mode.constraints.push_back(static_cast<Constraint>(code - codes.begin()));
     }
   }
   return table;
+}
+
+/// `value` as the 18 finite entries of [y0, q1..q17]; std::invalid_argument naming `name`.
+inline Vector18 vector18(const Vector & value, const char * name)
+{
+  require_finite_vector(value, kCoordinates, name, "[y0, q1..q17]");
+  return value;
+}
+
+/// The four support models (index side * 2 + pivot) with their frames; std::invalid_argument
+/// for another number.
+inline std::array<SupportModel, 4> support_models(
+  const std::vector<RobotModel> & models, const std::vector<Frames> & frames)
+{
+  if (models.size() != 4 || frames.size() != 4) {
+    throw std::invalid_argument(
+      "four support models (index side * 2 + pivot) and their frames are needed");
+  }
+  return {SupportModel{models[0], frames[0]}, SupportModel{models[1], frames[1]},
+          SupportModel{models[2], frames[2]}, SupportModel{models[3], frames[3]}};
 }
 
 /// Kinematics, ModelKinematics, Observation and Controller in module `m`.

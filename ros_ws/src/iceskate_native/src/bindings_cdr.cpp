@@ -26,7 +26,7 @@ namespace
 using SlotArray = nb::ndarray<const std::uint32_t, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using AnyArray = nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu>;
 
-CdrProgram make_program(nb::bytes skeleton, SlotArray slots)
+void construct_program(CdrProgram * self, const nb::bytes & skeleton, SlotArray slots)
 {
   if (slots.shape(1) != 4) {
     throw std::invalid_argument("slots need 4 columns (offset, write, column, element)");
@@ -40,7 +40,7 @@ CdrProgram make_program(nb::bytes skeleton, SlotArray slots)
     out[k] = CdrSlot{slots(k, 0), static_cast<CdrWrite>(write), slots(k, 2), slots(k, 3)};
   }
   const auto * data = static_cast<const std::uint8_t *>(static_cast<const void *>(skeleton.c_str()));
-  return CdrProgram(std::vector<std::uint8_t>(data, data + skeleton.size()), std::move(out));
+  new (self) CdrProgram(std::vector<std::uint8_t>(data, data + skeleton.size()), std::move(out));
 }
 
 /// A numpy array of `rows` rows (1-D: one value per row; 2-D: its columns) as a Column.
@@ -99,11 +99,7 @@ void bind_cdr(nb::module_ & m)
     "How the CDR messages of one layout are written from columns of samples: the skeleton "
     "(the message's bytes with its numbers 0) and one slot per number.")
     .def(
-      "__init__",
-      [](CdrProgram * self, nb::bytes skeleton, SlotArray slots) {
-        new (self) CdrProgram(make_program(std::move(skeleton), slots));
-      },
-      "skeleton"_a, "slots"_a,
+      "__init__", &construct_program, "skeleton"_a, "slots"_a,
       "slots: (n, 4) uint32: byte offset, write (0 float64, 1 int32, 2 uint32, 3 uint8, 4 "
       "builtin_interfaces/Time from nanoseconds, 5 float32, 6 int8, 7 int16, 8 uint16, 9 "
       "int64, 10 uint64), column, element. ValueError for a slot outside the skeleton.")

@@ -5,7 +5,6 @@
 // Observation a law answers, and the queries of a Kinematics (tested against the Python model).
 // Controller is subclassable in Python (its trampoline PythonController, python_controller.hpp):
 // a controller written in Python runs inside the native ControlLoop.
-#include <array>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -37,43 +36,22 @@ namespace iceskate_native::bindings
 namespace
 {
 
-using Vector = Eigen::Ref<const Eigen::VectorXd>;
-
-Vector18 vector18(const Vector & value, const char * name)
-{
-  require_finite_vector(value, kCoordinates, name, "[y0, q1..q17]");
-  return value;
-}
-
 Frame frame_named(const std::string & name)
 {
-  static const std::array<std::pair<const char *, Frame>, 5> frames{{
-    {"head_top", Frame::kHeadTop},
-    {"swing_heel", Frame::kSwingHeel},
-    {"support_toe", Frame::kSupportToe},
-    {"support_heel", Frame::kSupportHeel},
-    {"pelvis_centre", Frame::kPelvisCentre}}};
-  for (const auto & [known, frame] : frames) {
-    if (name == known) {
-      return frame;
+  for (std::size_t k = 0; k < kFrameNames.size(); ++k) {
+    if (name == kFrameNames[k]) {
+      return static_cast<Frame>(k);
     }
   }
-  throw std::invalid_argument(
-    "unknown frame '" + name + "' (head_top, swing_heel, support_toe or pelvis_centre)");
+  throw std::invalid_argument("unknown frame '" + name + "' (head_top, swing_heel, support_toe, "
+                              "support_heel or pelvis_centre)");
 }
 
 void construct_kinematics(
   ModelKinematics * self, const std::vector<RobotModel> & models,
   const std::vector<Frames> & frames, const std::vector<ModeRow> & modes, double total_mass)
 {
-  if (models.size() != 4 || frames.size() != 4) {
-    throw std::invalid_argument(
-      "four support models (index side * 2 + pivot) and their frames are needed");
-  }
-  new (self) ModelKinematics(
-    {SupportModel{models[0], frames[0]}, SupportModel{models[1], frames[1]},
-     SupportModel{models[2], frames[2]}, SupportModel{models[3], frames[3]}},
-    mode_table(modes), total_mass);
+  new (self) ModelKinematics(support_models(models, frames), mode_table(modes), total_mass);
 }
 
 void construct_observation(

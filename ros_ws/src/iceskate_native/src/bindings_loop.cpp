@@ -1,15 +1,9 @@
 // Bindings of the control loop (control_loop.hpp), part of iceskate_native._kernel: a
-// ControlLoop over a HybridSimulator, a Kinematics and the controllers (native Controller
-// objects, e.g. visual_lifting._law.VisualLiftingController), which it keeps alive; run(n)
-// returns the samples of up to n periods as numpy arrays, and raise_error() re-raises what
-// stopped it early (the simulator's DivergenceError & co. or the controller's own error).
-// A loop without controllers takes the commands of controller nodes (receive, checked for
-// sizes, finiteness and gains >= 0), holds them one period at a time (hold) into a block taken
-// with take_block, and gives the live view of the current state (live).
+// ControlLoop over a HybridSimulator, a Kinematics and native Controller objects, which it keeps
+// alive, or over the commands of controller nodes it receives (see the bound docstrings).
 #include <algorithm>
 #include <cstdint>
 #include <exception>
-#include <initializer_list>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -69,7 +63,7 @@ using PushRow = std::tuple<double, double, std::string, Eigen::VectorXd>;
 void construct_loop(
   BoundControlLoop * self, nb::object simulator, nb::object kinematics,
   std::vector<nb::object> controllers, const std::vector<PushRow> & pushes,
-  const Eigen::Ref<const Eigen::VectorXd> & head_origin,
+  const Vector & head_origin,
   const std::vector<std::pair<std::string, std::string>> & tf_pairs,
   const std::vector<std::vector<std::string>> & inbox)
 {
@@ -97,13 +91,11 @@ void construct_loop(
     SampleBlock{}, SampleBlock{}, std::move(slots), std::vector<bool>(inbox.size(), false), {}};
 }
 
-using Values = Eigen::Ref<const Eigen::VectorXd>;
-
 /// Store controller node `index`'s command (see bind_control_loop for the arguments).
 void receive(
-  BoundControlLoop & self, std::size_t index, const Values & effort, const Values & stiffness,
-  const Values & damping, const Values & reference, const Values & source_efforts,
-  const Values & head_target)
+  BoundControlLoop & self, std::size_t index, const Vector & effort, const Vector & stiffness,
+  const Vector & damping, const Vector & reference, const Vector & source_efforts,
+  const Vector & head_target)
 {
   if (index >= self.inbox.size()) {
     throw std::invalid_argument(
@@ -169,58 +161,29 @@ bool hold(BoundControlLoop & self, bool clear)
   return taken;
 }
 
-/// A numpy array that takes over `data` (no copy), of the given shape.
+/// A numpy array that takes over `data` (no copy): (rows,) for width 1, else (rows, width).
 template <typename T>
-nb::object array_of(std::vector<T> && data, std::initializer_list<std::size_t> shape)
+nb::object array_of(std::vector<T> && data, std::size_t rows, std::size_t width)
 {
   auto * owner = new std::vector<T>(std::move(data));
   nb::capsule deleter(owner, [](void * p) noexcept { delete static_cast<std::vector<T> *>(p); });
-  return nb::cast(nb::ndarray<nb::numpy, T>(owner->data(), shape, deleter));
+  const std::size_t shape[2] = {rows, width};
+  return nb::cast(nb::ndarray<nb::numpy, T>(owner->data(), width == 1 ? 1 : 2, shape, deleter));
 }
 
 /// The samples of `b` as numpy arrays (taken over: `b` is left empty, its sources kept).
 nb::dict block_arrays(SampleBlock & b)
 {
   const auto n = static_cast<std::size_t>(b.count);
-  constexpr std::size_t m = kCoordinates;
   nb::dict out;
-  out["t"] = array_of(std::move(b.t), {n});
-  out["t_exchange"] = array_of(std::move(b.t_exchange), {n});
-  out["t_touchdown"] = array_of(std::move(b.t_touchdown), {n});
-  out["heel_anchor_y"] = array_of(std::move(b.heel_anchor_y), {n});
-  out["mode"] = array_of(std::move(b.mode), {n});
-  out["side"] = array_of(std::move(b.side), {n});
-  out["pivot"] = array_of(std::move(b.pivot), {n});
-  out["pivot_code"] = array_of(std::move(b.pivot_code), {n});
-  out["step_index"] = array_of(std::move(b.step_index), {n});
-  out["q"] = array_of(std::move(b.q), {n, m});
-  out["v"] = array_of(std::move(b.v), {n, m});
-  out["qdd"] = array_of(std::move(b.qdd), {n, m});
-  out["passive"] = array_of(std::move(b.passive), {n, m});
-  out["applied"] = array_of(std::move(b.applied), {n, m});
-  out["multipliers"] = array_of(std::move(b.multipliers), {n, 3});
-  out["support_normal"] = array_of(std::move(b.support_normal), {n});
-  out["support_tangential"] = array_of(std::move(b.support_tangential), {n});
-  out["cop_y"] = array_of(std::move(b.cop_y), {n});
-  out["head_position"] = array_of(std::move(b.head_position), {n, 3});
-  out["head_orientation"] = array_of(std::move(b.head_orientation), {n, 4});
-  out["head_pitch"] = array_of(std::move(b.head_pitch), {n});
-  out["tf"] = array_of(std::move(b.tf), {n, 7 * b.tf_pairs});
-  out["head_target"] = array_of(std::move(b.head_target), {n, 3});
-  out["last_event"] = array_of(std::move(b.last_event), {n});
-  out["stamps_ns"] = array_of(std::move(b.stamps_ns), {n, 4});
-  out["y0_active"] = array_of(std::move(b.y0_active), {n});
-  out["q1_active"] = array_of(std::move(b.q1_active), {n});
-  out["zmp_inside_support"] = array_of(std::move(b.zmp_inside_support), {n});
-  out["touched_down"] = array_of(std::move(b.touched_down), {n});
-  out["active"] = array_of(std::move(b.active), {n, m});
-  out["effort_total"] = array_of(std::move(b.effort_total), {n, m});
-  out["present"] = array_of(std::move(b.present), {n});
+  for_each_column(b, [&](const char * key, auto & column, std::size_t width) {
+    out[key] = array_of(std::move(column), n, width);
+  });
   nb::list sources;
   nb::list efforts;
   for (std::size_t i = 0; i < b.sources.size(); ++i) {
     sources.append(b.sources[i]);
-    efforts.append(array_of(std::move(b.efforts[i]), {n, m}));
+    efforts.append(array_of(std::move(b.efforts[i]), n, kCoordinates));
   }
   out["sources"] = sources;
   out["efforts"] = efforts;

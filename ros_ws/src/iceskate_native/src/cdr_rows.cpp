@@ -41,42 +41,35 @@ void put(std::uint8_t * out, T value)
   std::memcpy(out, &value, sizeof(T));
 }
 
+/// Entry k of column data of type `type`, converted to T.
+template <typename T>
+T entry(const void * data, Column::Type type, std::size_t k)
+{
+  switch (type) {
+    case Column::Type::kFloat64:
+      return static_cast<T>(static_cast<const double *>(data)[k]);
+    case Column::Type::kInt64:
+      return static_cast<T>(static_cast<const std::int64_t *>(data)[k]);
+    case Column::Type::kInt32:
+      return static_cast<T>(static_cast<const std::int32_t *>(data)[k]);
+    case Column::Type::kUint64:
+      return static_cast<T>(static_cast<const std::uint64_t *>(data)[k]);
+    case Column::Type::kUint8:
+      return static_cast<T>(static_cast<const std::uint8_t *>(data)[k]);
+  }
+  return T{};
+}
+
 }  // namespace
 
 double Column::real(std::size_t row, std::size_t element) const
 {
-  const std::size_t k = row * width + element;
-  switch (type) {
-    case Type::kFloat64:
-      return static_cast<const double *>(data)[k];
-    case Type::kInt64:
-      return static_cast<double>(static_cast<const std::int64_t *>(data)[k]);
-    case Type::kInt32:
-      return static_cast<const std::int32_t *>(data)[k];
-    case Type::kUint64:
-      return static_cast<double>(static_cast<const std::uint64_t *>(data)[k]);
-    case Type::kUint8:
-      return static_cast<const std::uint8_t *>(data)[k];
-  }
-  return 0.0;
+  return entry<double>(data, type, row * width + element);
 }
 
 std::int64_t Column::integer(std::size_t row, std::size_t element) const
 {
-  const std::size_t k = row * width + element;
-  switch (type) {
-    case Type::kFloat64:
-      return static_cast<std::int64_t>(static_cast<const double *>(data)[k]);
-    case Type::kInt64:
-      return static_cast<const std::int64_t *>(data)[k];
-    case Type::kInt32:
-      return static_cast<const std::int32_t *>(data)[k];
-    case Type::kUint64:
-      return static_cast<std::int64_t>(static_cast<const std::uint64_t *>(data)[k]);
-    case Type::kUint8:
-      return static_cast<const std::uint8_t *>(data)[k];
-  }
-  return 0;
+  return entry<std::int64_t>(data, type, row * width + element);
 }
 
 CdrProgram::CdrProgram(std::vector<std::uint8_t> skeleton, std::vector<CdrSlot> slots)

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 
 #include <Eigen/Geometry>
@@ -27,18 +29,10 @@ double stamp_time(double t) { return static_cast<double>(stamp_ns(t)) / 1e9; }
 /// a stamp's resolution, and the pivot 'toe' while the sole is flat (q1 locked).
 Observation observation_of(const HybridState & s, const Mode & mode)
 {
-  Observation obs;
-  obs.t = stamp_time(s.t);
-  obs.q = s.q;
-  obs.v = s.v;
-  obs.mode = s.contact.mode;
-  obs.side = s.contact.side;
-  obs.pivot = mode.q1_active ? s.contact.pivot : 0;
-  obs.step_index = s.step_index;
-  obs.t_exchange = stamp_time(s.t_exchange);
-  obs.heel_anchor_y = s.contact.heel_anchor_y;
-  obs.t_touchdown = std::isfinite(s.t_touchdown) ? stamp_time(s.t_touchdown) : s.t_touchdown;
-  return obs;
+  return {stamp_time(s.t), s.q, s.v, s.contact.mode, s.contact.side,
+          mode.q1_active ? s.contact.pivot : 0, s.step_index, stamp_time(s.t_exchange),
+          s.contact.heel_anchor_y,
+          std::isfinite(s.t_touchdown) ? stamp_time(s.t_touchdown) : s.t_touchdown};
 }
 
 /// Index in `events` of the latest transition at or before t [s] (-1: none).
@@ -49,6 +43,23 @@ long last_event_at(const std::vector<TransitionRecord> & events, double t)
     --last;
   }
   return last;
+}
+
+/// The Column::Type of a column of T.
+template <class T>
+constexpr Column::Type column_type(const std::vector<T> &)
+{
+  static_assert(sizeof(long) == sizeof(std::int64_t), "last_event is read as int64");
+  if constexpr (std::is_same_v<T, double>) {
+    return Column::Type::kFloat64;
+  } else if constexpr (std::is_same_v<T, std::uint8_t>) {
+    return Column::Type::kUint8;
+  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+    return Column::Type::kUint64;
+  } else {
+    static_assert(std::is_signed_v<T> && (sizeof(T) == 4 || sizeof(T) == 8));
+    return sizeof(T) == 8 ? Column::Type::kInt64 : Column::Type::kInt32;
+  }
 }
 
 template <typename Derived>
@@ -64,25 +75,10 @@ void append(std::vector<double> & column, const Eigen::DenseBase<Derived> & valu
 void SampleBlock::clear()
 {
   count = 0;
-  for (auto * column : {&t, &t_exchange, &t_touchdown, &heel_anchor_y, &q, &v, &qdd, &passive,
-                        &applied, &multipliers, &support_normal, &support_tangential, &cop_y,
-                        &head_position, &head_orientation, &head_pitch, &tf,
-                        &head_target}) {
-    column->clear();
-  }
-  for (auto * column : {&mode, &side, &pivot, &pivot_code, &step_index}) {
-    column->clear();
-  }
-  stamps_ns.clear();
-  for (auto * column : {&y0_active, &q1_active, &zmp_inside_support, &touched_down, &active}) {
-    column->clear();
-  }
-  effort_total.clear();
-  last_event.clear();
+  for_each_column(*this, [](const char *, auto & column, std::size_t) { column.clear(); });
   for (auto & column : efforts) {
     column.clear();
   }
-  present.clear();
 }
 
 ControlLoop::ControlLoop(
@@ -385,57 +381,22 @@ void ControlLoop::live(SampleBlock & block)
 
 Column column_of(const SampleBlock & block, const std::string & name)
 {
-  using Type = Column::Type;
-  const auto reals = [](const std::vector<double> & v, std::size_t width) {
-    return Column{v.data(), Type::kFloat64, width};
-  };
-  const auto ints = [](const std::vector<int> & v) { return Column{v.data(), Type::kInt32, 1}; };
-  const auto flags = [](const std::vector<std::uint8_t> & v, std::size_t width) {
-    return Column{v.data(), Type::kUint8, width};
-  };
-  const std::size_t n = kCoordinates;
-  if (name == "t") return reals(block.t, 1);
-  if (name == "t_exchange") return reals(block.t_exchange, 1);
-  if (name == "t_touchdown") return reals(block.t_touchdown, 1);
-  if (name == "heel_anchor_y") return reals(block.heel_anchor_y, 1);
-  if (name == "mode") return ints(block.mode);
-  if (name == "side") return ints(block.side);
-  if (name == "pivot") return ints(block.pivot);
-  if (name == "pivot_code") return ints(block.pivot_code);
-  if (name == "step_index") return ints(block.step_index);
-  if (name == "q") return reals(block.q, n);
-  if (name == "v") return reals(block.v, n);
-  if (name == "qdd") return reals(block.qdd, n);
-  if (name == "passive") return reals(block.passive, n);
-  if (name == "applied") return reals(block.applied, n);
-  if (name == "multipliers") return reals(block.multipliers, 3);
-  if (name == "support_normal") return reals(block.support_normal, 1);
-  if (name == "support_tangential") return reals(block.support_tangential, 1);
-  if (name == "cop_y") return reals(block.cop_y, 1);
-  if (name == "head_position") return reals(block.head_position, 3);
-  if (name == "head_orientation") return reals(block.head_orientation, 4);
-  if (name == "head_pitch") return reals(block.head_pitch, 1);
-  if (name == "tf") return reals(block.tf, 7 * block.tf_pairs);
-  if (name == "head_target") return reals(block.head_target, 3);
-  if (name == "last_event") {
-    static_assert(sizeof(long) == sizeof(std::int64_t), "last_event is read as int64");
-    return Column{block.last_event.data(), Type::kInt64, 1};
+  std::optional<Column> found;
+  for_each_column(block, [&](const char * key, const auto & column, std::size_t width) {
+    if (name == key) {
+      found = Column{column.data(), column_type(column), width};
+    }
+  });
+  if (found) {
+    return *found;
   }
-  if (name == "stamps_ns") return Column{block.stamps_ns.data(), Type::kInt64, 4};
-  if (name == "present") return Column{block.present.data(), Type::kUint64, 1};
-  if (name == "y0_active") return flags(block.y0_active, 1);
-  if (name == "q1_active") return flags(block.q1_active, 1);
-  if (name == "zmp_inside_support") return flags(block.zmp_inside_support, 1);
-  if (name == "touched_down") return flags(block.touched_down, 1);
-  if (name == "active") return flags(block.active, n);
-  if (name == "effort_total") return reals(block.effort_total, n);
   const std::string prefix = "efforts.";
   if (name.compare(0, prefix.size(), prefix) == 0) {
     const std::string index = name.substr(prefix.size());
     if (!index.empty() && index.find_first_not_of("0123456789") == std::string::npos) {
       const std::size_t i = std::stoul(index);
       if (i < block.efforts.size()) {
-        return reals(block.efforts[i], n);
+        return Column{block.efforts[i].data(), Column::Type::kFloat64, kCoordinates};
       }
     }
   }

@@ -49,7 +49,7 @@ struct StateTerms
   int model = -1;  // side * 2 + pivot; -1: none yet
   Vector18 q = Vector18::Zero();
   Vector18 v = Vector18::Zero();
-  Eigen::Matrix<double, kCoordinates, kCoordinates> mass;  // upper triangle
+  Eigen::Matrix<double, kCoordinates, kCoordinates> mass;  // M(q), both triangles
   Vector18 nle;                                              // h(q, v) + g(q)
   Eigen::Matrix<double, 6, kCoordinates> heel_jacobian;     // world-aligned
   Eigen::Vector3d heel;
@@ -214,7 +214,7 @@ void Dynamics::assemble(
     terms.model = w.model;
     terms.q = q;
     terms.v = v;
-    terms.mass = data.M;
+    terms.mass = data.M.selfadjointView<Eigen::Upper>();  // Pinocchio fills the upper triangle
     terms.nle = data.nle;
     terms.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
     w.jacobian.setZero();
@@ -260,15 +260,8 @@ void Dynamics::assemble(
   const int size = n + nc;
   w.A.setZero(size, size);
   w.b.setZero(size);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      const int lo = std::min(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
-      const int hi = std::max(act[static_cast<std::size_t>(i)], act[static_cast<std::size_t>(j)]);
-      w.A(i, j) = terms.mass(lo, hi);  // Pinocchio fills the upper triangle
-    }
-    const int k = act[static_cast<std::size_t>(i)];
-    w.b[i] = w.applied[k] - terms.nle[k];
-  }
+  w.A.topLeftCorner(n, n) = terms.mass(act, act);
+  w.b.head(n) = w.applied(act) - terms.nle(act);
   const double mu = params_.mu;
   if (nc > 0) {
     const auto & jacobian = terms.heel_jacobian;
@@ -298,17 +291,14 @@ void Dynamics::assemble(
       }
     }
     if (mode.swing_sliding) {  // friction mu f_nz on the heel, against its velocity
-      for (int i = 0; i < n; ++i) {
-        w.A(i, n) = mu * contact.heel_slide_dir * jacobian(1, act[static_cast<std::size_t>(i)])
-                    - w.A(n, i);
-      }
+      w.A.col(n).head(n) =
+        (mu * contact.heel_slide_dir * jacobian(1, act) - w.A.row(n).head(n)).transpose();
     }
   }
   if (mode.y0_active) {  // Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
     const double k = mu * contact.support_slide_dir;
-    for (int i = 0; i < n; ++i) {  // m zdd_com = row z of A_g qdd + its velocity products
-      w.A(0, i) += k * terms.momentum(2, act[static_cast<std::size_t>(i)]);
-    }
+    // m zdd_com = row z of A_g qdd + its velocity products
+    w.A.row(0).head(n) += k * terms.momentum(2, act);
     w.b[0] -= k * terms.vertical_bias;
     if (nc > 0) {
       w.A(0, n) -= k;
@@ -360,9 +350,7 @@ DynamicsResult Dynamics::evaluate(
   const Workspace & w = *work_;
   const Mode & mode = this->mode(contact.mode);
   DynamicsResult r;
-  for (int i = 0; i < w.n; ++i) {
-    r.qdd[mode.active[static_cast<std::size_t>(i)]] = w.x[i];
-  }
+  r.qdd(mode.active) = w.x.head(w.n);
   const Constraint order[3] = {Constraint::kHeelZ, Constraint::kHeelY, Constraint::kSoleFlat};
   for (int k = 0; k < 3; ++k) {
     const int at = mode.multiplier_index(order[k]);
@@ -405,14 +393,10 @@ Vector18 Dynamics::implicit_acceleration(
   }
   implicit[kY0] = 0.0;
   const auto & act = mode(contact.mode).active;
-  for (int i = 0; i < w.n; ++i) {
-    w.A(i, i) += h * implicit[act[static_cast<std::size_t>(i)]];
-  }
+  w.A.diagonal().head(w.n) += h * implicit(act);
   solve(contact, q, v);
   Vector18 qdd = Vector18::Zero();
-  for (int i = 0; i < w.n; ++i) {
-    qdd[act[static_cast<std::size_t>(i)]] = w.x[i];
-  }
+  qdd(act) = w.x.head(w.n);
   return qdd;
 }
 
@@ -424,16 +408,8 @@ Eigen::MatrixXd Dynamics::mass_matrix(const Contact & contact, const Vector18 & 
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::crba(model, data, ConstVector(w.q));
-  const auto n = static_cast<Eigen::Index>(act.size());
-  Eigen::MatrixXd mass(n, n);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    for (Eigen::Index j = 0; j < n; ++j) {
-      const int a = act[static_cast<std::size_t>(i)];
-      const int b = act[static_cast<std::size_t>(j)];
-      mass(i, j) = data.M(std::min(a, b), std::max(a, b));  // Pinocchio fills the upper triangle
-    }
-  }
-  return mass;
+  const Eigen::MatrixXd mass = data.M.selfadjointView<Eigen::Upper>();  // from its upper triangle
+  return mass(act, act);
 }
 
 ConstraintRows Dynamics::constraints(const Contact & contact, const Vector18 & q)
@@ -465,27 +441,17 @@ ConstraintRows Dynamics::constraints(const Contact & contact, const Vector18 & q
         c == Constraint::kHeelZ ? position[2] : position[1] - contact.heel_anchor_y;
     }
   }
-  if (!m.y0_active) {
-    out.rows.col(kY0).setZero();
-  }
-  if (!m.q1_active) {
-    out.rows.col(kQ1).setZero();
-  }
+  zero_locked_columns(m, out.rows);
   return out;
 }
 
 Eigen::Vector3d Dynamics::frame_position(
   const Contact & contact, const Vector18 & q, const std::string & frame)
 {
-  const SupportModel & support = support_model(contact.side, contact.pivot);
-  const pinocchio::Model & model = support.model.pin();
-  Workspace & w = *work_;
-  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
-  w.q = q;
-  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
-  return pinocchio::updateFramePlacement(
-           model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)))
-    .translation();
+  std::vector<Placement> placement;
+  frame_placements(contact, q, {support_model(contact.side, contact.pivot).frame(frame)},
+                   placement);
+  return placement[0].translation;
 }
 
 void Dynamics::frame_placements(
@@ -522,12 +488,7 @@ Vector18 Dynamics::push_force(
     model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned,
     w.jacobian);
   Vector18 out = w.jacobian.topRows<3>().transpose() * force;
-  if (!m.y0_active) {
-    out[kY0] = 0.0;
-  }
-  if (!m.q1_active) {
-    out[kQ1] = 0.0;
-  }
+  zero_locked_columns(m, out.transpose());
   return out;
 }
 

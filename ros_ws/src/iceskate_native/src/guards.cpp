@@ -8,14 +8,9 @@ namespace iceskate_native
 
 Guard guard_named(const std::string & name)
 {
-  static const std::array<std::pair<const char *, Guard>, 13> names{{
-    {"E1", Guard::kE1}, {"E2", Guard::kE2}, {"E3", Guard::kE3}, {"E4", Guard::kE4},
-    {"E5", Guard::kE5}, {"E6", Guard::kE6}, {"S1", Guard::kS1}, {"S2", Guard::kS2},
-    {"S3", Guard::kS3}, {"S4", Guard::kS4}, {"S5", Guard::kS5}, {"S6", Guard::kS6},
-    {"S7", Guard::kS7}}};
-  for (const auto & [text, guard] : names) {
-    if (name == text) {
-      return guard;
+  for (std::size_t k = 0; k < kGuardNames.size(); ++k) {
+    if (name == kGuardNames[k]) {
+      return static_cast<Guard>(k);
     }
   }
   throw std::invalid_argument("unknown guard '" + name + "' (E1-E6, S1-S7)");

@@ -26,15 +26,12 @@ State take_step(
 {
   const Vector18 q = x.head<kCoordinates>();
   const Vector18 v = x.tail<kCoordinates>();
-  State out;
-  if (method == Method::kSymplecticEuler) {
-    const Vector18 v1 = v + h * qdd0;
-    out << q + h * v1, v1;
-    return out;
-  }
-  if (method == Method::kImplicitEuler) {
-    const Vector18 v1 = v + h * dynamics.implicit_acceleration(contact, q, v, inputs, h);
-    extra += 1;
+  if (method != Method::kRk4) {  // the Euler methods: v first, then q with the new v
+    const bool implicit = method == Method::kImplicitEuler;
+    const Vector18 v1 =
+      v + h * (implicit ? dynamics.implicit_acceleration(contact, q, v, inputs, h) : qdd0);
+    extra += implicit ? 1 : 0;
+    State out;
     out << q + h * v1, v1;
     return out;
   }

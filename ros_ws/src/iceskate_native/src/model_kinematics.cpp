@@ -21,26 +21,9 @@ namespace
 {
 
 constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
-constexpr int kFrames = static_cast<int>(Frame::kPelvisCentre) + 1;  // the last Frame
+constexpr int kFrames = static_cast<int>(kFrameNames.size());
 
 using ConstVector = Eigen::Ref<const Eigen::VectorXd>;  // selects Pinocchio's compiled algorithms
-
-const char * frame_name(Frame frame)
-{
-  switch (frame) {
-    case Frame::kHeadTop:
-      return "head_top";
-    case Frame::kSwingHeel:
-      return "swing_heel";
-    case Frame::kSupportToe:
-      return "support_toe";
-    case Frame::kSupportHeel:
-      return "support_heel";
-    case Frame::kPelvisCentre:
-      return "pelvis_centre";
-  }
-  throw std::invalid_argument("unknown frame");
-}
 
 std::string joint_name(int joint) { return joint == kY0 ? "y0" : "q" + std::to_string(joint); }
 
@@ -114,10 +97,10 @@ ModelKinematics::ModelKinematics(
       w.joints[k][static_cast<std::size_t>(i)] = model.getJointId(name);
     }
     for (int f = 0; f < kFrames; ++f) {
-      const int id = support.frame(frame_name(static_cast<Frame>(f)));
+      const char * name = kFrameNames[static_cast<std::size_t>(f)];
+      const int id = support.frame(name);
       if (id < 0 || id >= static_cast<int>(model.nframes)) {
-        throw std::invalid_argument(
-          std::string("frame index of '") + frame_name(static_cast<Frame>(f)) + "' out of range");
+        throw std::invalid_argument(std::string("frame index of '") + name + "' out of range");
       }
       w.frames[k][static_cast<std::size_t>(f)] = static_cast<pinocchio::FrameIndex>(id);
     }
@@ -130,12 +113,12 @@ ModelKinematics::ModelKinematics(
 
 ModelKinematics::~ModelKinematics() = default;
 
-int ModelKinematics::model_index(int side, int pivot) const
+std::size_t ModelKinematics::model_index(int side, int pivot) const
 {
   if (side < 0 || side > 1 || pivot < 0 || pivot > 1) {
     throw std::invalid_argument("side and pivot must be 0 or 1");
   }
-  return side * 2 + pivot;
+  return static_cast<std::size_t>(side * 2 + pivot);
 }
 
 const Mode & ModelKinematics::mode(int number) const
@@ -150,14 +133,14 @@ const Mode & ModelKinematics::mode(int number) const
 Eigen::Vector3d ModelKinematics::joint_placement(int side, int pivot, int joint) const
 {
   check_joint(joint);
-  const auto k = static_cast<std::size_t>(model_index(side, pivot));
+  const auto k = model_index(side, pivot);
   return models_[k].model.pin().jointPlacements[work_->joints[k][static_cast<std::size_t>(joint)]]
     .translation();
 }
 
 Eigen::Vector3d ModelKinematics::frame_offset(int side, int pivot, Frame frame) const
 {
-  const auto k = static_cast<std::size_t>(model_index(side, pivot));
+  const auto k = model_index(side, pivot);
   return models_[k].model.pin().frames[work_->frames[k][static_cast<std::size_t>(frame)]]
     .placement.translation();
 }
@@ -226,21 +209,15 @@ const StateCache & ModelKinematics::positions(std::size_t k, const Vector18 & q)
 HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)
 {
   const Mode & m = mode(state.mode);
-  HeadPose pose = positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
-                    .head;
-  if (!m.y0_active) {
-    pose.jacobian.col(kY0).setZero();
-  }
-  if (!m.q1_active) {
-    pose.jacobian.col(kQ1).setZero();
-  }
+  HeadPose pose = positions(model_index(state.side, state.pivot), q).head;
+  zero_locked_columns(m, pose.jacobian);
   return pose;
 }
 
 Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q)
 {
   const Mode & m = mode(state.mode);
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const auto k = model_index(state.side, state.pivot);
   StateCache & c = at(k, q);
   if (!c.gravity) {
     Workspace & w = *work_;
@@ -250,30 +227,22 @@ Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q
     c.gravity = true;
   }
   Vector18 out = Vector18::Zero();
-  for (int i : m.active) {
-    out[i] = c.g[i];
-  }
+  out(m.active) = c.g(m.active);
   return out;
 }
 
 Vector18 ModelKinematics::swing_heel_z_row(const SupportState & state, const Vector18 & q)
 {
   const Mode & m = mode(state.mode);
-  Vector18 row =
-    positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q).heel_z_row;
-  if (!m.y0_active) {
-    row[kY0] = 0.0;
-  }
-  if (!m.q1_active) {
-    row[kQ1] = 0.0;
-  }
+  Vector18 row = positions(model_index(state.side, state.pivot), q).heel_z_row;
+  zero_locked_columns(m, row.transpose());
   return row;
 }
 
 CentreOfMass ModelKinematics::centre_of_mass(
   const SupportState & state, const Vector18 & q, const Vector18 & v)
 {
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const auto k = model_index(state.side, state.pivot);
   StateCache & c = at(k, q, v);
   if (!c.com) {
     const pinocchio::Model & model = models_[k].model.pin();
@@ -294,7 +263,7 @@ CentreOfMass ModelKinematics::centre_of_mass(
 Eigen::Vector3d ModelKinematics::frame_position(
   const SupportState & state, const Vector18 & q, Frame frame)
 {
-  return positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
+  return positions(model_index(state.side, state.pivot), q)
     .frames[static_cast<std::size_t>(frame)];
 }
 
@@ -302,7 +271,7 @@ Eigen::Vector3d ModelKinematics::joint_position(
   const SupportState & state, const Vector18 & q, int joint)
 {
   check_joint(joint);
-  return positions(static_cast<std::size_t>(model_index(state.side, state.pivot)), q)
+  return positions(model_index(state.side, state.pivot), q)
     .joints[static_cast<std::size_t>(joint)];
 }
 
@@ -310,7 +279,7 @@ Eigen::Vector3d ModelKinematics::joint_velocity(
   const SupportState & state, const Vector18 & q, const Vector18 & v, int joint)
 {
   check_joint(joint);
-  const auto k = static_cast<std::size_t>(model_index(state.side, state.pivot));
+  const auto k = model_index(state.side, state.pivot);
   StateCache & c = at(k, q, v);
   if (!c.velocities) {
     const pinocchio::Model & model = models_[k].model.pin();

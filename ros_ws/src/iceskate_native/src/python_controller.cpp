@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <initializer_list>
 #include <stdexcept>
 #include <string>
@@ -36,27 +37,16 @@ std::string text(nb::handle value) { return nb::str(value).c_str(); }
 std::string who(nb::handle self, double t)
 {
   const nb::handle type = self.type();
-  std::string out = "controller ";
+  const std::string kind = text(type.attr("__module__")) + "." + text(type.attr("__qualname__"));
   const nb::object name = nb::getattr(self, "name", nb::none());
-  if (nb::isinstance<nb::str>(name)) {
-    out += "'" + text(name) + "' (";
-  }
-  out += text(type.attr("__module__")) + "." + text(type.attr("__qualname__"));
-  if (nb::isinstance<nb::str>(name)) {
-    out += ")";
-  }
   char when[48];
   std::snprintf(when, sizeof when, " at t=%.6f s", t);
-  return out + when;
+  return "controller "
+         + (nb::isinstance<nb::str>(name) ? "'" + text(name) + "' (" + kind + ")" : kind) + when;
 }
 
 /// Who failed, built only when something did (it asks Python for names).
-struct Where
-{
-  nb::handle self;
-  double t;
-  std::string operator()() const { return who(self, t); }
-};
+using Where = std::function<std::string()>;
 
 /// A 1-D array of `size` finite numbers (any sequence numpy.asarray takes).
 Eigen::VectorXd numbers(
@@ -86,23 +76,16 @@ Eigen::VectorXd numbers(
   return out;
 }
 
-/// "source 'name' what", naming an array of a source's command in the messages.
-std::string named(const std::string & source, const char * what)
-{
-  return "source '" + source + "' " + what;
-}
-
 /// `mapping`'s keys must be among `allowed` (a ControllerError naming the first other one).
 void require_keys(
   const nb::dict & mapping, std::initializer_list<const char *> allowed, const std::string & what,
   const Where & where)
 {
   for (const auto & [key, value] : mapping) {
-    bool known = false;
-    for (const char * name : allowed) {
-      known = known || (nb::isinstance<nb::str>(key) && nb::str(key).equal(nb::str(name)));
-    }
-    if (!known) {
+    const auto named_key = [&key](const char * name) {
+      return nb::isinstance<nb::str>(key) && nb::str(key).equal(nb::str(name));
+    };
+    if (std::none_of(allowed.begin(), allowed.end(), named_key)) {
       std::string names;
       for (const char * name : allowed) {
         names += std::string(names.empty() ? "" : ", ") + name;
@@ -118,8 +101,11 @@ void read_command(
   nb::handle value, const std::string & source, JointCommand & command, bool top,
   const Where & where)
 {
+  const auto joints = [&](nb::handle array, const char * key) {  // one of its (18,) arrays
+    return numbers(array, kCoordinates, "source '" + source + "' " + key, kJoints, where);
+  };
   if (!nb::isinstance<nb::dict>(value)) {
-    command.set_torque(numbers(value, kCoordinates, named(source, "torque"), kJoints, where));
+    command.set_torque(joints(value, "torque"));
     return;
   }
   const nb::dict mapping = nb::borrow<nb::dict>(value);
@@ -133,8 +119,7 @@ void read_command(
   if (!mapping.contains("effort")) {
     throw ControllerError(where() + ": the command of source '" + source + "' has no 'effort'");
   }
-  command.effort =
-    numbers(mapping["effort"], kCoordinates, named(source, "effort"), kJoints, where);
+  command.effort = joints(mapping["effort"], "effort");
   const int gains = static_cast<int>(mapping.contains("stiffness")) +
                     static_cast<int>(mapping.contains("damping")) +
                     static_cast<int>(mapping.contains("reference"));
@@ -146,12 +131,9 @@ void read_command(
     throw ControllerError(where() + ": the command of source '" + source + "' needs all of "
                           "'stiffness', 'damping' and 'reference' or none");
   }
-  command.stiffness =
-    numbers(mapping["stiffness"], kCoordinates, named(source, "stiffness"), kJoints, where);
-  command.damping =
-    numbers(mapping["damping"], kCoordinates, named(source, "damping"), kJoints, where);
-  command.reference =
-    numbers(mapping["reference"], kCoordinates, named(source, "reference"), kJoints, where);
+  command.stiffness = joints(mapping["stiffness"], "stiffness");
+  command.damping = joints(mapping["damping"], "damping");
+  command.reference = joints(mapping["reference"], "reference");
   if (command.stiffness.minCoeff() < 0.0 || command.damping.minCoeff() < 0.0) {
     throw ControllerError(where() + ": the stiffness and damping of source '" + source +
                           "' must be >= 0");
@@ -263,7 +245,7 @@ void PythonLaw::compute(const Observation & obs, Kinematics & kinematics, Contro
                           (missing ? "its class defines no compute(obs, kinematics)"
                                    : std::string(error.what())));
   }
-  read_answer(answer, names, out, Where{self(), obs.t});
+  read_answer(answer, names, out, [this, &obs] { return who(self(), obs.t); });
 }
 
 void bind_controller_error(nb::module_ & m, nb::handle native_error)

@@ -1,17 +1,9 @@
-// A controller written in Python (docs/usage.md, "Your own controller"): a Python subclass of
-// iceskate_native.Controller whose method compute(obs, kinematics) returns its command. PythonLaw
-// is the C++ Controller that calls that method, under the GIL (ControlLoop.run releases it), and
-// checks and converts its answer; PythonController is PythonLaw's nanobind trampoline, the type
-// bound as iceskate_native.Controller. Private to the module iceskate_native._kernel.
-//
-// The answer, in SI units ([y0, q1..q17]: N, N m; N m/rad, N m s/rad; m, rad):
-//   tau                                  (18,) the generalized force of the controller's one source
-//   {'effort': tau, 'stiffness': k, 'damping': d, 'reference': q_ref, 'head_target': psi_d}
-//                                        one source with an impedance (k, d, q_ref: all or none)
-//   {'sources': {name: tau or {'effort': ..., ...}, ...}, 'head_target': psi_d}
-//                                        every source of `sources`, each a torque or a command
-// A wrong size, a value that is not finite, a negative gain, an unknown key or source, and an
-// exception raised by compute are a ControllerError naming the controller and the time.
+// A controller written in Python (docs/usage.md, "Your own controller", for its answer): a
+// Python subclass of iceskate_native.Controller whose method compute(obs, kinematics) returns its
+// command. PythonLaw is the C++ Controller that calls that method under the GIL (ControlLoop.run
+// releases it) and checks and converts its answer; a wrong answer or an exception in compute is a
+// ControllerError naming the controller and the time. PythonController is PythonLaw's nanobind
+// trampoline, the type bound as iceskate_native.Controller. Private to iceskate_native._kernel.
 #pragma once
 
 #include <string>

@@ -13,12 +13,7 @@ namespace iceskate_native
 namespace
 {
 
-const char * name_of(Guard guard)
-{
-  static const char * const names[] = {
-    "E1", "E2", "E3", "E4", "E5", "E6", "S1", "S2", "S3", "S4", "S5", "S6", "S7"};
-  return names[static_cast<int>(guard)];
-}
+const char * name_of(Guard guard) { return kGuardNames[static_cast<std::size_t>(guard)]; }
 
 std::string format(const char * pattern, double a, double b)
 {

@@ -1,5 +1,6 @@
 #include "iceskate_native/transitions.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -28,28 +29,18 @@ bool sliding(Swing s) { return s == Swing::kHeelSliding || s == Swing::kFlatSlid
 bool sole_flat(Swing s) { return s == Swing::kFlatSliding || s == Swing::kFlatPinned; }
 bool heel_only(Swing s) { return s == Swing::kHeelSliding || s == Swing::kHeelPinned; }
 
-Support with_edge(Support s, bool edge)
+// A support foot: on an edge or flat, gliding or stuck.
+Support support_with(bool edge, bool glide)
 {
-  return gliding(s) ? (edge ? Support::kEdgeGliding : Support::kFlatGliding)
-                    : (edge ? Support::kEdgeStuck : Support::kFlatStuck);
+  return glide ? (edge ? Support::kEdgeGliding : Support::kFlatGliding)
+               : (edge ? Support::kEdgeStuck : Support::kFlatStuck);
 }
 
-Support with_glide(Support s, bool glide)
+// A swing foot on the floor: flat or on its heel, pinned or sliding.
+Swing swing_with(bool flat, bool pin)
 {
-  return on_edge(s) ? (glide ? Support::kEdgeGliding : Support::kEdgeStuck)
-                    : (glide ? Support::kFlatGliding : Support::kFlatStuck);
-}
-
-Swing with_pin(Swing s, bool pin)
-{
-  return sole_flat(s) ? (pin ? Swing::kFlatPinned : Swing::kFlatSliding)
-                      : (pin ? Swing::kHeelPinned : Swing::kHeelSliding);
-}
-
-Swing with_flat(Swing s, bool flat)
-{
-  return pinned(s) ? (flat ? Swing::kFlatPinned : Swing::kHeelPinned)
-                   : (flat ? Swing::kFlatSliding : Swing::kHeelSliding);
+  return flat ? (pin ? Swing::kFlatPinned : Swing::kFlatSliding)
+              : (pin ? Swing::kHeelPinned : Swing::kHeelSliding);
 }
 
 // sign(x), with 0 counted as +1 (a direction, never zero)
@@ -91,10 +82,7 @@ HybridState reroot(Dynamics & dynamics, const GuardConstants & constants, const 
   const Contact & old = s.contact;
   const ModeTable & modes = dynamics.modes();
   const Swing swing = swing_of(dynamics.mode(old.mode));
-  const Support support = sole_flat(swing) ? (pinned(swing) ? Support::kFlatStuck
-                                                             : Support::kFlatGliding)
-                                           : (pinned(swing) ? Support::kEdgeStuck
-                                                            : Support::kEdgeGliding);
+  const Support support = support_with(!sole_flat(swing), !pinned(swing));
   const int number = mode_for(modes, support, Swing::kAir);
   const Mode & mode = dynamics.mode(number);
   HybridState out = s;
@@ -164,15 +152,12 @@ std::vector<Contact> candidates(const Dynamics & dynamics, const HybridState & s
   const Mode & mode = dynamics.mode(c.mode);
   const Swing swing = swing_of(mode);
   const bool flat_ok = std::abs(state.q[kQ1]) < 1e-12 && std::abs(state.v[kQ1]) < kAtRest;
-  std::vector<int> pivots{c.pivot};
-  if (!mode.q1_active) {
-    pivots = {kToe, kHeel};
-  }
+  const std::vector<int> pivots =
+    mode.q1_active ? std::vector<int>{c.pivot} : std::vector<int>{kToe, kHeel};
   const bool stuck_ok = std::abs(state.v[kY0]) < kAtRest;
-  std::vector<double> glide_dirs{1.0, -1.0};
-  if (mode.y0_active && !stuck_ok) {
-    glide_dirs = {c.support_slide_dir};
-  }
+  const std::vector<double> glide_dirs = mode.y0_active && !stuck_ok
+                                           ? std::vector<double>{c.support_slide_dir}
+                                           : std::vector<double>{1.0, -1.0};
   std::vector<Swing> swings{Swing::kAir};
   if (swing != Swing::kAir) {
     swings = {Swing::kAir, Swing::kHeelSliding, Swing::kHeelPinned};
@@ -181,14 +166,6 @@ std::vector<Contact> candidates(const Dynamics & dynamics, const HybridState & s
       swings.push_back(Swing::kFlatPinned);
     }
   }
-  const auto allowed = [&swings](Swing s) {
-    for (Swing t : swings) {
-      if (t == s) {
-        return true;
-      }
-    }
-    return false;
-  };
   std::vector<Contact> out;
   for (Support support : {Support::kFlatStuck, Support::kEdgeStuck, Support::kFlatGliding,
                           Support::kEdgeGliding}) {
@@ -199,7 +176,7 @@ std::vector<Contact> candidates(const Dynamics & dynamics, const HybridState & s
     }
     for (Swing s : {Swing::kFlatPinned, Swing::kFlatSliding, Swing::kHeelPinned,
                     Swing::kHeelSliding, Swing::kAir}) {
-      if (!allowed(s)) {
+      if (std::find(swings.begin(), swings.end(), s) == swings.end()) {
         continue;
       }
       for (int pivot : edge ? pivots : std::vector<int>{c.pivot}) {
@@ -279,8 +256,7 @@ bool consistent(
 
 Support support_of(const Mode & mode)
 {
-  return mode.y0_active ? (mode.q1_active ? Support::kEdgeGliding : Support::kFlatGliding)
-                        : (mode.q1_active ? Support::kEdgeStuck : Support::kFlatStuck);
+  return support_with(mode.q1_active, mode.y0_active);
 }
 
 Swing swing_of(const Mode & mode)
@@ -290,8 +266,7 @@ Swing swing_of(const Mode & mode)
   if (mode.constraints.empty()) {
     return Swing::kAir;
   }
-  return flat ? (heel_y ? Swing::kFlatPinned : Swing::kFlatSliding)
-              : (heel_y ? Swing::kHeelPinned : Swing::kHeelSliding);
+  return swing_with(flat, heel_y);
 }
 
 int mode_for(const ModeTable & modes, Support support, Swing swing)
@@ -314,14 +289,10 @@ std::pair<Vector18, Eigen::VectorXd> impact(
   const Eigen::Index k = rows.rows();
   Eigen::MatrixXd system = Eigen::MatrixXd::Zero(n + k, n + k);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + k);
-  Eigen::VectorXd v_active(n);
+  const Eigen::VectorXd v_active = v(act);
   system.topLeftCorner(n, n) = mass;
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const int j = act[static_cast<std::size_t>(i)];
-    v_active[i] = v[j];
-    system.block(n, i, k, 1) = rows.col(j);
-    system.block(i, n, 1, k) = -rows.col(j).transpose();
-  }
+  system.bottomLeftCorner(k, n) = rows(Eigen::all, act);
+  system.topRightCorner(n, k) = -rows(Eigen::all, act).transpose();
   rhs.head(n) = mass * v_active;
   const Eigen::PartialPivLU<Eigen::MatrixXd> lu(system);
   const Eigen::VectorXd x = lu.solve(rhs);
@@ -329,9 +300,7 @@ std::pair<Vector18, Eigen::VectorXd> impact(
     throw NativeError("impact in mode " + std::to_string(contact.mode) + ": singular system");
   }
   Vector18 v_plus = Vector18::Zero();
-  for (Eigen::Index i = 0; i < n; ++i) {
-    v_plus[act[static_cast<std::size_t>(i)]] = x[i];
-  }
+  v_plus(act) = x.head(n);
   return {v_plus, x.tail(k)};
 }
 
@@ -386,7 +355,7 @@ TransitionOutcome apply_transition(
   switch (guard) {
     case Guard::kE1:
     case Guard::kE2:
-      c = with_mode(c, modes, with_edge(support, true), swing);
+      c = with_mode(c, modes, support_with(true, gliding(support)), swing);
       c.pivot = guard == Guard::kE1 ? kToe : kHeel;
       s.q[kQ1] = 0.0;
       break;
@@ -400,16 +369,16 @@ TransitionOutcome apply_transition(
       s.q = hit.q;
       s.v = hit.v;
       s.v[kQ1] = 0.0;
-      c = with_mode(c, modes, with_edge(support, false), swing);
+      c = with_mode(c, modes, support_with(false, gliding(support)), swing);
       break;
     }
     case Guard::kE4:
-      c = with_mode(c, modes, with_glide(support, true), swing);
+      c = with_mode(c, modes, support_with(on_edge(support), true), swing);
       c.support_slide_dir = friction.ice ? 1.0 : direction_of(-result.support_tangential);
       break;
     case Guard::kE5:
       s.v[kY0] = 0.0;
-      c = with_mode(c, modes, with_glide(support, false), swing);
+      c = with_mode(c, modes, support_with(on_edge(support), false), swing);
       break;
     case Guard::kE6:
       if (swing == Swing::kAir) {
@@ -425,7 +394,7 @@ TransitionOutcome apply_transition(
       out = heel_strike(dynamics, friction, state);
       break;
     case Guard::kS2: {
-      c = with_mode(c, modes, support, with_pin(swing, true));
+      c = with_mode(c, modes, support, swing_with(sole_flat(swing), true));
       c.heel_anchor_y = result.swing_heel[1];
       const Impact hit = impact_into(dynamics, state, c);
       out.impulse.assign(hit.impulse.data(), hit.impulse.data() + hit.impulse.size());
@@ -434,11 +403,11 @@ TransitionOutcome apply_transition(
       break;
     }
     case Guard::kS3:
-      c = with_mode(c, modes, support, with_pin(swing, false));
+      c = with_mode(c, modes, support, swing_with(sole_flat(swing), false));
       c.heel_slide_dir = friction.ice ? 1.0 : direction_of(-result.multipliers[1]);
       break;
     case Guard::kS4: {
-      c = with_mode(c, modes, support, with_flat(swing, true));
+      c = with_mode(c, modes, support, swing_with(true, pinned(swing)));
       const Impact hit = impact_into(dynamics, state, c);
       out.impulse.assign(hit.impulse.data(), hit.impulse.data() + hit.impulse.size());
       s.q = hit.q;
@@ -446,7 +415,7 @@ TransitionOutcome apply_transition(
       break;
     }
     case Guard::kS5:
-      c = with_mode(c, modes, support, with_flat(swing, false));
+      c = with_mode(c, modes, support, swing_with(false, pinned(swing)));
       break;
     case Guard::kS6:
       c = with_mode(c, modes, support, Swing::kAir);

@@ -41,5 +41,5 @@ class RunInterrupted(SimulationError):
         when = f'at t={t:.6f} s' if t is not None else 'before the simulation started'
         super().__init__(f'interrupted by {name} {when}' + (f' ({detail})' if detail else ''),
                          end='interrupted')
-        self.signum, self.t, self.signal_name = int(signum), t, name
+        self.signum, self.t = int(signum), t
         self.exit_code = 128 + int(signum)

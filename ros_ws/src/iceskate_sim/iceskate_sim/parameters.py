@@ -1,5 +1,6 @@
 """One schema for every parameter set: frozen dataclasses whose fields say their rules
-(``setting``, ``block``, ``check_fields``, ``from_mapping``, ``flatten``, ``unflatten``).
+(``setting``, ``block``, ``check_fields``, ``checked``, ``from_mapping``, ``flatten``,
+``unflatten``).
 See docs/architecture.md, 'Parameters'.
 """
 
@@ -72,15 +73,11 @@ def field_types(cls: type) -> dict[str, Any]:
 
 def optional_inner(tp: Any) -> Any:
     """``X`` of an ``X | None`` annotation (``tp`` itself otherwise)."""
-    return _is_optional(tp)[1]
-
-
-def _is_optional(tp: Any) -> tuple[bool, Any]:
     args = typing.get_args(tp)
     if (typing.get_origin(tp) in (typing.Union, types.UnionType) and type(None) in args
             and len(args) == 2):
-        return True, next(a for a in args if a is not type(None))
-    return False, tp
+        return next(a for a in args if a is not type(None))
+    return tp
 
 
 def _number(name: str, value: Any, r: Rules, error: type[Exception], kind: type) -> Any:
@@ -106,11 +103,11 @@ def check_value(name: str, value: Any, tp: Any, r: Rules, error: type[Exception]
     frozensets); raises ``error`` with a message starting with ``name``."""
     if tp is Any:  # taken as given (checked by whoever reads it)
         return value
-    optional, tp = _is_optional(tp)
     if value is None:
-        if optional:
+        if optional_inner(tp) is not tp:
             return None
         raise error(f'{name} must be set, got None')
+    tp = optional_inner(tp)
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if tp is bool:
         if not isinstance(value, bool):
@@ -149,6 +146,11 @@ def check_fields(obj: Any, error: type[Exception]) -> None:
     for name, tp in types_.items():
         value = check_value(name, getattr(obj, name), tp, rules[name], error)
         object.__setattr__(obj, name, value)
+
+
+def checked(error: type[Exception]) -> Callable[[Any], None]:
+    """A parameter class's ``__post_init__``: ``check_fields`` raising ``error``."""
+    return lambda obj: check_fields(obj, error)
 
 
 def from_mapping(cls: type[T], d: Any, error: type[Exception], prefix: str = '') -> T:
@@ -228,8 +230,8 @@ def unflatten(cls: type, flat: Mapping[str, Any]) -> dict[str, Any]:
         if rest and head in types_ and is_dataclass(types_[head]):
             out.setdefault(head, {})[rest] = value
             continue
-        optional, _ = _is_optional(types_.get(name, Any))
-        if optional and isinstance(value, float) and math.isnan(value):
+        tp = types_.get(name, Any)
+        if optional_inner(tp) is not tp and isinstance(value, float) and math.isnan(value):
             value = None
         out[name] = value
     for head, sub in list(out.items()):

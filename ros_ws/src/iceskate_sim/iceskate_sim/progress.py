@@ -21,11 +21,6 @@ class ProgressBar:
             self._bar = tqdm(total=total, desc=desc, unit=unit, mininterval=0.5,
                              file=sys.stderr, leave=leave, dynamic_ncols=True)
 
-    @property
-    def count(self) -> int:
-        """Items counted so far (0 when the bar is off)."""
-        return 0 if self._bar is None else self._bar.n
-
     def update(self, n: int = 1, postfix: str | None = None) -> None:
         """``n`` more items done; ``postfix``: the text after the bar."""
         if self._bar is None:

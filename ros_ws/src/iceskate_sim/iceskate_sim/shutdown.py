@@ -25,7 +25,6 @@ class StopRequest:
 
     def __init__(self) -> None:
         self.signum: int | None = None
-        self.count = 0
         self._saved: dict[int, Any] = {}
 
     def __enter__(self) -> StopRequest:
@@ -42,7 +41,6 @@ class StopRequest:
         self._saved.clear()
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.count += 1
         if self.signum is None:
             self.signum = signum
 

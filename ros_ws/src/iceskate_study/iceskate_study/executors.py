@@ -28,8 +28,7 @@ MAX_CRASHES = 2
 
 def cpu_count() -> int:
     """The CPUs this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else (
-        os.cpu_count() or 1)
+    return len(os.sched_getaffinity(0))
 
 
 def crashed_row(task: Task, failure: str) -> Row:

@@ -20,7 +20,7 @@ import numpy as np
 
 from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.installed import shipped_files, shipped_or_path
+from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
@@ -293,11 +293,6 @@ def kept(name: str, metrics: tuple[str, ...]) -> bool:
 STUDY_RESOURCE = 'iceskate_studies'
 
 
-def shipped_studies() -> list[str]:
-    """Names of the shipped studies."""
-    return list(shipped_files(STUDY_RESOURCE, 'studies'))
-
-
 def load_spec(name_or_path: str | pathlib.Path) -> Spec:
     """Read and validate a SPEC file (a path, or a shipped study's name)."""
     try:
@@ -372,10 +367,9 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
     metrics = tuple(dict.fromkeys(_metric_name(m, 'metrics') for m in metrics))
     keys = tuple(axis.key for axis in axes)
     ratios = _ratios(top.ratios, axes, metrics, sampling)
-    spec = Spec(top.study, top.description, path, scene_file, base, axes, sampling,
+    return Spec(top.study, top.description, path, scene_file, base, axes, sampling,
                 top.samples or 0, top.seed or 0, top.repeats, metrics, _bags(top.bags, keys),
                 ratios, _maps(top.maps, keys, metrics, ratios))
-    return spec
 
 
 def _bags(raw: Any, keys: tuple[str, ...]) -> tuple[dict[str, Any], ...] | None:

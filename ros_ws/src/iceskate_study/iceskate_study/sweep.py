@@ -23,7 +23,7 @@ from iceskate_sim.shutdown import StopRequest, say
 from iceskate_study.errors import StudyError
 
 if TYPE_CHECKING:
-    from iceskate_study.spec import Point, Spec
+    from iceskate_study.spec import Spec
 
 #: Seconds between two writes of the table while runs finish.
 WRITE_INTERVAL = 1.0
@@ -59,77 +59,68 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
 
     :param workers: processes (local) or runs at once (Ray); None: one per CPU.
     :param ray: None (local processes), ``'local'`` or the address of a Ray cluster.
-    :param stop: the signals' stop request (None: one is installed for the call).
-    A signal ends the runs in flight and the sweep (``signum`` in the result; no maps); the
-    finished rows are in the table.
-
+    :param stop: the signals' stop request (None: one is installed for the call); a signal ends
+        the runs in flight and the sweep (``signum`` in the result; no maps).
     :raises StudyError: a bad output folder, a table of another SPEC, Ray not reached.
     """
     from iceskate_sim.run.session import prepare_output, release_output
     from iceskate_study.spec import expand
+    from iceskate_study.table import ResultTable
+    from iceskate_study.worker import Task
     points = expand(spec)
     try:
         prepare_output(out)
     except SimulationError as exc:
         raise StudyError(str(exc)) from None
     try:
-        return _sweep(spec, out, points, workers, ray, maps, progress, stop)
+        table = ResultTable(out, spec, points)
+        todo = [p for p in points if p.key not in table.rows]
+        result = SweepResult(len(points), len(points) - len(todo), table=table.path)
+        with contextlib.ExitStack() as stack:
+            if stop is None:
+                stop = stack.enter_context(StopRequest())
+            if todo and not stop.requested:
+                from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
+                executor = (RayExecutor(ray, workers) if ray is not None
+                            else LocalExecutor(min(workers or cpu_count(), len(todo))))
+                stack.callback(executor.close)
+                bar = stack.enter_context(ProgressBar(len(todo), f'sweep {spec.study}', 'run',
+                                                      progress))
+                bar.note(f'{len(todo)} runs on {executor.describe()}'
+                         + (f' ({result.resumed} done before)' if result.resumed else ''))
+                start = time.perf_counter()
+                executor.submit(Task(p.key, p.raw, spec.metrics,
+                                     str((out / 'runs' / p.key).resolve()) if p.bag else None)
+                                for p in todo)
+                interrupted, written, statuses = False, time.perf_counter(), Counter()
+                while executor.pending:
+                    if stop.requested and not interrupted:
+                        executor.interrupt(stop.signum or 0)
+                        interrupted = True
+                    for row in executor.completed(POLL):
+                        table.add(row)
+                        result.ran += 1
+                        statuses[row['status']] += 1
+                        minutes = (time.perf_counter() - start) / 60.0
+                        bar.update(1, f'{result.ran / minutes:.1f} runs/min, fell '
+                                      f'{statuses["fell"]}, failed {statuses["failed"]}')
+                    if table.dirty and time.perf_counter() - written >= WRITE_INTERVAL:
+                        table.write()
+                        written = time.perf_counter()
+                result.wall_time_s = time.perf_counter() - start
+            if table.dirty or not table.path.exists():
+                table.write()
+            result.counts = dict(Counter(row['status'] for row in table.rows.values()))
+            if stop.requested:
+                result.signum = stop.signum
+                return result
+        if maps and spec.maps is not None:
+            from iceskate_study.plot import draw_maps
+            result.maps = draw_maps(table.path, spec.maps.x, spec.maps.y, spec.maps.metrics,
+                                    out / 'maps')
+        return result
     finally:
         release_output(out)
-
-
-def _sweep(spec: Spec, out: pathlib.Path, points: list[Point], workers: int | None,
-           ray: str | None, maps: bool, progress: bool, stop: StopRequest | None
-           ) -> SweepResult:
-    """``run_sweep`` once the output folder is this sweep's."""
-    from iceskate_study.table import ResultTable
-    from iceskate_study.worker import Task
-    table = ResultTable(out, spec, points)
-    todo = [p for p in points if p.key not in table.rows]
-    result = SweepResult(len(points), len(points) - len(todo), table=table.path)
-    with contextlib.ExitStack() as stack:
-        if stop is None:
-            stop = stack.enter_context(StopRequest())
-        if todo and not stop.requested:
-            from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
-            executor = (RayExecutor(ray, workers) if ray is not None
-                        else LocalExecutor(min(workers or cpu_count(), len(todo))))
-            stack.callback(executor.close)
-            bar = stack.enter_context(ProgressBar(len(todo), f'sweep {spec.study}', 'run',
-                                                  progress))
-            bar.note(f'{len(todo)} runs on {executor.describe()}'
-                     + (f' ({result.resumed} done before)' if result.resumed else ''))
-            start = time.perf_counter()
-            executor.submit(Task(p.key, p.raw, spec.metrics,
-                                 str((out / 'runs' / p.key).resolve()) if p.bag else None)
-                            for p in todo)
-            interrupted, written, statuses = False, time.perf_counter(), Counter()
-            while executor.pending:
-                if stop.requested and not interrupted:
-                    executor.interrupt(stop.signum or 0)
-                    interrupted = True
-                for row in executor.completed(POLL):
-                    table.add(row)
-                    result.ran += 1
-                    statuses[row['status']] += 1
-                    minutes = (time.perf_counter() - start) / 60.0
-                    bar.update(1, f'{result.ran / minutes:.1f} runs/min, fell '
-                                  f'{statuses["fell"]}, failed {statuses["failed"]}')
-                if table.dirty and time.perf_counter() - written >= WRITE_INTERVAL:
-                    table.write()
-                    written = time.perf_counter()
-            result.wall_time_s = time.perf_counter() - start
-        if table.dirty or not table.path.exists():
-            table.write()
-        result.counts = dict(Counter(row['status'] for row in table.rows.values()))
-        if stop.requested:
-            result.signum = stop.signum
-            return result
-    if maps and spec.maps is not None:
-        from iceskate_study.plot import draw_maps
-        result.maps = draw_maps(table.path, spec.maps.x, spec.maps.y, spec.maps.metrics,
-                                out / 'maps')
-    return result
 
 
 def main(argv: list[str] | None = None) -> int:

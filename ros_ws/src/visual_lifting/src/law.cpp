@@ -6,13 +6,8 @@
 namespace visual_lifting
 {
 
+using iceskate_native::stance_schedule;
 using iceskate_native::Vector18;
-
-iceskate_native::StanceSchedule stance_schedule(const VisualLiftingParameters & params)
-{
-  return {params.shift_y1, params.shift_z1, params.shift_time1, params.shift_y2,
-          params.shift_time2};
-}
 
 Eigen::Vector3d desired_head_pose(
   const VisualLiftingParameters & params, double t, const Eigen::Vector3d & psi,

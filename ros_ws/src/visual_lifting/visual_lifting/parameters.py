@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from iceskate_sim.parameters import check_fields, from_mapping, setting
+from iceskate_sim.parameters import checked, from_mapping, setting
 from visual_lifting.errors import VisualLiftingError
 
 #: The forward targets y_d: 'moving' y_H(0) + v_d t, 'follow' y_H(t), 'fixed' y_H(0).
@@ -18,11 +18,8 @@ DESIRED_Y_OPTIONS = ('moving', 'follow', 'fixed')
 
 @dataclass(frozen=True)
 class VisualLiftingParameters:
-    """Parameters of the visual-lifting law (docs/model.md, visual lifting).
-
-    Each field's description, unit and range are its ``setting``; the node declares them as
-    typed ROS parameters (``ros2 param list /visual_lifting``).
-    """
+    """Parameters of the visual-lifting law (docs/model.md, visual lifting); the node declares
+    them as typed ROS parameters (``ros2 param list /visual_lifting``)."""
 
     kp: tuple[float, float, float] = setting(
         (20.0, 290.0, 1100.0), 'K_p = diag(k_y, k_z, k_pitch) on the head pose (y, z, pitch); '
@@ -50,10 +47,7 @@ class VisualLiftingParameters:
     shift_y2: float = setting(0.0, 'further forward shift after the swing heel strike', unit='m',
                               low=-0.4, high=0.4)
     shift_time2: float = setting(0.5, 'duration of the second shift', unit='s', low=0.0)
-
-    def __post_init__(self) -> None:
-        """Check and normalise every field (VisualLiftingError naming the key)."""
-        check_fields(self, VisualLiftingError)
+    __post_init__ = checked(VisualLiftingError)  # errors name the key
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> VisualLiftingParameters:

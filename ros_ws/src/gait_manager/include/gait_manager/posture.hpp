@@ -15,9 +15,6 @@
 namespace gait_manager
 {
 
-/// The moving stance of the shift_* fields.
-iceskate_native::StanceSchedule stance_schedule(const PostureParameters & params);
-
 /// q_ref (18 entries [m, rad]) and the head offset (dy, dz) [m] for visual lifting.
 struct StanceReference
 {

@@ -5,8 +5,8 @@
 // sentence naming it. Binding code only (needs nanobind): the laws never include it.
 #pragma once
 
+#include <array>
 #include <cmath>
-#include <initializer_list>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -104,28 +104,20 @@ public:
     return out;
   }
 
-  /// The option named by text field `name`.
-  template <class Option>
-  Option choice(
-    const char * name, std::initializer_list<std::pair<const char *, Option>> options) const
+  /// The option named by text field `name`: Option(k) for names[k].
+  template <class Option, std::size_t N>
+  Option choice(const char * name, const std::array<const char *, N> & names) const
   {
-    const auto text = cast<std::string>(get(name), name, "text");
-    std::string known;
-    for (const auto & [option, value] : options) {
-      if (text == option) {
-        return value;
-      }
-      known += known.empty() ? option : std::string(", ") + option;
-    }
-    throw std::invalid_argument(path(name) + " '" + text + "' is not one of " + known);
+    return static_cast<Option>(index(cast<std::string>(get(name), name, "text"), name, names));
   }
 
-  /// Every item of the collection `name` (a set or list of text).
-  std::vector<std::string> texts(const char * name) const
+  /// Which of `names` the collection `name` (a set or list of text) holds.
+  template <std::size_t N>
+  std::array<bool, N> set(const char * name, const std::array<const char *, N> & names) const
   {
-    std::vector<std::string> out;
+    std::array<bool, N> out{};
     for (nanobind::handle item : get(name)) {
-      out.push_back(cast<std::string>(item, name, "a list of text"));
+      out[index(cast<std::string>(item, name, "a list of text"), name, names)] = true;
     }
     return out;
   }
@@ -139,6 +131,21 @@ private:
       throw std::invalid_argument("the parameters have no field " + path(name));
     }
     return block_.attr(name);
+  }
+
+  /// k for text == names[k]; std::invalid_argument naming field `name` otherwise.
+  template <std::size_t N>
+  std::size_t index(
+    const std::string & text, const char * name, const std::array<const char *, N> & names) const
+  {
+    std::string known;
+    for (std::size_t k = 0; k < N; ++k) {
+      if (text == names[k]) {
+        return k;
+      }
+      known += (k == 0 ? "" : ", ") + std::string(names[k]);
+    }
+    throw std::invalid_argument(path(name) + " '" + text + "' is not one of " + known);
   }
 
   template <class T>

@@ -91,6 +91,47 @@ struct SampleBlock
   void clear();
 };
 
+/// Call f(key, column, width) for every column of `block` (a SampleBlock, const or not) but
+/// the efforts, in the order of take_block()'s dict: its key there, its vector and its values
+/// per sample (1: a 1-D array).
+template <class Block, class F>
+void for_each_column(Block & block, F && f)
+{
+  const std::size_t n = kCoordinates;
+  f("t", block.t, 1);
+  f("t_exchange", block.t_exchange, 1);
+  f("t_touchdown", block.t_touchdown, 1);
+  f("heel_anchor_y", block.heel_anchor_y, 1);
+  f("mode", block.mode, 1);
+  f("side", block.side, 1);
+  f("pivot", block.pivot, 1);
+  f("pivot_code", block.pivot_code, 1);
+  f("step_index", block.step_index, 1);
+  f("q", block.q, n);
+  f("v", block.v, n);
+  f("qdd", block.qdd, n);
+  f("passive", block.passive, n);
+  f("applied", block.applied, n);
+  f("multipliers", block.multipliers, 3);
+  f("support_normal", block.support_normal, 1);
+  f("support_tangential", block.support_tangential, 1);
+  f("cop_y", block.cop_y, 1);
+  f("head_position", block.head_position, 3);
+  f("head_orientation", block.head_orientation, 4);
+  f("head_pitch", block.head_pitch, 1);
+  f("tf", block.tf, 7 * block.tf_pairs);
+  f("head_target", block.head_target, 3);
+  f("last_event", block.last_event, 1);
+  f("stamps_ns", block.stamps_ns, 4);
+  f("y0_active", block.y0_active, 1);
+  f("q1_active", block.q1_active, 1);
+  f("zmp_inside_support", block.zmp_inside_support, 1);
+  f("touched_down", block.touched_down, 1);
+  f("active", block.active, n);
+  f("effort_total", block.effort_total, n);
+  f("present", block.present, 1);
+}
+
 /// The column `name` of `block` (its key in take_block()'s dict; "efforts.<i>" for source i's
 /// efforts), for CdrProgram::write.
 /// \throws std::invalid_argument for a name that is no column.

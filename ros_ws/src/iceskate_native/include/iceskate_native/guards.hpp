@@ -19,6 +19,10 @@ enum class Guard
   kE1, kE2, kE3, kE4, kE5, kE6, kS1, kS2, kS3, kS4, kS5, kS6, kS7
 };
 
+/// The guards' names in the event log, in Guard's order.
+constexpr std::array<const char *, 13> kGuardNames = {
+  "E1", "E2", "E3", "E4", "E5", "E6", "S1", "S2", "S3", "S4", "S5", "S6", "S7"};
+
 /// The guard called `name` ("E1".."E6", "S1".."S7"); std::invalid_argument otherwise.
 Guard guard_named(const std::string & name);
 

@@ -6,6 +6,8 @@
 // it on the four support models. Units: SI (m, rad, s, kg, N, N m).
 #pragma once
 
+#include <array>
+
 #include <Eigen/Core>
 
 #include "iceskate_native/coordinates.hpp"
@@ -23,15 +25,19 @@ struct SupportState
   int pivot = 0;
 };
 
-/// The frames the laws use (named as in iceskate_sim.model.robot.SupportModel).
+/// The frames the laws use.
 enum class Frame
 {
-  kHeadTop,       // head_top
-  kSwingHeel,     // swing_heel
-  kSupportToe,    // support_toe
-  kSupportHeel,   // support_heel
-  kPelvisCentre   // pelvis_centre
+  kHeadTop,
+  kSwingHeel,
+  kSupportToe,
+  kSupportHeel,
+  kPelvisCentre
 };
+
+/// The name of each Frame, in Frame's order (as in iceskate_sim.model.robot.SupportModel).
+constexpr std::array<const char *, 5> kFrameNames = {
+  "head_top", "swing_heel", "support_toe", "support_heel", "pelvis_centre"};
 
 /// Head-top pose psi = (y [m], z [m], pitch [rad]) and J_H = d psi / d q (3 x 18; columns of
 /// locked coordinates 0). Pitch is the angle of the head z axis in the world y-z plane

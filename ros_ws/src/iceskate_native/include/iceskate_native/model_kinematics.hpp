@@ -47,7 +47,7 @@ public:
 private:
   struct Workspace;  // Pinocchio data, answers and argument buffers (in model_kinematics.cpp)
 
-  int model_index(int side, int pivot) const;
+  std::size_t model_index(int side, int pivot) const;
   /// Model k's answers, emptied unless they are at q (and v).
   StateCache & at(std::size_t k, const Vector18 & q);
   StateCache & at(std::size_t k, const Vector18 & q, const Vector18 & v);

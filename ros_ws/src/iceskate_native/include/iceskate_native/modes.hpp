@@ -35,6 +35,19 @@ struct Mode
   int multiplier_index(Constraint c) const;
 };
 
+/// Zero the columns of `matrix` (18 columns; a Vector18's transpose() for its entries) of the
+/// coordinates y0 and q1 where `mode` locks them.
+template <class Matrix>
+void zero_locked_columns(const Mode & mode, Matrix && matrix)
+{
+  if (!mode.y0_active) {
+    matrix.col(kY0).setZero();
+  }
+  if (!mode.q1_active) {
+    matrix.col(kQ1).setZero();
+  }
+}
+
 /// The 20 modes, indexed by number - 1.
 using ModeTable = std::array<Mode, kModes>;
 

@@ -54,4 +54,12 @@ struct StanceSchedule
   }
 };
 
+/// The schedule of a law's parameters with the fields shift_y1, shift_z1, shift_time1,
+/// shift_y2 and shift_time2.
+template <class Parameters>
+StanceSchedule stance_schedule(const Parameters & p)
+{
+  return {p.shift_y1, p.shift_z1, p.shift_time1, p.shift_y2, p.shift_time2};
+}
+
 }  // namespace iceskate_native

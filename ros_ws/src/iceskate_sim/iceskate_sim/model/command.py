@@ -79,11 +79,6 @@ class HeldCommand:
         zeros = np.zeros(N_COORDINATES)
         return cls(tau.copy(), zeros, zeros.copy())
 
-    @classmethod
-    def of_input(cls, command: HeldCommand | np.ndarray) -> HeldCommand:
-        """``command`` itself, or a plain torque vector held (``torque_only``)."""
-        return command if isinstance(command, HeldCommand) else cls.torque_only(command)
-
     def torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The generalized force at (q, v) [N m]."""
         return self.bias - self.stiffness * q - self.damping * v

@@ -12,9 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.modes import MULTIPLIER_NAMES, GaitMode
-from iceskate_sim.model.robot import N_COORDINATES, Q1, SIDES, Y0, Robot
-from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.model.modes import GaitMode
+from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, Robot
+from iceskate_sim.parameters import checked, setting
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)
@@ -34,10 +34,7 @@ class DynamicsParameters:
     limit_damping: float = setting(100.0, 'damping of a soft stop (while it is penetrated)',
                                    unit='N m s/rad', low=0.0, high=1e5)
     damping: bool = setting(True, 'joint damping of Table 1 on')
-
-    def __post_init__(self) -> None:
-        """Check the fields."""
-        check_fields(self, SimulationError)
+    __post_init__ = checked(SimulationError)
 
 
 @dataclass
@@ -93,10 +90,6 @@ class DynamicsResult:
     swing_toe_z: float = 0.0
     passive: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(18))
 
-    def multiplier(self, name: str) -> float:
-        """Return the multiplier called ``name`` ('f_nz', 'f_ny' or 'tau_n')."""
-        return float(self.multipliers[MULTIPLIER_NAMES.index(name)])
-
 
 class ModelTerms:
     """Model terms and derived quantities of the humanoid in a mode.
@@ -114,11 +107,8 @@ class ModelTerms:
 
     # ----------------------------------------------------------------- helpers
     def _model(self, contact: ContactState) -> tuple[pin.Model, pin.Data, dict[str, int]]:
-        key = (contact.side, contact.pivot)
-        sm = self.robot.models.get(key)
-        if sm is None:
-            raise SimulationError(f'unknown support side/pivot {key}; sides {SIDES}')
-        return sm.model, self._data[key], sm.frame_ids
+        sm = self.robot.support_model(contact.side, contact.pivot)
+        return sm.model, self._data[(sm.side, sm.pivot)], sm.frame_ids
 
     def _constraint_rows(self, contact: ContactState, data: pin.Data, model: pin.Model,
                          frames: dict[str, int], q: np.ndarray,
@@ -193,7 +183,8 @@ class ModelTerms:
         zx, zy, zz = placement.rotation[:, 2]
         denom = zy * zy + zz * zz
         pitch_row = np.array([1.0, -zx * zy / denom, -zx * zz / denom]) @ jac[3:]
-        psi = head_psi(placement.translation, placement.rotation)
+        psi = np.array([placement.translation[1], placement.translation[2],
+                        float(np.arctan2(-zy, zz))])
         jac_h = np.vstack([jac[1], jac[2], pitch_row])
         jac_h[:, locked_coordinates(contact.mode)] = 0.0
         return psi, jac_h
@@ -217,13 +208,6 @@ class ModelTerms:
         pin.forwardKinematics(model, data, q, self._zeros, self._zeros)
         pin.computeJointJacobians(model, data, q)
         return self._constraint_rows(contact, data, model, frames, q)[0]
-
-
-def head_psi(translation: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    """Head-top pose psi = (y [m], z [m], pitch [rad]) of its world placement: pitch is the angle
-    of the head z axis in the world y-z plane (positive tilts the head back)."""
-    return np.array([translation[1], translation[2],
-                     float(np.arctan2(-rotation[1, 2], rotation[2, 2]))])
 
 
 def locked_coordinates(mode: GaitMode) -> list[int]:

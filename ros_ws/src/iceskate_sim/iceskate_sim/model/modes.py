@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0
+from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0
 
 # Support-foot states (docs/model.md §3.1): code -> (y0 present, q1 present, meaning)
 SUPPORT_STATES = {
@@ -66,15 +66,6 @@ class GaitMode:
     def n_coordinates(self) -> int:
         """Number of generalized coordinates (16, 17 or 18)."""
         return int(self.active.size)
-
-    @property
-    def dof(self) -> int:
-        """Degrees of freedom: coordinates minus constraints."""
-        return self.n_coordinates - len(self.constraints)
-
-    def coordinate_names(self) -> tuple[str, ...]:
-        """Names of the active coordinates, e.g. ('y0', 'q2', ..., 'q17')."""
-        return tuple(COORDINATE_NAMES[i] for i in self.active)
 
 
 def _make_mode(number: int, support: str, swing: str) -> GaitMode:

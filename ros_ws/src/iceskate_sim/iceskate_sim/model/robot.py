@@ -24,7 +24,6 @@ PIVOTS = ('toe', 'heel')
 SOLE_HEEL_Y = -0.06  # m, heel edge relative to the ankle along the foot (docs/model.md §2.4)
 SOLE_TOE_Y = 0.20  # m, toe edge relative to the ankle
 SOLE_Z = -0.07  # m, sole plane below the ankle
-SOLE_HALF_WIDTH = 0.05  # m
 PIVOT_Y = {'toe': SOLE_TOE_Y, 'heel': SOLE_HEEL_Y}
 GRAVITY = 9.81  # m/s^2
 
@@ -66,11 +65,6 @@ def anatomical_map(side: str) -> list[tuple[int, str, float]]:
                (6, f'{swing}_knee_pitch', 1.0), (7, f'{swing}_ankle_pitch', 1.0)]
     mapping += [(i, urdf_joint, 1.0) for i, (urdf_joint, _link) in UPPER_BODY.items()]
     return mapping
-
-
-def default_urdf_path() -> pathlib.Path:
-    """The URDF the package installs (``share/iceskate_sim/urdf``)."""
-    return share_path('iceskate_sim', 'urdf', 'iceskate_humanoid.urdf')
 
 
 @dataclass(frozen=True)
@@ -229,27 +223,20 @@ def _build_support_model(urdf_model: pin.Model, links: dict[str, _Link],
 
 def _damping(urdf_model: pin.Model, side: str) -> np.ndarray:
     """Table 1 damping per Table-2 coordinate, read from the URDF joints (y0: 0)."""
-    def urdf_damping(joint_name: str) -> float:
-        jid = urdf_model.getJointId(joint_name)
-        return float(urdf_model.damping[urdf_model.joints[jid].idx_v])
-    swing = _other(side)
     damping = np.zeros(N_COORDINATES)
-    damping[1] = urdf_damping(f'{side}_ankle_pitch')  # the support foot's own damping
-    damping[2] = urdf_damping(f'{side}_ankle_pitch')
-    damping[3] = urdf_damping(f'{side}_knee_pitch')
-    damping[4] = urdf_damping(f'{side}_hip_pitch')
-    damping[5] = urdf_damping(f'{swing}_hip_pitch')
-    damping[6] = urdf_damping(f'{swing}_knee_pitch')
-    damping[7] = urdf_damping(f'{swing}_ankle_pitch')
-    for i, (urdf_joint, _link) in UPPER_BODY.items():
-        damping[i] = urdf_damping(urdf_joint)
+    for i, urdf_joint, _sign in anatomical_map(side):
+        jid = urdf_model.getJointId(urdf_joint)
+        damping[i] = float(urdf_model.damping[urdf_model.joints[jid].idx_v])
+    damping[1] = damping[2]  # the support foot's own damping: its ankle's
     return damping
 
 
 @functools.lru_cache(maxsize=4)
 def load_robot(urdf_path: str | None = None) -> Robot:
-    """Load the URDF and prepare the four support-rooted models (cached per path)."""
-    path = pathlib.Path(urdf_path) if urdf_path else default_urdf_path()
+    """Load the URDF (default: the one the package installs, ``share/iceskate_sim/urdf``) and
+    prepare the four support-rooted models (cached per path)."""
+    path = (pathlib.Path(urdf_path) if urdf_path
+            else share_path('iceskate_sim', 'urdf', 'iceskate_humanoid.urdf'))
     try:
         urdf_model = pin.buildModelFromUrdf(str(path))
     except (RuntimeError, ValueError) as exc:

@@ -13,9 +13,9 @@ import numpy as np
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
-from iceskate_sim.model.modes import GaitMode
+from iceskate_sim.model.modes import MODES, GaitMode
 from iceskate_sim.model.robot import Q1, Y0
-from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.parameters import checked, setting
 
 # Dead bands (hysteresis) of the force-based guards. A guard that is the complement of the
 # transition just made (flat <-> edge, stick <-> slip, flat sole <-> heel only) would otherwise
@@ -37,10 +37,7 @@ class FrictionModel:
     rule: str = setting('ice', "'ice' (forward sliding only, a foot sliding back is stuck by "
                         "the toe pick) or 'coulomb' (|F_t| <= mu N both ways)",
                         choices=('ice', 'coulomb'))
-
-    def __post_init__(self) -> None:
-        """Check the fields."""
-        check_fields(self, SimulationError)
+    __post_init__ = checked(SimulationError)
 
 
 @dataclass(frozen=True)
@@ -101,16 +98,12 @@ GUARDS: tuple[Guard, ...] = (
     Guard('S5', 'swing sole un-flattens (toe lifts)', lambda m: m.swing in ('Fs', 'Fp')),
     Guard('S6', 'swing contact force reached zero', lambda m: m.swing != 'A'),
 )
-_GUARDS_OF_MODE: dict[int, tuple[Guard, ...]] = {}
+_GUARDS_OF_MODE = {n: tuple(g for g in GUARDS if g.applies(m)) for n, m in MODES.items()}
 
 
 def guards_of(mode: GaitMode) -> tuple[Guard, ...]:
-    """The guards that apply in ``mode``, in the order the kernel evaluates them (cached)."""
-    found = _GUARDS_OF_MODE.get(mode.number)
-    if found is None:
-        found = tuple(g for g in GUARDS if g.applies(mode))
-        _GUARDS_OF_MODE[mode.number] = found
-    return found
+    """The guards that apply in ``mode``, in the order the kernel evaluates them."""
+    return _GUARDS_OF_MODE[mode.number]
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.parameters import checked, setting
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 METHODS = (*FIXED_STEP, 'rk45')
@@ -28,7 +28,4 @@ class IntegratorConfig:
                                      open_low=True, high=1e-3)
     projection: bool = setting(True, 'project positions and velocities onto the active swing '
                                'constraints after every control period (drift control)')
-
-    def __post_init__(self) -> None:
-        """Check the fields."""
-        check_fields(self, SimulationError)
+    __post_init__ = checked(SimulationError)

@@ -13,10 +13,14 @@ from iceskate_sim.physics.hybrid import COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_S
 
 #: The guards' dead bands and sole geometry, in the kernel's order.
 GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)
+#: Table 2 as the kernels take it: (number, y0 active, q1 active, swing sliding, active
+#: coordinates, constraints) per mode.
+MODE_ROWS = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
+              list(m.constraints)) for m in MODES.values()]
 
 
-def _native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
-    """The four support models in the kernel's order (side * 2 + pivot) and their frames."""
+def native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
+    """The four support models in the kernels' order (side * 2 + pivot) and their frames."""
     keys = [(side, pivot) for side in SIDES for pivot in PIVOTS]
     models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
     frames = [dict(robot.models[key].frame_ids) for key in keys]
@@ -30,13 +34,11 @@ class NativeGaitDynamics(ModelTerms):
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         super().__init__(robot, params)
         p = self.params
-        models, frames = _native_robot(robot)
-        modes = [(m.number, m.y0_active, m.q1_active, m.swing_sliding,
-                  [int(i) for i in m.active], list(m.constraints)) for m in MODES.values()]
+        models, frames = native_robot(robot)
         limits = [(i, lo, hi) for i, (lo, hi) in sorted(JOINT_LIMITS.items())]
         try:
             self.kernel = iceskate_native.Dynamics(
-                models, frames, modes, robot.damping, robot.total_mass, limits,
+                models, frames, MODE_ROWS, robot.damping, robot.total_mass, limits,
                 (p.mu, p.baumgarte, p.joint_limits, p.limit_stiffness, p.limit_damping,
                  p.damping))
         except ValueError as exc:

@@ -7,19 +7,15 @@ from __future__ import annotations
 
 import iceskate_native
 from iceskate_sim.model.command import EMPTY, CommandValues
-from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.observation import Observation
-from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
+from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, Robot
+from iceskate_sim.physics.native import MODE_ROWS, native_robot
 
 
 def native_kinematics(robot: Robot) -> iceskate_native.ModelKinematics:
     """The laws' view of ``robot`` (its own Pinocchio workspaces: one per thread)."""
-    keys = [(side, pivot) for side in SIDES for pivot in PIVOTS]  # index side * 2 + pivot
-    models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
-    frames = [dict(robot.models[key].frame_ids) for key in keys]
-    modes = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],
-              list(m.constraints)) for m in MODES.values()]
-    return iceskate_native.ModelKinematics(models, frames, modes, robot.total_mass)
+    models, frames = native_robot(robot)
+    return iceskate_native.ModelKinematics(models, frames, MODE_ROWS, robot.total_mass)
 
 
 def native_observation(obs: Observation) -> iceskate_native.Observation:

@@ -8,12 +8,10 @@ state; a fall, flight or toe-first touchdown ends the run (``Simulator.ended``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
-import pinocchio as pin
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
@@ -24,7 +22,7 @@ from iceskate_sim.model.dynamics import (
     DynamicsResult,
     ModelTerms,
 )
-from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.modes import MODES, get_mode
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
@@ -46,21 +44,6 @@ from iceskate_sim.physics.native import GUARD_CONSTANTS, NativeGaitDynamics
 def stamp_time(t: float) -> float:
     """Time t [s] at a stamp's resolution (whole nanoseconds)."""
     return ns_to_seconds(seconds_to_ns(t))
-
-
-def observation_of(s: HybridState) -> Observation:
-    """The controller's view of a hybrid state (copies of q and v).
-
-    It holds what a GaitState message carries, so a controller computes the same torque
-    in-process as from the message: times rounded to whole nanoseconds (a ROS stamp's
-    resolution), and the pivot 'toe' while the sole is flat (q1 locked: no pivot is sent, and
-    the kinematics rooted at either edge agree up to rounding).
-    """
-    touchdown = stamp_time(s.t_touchdown) if math.isfinite(s.t_touchdown) else s.t_touchdown
-    pivot = s.contact.pivot if s.mode.q1_active else 'toe'
-    return Observation(stamp_time(s.t), s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
-                       pivot, s.step_index, stamp_time(s.t_exchange), s.contact.heel_anchor_y,
-                       touchdown)
 
 
 @dataclass(frozen=True)
@@ -127,11 +110,10 @@ class RunStatistics:
 
 class StateQueries:
     """What a simulator answers about its current ``state`` (with its ``dynamics``' model
-    terms): the time, the controllers' observation, the head-top placement."""
+    terms): the time, the controllers' observation."""
 
     state: HybridState
     dynamics: ModelTerms
-    _head: tuple[HybridState | None, pin.SE3 | None] = (None, None)
 
     @property
     def time(self) -> float:
@@ -139,16 +121,19 @@ class StateQueries:
         return self.state.t
 
     def observation(self) -> Observation:
-        """The controller's view of the current state."""
-        return observation_of(self.state)
+        """The controller's view of the current state (copies of q and v).
 
-    def head_placement(self) -> pin.SE3:
-        """World placement of the head-top frame in the current state (kept until the state
-        changes)."""
-        if self._head[0] is not self.state:
-            self._head = (self.state, self.dynamics.frame_placement(
-                self.state.contact, self.state.q, 'head_top'))
-        return self._head[1]
+        It holds what a GaitState message carries, so a controller computes the same torque
+        in-process as from the message: times rounded to whole nanoseconds (a ROS stamp's
+        resolution), and the pivot 'toe' while the sole is flat (q1 locked: no pivot is sent,
+        and the kinematics rooted at either edge agree up to rounding).
+        """
+        s = self.state
+        touchdown = stamp_time(s.t_touchdown) if math.isfinite(s.t_touchdown) else s.t_touchdown
+        pivot = s.contact.pivot if s.mode.q1_active else 'toe'
+        return Observation(stamp_time(s.t), s.q.copy(), s.v.copy(), s.mode.number,
+                           s.contact.side, pivot, s.step_index, stamp_time(s.t_exchange),
+                           s.contact.heel_anchor_y, touchdown)
 
 
 #: Guard causes for the event log, by name.
@@ -225,16 +210,6 @@ class Simulator(StateQueries):
         """The dynamics at the current state under the last input."""
         return DynamicsResult(*self.kernel.result)
 
-    @property
-    def start_state(self) -> HybridState:
-        """The state at the start of the last period, after the transitions due then."""
-        return _hybrid_state(self.kernel.start_state)
-
-    @property
-    def start_result(self) -> DynamicsResult:
-        """The dynamics at ``start_state`` under the last period's input."""
-        return DynamicsResult(*self.kernel.start_result)
-
     def advance(self, command: HeldCommand | np.ndarray,
                 push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
         """Integrate one control period holding the input command (zero-order hold).
@@ -249,7 +224,8 @@ class Simulator(StateQueries):
             (fall, flight, toe-first touchdown) sets ``ended`` and stops advancing.
         """
         self._require_running()
-        command = HeldCommand.of_input(command)
+        if not isinstance(command, HeldCommand):
+            command = HeldCommand.torque_only(command)
         try:
             self.kernel.advance(command.bias, command.stiffness, command.damping,
                                  '' if push is None else push[0],
@@ -271,22 +247,35 @@ class Simulator(StateQueries):
 
     def hold_period(self, loop: NativeControlLoop, clear: bool = True) -> None:
         """One control period of ``loop`` holding the commands it received
-        (``NativeControlLoop.hold``; the sample stays in its block), then mirror the kernel.
+        (``iceskate_native.ControlLoop.hold``: the sample stays in its block; ``clear``: forget
+        the commands afterwards), then mirror the kernel.
 
         :raises SimulationError: where the physics failed, as ``advance``.
         """
         self._require_running()
         try:
-            loop.hold(clear)
+            if not loop.kernel.hold(clear):
+                try:
+                    loop.kernel.raise_error()
+                except Exception as exc:  # noqa: BLE001 - the kernel's failure, in our words
+                    raise self.failure(exc) from None
         finally:
             self._mirror()
 
     def run_loop(self, loop: NativeControlLoop, periods: int) -> tuple[dict, Exception | None]:
-        """Up to ``periods`` control periods of ``loop`` (``NativeControlLoop.run``: the samples
-        and what stopped the block early), then mirror the kernel."""
+        """Up to ``periods`` control periods of ``loop``, then mirror the kernel: their samples
+        (as ``iceskate_native.ControlLoop.run`` returns them) and what stopped the block early
+        or None: a failure of the physics as the ``SimulationError`` that ``advance`` raises, a
+        controller's own error (e.g. a non-finite command) as it was raised."""
         self._require_running()
         try:
-            return loop.run(periods)
+            block, error = loop.kernel.run(periods), None
+            if loop.kernel.failed:
+                try:
+                    loop.kernel.raise_error()
+                except Exception as exc:  # noqa: BLE001 - handed back beside the samples taken
+                    error = self.failure(exc) if loop.kernel.physics_failed else exc
+            return block, error
         finally:
             self._mirror()
 
@@ -327,19 +316,15 @@ class Simulator(StateQueries):
 
 
 class NativeControlLoop:
-    """Many control periods in one C++ call (``iceskate_native.ControlLoop``): at each control
-    instant the native ``controllers`` answer the observation through ``kinematics``, the sum of
-    their commands and the active push are held over the period, and ``periods`` advances; the
-    samples come back as arrays (``Session.run_periods``: the headless runner's
-    ``ControlStack`` answers in C++, without Python in between).
+    """Many control periods in one C++ call (``kernel``: ``iceskate_native.ControlLoop``, see
+    docs/architecture.md, 'One run: many periods per native call'), advanced by
+    ``Simulator.run_loop`` with the native ``controllers``; without them, by
+    ``Simulator.hold_period`` with the commands of controller nodes received from outside
+    (``receive``). The ``kernel``'s own methods give the samples held (``take_block``,
+    ``block_size``), drop the commands (``forget``) and the live view of the current state
+    (``live``, ``live_fill``, ``live_messages``).
 
-    Without controllers it holds the commands of controller nodes received from outside (the
-    ROS graph): ``receive`` each node's command, ``hold`` one period (its sample kept in the
-    block), ``take_block`` the samples held; ``live`` is the live view of the current state.
-    A sample holds what the recording encodes, among it the /tf transforms of the URDF's links
-    (``Robot.tf_frames``).
-
-    :param simulator: the simulator it advances (which mirrors the kernel after each block).
+    :param simulator: the simulator it advances.
     :param kinematics: the controllers' view of the robot (``native_control.native_kinematics``;
         None without controllers).
     :param controllers: the native laws, in summing order.
@@ -353,90 +338,31 @@ class NativeControlLoop:
     def __init__(self, simulator: Simulator, kinematics: iceskate_native.Kinematics | None,
                  controllers: list[iceskate_native.Controller], pushes: tuple,
                  head_origin: np.ndarray, inbox: tuple[tuple[str, ...], ...] = ()) -> None:
-        self._simulator = simulator
         rows = [(p.start, p.duration, p.frame, np.asarray(p.force, dtype=float)) for p in pushes]
         try:
-            self._kernel = iceskate_native.ControlLoop(
+            self.kernel = iceskate_native.ControlLoop(
                 simulator.kernel, kinematics, list(controllers), rows,
                 np.asarray(head_origin, dtype=float), simulator.robot.tf_frames,
                 [list(s) for s in inbox])
         except (ValueError, TypeError) as exc:
             raise SimulationError(f'native control loop: {exc}') from None
 
-    def run(self, periods: int) -> tuple[dict, Exception | None]:
-        """Up to ``periods`` control periods: (their samples as ``iceskate_native.ControlLoop.run``
-        returns them, what stopped the block early or None). A failure of the physics comes as
-        the ``SimulationError`` that ``Simulator.advance`` raises; a controller's own error
-        (e.g. a non-finite command) as it was raised."""
-        block = self._kernel.run(periods)
-        error: Exception | None = None
-        if self._kernel.failed:
-            try:
-                self._kernel.raise_error()
-            except Exception as exc:  # noqa: BLE001 - handed back beside the samples taken
-                error = self._simulator.failure(exc) if self._kernel.physics_failed else exc
-        return block, error
-
     def receive(self, index: int, values: CommandValues) -> None:
         """Keep the command ``values`` of the inbox's controller node ``index`` for the next
-        ``hold`` (its sources' efforts in the inbox's order).
+        ``Simulator.hold_period`` (its sources' efforts in the inbox's order).
 
         :raises SimulationError: naming the field with a wrong size, a non-finite value or a
             negative gain (the command is not kept).
         """
         try:
-            self._kernel.receive(index, *values[:6])
+            self.kernel.receive(index, *values[:6])
         except (ValueError, TypeError) as exc:
             raise SimulationError(f'command: {exc}') from None
-
-    def hold(self, clear: bool = True) -> None:
-        """One control period holding the commands received (``iceskate_native.ControlLoop.hold``;
-        ``clear``: forget them afterwards).
-
-        :raises SimulationError: where the physics failed (``Simulator.failure``).
-        """
-        if not self._kernel.hold(clear):
-            try:
-                self._kernel.raise_error()
-            except Exception as exc:  # noqa: BLE001 - the kernel's failure, in our words
-                raise self._simulator.failure(exc) from None
-
-    def forget(self) -> None:
-        """Drop the commands received (none is held until the next ``receive``)."""
-        self._kernel.forget()
-
-    @property
-    def block_size(self) -> int:
-        """Samples held and not taken yet."""
-        return self._kernel.block_size
-
-    def take_block(self) -> dict:
-        """The samples held since the last call, as ``run`` returns them."""
-        return self._kernel.take_block()
-
-    def live(self) -> dict:
-        """The live view of the current state, what the simulator publishes at t_k before the
-        commands of t_k exist: one sample with ``take_block``'s keys (one row), its dynamics
-        under the inputs held over the last period, the held input's generalized force at the
-        state as the one source ``held`` and that period's head target."""
-        return self._kernel.live()
-
-    def live_fill(self) -> tuple[int, int, int]:
-        """Take ``live``'s sample in the loop for ``live_messages``; its (mode, index of the
-        latest transition or -1, sources present)."""
-        return self._kernel.live_fill()
-
-    def live_messages(self, columns: Sequence[str],
-                      programs: Sequence[iceskate_native.CdrProgram]) -> list[bytes]:
-        """The bytes of one message per program (``cdr.Layout.program``, numbering
-        ``columns``) of the sample ``live_fill`` took."""
-        return self._kernel.live_messages(list(columns), list(programs))
 
 
 def initial_state(q: np.ndarray, mode: int, side: str = 'right', pivot: str = 'toe',
                   v: np.ndarray | None = None, t: float = 0.0) -> HybridState:
     """A HybridState at rest (or with velocity ``v``) in Table 2 ``mode``."""
-    from iceskate_sim.model.modes import get_mode
     gait_mode = get_mode(mode)
     q = np.asarray(q, dtype=float).copy()
     v = np.zeros(N_COORDINATES) if v is None else np.asarray(v, dtype=float).copy()

@@ -43,8 +43,8 @@ class _BagFile:
         self.messages = messages
         custom = {key: value if isinstance(value, str) else json.dumps(value, sort_keys=True)
                   for key, value in metadata.items()}
-        self._bag: Bag | None = Bag(path, TOPICS, messages.typestore, OFFERED_QOS,
-                                    {**custom, 'project_version': PROJECT_VERSION})
+        self._bag = Bag(path, TOPICS, messages.typestore, OFFERED_QOS,
+                        {**custom, 'project_version': PROJECT_VERSION})
         self._bag.write('/robot_description', 0, messages.description(urdf))
 
     def write_block(self, block: dict[str, Any], events: Events) -> None:
@@ -54,24 +54,16 @@ class _BagFile:
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""
-        if self._bag is not None:
-            self._bag.close()
-            self._bag = None
+        self._bag.close()
 
 
 def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
                     messages: SampleMessages, batches: multiprocessing.Queue,
                     status: Connection) -> None:
     """Body of the writer process: write the ``Batch``es of ``batches`` until None, then close
-    the bag and send ('ok', samples) or ('error', message) on ``status``.
-
-    SIGINT, SIGTERM and SIGHUP are ignored: sent to the whole process group (Ctrl-C, ``timeout``,
-    a closed terminal), they reach the parent too, which ends the run and closes the bag through
-    this process. When the parent dies (even by SIGKILL) the kernel sends SIGUSR1
-    (``die_with_parent``; it comes when the forking thread ends, so the parent is looked at
-    again a second later, by SIGALRM): this process writes the batches that arrived whole,
-    closes the bag (with its metadata) and exits; a batch the parent was sending when it died is
-    dropped (SIGALRM ends a read that would wait for its missing part forever)."""
+    the bag and send ('ok', samples) or ('error', message) on ``status``. Stop signals are
+    left to the parent; once the parent is gone (SIGUSR1, then SIGALRM a second later), the
+    batches that arrived whole are written and the bag closed (docs/architecture.md, 'Bags')."""
     for signum in STOP_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
     gc.freeze()  # what the parent had: not this process's garbage, never collected here
@@ -201,6 +193,7 @@ class BagRecorder:
             self._batches.cancel_join_thread()
             raise SimulationError(f'bag writer for {self.path} failed: '
                                   f'{self._writer_status(process)}', end='io_error')
+
     def _writer_status(self, process: multiprocessing.process.BaseProcess) -> str:
         """The writer's report ('ok' or the error), or its exit code if it sent none."""
         if self._status.poll():

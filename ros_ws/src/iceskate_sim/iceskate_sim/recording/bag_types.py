@@ -15,8 +15,7 @@ from iceskate_sim.installed import share_path
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-__all__ = ['INTERFACES_PACKAGE', 'OFFERED_QOS', 'PASSIVE', 'find_msg_dir', 'make_typestore',
-           'msg_types']
+__all__ = ['INTERFACES_PACKAGE', 'OFFERED_QOS', 'PASSIVE', 'make_typestore', 'msg_types']
 
 #: ROS package that defines our messages.
 INTERFACES_PACKAGE = 'iceskate_interfaces'
@@ -33,23 +32,17 @@ OFFERED_QOS = {'/robot_description': [{
     'liveliness_lease_duration': {'sec': 0, 'nsec': 0},
     'avoid_ros_namespace_conventions': False}]}
 
-def find_msg_dir() -> Path:
-    """The ``.msg`` files' folder the ``iceskate_interfaces`` package installs.
-
-    :raises SimulationError: if the package is not installed.
-    """
-    return share_path(INTERFACES_PACKAGE, 'msg')
-
 
 def msg_types(msg_dir: Path | str | None = None) -> dict:
     """Parse every ``.msg`` file of ``iceskate_interfaces`` into rosbags type definitions.
 
-    :param msg_dir: directory of the ``.msg`` files; default: :func:`find_msg_dir`.
+    :param msg_dir: directory of the ``.msg`` files; default: the one the package installs.
     :return: mapping ``'iceskate_interfaces/msg/<Name>'`` to its rosbags definition, ready for
         ``Typestore.register``.
+    :raises SimulationError: if the package is not installed.
     :raises FileNotFoundError: when ``msg_dir`` holds no ``.msg`` file.
     """
-    directory = Path(msg_dir) if msg_dir is not None else find_msg_dir()
+    directory = Path(msg_dir) if msg_dir is not None else share_path(INTERFACES_PACKAGE, 'msg')
     paths = sorted(directory.glob('*.msg'))
     if not paths:
         raise FileNotFoundError(f'no .msg files in {directory}')
@@ -60,14 +53,13 @@ def msg_types(msg_dir: Path | str | None = None) -> dict:
     return types
 
 
-def make_typestore(msg_dir: Path | str | None = None) -> Typestore:
-    """Return a ROS 2 Jazzy typestore with the ``iceskate_interfaces`` messages registered.
+def make_typestore() -> Typestore:
+    """Return a new ROS 2 Jazzy typestore with the installed ``iceskate_interfaces`` messages
+    registered.
 
-    :param msg_dir: directory of the ``.msg`` files; default: :func:`find_msg_dir`.
-    :return: a new ``Typestore`` (``Stores.ROS2_JAZZY`` plus our types).
     :raises SimulationError: when ``iceskate_interfaces`` is not installed.
-    :raises FileNotFoundError: when the ``.msg`` folder holds no ``.msg`` file.
+    :raises FileNotFoundError: when its ``.msg`` folder holds no ``.msg`` file.
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
-    typestore.register(msg_types(msg_dir))
+    typestore.register(msg_types())
     return typestore

@@ -148,7 +148,7 @@ def layout_of(typestore: Typestore, msgtype: str, data: bytes) -> Layout:
     """
     if len(data) < HEADER or data[:2] != ENCAPSULATION[:2]:
         raise LayoutError('not little-endian CDR')
-    walk = _Walk(typestore, _Reading(data))
+    walk = _Walk(typestore, data)
     walk.message(msgtype, '')
     if len(data) - walk.pos >= 4:  # up to 3: the padding some writers add
         raise LayoutError(f'{len(data) - walk.pos} bytes after the end of the message')
@@ -164,54 +164,43 @@ def layout_for(typestore: Typestore, msgtype: str,
 
     :raises LayoutError: for a path of ``shape`` that is not in the message.
     """
-    writing = _Writing(shape)
-    walk = _Walk(typestore, writing)
+    walk = _Walk(typestore, shape=shape)
     walk.message(msgtype, '')
-    unused = set(shape) - writing.used
+    unused = set(shape) - walk.used
     if unused:
         raise LayoutError(f'{msgtype} has no field {sorted(unused)[0]!r}')
     return walk.layout(ENCAPSULATION)
 
 
-class _Reading:
-    """The counts and strings of ``_Walk`` read from a message's bytes."""
-
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def count(self, path: str, offset: int) -> int:
-        if offset + 4 > len(self.data):
-            raise LayoutError(f'{len(self.data)} bytes end inside the message')
-        return _COUNT.unpack_from(self.data, offset)[0]
-
-
-class _Writing:
-    """The counts and strings of ``_Walk`` taken from a shape (``layout_for``)."""
-
-    def __init__(self, shape: Mapping[str, int | str | Sequence[str]]) -> None:
-        self.shape, self.used = shape, set()
-
-    def value(self, path: str) -> int | str | Sequence[str] | None:
-        if path in self.shape:
-            self.used.add(path)
-        return self.shape.get(path)
-
-
 class _Walk:
     """One pass over a message type's definition: offsets of every field, the skeleton, and
-    (when writing) the template bytes."""
+    the template bytes. Its counts and strings are read from a message's bytes ``data``
+    (``layout_of``) or, writing, taken from a shape (``layout_for``; ``used``: its paths met)."""
 
-    def __init__(self, typestore: Typestore, source: _Reading | _Writing) -> None:
-        self.typestore, self.source = typestore, source
+    def __init__(self, typestore: Typestore, data: bytes | None = None,
+                 shape: Mapping[str, int | str | Sequence[str]] | None = None) -> None:
+        self.typestore, self.data, self.shape = typestore, data, shape
+        self.used: set[str] = set()
         self.pos = HEADER
         self.fields: dict[str, Field] = {}
         self.strings: dict[str, str] = {}
         self.skeleton: list[tuple[int, bytes]] = []
-        self.out = bytearray(ENCAPSULATION) if isinstance(source, _Writing) else None
+        self.out = bytearray(ENCAPSULATION) if data is None else None
+
+    def value(self, path: str) -> int | str | Sequence[str] | None:
+        """The shape's count, string or strings at ``path`` (writing)."""
+        if path in self.shape:
+            self.used.add(path)
+        return self.shape.get(path)
+
+    def read_count(self, offset: int) -> int:
+        """The uint32 at ``offset`` of the bytes read."""
+        if offset + 4 > len(self.data):
+            raise LayoutError(f'{len(self.data)} bytes end inside the message')
+        return _COUNT.unpack_from(self.data, offset)[0]
 
     def layout(self, encapsulation: bytes) -> Layout:
-        template = (bytes(self.out) if self.out is not None
-                    else bytes(self.source.data[:self.pos]))
+        template = bytes(self.out) if self.out is not None else bytes(self.data[:self.pos])
         numbers = bytearray(template)
         for field in self.fields.values():  # the template's numbers are 0
             numbers[field.offset:field.offset + field.dtype.itemsize * field.count] = bytes(
@@ -230,8 +219,8 @@ class _Walk:
         self.pos += size
         if self.out is not None:
             self.out += bytes(size)
-        elif self.pos > len(self.source.data):
-            raise LayoutError(f'{len(self.source.data)} bytes end inside the message')
+        elif self.pos > len(self.data):
+            raise LayoutError(f'{len(self.data)} bytes end inside the message')
         return start
 
     def count(self, path: str) -> int:
@@ -239,13 +228,12 @@ class _Walk:
         self.align(4)
         start = self.pos
         if self.out is not None:
-            value = self.source.value(path)
+            value = self.value(path)
             count = (len(value) if isinstance(value, (list, tuple)) else int(value or 0))
             self.out += _COUNT.pack(count)
-            self.pos += 4
         else:
-            count = self.source.count(path, start)
-            self.pos += 4
+            count = self.read_count(start)
+        self.pos += 4
         self.skeleton.append((start, _COUNT.pack(count)))
         return count
 
@@ -253,23 +241,23 @@ class _Walk:
         self.align(4)
         start = self.pos
         if self.out is not None:
-            text = value if value is not None else self.source.value(path) or ''
+            text = value if value is not None else self.value(path) or ''
             self.strings[path] = str(text)
             encoded = self.strings[path].encode() + b'\0'
             self.out += _COUNT.pack(len(encoded)) + encoded
             self.pos += 4 + len(encoded)
         else:
-            size = self.source.count(path, start)
+            size = self.read_count(start)
             end = start + 4 + size
-            if end > len(self.source.data) or size == 0 or self.source.data[end - 1] != 0:
+            if end > len(self.data) or size == 0 or self.data[end - 1] != 0:
                 raise LayoutError(f'string {path!r} is cut or lacks its terminating NUL')
             try:
-                self.strings[path] = bytes(self.source.data[start + 4:end - 1]).decode()
+                self.strings[path] = bytes(self.data[start + 4:end - 1]).decode()
             except UnicodeDecodeError as exc:
                 raise LayoutError(f'string {path!r} is not UTF-8: {exc}') from None
             self.pos = end
-        self.skeleton.append((start, bytes(self.out[start:self.pos]) if self.out is not None
-                              else bytes(self.source.data[start:self.pos])))
+        self.skeleton.append((start, bytes((self.out if self.out is not None
+                                            else self.data)[start:self.pos])))
 
     def message(self, msgtype: str, prefix: str) -> None:
         for name, (kind, detail) in self.typestore.fielddefs[msgtype][1]:
@@ -298,7 +286,7 @@ class _Walk:
             for k in range(count):
                 self.message(detail, f'{path}.{k}.')
         elif detail[0] == 'string':
-            given = (self.source.value(path) if self.out is not None else None) or ()
+            given = (self.value(path) if self.out is not None else None) or ()
             for k in range(count):
                 self.string(f'{path}.{k}', given[k] if k < len(given) else None)
         else:
@@ -326,13 +314,6 @@ class LayoutCache:
         self.typestore, self.msgtype, self.capacity = typestore, msgtype, capacity
         self._prepare = prepare
         self._known: list[tuple[Layout, Any]] = []
-
-    def layout(self, data: bytes) -> Layout:
-        """The layout of ``data``.
-
-        :raises LayoutError: for bytes that are not a message of the type.
-        """
-        return self.lookup(data)[0]
 
     def lookup(self, data: bytes) -> tuple[Layout, Any]:
         """The layout of ``data`` and what ``prepare`` made of it.

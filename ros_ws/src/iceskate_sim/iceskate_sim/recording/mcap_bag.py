@@ -207,10 +207,6 @@ class Bag:
         staged.write_text(text, encoding='utf-8')
         staged.replace(self.path / 'metadata.yaml')
 
-    def abort(self) -> None:
-        """Close the file as it is (no index, no ``metadata.yaml``): a recording cut short."""
-        self._file.close()
-
     def _metadata(self) -> dict[str, Any]:
         """rosbag2's bag information (``metadata.yaml``, format version 9)."""
         count = sum(topic.count for topic in self.topics.values())

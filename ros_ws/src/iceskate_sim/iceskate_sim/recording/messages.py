@@ -95,7 +95,8 @@ class SampleMessages:
             encoded: list[bytes] = [b''] * rows
             for key, selected in _keys(topic, block, events):
                 program, names = self._program(topic, key)
-                arrays = [_column(block, name) for name in names]
+                arrays = [block['efforts'][int(name[len('efforts.'):])]
+                          if name.startswith('efforts.') else block[name] for name in names]
                 if selected is None:
                     encoded = [row.tobytes() for row in iceskate_native.encode_rows(
                         program, arrays, rows)]
@@ -109,9 +110,9 @@ class SampleMessages:
 
     def encode_live(self, loop: Any, taken: tuple[int, int, int], events: Sequence[Any],
                     topics: Sequence[str]) -> dict[str, bytes]:
-        """Topic -> the bytes of its message of the live sample ``loop`` took (its
-        ``live_fill()``: ``taken``, its mode, latest transition and sources present);
-        ``events``: the event log."""
+        """Topic -> the bytes of its message of the live sample the native ``ControlLoop``
+        ``loop`` took (its ``live_fill()``: ``taken``, its mode, latest transition and sources
+        present); ``events``: the event log."""
         mode, last, _ = taken
         out = {}
         for topic in topics:
@@ -123,8 +124,7 @@ class SampleMessages:
 
     def description(self, urdf: str) -> bytes:
         """The /robot_description message holding ``urdf``."""
-        layout = layout_for(self.typestore, TOPICS['/robot_description'], {'data': urdf})
-        return layout.template
+        return layout_for(self.typestore, TOPICS['/robot_description'], {'data': urdf}).template
 
     def _program(self, topic: str, key: Any) -> tuple[iceskate_native.CdrProgram,
                                                       tuple[str, ...]]:
@@ -203,13 +203,6 @@ _FIELDS = {
     '/clock': SampleMessages._clock, '/joint_states': SampleMessages._joint_states,
     '/head_pose': SampleMessages._head_pose, '/gait_state': SampleMessages._gait_state,
     '/joint_dynamics': SampleMessages._joint_dynamics, '/tf': SampleMessages._tf}
-
-
-def _column(block: Mapping[str, Any], name: str) -> np.ndarray:
-    """The column ``name`` of ``block`` (``efforts.<i>``: source i's efforts)."""
-    if name.startswith('efforts.'):
-        return block['efforts'][int(name.split('.')[1])]
-    return block[name]
 
 
 def _keys(topic: str, block: Mapping[str, Any], events: Events

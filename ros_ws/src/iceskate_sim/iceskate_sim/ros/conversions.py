@@ -15,7 +15,6 @@ from iceskate_sim.model.command import EMPTY, CommandValues, all_finite
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
 PIVOT_OF_CODE = {0: 'toe', 1: 'toe', 2: 'heel'}  # GaitState.pivot -> Observation.pivot
-_NAMES = list(COORDINATE_NAMES)
 _INDEX = {name: i for i, name in enumerate(COORDINATE_NAMES)}
 _IMPEDANCE = ('stiffness', 'damping', 'position_reference')
 
@@ -47,11 +46,6 @@ def _indices(names: list[str], where: str) -> np.ndarray:
     return np.array([_INDEX[n] for n in names], dtype=np.intp)
 
 
-def _array(msg: Any, field: str, names: list[str], where: str) -> np.ndarray:
-    return finite_vector(getattr(msg, field), names, f'{where}: {field}',
-                          f' for {len(names)} joint names')
-
-
 def command_from_message(msg: Any) -> CommandValues:
     """The CommandValues of an EffortCommand message (18-vectors; unnamed coordinates 0).
 
@@ -64,7 +58,7 @@ def command_from_message(msg: Any) -> CommandValues:
     """
     where = f'effort command of source {msg.source!r}'
     names = list(msg.joint_names)
-    index = None if names == _NAMES else _indices(names, where)
+    index = None if names == list(COORDINATE_NAMES) else _indices(names, where)
 
     def coordinates(x: np.ndarray) -> np.ndarray:
         if index is None:
@@ -74,7 +68,8 @@ def command_from_message(msg: Any) -> CommandValues:
         return out
 
     def field(name: str) -> np.ndarray:
-        return coordinates(_array(msg, name, names, where))
+        return coordinates(finite_vector(getattr(msg, name), names, f'{where}: {name}',
+                                         f' for {len(names)} joint names'))
 
     effort = field('effort')
     given = [len(getattr(msg, f)) > 0 for f in _IMPEDANCE]

@@ -66,14 +66,11 @@ class CommandDecoder:
             **{name: layout.read(data, name).copy() for name in ARRAYS})
         values = command_from_message(message)
         if message.joint_names == list(COORDINATE_NAMES):  # the layout the fast way assumes
-            fields = [layout.fields[name] for name in ARRAYS]
-            starts = [(f.offset - fields[0].offset) // 8 for f in fields]
-            every = np.concatenate([np.arange(s, s + f.count) for s, f in zip(starts, fields,
-                                                                               strict=True)])
-            self._known[message.source] = (
-                layout, every, tuple(slice(s, s + f.count) for s, f in zip(starts, fields,
-                                                                           strict=True)),
-                tuple(message.source_names))
+            first = layout.fields[ARRAYS[0]].offset  # each array's doubles from there on
+            arrays = tuple(slice((f.offset - first) // 8, (f.offset - first) // 8 + f.count)
+                           for f in (layout.fields[name] for name in ARRAYS))
+            every = np.concatenate([np.arange(a.start, a.stop) for a in arrays])
+            self._known[message.source] = (layout, every, arrays, tuple(message.source_names))
         return message.source, message.stamp_ns, values
 
     @staticmethod

@@ -24,10 +24,8 @@ from iceskate_sim.recording.messages import SampleMessages
 from iceskate_sim.ros.effort_cdr import CommandDecoder
 from iceskate_sim.run.session import Session
 
-#: Live state topics the controllers read, published first, as soon as the state is known: the
-#: state, then /clock (their sim time) at once, while their transport threads are still awake
-#: (measured: 3-5 % faster than /clock first; a /clock after the recording would wake them while
-#: they answer).
+#: Live state topics the controllers read, published first, as soon as the state is known (the
+#: state, then /clock while their transport threads are awake: 3-5 % faster than /clock first).
 CONTROL_TOPICS = ('/gait_state', '/clock')
 #: Every live state topic, in publishing order.
 STATE_TOPICS = CONTROL_TOPICS + ('/joint_states', '/head_pose')
@@ -60,8 +58,7 @@ class LockstepSession:
         self._breakdown = {c: sources or (c,) for c, sources in controllers.items()}
         self._learning = {c for c, sources in controllers.items() if sources is None}
         self.controllers = tuple(controllers)
-        self.recorder = session.recorder
-        self.messages = (self.recorder.messages if self.recorder else
+        self.messages = (session.recorder.messages if session.recorder else
                          SampleMessages(make_typestore(), self.robot.tf_frames))
         #: the native loop that holds the commands
         self._inbox = session.command_inbox(tuple(self._breakdown.values()))
@@ -86,38 +83,14 @@ class LockstepSession:
         """Every controller's sources, in summing order."""
         return tuple(s for sources in self._breakdown.values() for s in sources)
 
-    @property
-    def nodes(self) -> set[str]:
-        """Names of the controller nodes the scene's sources need."""
-        return set(self.controllers)
-
-    @property
-    def done(self) -> bool:
-        """The run is over: duration reached, physically ended, or failed."""
-        return self.session.done
-
-    @property
-    def error(self) -> SimulationError | None:
-        """Why the run failed (None: it did not)."""
-        return self.session.error
-
-    @property
-    def periods(self) -> int:
-        """Control periods stepped."""
-        return self.session.periods
-
-    @property
-    def metrics(self) -> dict[str, Any] | None:
-        """The metrics once the run is finished."""
-        return self.session.metrics
-
     def state_bytes(self, topics: tuple[str, ...] = STATE_TOPICS) -> dict[str, bytes]:
         """CDR bytes of the live ``topics``' messages at t_k (see the module docstring), the
         bag's message types, publishable raw (encoded as the bag's records are)."""
         s = self.sim.state
         if self._live is None or self._live[0] is not s:  # taken once per instant
-            self._live = (s, self._inbox.live_fill())
-        return self.messages.encode_live(self._inbox, self._live[1], self.sim.events, topics)
+            self._live = (s, self._inbox.kernel.live_fill())
+        return self.messages.encode_live(self._inbox.kernel, self._live[1], self.sim.events,
+                                         topics)
 
     # -------------------------------------------------------------------------- commands
     def offer(self, controller: str, stamp_ns: int, command: CommandValues) -> bool:
@@ -172,7 +145,7 @@ class LockstepSession:
     def _adopt(self, controller: str, sources: tuple[str, ...]) -> None:
         """Take ``sources`` as the breakdown of ``controller`` (whose sources were not given):
         a new inbox, holding the commands received so far."""
-        if self.periods:
+        if self.session.periods:
             raise SimulationError(f'command of {controller!r} breaks down into sources '
                                   f'{list(sources)} after the run began with '
                                   f'{list(self._breakdown[controller])}')
@@ -192,7 +165,7 @@ class LockstepSession:
     # -------------------------------------------------------------------------- stepping
     def step(self) -> bool:
         """Integrate one period under the commands in (``Session.hold``); False if done."""
-        if self.done:
+        if self.session.done:
             return False
         if self.lockstep and self.missing():
             raise SimulationError(f'step at t={self.sim.time} s without commands of '
@@ -202,22 +175,10 @@ class LockstepSession:
             self._answered.clear()
         return taken
 
-    def flush(self, whole: bool = True) -> None:
-        """Record the periods stepped (off the lockstep's critical path: call it while the
-        controllers compute); ``whole=False``: the samples a block at a time
-        (``Session.flush``)."""
-        self.session.flush(whole)
-
     def reset(self) -> None:
         """Back to the scene's initial state (refused while recording a bag)."""
         self.session.reset()
         self._restart()
-
-    def finish(self, error: SimulationError | None = None,
-               extra: dict[str, Any] | None = None) -> dict[str, Any]:
-        """End the run: close the bag, compute the metrics (and ``extra``), write the output
-        files (once)."""
-        return self.session.finish(error, extra)
 
 
 class LoopMonitor:
@@ -263,10 +224,6 @@ class LoopMonitor:
         self.published_at = time.monotonic()
         if not again:
             self.waiting_since = self.published_at
-
-    def wait_anew(self) -> None:
-        """Restart the command timeout (after a pause)."""
-        self.waiting_since = time.monotonic()
 
     def command(self, source: str, complete: bool) -> None:
         """A valid command came in; ``complete``: now every source has answered t_k."""
@@ -344,7 +301,7 @@ class LockstepLoop:
             this long [s].
         :returns: whether the run started now.
         """
-        nodes = self.session.nodes
+        nodes = set(self.session.controllers)
         if nodes <= up and matched >= len(nodes):
             self.phase = 'running'
             self.monitor.start()
@@ -363,7 +320,7 @@ class LockstepLoop:
         bag) and the other topics go out."""
         self._publish_live(CONTROL_TOPICS)
         self.monitor.published(again)
-        self.session.flush(whole=False)
+        self.session.session.flush(whole=False)
         self._publish_live(STATE_TOPICS[len(CONTROL_TOPICS):])
 
     def _publish_live(self, topics: tuple[str, ...]) -> None:
@@ -379,7 +336,7 @@ class LockstepLoop:
         self.session.step()
         self.monitor.samples['physics'].append(time.perf_counter() - start)
         self.budget = max(0, self.budget - 1)
-        if self.session.done:
+        if self.session.session.done:
             return self.finish()
         self.publish_state()
 
@@ -418,7 +375,7 @@ class LockstepLoop:
             self.publish_state(again=True)
         # free-running: keep the pace; lockstep without controllers: nothing to wait for
         count = (UNCONTROLLED_BATCH if not s.controllers else 0) if s.lockstep else m.due(
-            s.periods)
+            s.session.periods)
         for _ in range(count):
             if self.may_step():
                 self.step()
@@ -428,9 +385,9 @@ class LockstepLoop:
 
         The exit code: 0, 1 after an error, 128 + signum after a ``RunInterrupted``.
         """
-        metrics = self.session.finish(error, {'rejected_commands':
-                                              self.monitor.rejected_summary()})
-        failed = self.session.error
+        run = self.session.session
+        metrics = run.finish(error, {'rejected_commands': self.monitor.rejected_summary()})
+        failed = run.error
         self.phase = 'finished'
         self.exit_code = (failed.exit_code if isinstance(failed, RunInterrupted)
                           else int(failed is not None))
@@ -438,7 +395,7 @@ class LockstepLoop:
                      f'{metrics["failure"] or "complete"}', bool(self.exit_code))
         if self._stats_file is not None:
             self._stats_file.write_text(json.dumps(self.monitor.stats(
-                self.session.periods, metrics['wall_time_s']), indent=1))
+                run.periods, metrics['wall_time_s']), indent=1))
 
     def stop(self, signum: int | None = None, detail: str = '') -> None:
         """End a run that is not over yet: the node was stopped, by the signal ``signum``
@@ -465,7 +422,7 @@ class LockstepLoop:
         return ok, seconds_to_ns(target), text
 
     def _go_on(self) -> None:
-        self.monitor.wait_anew()
+        self.monitor.waiting_since = time.monotonic()  # the command timeout starts anew
         if self.session.lockstep and not self.session.missing() and self.may_step():
             self.step()
 

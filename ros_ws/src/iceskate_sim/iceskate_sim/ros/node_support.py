@@ -80,16 +80,12 @@ class ConfigError(ValueError):
 def _ros_type(tp: Any) -> Parameter.Type:
     """The ROS parameter type of a parameter-class field type."""
     tp = optional_inner(tp)
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin in (tuple, frozenset):
-        return _ARRAY_TYPES[args[0]]
-    return _SCALAR_TYPES[tp]
+    if typing.get_origin(tp) in (tuple, frozenset):
+        return Parameter.Type[_ROS_TYPES[typing.get_args(tp)[0]] + '_ARRAY']
+    return Parameter.Type[_ROS_TYPES[tp]]
 
 
-_SCALAR_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
-                 float: Parameter.Type.DOUBLE, str: Parameter.Type.STRING}
-_ARRAY_TYPES = {bool: Parameter.Type.BOOL_ARRAY, int: Parameter.Type.INTEGER_ARRAY,
-                float: Parameter.Type.DOUBLE_ARRAY, str: Parameter.Type.STRING_ARRAY}
+_ROS_TYPES = {bool: 'BOOL', int: 'INTEGER', float: 'DOUBLE', str: 'STRING'}
 
 
 def _descriptor(name: str, ros_type: Parameter.Type, rules: Rules, optional: bool
@@ -205,18 +201,6 @@ def spin_until(executor: Any, done: Callable[[], bool], context: Any = None,
         executor.spin_once(timeout_sec=period)
 
 
-def check_parameter_files(argv: list[str]) -> None:
-    """Read every ``--params-file`` of ``argv`` as the scenes are read (``read_yaml``: UTF-8
-    text, well-formed YAML), so a binary or malformed file is refused in one sentence naming
-    it before rcl parses it.
-
-    :raises SimulationError: naming the file and the problem.
-    """
-    for option, value in zip(argv, argv[1:], strict=False):
-        if option == '--params-file':
-            read_yaml(value, 'parameter file')
-
-
 def usage(name: str, about: str, parameters: type | None) -> str:
     """The ``--help`` text of a node's executable: how to call it, what it does, its ROS
     parameters (from the parameter class: default, unit, range, description)."""
@@ -258,7 +242,12 @@ def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None
     parent = os.getppid()
     with StopRequest() as stop:
         try:
-            check_parameter_files(sys.argv if args is None else args)
+            # every --params-file read as the scenes are (UTF-8, well-formed YAML): a bad one
+            # is refused in one sentence naming it before rcl parses it
+            given = sys.argv if args is None else args
+            for option, value in zip(given, given[1:], strict=False):
+                if option == '--params-file':
+                    read_yaml(value, 'parameter file')
             loopback_dds(os.environ)
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = make()

@@ -27,7 +27,7 @@ from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_interfaces.srv import StepSimulation
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.stamps import set_stamp
-from iceskate_sim.parameters import check_fields, setting
+from iceskate_sim.parameters import checked, setting
 from iceskate_sim.ros.lockstep import LockstepLoop, LockstepSession
 from iceskate_sim.ros.node_support import (
     CLOCK_QOS,
@@ -66,10 +66,7 @@ class SimulatorNodeParameters:
     start_paused: bool = setting(False, 'start paused (~/step, ~/resume)')
     exit_on_end: bool = setting(True, 'exit when the run is over')
     stats_file: str = setting('', 'JSON file for the loop timings; empty: none')
-
-    def __post_init__(self) -> None:
-        """Check every field by its rules."""
-        check_fields(self, SimulationError)
+    __post_init__ = checked(SimulationError)
 
 
 class SimulatorNode(Node):
@@ -89,13 +86,14 @@ class SimulatorNode(Node):
             raise ConfigError(str(exc)) from None
         controllers = self._controllers(scene)
         self.session = LockstepSession(session, controllers, c.lockstep)
-        self.loop = LockstepLoop(self.session, self._publish, self._report, c.control_timeout,
-                                 c.realtime_factor, c.start_paused, c.stats_file,
-                                 self._listened)
+        self.loop = LockstepLoop(
+            self.session, lambda topic, data: self._pub[topic].publish(data), self._report,
+            c.control_timeout, c.realtime_factor, c.start_paused, c.stats_file,
+            lambda topic: topic in self._readers)
         self._pub = {'/clock': self.create_publisher(Clock, '/clock', CLOCK_QOS)} | {
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
             (('joint_states', JointState), ('head_pose', PoseStamped), ('gait_state', GaitState))}
-        self._readers: set[str] = set()  # live topics with readers (``_count_readers``)
+        self._readers: set[str] = set()  # live topics with readers (``timer_callback``)
         self._waited: set[str] | None = None  # controller nodes seen up while starting
         self.create_publisher(String, 'robot_description', LATCHED_QOS).publish(
             String(data=self.session.robot.urdf_path.read_text(encoding='utf-8')))
@@ -146,16 +144,6 @@ class SimulatorNode(Node):
         """1 if the run ended with an error, else 0."""
         return self.loop.exit_code
 
-    def _listened(self, topic: str) -> bool:
-        return topic in self._readers
-
-    def _count_readers(self) -> None:
-        """Note which live topics have readers (4 rmw calls: not at every instant)."""
-        self._readers = {t for t, pub in self._pub.items() if pub.get_subscription_count()}
-
-    def _publish(self, topic: str, data: bytes) -> None:
-        self._pub[topic].publish(data)
-
     def _report(self, text: str, failed: bool) -> None:
         if not self.context.ok():  # stopped by a signal: rosout is gone
             print(f'[simulator] {text}', file=sys.stderr)
@@ -169,14 +157,15 @@ class SimulatorNode(Node):
 
     def timer_callback(self) -> None:
         """Start once the controllers are up; watchdog and resend; free-running pace."""
-        self._count_readers()
+        # the live topics with readers (4 rmw calls: here, not at every instant)
+        self._readers = {t for t, pub in self._pub.items() if pub.get_subscription_count()}
         self._try_start() if self.loop.phase == 'starting' else self.loop.tick()
 
     def _try_start(self) -> None:
         up = ({i.node_name for i in self.get_publishers_info_by_topic('effort_commands')}
               & {i.node_name for i in self.get_subscriptions_info_by_topic('gait_state')})
         matched = self._pub['/gait_state'].get_subscription_count()
-        nodes = self.session.nodes
+        nodes = set(self.session.controllers)
         if self._waited is None and nodes:  # once: what it waits for, then each arrival
             self._waited = set()
             self.get_logger().info(
@@ -189,7 +178,7 @@ class SimulatorNode(Node):
         if self.loop.try_begin(up, matched, self.config.startup_timeout):
             self.get_logger().info(f'running {self.session.scene.name!r}: sources '
                                    f'{list(self.session.sources)}, nodes '
-                                   f'{sorted(self.session.nodes)}')
+                                   f'{sorted(self.session.controllers)}')
 
     def close(self, signum: int | None = None, detail: str = '') -> None:
         """Close the bag and write the outputs if the run was stopped (by the signal

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import pathlib
 import shutil
 import tempfile
@@ -68,7 +69,8 @@ class Trajectory:
             self._blocks.setdefault(key, []).append(np.asarray(values))
             self._held += self._blocks[key][-1].nbytes
         self._count += n
-        self._maybe_spill()
+        if self._spill_parent is not None and self._held > self._spill_bytes:
+            self._spill()
 
     def _add_sources(self, efforts: dict[str, np.ndarray]) -> None:
         """New source columns, 0 for the samples before."""
@@ -79,11 +81,6 @@ class Trajectory:
                 if self._spilled:  # the spilled samples' zeros go straight to its file
                     self._write(key, np.zeros((self._spilled, 18)))
                 self._blocks[key] = [np.zeros((self._count - self._spilled, 18))]
-
-    def _maybe_spill(self) -> None:
-        """Move the blocks in memory to the spill files once they pass ``spill_bytes``."""
-        if self._spill_parent is not None and self._held > self._spill_bytes:
-            self._spill()
 
     def _spill(self) -> None:
         """Append every column's blocks to its file (all rows are in blocks)."""
@@ -148,11 +145,7 @@ def _rms(x: np.ndarray) -> float:
 
 def _runs(values: np.ndarray) -> list[int]:
     """Collapse consecutive repeats: [1, 1, 2, 2, 10] -> [1, 2, 10]."""
-    out: list[int] = []
-    for value in values.tolist():
-        if not out or out[-1] != value:
-            out.append(int(value))
-    return out
+    return [int(value) for value, _ in itertools.groupby(values.tolist())]
 
 
 def _arm_swing(q: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:

@@ -1,14 +1,8 @@
-"""Scenes: one YAML file per experiment, validated once before the run (the simulator's part).
-
-A scene declares the floor, the initial posture and mode, which controllers run (``inputs``:
-one parameter block per controller node), disturbances, duration, control period, integrator
-and tolerance, and what is recorded. This module validates everything the simulator uses; the
-controllers' blocks are kept as given and validated by the layer that composes the controllers
-(``parse_scene``'s ``validate_inputs``; ``iceskate_bringup.scene`` does it for the shipped
-controllers). An unknown key, a wrong type or an out-of-range value is refused with a
-``SimulationError`` naming the key (e.g. ``integrator.step``). A scene is named by its file's
-path or, for the scenes a package ships (``share/<package>/scenes/<name>.yaml``, the package
-registered under the ament index's ``iceskate_scenes``), by its name.
+"""Scenes: one YAML file per experiment, validated once before the run (the simulator's part;
+the controllers' blocks by ``parse_scene``'s ``validate_inputs``), a bad key refused with a
+``SimulationError`` naming it (e.g. ``integrator.step``). A scene is named by its path or, for
+those a package ships (``share/<package>/scenes/<name>.yaml``, the package registered under the
+ament index's ``iceskate_scenes``), by its name. See docs/usage.md, 'Run a scene'.
 """
 
 from __future__ import annotations
@@ -19,7 +13,7 @@ from dataclasses import MISSING, dataclass, field, make_dataclass
 import math
 import pathlib
 import re
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +21,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.parameters import block, check_fields, keyed_from_mapping, setting
+from iceskate_sim.parameters import block, checked, keyed_from_mapping, setting
 from iceskate_sim.physics.hybrid import FrictionModel, HybridState
 from iceskate_sim.physics.integrators import IntegratorConfig
 from iceskate_sim.physics.simulation import SimulatorConfig, initial_state
@@ -38,7 +32,6 @@ POSTURES = ('bent_knees', 'staggered', 'upright')
 MAX_DURATION = 3600.0
 #: The ament index resource of the packages that ship scenes.
 SCENE_RESOURCE = 'iceskate_scenes'
-T = TypeVar('T')
 
 
 @dataclass(frozen=True)
@@ -77,13 +70,11 @@ class Scene:
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
 
-
 # ------------------------------------------------------------------- the scene's schema
 # Every key of a scene's simulator part is a ``setting`` of these classes or of the run's own
 # configurations (``FrictionModel``, ``IntegratorConfig``, ``DynamicsParameters``; the parameter
 # schema of the project, ``iceskate_sim.parameters``): its default, description, unit and rules.
-def _checked(obj: Any) -> None:
-    check_fields(obj, SimulationError)
+_checked = checked(SimulationError)
 
 
 #: ``initial.q`` and ``initial.v``: a value per coordinate name (m, rad; m/s, rad/s), each
@@ -159,12 +150,6 @@ def _fail(key: str, message: str) -> SimulationError:
     return SimulationError(f'scene key {key!r}: {message}')
 
 
-def _settings(cls: type[T], d: Any, key: str) -> T:
-    """Block ``cls`` of the scene at ``key`` ('' for the top level), its errors naming the
-    scene key."""
-    return keyed_from_mapping(cls, d, SimulationError, _fail, key)
-
-
 # ----------------------------------------------------------------------- postures
 def standing_posture(kind: str, knee_bend: float, stagger: float) -> tuple[np.ndarray, str]:
     """Initial coordinates of a double-support posture and the pivot to use.
@@ -200,7 +185,7 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         raise _fail('engine', 'the physics always runs on the native core now; remove the key')
     if isinstance(raw.get('dynamics'), dict) and 'mu' in raw['dynamics']:
         raise _fail('dynamics.mu', "the friction coefficient is the floor's: set floor.mu")
-    top = _settings(SceneSettings, raw, '')
+    top = keyed_from_mapping(SceneSettings, raw, SimulationError, _fail)
     if not top.scene:
         raise _fail('scene', f'must be a non-empty name, got {top.scene!r}')
     init = top.initial
@@ -244,7 +229,8 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
     if not isinstance(items, list):
         raise _fail('disturbances', f'must be a list, got {type(items).__name__}')
     pushes = tuple(Push(p.start, p.duration, p.frame, p.force) for p in (
-        _settings(PushSettings, item, f'disturbances[{k}]') for k, item in enumerate(items)))
+        keyed_from_mapping(PushSettings, item, SimulationError, _fail, f'disturbances[{k}]')
+        for k, item in enumerate(items)))
     return Scene(top.scene, top.description, top.duration, simulator, initial, inputs, pushes,
                  top.record.bag, _record_every(top.record.rate, simulator.control_period),
                  raw)
@@ -262,6 +248,7 @@ def _record_every(rate: float | None, control_period: float) -> int:
                     f'{control_rate:g} Hz (e.g. {control_rate:g}, {control_rate / 2:g}, '
                     f'{control_rate / 10:g})')
     return every
+
 
 def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
     """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself.

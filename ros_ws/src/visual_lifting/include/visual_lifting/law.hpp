@@ -17,9 +17,6 @@
 namespace visual_lifting
 {
 
-/// The moving stance of the shift_* fields (no shift by default).
-iceskate_native::StanceSchedule stance_schedule(const VisualLiftingParameters & params);
-
 /// psi_d at time t [s] from the current pose psi, the origin psi(0) and the stance offset
 /// (dy, dz) [m] ('follow' ignores dy).
 Eigen::Vector3d desired_head_pose(
