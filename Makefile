@@ -9,6 +9,9 @@ IN_ENV := cd $(ROOT) && . ./env.sh &&
 
 # Extra pytest arguments, e.g. `make test PYTEST_ARGS='-k bag -x'`.
 PYTEST_ARGS ?=
+# Test processes (pytest-xdist; each test isolates its DDS domain, logs and folders): the suite
+# is mostly one core's work at a time, so two share a 2-core machine well. 0: one process.
+PYTEST_WORKERS ?= 2
 
 .PHONY: help setup test run study lint fix lock clean distclean bench stress sanitize
 
@@ -30,7 +33,7 @@ setup:
 	@bash $(ROOT)/scripts/bootstrap.sh
 
 test: setup
-	$(IN_ENV) python -m pytest tests -ra --durations=10 $(PYTEST_ARGS)
+	$(IN_ENV) python -m pytest tests -ra --durations=10 -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS)
 
 # The main job: one scene, headless (same control code and rate as the ROS nodes).
 SCENE ?= skate

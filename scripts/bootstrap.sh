@@ -3,7 +3,9 @@
 #   1. .venv at the repo root (python3 -m venv), with uv pinned below (pip install), and
 #   2. requirements.lock installed into it with `uv pip sync` (both skipped while the lock is
 #      unchanged and the venv healthy; a changed lock gives a new venv, see below);
-#   3. `colcon build --symlink-install` of ros_ws             (skipped while ros_ws/src is unchanged).
+#   3. `colcon build --symlink-install` of ros_ws             (skipped while ros_ws/src is unchanged);
+#   4. Debian's chromium, the browser of the viewer's tests, where it is missing and this runs as
+#      root with apt-get (elsewhere a note: those tests then skip, unless ICESKATE_REQUIRE_BROWSER=1).
 # A second run with nothing changed takes a second or two.
 #
 # Environment knobs: PYTHON (interpreter that makes the venv, default python3, must be 3.11),
@@ -135,4 +137,17 @@ if [ "${ICESKATE_FORCE_BUILD:-0}" = 1 ] || [ ! -d "$WS/build" ] \
   echo "$build_hash" >"$BUILD_STAMP"
 else
   log "ros_ws/install up to date with ros_ws/src"
+fi
+
+# --- 4. the browser of the viewer's tests ----------------------------------------------------------
+if command -v chromium >/dev/null 2>&1; then
+  :
+elif [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  log "installing Debian's chromium (the viewer's browser tests)"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq >/dev/null
+  apt-get install -y -qq chromium >/dev/null \
+    || die "apt-get install chromium failed"
+else
+  log "note: no chromium (apt-get install chromium as root): the browser tests will be skipped"
 fi

@@ -325,3 +325,66 @@ def test_unknown_side_or_pivot_is_rejected(robot):
         robot.support_model('right', 'middle')
     with pytest.raises(SimulationError, match="'up'"):
         robot.support_model('up', 'toe')
+
+
+# ------------------------------------------------------------------------------------ the body
+def _urdf_without_visuals(robot, tmp_path) -> str:
+    """The shipped URDF with every <visual> element taken out (written under ``tmp_path``)."""
+    root = ET.parse(robot.urdf_path).getroot()
+    for link in root.findall('link'):
+        for visual in link.findall('visual'):
+            link.remove(visual)
+    path = tmp_path / 'no_visuals.urdf'
+    ET.ElementTree(root).write(path)
+    return str(path)
+
+
+def test_every_link_with_mass_has_a_body_coloured_by_side(robot):
+    model = robot.urdf_model
+    geometry = pin.buildGeomFromUrdf(model, str(robot.urdf_path), pin.GeometryType.VISUAL)
+    colours: dict[str, set[tuple]] = {}
+    for item in geometry.geometryObjects:
+        link = model.frames[item.parentFrame].name
+        colours.setdefault(link, set()).add(tuple(np.round(item.meshColor, 3)))
+    assert set(colours) == set(_all_links())
+    for link in _all_links():
+        if link.startswith('right_'):
+            mirror = 'left_' + link[len('right_'):]
+            assert not colours[link] & colours[mirror] - {(0.12, 0.12, 0.14, 1.0)}, link
+
+
+def test_the_sole_drawn_is_the_contact_sole(robot):
+    """The dark box of each foot spans heel to toe edge (0.26 m), 0.10 m wide, its underside
+    at the sole edges' height."""
+    geometry = pin.buildGeomFromUrdf(robot.urdf_model, str(robot.urdf_path),
+                                     pin.GeometryType.VISUAL)
+    for side in SIDES:
+        soles = [g for g in geometry.geometryObjects
+                 if robot.urdf_model.frames[g.parentFrame].name == f'{side}_foot'
+                 and isinstance(g.geometry, pin.hppfcl.Box if hasattr(pin, 'hppfcl')
+                                else type(g.geometry)) and g.meshColor[0] < 0.2]
+        assert len(soles) == 1
+        half = soles[0].geometry.halfSide
+        centre = soles[0].placement.translation
+        assert 2 * half[0] == pytest.approx(0.10)
+        assert centre[1] - half[1] == pytest.approx(HEEL_Y)
+        assert centre[1] + half[1] == pytest.approx(TOE_Y)
+        assert centre[2] - half[2] == pytest.approx(-SOLE_DEPTH)
+
+
+def test_the_body_leaves_the_dynamics_bit_identical(robot, rng, tmp_path):
+    """Mass matrix and bias terms of the URDF model and of every support-rooted model equal,
+    bit for bit, those built from the same URDF without its <visual> elements."""
+    from iceskate_sim.model.robot import load_robot
+    bare = load_robot(_urdf_without_visuals(robot, tmp_path))
+    pairs = [(robot.urdf_model, bare.urdf_model)]
+    pairs += [(robot.models[key].model, bare.models[key].model) for key in SUPPORT_KEYS]
+    for shipped, reference in pairs:
+        data, reference_data = shipped.createData(), reference.createData()
+        for _ in range(5):
+            q = pin.randomConfiguration(shipped, -np.ones(shipped.nq), np.ones(shipped.nq))
+            v = rng.normal(size=shipped.nv)
+            np.testing.assert_array_equal(pin.crba(shipped, data, q),
+                                          pin.crba(reference, reference_data, q))
+            np.testing.assert_array_equal(pin.nonLinearEffects(shipped, data, q, v),
+                                          pin.nonLinearEffects(reference, reference_data, q, v))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import json
 import math
 import pathlib
@@ -39,26 +39,35 @@ BLOCK_SECONDS = 0.2
 FIRST_BLOCK = 10
 
 
+@dataclass(frozen=True)
+class Watch:
+    """A run watched live: its page on ``host``:``port``, at ``pace`` simulated seconds per
+    wall second (0: as fast as it runs)."""
+
+    pace: float = 1.0
+    host: str = '127.0.0.1'
+    port: int = 8080
+
+
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
-        stop: StopRequest | None = None, picture: bool = True) -> dict[str, Any]:
+        stop: StopRequest | None = None, picture: bool = True,
+        watch: Watch | None = None) -> dict[str, Any]:
     """Run ``scene``; write the outputs into ``out`` (if given) and return the metrics.
 
-    A SIGINT, SIGTERM or SIGHUP (``stop``; None: one is installed for the call) ends the run
-    between two control periods: the bag is closed with its metadata and the outputs are
-    written (``interrupted`` in the metrics), then ``RunInterrupted`` is raised. ``picture``:
-    draw summary.png (False: the other outputs only, as a parameter search wants them).
+    A signal (``stop``; None: one is installed for the call) ends the run between two control
+    periods, its outputs written (docs/usage.md, "Run a scene"). ``picture``: draw summary.png.
 
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
-    metrics, error = simulate(scene, out, progress, stop, picture)
+    metrics, error = simulate(scene, out, progress, stop, picture, watch)
     if error is not None:
         raise error
     return metrics
 
 
 def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
-             stop: StopRequest | None = None, picture: bool = True
+             stop: StopRequest | None = None, picture: bool = True, watch: Watch | None = None
              ) -> tuple[dict[str, Any], SimulationError | None]:
     """``run``, but a failure of the physics, or of a controller written in Python
     (``iceskate_native.ControllerError``: it raised or answered a bad command), is returned
@@ -86,6 +95,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             plotting.start()
             signals.callback(plotting.join)
         bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
+        live = _live_view(watch, session, signals)
         ended: SimulationError | None = None
         controller_failed = False
 
@@ -107,7 +117,12 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                 started = time.perf_counter()
                 bar.update(session.run_periods(stack, block))
                 spent = max(time.perf_counter() - started, 1e-6)
-                block = max(1, min(BLOCK_PERIODS, 10 * block, int(block * BLOCK_SECONDS / spent)))
+                most = BLOCK_PERIODS
+                if live is not None and session.latest is not None:
+                    live.offer_last(session.latest)
+                    live.keep_pace(session.sim.time, stop)
+                    most = min(most, live.periods_per_frame(scene.simulator.control_period))
+                block = max(1, min(most, 10 * block, int(block * BLOCK_SECONDS / spent)))
         except ControllerError as exc:  # the samples before it are recorded: the run ends here
             ended = SimulationError(str(exc), end='controller_failed')
             controller_failed = True
@@ -121,6 +136,20 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     if isinstance(ended, RunInterrupted):
         raise ended
     return metrics, ended if controller_failed else session.error
+
+
+def _live_view(watch: Watch | None, session: Any, closing: contextlib.ExitStack) -> Any:
+    """The live page of ``watch`` (None: not watched), closed with ``closing``; its address
+    is printed."""
+    if watch is None:
+        return None
+    from iceskate_viewer.live import LiveView
+    from iceskate_viewer.pose import BodyPose
+    live = LiveView(BodyPose(session.robot), session.scene.name, watch.host, watch.port,
+                    watch.pace)
+    closing.callback(live.close)
+    say(f'run_scene: the live view is at {live.url} (pause and pace on the page)')
+    return live
 
 
 def _import_plotting() -> None:
@@ -158,6 +187,17 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
                         help='with --ros: run the nodes under SCHED_FIFO at priority N (1-99; '
                              'needs root, CAP_SYS_NICE or an rtprio limit; default 0: off)')
+    parser.add_argument('--view', action='store_true',
+                        help='watch the run in 3D in the browser (the page prints its address)')
+    parser.add_argument('--pace', type=float, metavar='X',
+                        help='with --view: simulated seconds per wall second (default 1; 0: as '
+                             'fast as it runs; also a control on the page)')
+    parser.add_argument('--view-host', metavar='HOST',
+                        help='with --view: address the page is served on (default 127.0.0.1: '
+                             'this machine only)')
+    parser.add_argument('--view-port', type=int, metavar='PORT',
+                        help='with --view: port of the page (default 8080; a busy one: the next '
+                             'free one; 0: any)')
     args = parser.parse_args(argv)
     from iceskate_bringup.scene import load_scene
     from iceskate_sim.run.scene import MAX_DURATION
@@ -166,6 +206,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     try:
         if not args.ros and (args.single_process or args.rt_priority):
             raise SimulationError('--single-process and --rt-priority need --ros')
+        watch = _watch(args)
         overrides = _overrides(args.set)
         scene = load_scene(args.scene, overrides)
         if args.duration is not None:
@@ -181,7 +222,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                                 single_process=args.single_process,
                                 rt_priority=args.rt_priority, stop=stop, overrides=overrides)
         else:
-            metrics = run(scene, args.out, progress=not args.quiet, stop=stop)
+            metrics = run(scene, args.out, progress=not args.quiet, stop=stop, watch=watch)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code
         say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
         return exc.exit_code
@@ -196,6 +237,26 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)
     return 0
+
+
+def _watch(args: argparse.Namespace) -> Watch | None:
+    """The ``Watch`` of ``--view``, ``--pace``, ``--view-host`` and ``--view-port``."""
+    given = [name for name in ('pace', 'view_host', 'view_port')
+             if getattr(args, name) is not None]
+    if not args.view:
+        if given:
+            raise SimulationError(f'--{given[0].replace("_", "-")} needs --view')
+        return None
+    if args.ros:
+        raise SimulationError('--view watches a headless run; a --ros run is watched '
+                              'afterwards with `view DIR`')
+    pace = 1.0 if args.pace is None else args.pace
+    if not (math.isfinite(pace) and pace >= 0.0):
+        raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs), got {pace:g}')
+    port = 8080 if args.view_port is None else args.view_port
+    if not 0 <= port <= 65535:
+        raise SimulationError(f'--view-port must be 0..65535, got {port}')
+    return Watch(pace, args.view_host or '127.0.0.1', port)
 
 
 def _overrides(settings: list[str]) -> dict[str, Any]:

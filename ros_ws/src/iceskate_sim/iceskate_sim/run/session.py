@@ -1,14 +1,6 @@
-"""One run of a scene, ROS-free: the loop that the headless runner and the simulator node share.
-
-A ``Session`` owns the simulator, the period count, the recorder (bag) and the trajectory. The
-periods themselves run in the native control loop, which at every control instant t_k holds
-the sum of the controllers' commands for t_k over [t_k, t_k+1] (zero-order hold), applies the
-scene's push, advances the hybrid simulation and keeps the sample of t_k: ``run_periods``
-with the laws answering in C++ (the headless runner), ``hold`` with the commands that arrived
-as messages (the simulator node, ``command_inbox``). Blocks of samples go to the trajectory and
-the bag (``flush``; the node calls it while the controllers compute); ``finish`` closes the
-bag, computes the metrics and writes ``metrics.json``, ``events.json`` and ``trajectory.npz``.
-Both paths run exactly this code, so they give the same trajectory.
+"""One run of a scene, ROS-free: ``Session``, the loop that the headless runner (``run_periods``)
+and the simulator node (``hold``) share, so both give the same trajectory; the output folder
+(``prepare_output``). See docs/architecture.md, 'The data path of a run'.
 """
 
 from __future__ import annotations
@@ -190,6 +182,8 @@ class Session:
                 release_output(out)
             raise
         self.metrics: dict[str, Any] | None = None
+        #: the trajectory columns of the block recorded last (None: none yet)
+        self.latest: dict[str, np.ndarray] | None = None
         #: the native loop holding commands received from outside (``command_inbox``)
         self._inbox: NativeControlLoop | None = None
         self._restart()
@@ -207,8 +201,8 @@ class Session:
         #: the native loop of ``run_periods`` (None: not made yet)
         self._loop: NativeControlLoop | None = None
         if self._inbox is not None:  # the samples and commands of the run left behind
-            self._inbox.take_block()
-            self._inbox.forget()
+            self._inbox.kernel.take_block()
+            self._inbox.kernel.forget()
 
     @property
     def done(self) -> bool:
@@ -233,9 +227,8 @@ class Session:
     def hold(self, clear: bool = True) -> bool:
         """One control period holding the commands received by the ``command_inbox`` loop (the
         same sum, hold, push and sample as ``run_periods``), its sample recorded by a later
-        ``flush``;
-        ``clear``: forget the commands afterwards. False if the run is done; a SimulationError
-        of the physics ends the run (``error``)."""
+        ``flush``; ``clear``: forget the commands afterwards. False if the run is done; a
+        SimulationError of the physics ends the run (``error``)."""
         if self.done:
             return False
         if self._wall_start is None:
@@ -279,8 +272,9 @@ class Session:
     def _record_block(self, block: dict[str, Any], first: int) -> None:
         """Append a native block of samples, the first of period ``first``, to the trajectory
         and the bag."""
-        kept = self._recorded_rows(first, len(block['t']))
-        if kept is not None:  # record.rate: every n-th sample only
+        every = self.scene.record_every
+        if every > 1:  # record.rate: every n-th sample only
+            kept = np.flatnonzero((first + np.arange(len(block['t']))) % every == 0)
             block = {key: value[kept] if isinstance(value, np.ndarray) else value
                      for key, value in block.items()}
             block['efforts'] = [e[kept] for e in block['efforts']]
@@ -292,25 +286,18 @@ class Session:
         columns['psi_d'] = block['head_target']
         self.trajectory.extend(columns, dict(zip(block['sources'], block['efforts'],
                                                  strict=True)))
+        self.latest = columns
         if self.recorder is not None and len(block['t']):
             self.recorder.write_block(block, Events.of(block['last_event'], self.sim.events))
-
-    def _recorded_rows(self, first: int, count: int) -> np.ndarray | None:
-        """Which of ``count`` periods' samples from period ``first`` on ``record.rate`` keeps
-        (None: all)."""
-        every = self.scene.record_every
-        if every == 1:
-            return None
-        return np.flatnonzero((first + np.arange(count)) % every == 0)
 
     def flush(self, whole: bool = True) -> None:
         """Append the samples held since the last flush to the trajectory and the bag
         (``whole``: all of them; else only once a block of ``HELD_BLOCK`` has gathered: one
         block of arrays costs what a few samples do)."""
         inbox = self._inbox
-        if inbox is not None and inbox.block_size >= (1 if whole else HELD_BLOCK):
-            first = self.periods - inbox.block_size
-            self._record_block(inbox.take_block(), first)
+        if inbox is not None and inbox.kernel.block_size >= (1 if whole else HELD_BLOCK):
+            first = self.periods - inbox.kernel.block_size
+            self._record_block(inbox.kernel.take_block(), first)
 
     def reset(self) -> None:
         """Back to the scene's initial state (refused while recording a bag)."""

@@ -1,0 +1,120 @@
+"""The live view of a running simulation (``run_scene SCENE --view``).
+
+The loop ``offer``s frames and never waits for the page: a frame goes into a queue of one,
+replacing one not yet drawn, and a display thread draws the newest at ``DISPLAY_HZ`` of wall
+time at the most. ``keep_pace`` is the loop's only wait: it holds the simulation at ``pace``
+times real time (0: as fast as it runs) and while the page's pause is on.
+"""
+
+from __future__ import annotations
+
+import queue
+import sys
+import threading
+import time
+
+from iceskate_sim.shutdown import StopRequest
+from iceskate_viewer.page import RunPage, serve, stop_server, url_of
+from iceskate_viewer.pose import BodyPose, ViewFrame
+
+#: Frames drawn per second of wall time at the most.
+DISPLAY_HZ = 30.0
+#: Longest single wait [s] of ``keep_pace`` between two looks at a stop request.
+WAIT_SLICE = 0.05
+
+
+class LiveView:
+    """A page on ``host``:``port`` showing the run ``name`` as it goes.
+
+    :param pace: simulated seconds per wall second (0: no pacing); also a control on the page.
+    """
+
+    def __init__(self, body: BodyPose, name: str, host: str, port: int, pace: float) -> None:
+        self.server = serve(host, port)
+        self.page = RunPage(self.server, body, [name])
+        gui = self.server.gui
+        self._pause = gui.add_checkbox('Pause', False)
+        self._pace = gui.add_number('Pace (x real time, 0: fastest)', float(pace), min=0.0,
+                                    max=100.0, step=0.1)
+        self._pause.on_update(lambda _: self._restart_clock())
+        self._pace.on_update(lambda _: self._restart_clock())
+        self._frames: queue.Queue[ViewFrame] = queue.Queue(maxsize=1)
+        self.dropped = 0  # frames replaced before they were drawn
+        self.drawn = 0
+        self._clock: tuple[float, float] | None = None  # (wall [s], simulated [s]) of pace 0
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=self._display, name='live-view', daemon=True)
+        self._thread.start()
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        return url_of(self.server)
+
+    @property
+    def pace(self) -> float:
+        """Simulated seconds per wall second the run keeps to (0: none)."""
+        return max(0.0, float(self._pace.value))
+
+    def offer(self, frame: ViewFrame) -> None:
+        """Hand ``frame`` to the page without waiting (an undrawn older frame is dropped)."""
+        while True:
+            try:
+                self._frames.put_nowait(frame)
+                return
+            except queue.Full:
+                try:
+                    self._frames.get_nowait()
+                    self.dropped += 1
+                except queue.Empty:
+                    pass
+
+    def offer_last(self, columns: dict) -> None:
+        """``offer`` the last sample of a block of trajectory columns."""
+        self.offer(ViewFrame.of_columns(columns, -1))
+
+    def periods_per_frame(self, control_period: float) -> int:
+        """Control periods of one drawn frame at the pace (a block of the paced loop, so that
+        the robot moves smoothly); unpaced: no limit."""
+        pace = self.pace
+        if pace <= 0.0:
+            return sys.maxsize
+        return max(1, int(pace / DISPLAY_HZ / control_period))
+
+    def keep_pace(self, t: float, stop: StopRequest) -> None:
+        """Wait while the page is paused, then until simulated time ``t`` [s] is due at the
+        pace; returns at once on a stop request."""
+        while self._pause.value and not stop.requested:
+            time.sleep(WAIT_SLICE)
+        pace = self.pace
+        if pace <= 0.0:
+            return
+        if self._clock is None:
+            self._clock = (time.perf_counter(), t)
+        wall, simulated = self._clock
+        while not stop.requested and not self._pause.value:
+            late = wall + (t - simulated) / pace - time.perf_counter()
+            if late <= 0.0 or self._clock != (wall, simulated):
+                return
+            time.sleep(min(late, WAIT_SLICE))
+
+    def close(self) -> None:
+        """Stop the display thread and the server."""
+        self._closed.set()
+        self._thread.join(timeout=5.0)
+        stop_server(self.server)
+
+    def _restart_clock(self) -> None:
+        self._clock = None
+
+    def _display(self) -> None:
+        period = 1.0 / DISPLAY_HZ
+        while not self._closed.is_set():
+            try:
+                frame = self._frames.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            started = time.perf_counter()
+            self.page.show(0, frame)
+            self.drawn += 1
+            self._closed.wait(max(0.0, period - (time.perf_counter() - started)))

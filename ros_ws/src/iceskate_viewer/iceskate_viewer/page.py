@@ -1,0 +1,188 @@
+"""The 3D page (viser): the ice with a mark every metre, one robot per run side by side, the
+support foot highlighted, visual lifting's head target, and time, mode and step as text."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import contextlib
+import io
+import ipaddress
+import socket
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+import viser
+
+from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.modes import MODES
+from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y, SOLE_Z
+from iceskate_sim.shutdown import say
+from iceskate_viewer.pose import BodyPose, ViewFrame
+
+#: Lateral distance [m] between two runs' robots.
+RUN_SPACING = 1.2
+#: The ice drawn: half its width [m], and its length ahead of and behind the start [m].
+ICE_HALF_WIDTH, ICE_AHEAD, ICE_BEHIND = 3.0, 40.0, 5.0
+#: Colours (RGB 0-255): the ice, its metre marks, the support-foot highlight, the head target.
+ICE, MARK, SUPPORT, TARGET = (196, 222, 240), (115, 120, 125), (255, 196, 0), (40, 170, 80)
+
+
+#: Unit meshes of the URDF's shapes (a box of side 1, a sphere and a cylinder along z of
+#: radius 1 and height 1), scaled per link.
+UNIT_MESHES = {coal.Box: trimesh.creation.box((1.0, 1.0, 1.0)),
+               coal.Sphere: trimesh.creation.icosphere(3, 1.0),
+               coal.Cylinder: trimesh.creation.cylinder(1.0, 1.0, sections=24)}
+
+
+def serve(host: str, port: int) -> viser.ViserServer:
+    """A viser server on ``host``:``port`` (0: any free port; a busy port: the next free one),
+    with a warning when ``host`` is not a loopback address. The page has no share link (it
+    would tunnel the page through a server outside this machine): the button is hidden and a
+    request is refused."""
+    try:  # viser would retry every port of a host it cannot bind: say so at once
+        with socket.create_server((host, 0), family=socket.AF_INET6 if ':' in host
+                                  else socket.AF_INET):
+            pass
+    except OSError as exc:
+        raise SimulationError(f'cannot serve the view on {host}: '
+                              f'{exc.strerror or exc}') from None
+    if not _loopback(host):
+        say(f'warning: the view is served on {host}, reachable from other machines '
+            '(127.0.0.1 keeps it on this one)')
+    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
+        server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.request_share_url = _no_share_url
+    server.gui.configure_theme(show_share_button=False, dark_mode=False)
+    return server
+
+
+def stop_server(server: viser.ViserServer) -> None:
+    """Stop ``server`` (quietly)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        server.stop()
+
+
+def _no_share_url(verbose: bool = True) -> None:
+    """A share link is never made: the page stays on this machine."""
+    del verbose
+
+
+def url_of(server: viser.ViserServer) -> str:
+    """The page's address."""
+    host = server.get_host()
+    return f'http://{f"[{host}]" if ":" in host else host}:{server.get_port()}'
+
+
+def _loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == 'localhost'
+
+
+class RunPage:
+    """The scene of ``names`` runs (one robot each, ``RUN_SPACING`` apart along x) on ``server``.
+
+    ``show(k, frame)`` places run ``k``'s robot and overlays; safe from any thread.
+    """
+
+    def __init__(self, server: viser.ViserServer, body: BodyPose, names: Sequence[str]) -> None:
+        self.server, self.body = server, body
+        scene = server.scene
+        # no shadows: a browser without a GPU (software WebGL) draws a frame several times faster
+        scene.configure_default_lights(cast_shadow=False)
+        scene.configure_environment_map(environment_intensity=0.5)
+        length = ICE_AHEAD + ICE_BEHIND
+        width = 2 * ICE_HALF_WIDTH + RUN_SPACING * (len(names) - 1)
+        centre = (RUN_SPACING * (len(names) - 1) / 2, (ICE_AHEAD - ICE_BEHIND) / 2)
+        scene.set_up_direction('+z')
+        scene.add_box('/ice', ICE, (width, length, 0.01), position=(*centre, -0.005),
+                      cast_shadow=False)
+        metres = np.arange(-int(ICE_BEHIND), int(ICE_AHEAD) + 1, dtype=float)
+        left, right = centre[0] - width / 2, centre[0] + width / 2
+        scene.add_line_segments('/marks', np.array(
+            [[[left, y, 0.002], [right, y, 0.002]] for y in metres]), MARK, thickness=0.01)
+        for metre in metres[metres >= 0].astype(int):
+            scene.add_label(f'/marks/{metre}m', f'{metre} m', position=(0.45, metre, 0.01))
+        server.initial_camera.position = (centre[0] + 3.2, -0.8, 1.3)
+        server.initial_camera.look_at = (centre[0], 0.6, 0.75)
+        self._bodies, self._support, self._target, self._names = [], [], [], []
+        for k, name in enumerate(names):
+            root = f'/run{k}'
+            scene.add_frame(root, show_axes=False, position=(k * RUN_SPACING, 0.0, 0.0))
+            self._bodies.append(_Body(scene, f'{root}/robot', body))
+            self._support.append(scene.add_box(
+                f'{root}/support', SUPPORT, (0.14, SOLE_TOE_Y - SOLE_HEEL_Y + 0.04, 0.004),
+                opacity=0.8, cast_shadow=False))
+            self._target.append(scene.add_icosphere(f'{root}/head_target', 0.035, TARGET))
+            self._names.append(scene.add_label(f'{root}/name', name))
+        self._text = server.gui.add_markdown('')
+        self._texts = [''] * len(names)
+
+    def show(self, k: int, frame: ViewFrame) -> None:
+        """Place run ``k``'s robot at ``frame`` (its name above its head), highlight its
+        support sole, put its head target (at the head's x) and write its time, mode and
+        step."""
+        body = self.body
+        body.place(body.configuration(frame))
+        foot = body.frame_placement(f'{frame.side}_foot')
+        head = body.frame_placement('head_top')
+        sole = foot * pin.SE3(np.eye(3), np.array([0.0, (SOLE_TOE_Y + SOLE_HEEL_Y) / 2,
+                                                      SOLE_Z - 0.004]))
+        mode = MODES[frame.mode]
+        self._texts[k] = (f'**t = {frame.t:6.3f} s** · mode {frame.mode} ({mode.support}/'
+                          f'{mode.swing}) · support {frame.side} ({frame.pivot}) · '
+                          f'step {frame.step_index}')
+        with self.server.atomic():
+            self._bodies[k].place(body.geometry.oMg)
+            self._names[k].position = head.translation + (0.0, 0.0, 0.12)
+            self._support[k].position = sole.translation
+            self._support[k].wxyz = _wxyz(sole.rotation)
+            target = frame.head_target
+            self._target[k].visible = bool(np.all(np.isfinite(target)))
+            if self._target[k].visible:
+                self._target[k].position = (head.translation[0], target[0], target[1])
+            self._text.content = '  \n'.join(self._texts)
+
+
+class _Body:
+    """A robot's visual geometry as one batched mesh per shape (boxes, spheres, cylinders):
+    three updates a frame, however many links."""
+
+    def __init__(self, scene: viser.SceneApi, root: str, body: BodyPose) -> None:
+        groups: dict[type, list[int]] = {}
+        for i, item in enumerate(body.visual.geometryObjects):
+            groups.setdefault(type(item.geometry), []).append(i)
+        self._batches = []
+        for kind, indices in groups.items():
+            items = [body.visual.geometryObjects[i] for i in indices]
+            mesh = UNIT_MESHES[kind]
+            self._batches.append((indices, scene.add_batched_meshes_simple(
+                f'{root}/{kind.__name__.lower()}', mesh.vertices, mesh.faces,
+                np.tile([1.0, 0.0, 0.0, 0.0], (len(items), 1)), np.zeros((len(items), 3)),
+                batched_scales=np.array([_scale(item.geometry) for item in items]),
+                batched_colors=np.array([np.round(255 * item.meshColor[:3]) for item in items],
+                                        dtype=np.uint8), lod='off', cast_shadow=False)))
+
+    def place(self, placements: Sequence[pin.SE3]) -> None:
+        """Put every shape at its world placement (``GeometryData.oMg``)."""
+        for indices, handle in self._batches:
+            handle.batched_positions = np.array([placements[i].translation for i in indices])
+            handle.batched_wxyzs = np.array([_wxyz(placements[i].rotation) for i in indices])
+
+
+def _scale(shape: coal.CollisionGeometry) -> tuple[float, float, float]:
+    """The per-axis scale of ``shape``'s unit mesh [m]."""
+    if isinstance(shape, coal.Box):
+        return tuple(2.0 * shape.halfSide)
+    if isinstance(shape, coal.Sphere):
+        return (shape.radius,) * 3
+    return (shape.radius, shape.radius, 2.0 * shape.halfLength)
+
+
+def _wxyz(rotation: np.ndarray) -> np.ndarray:
+    """A rotation matrix as viser's quaternion (w, x, y, z)."""
+    return pin.Quaternion(rotation).coeffs()[[3, 0, 1, 2]]
+
