@@ -32,6 +32,7 @@ def test_the_skate_gait_walks_a_minute_on_every_friction(tmp_path):
     assert all(r['sim_time_s'] == pytest.approx(60.0, abs=1e-6) for r in rows)
 
 
+@pytest.mark.timeout(1200)  # 644 runs of 15 s: ~200 s alone, ~300 s beside other tests
 def test_the_skate_gait_survives_a_chest_push_at_any_time(tmp_path):
     rows = _rows('push_robustness', tmp_path)
     ended = {force: [r['disturbances[0].start'] for r in rows
