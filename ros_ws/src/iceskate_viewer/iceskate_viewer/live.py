@@ -40,8 +40,7 @@ class LiveView:
         self._pace.on_update(lambda _: self._restart_clock())
         self._frames: queue.Queue[ViewFrame] = queue.Queue(maxsize=1)
         self.dropped = 0  # frames replaced before they were drawn
-        self.drawn = 0
-        self._clock: tuple[float, float] | None = None  # (wall [s], simulated [s]) of pace 0
+        self._clock: tuple[float, float] | None = None  # origin of the pace: (wall, simulated) [s]
         self._closed = threading.Event()
         self._thread = threading.Thread(target=self._display, name='live-view', daemon=True)
         self._thread.start()
@@ -116,5 +115,4 @@ class LiveView:
                 continue
             started = time.perf_counter()
             self.page.show(0, frame)
-            self.drawn += 1
             self._closed.wait(max(0.0, period - (time.perf_counter() - started)))

@@ -13,12 +13,16 @@ import pathlib
 import sys
 import threading
 import time
+from typing import TYPE_CHECKING
 import zipfile
 
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.shutdown import StopRequest, say
+
+if TYPE_CHECKING:  # the page's modules load viser and Pinocchio: only once the runs are read
+    from iceskate_viewer.page import RunPage
 
 #: The trajectory columns the view reads.
 COLUMNS = ('t', 'q', 'mode', 'side', 'pivot', 'step_index', 'psi_d')
@@ -84,7 +88,7 @@ def load_run(path: str | pathlib.Path) -> Run:
 class Replay:
     """The replay page of ``runs`` on ``server``'s ``page``: the controls and their state."""
 
-    def __init__(self, page: object, runs: list[Run]) -> None:
+    def __init__(self, page: RunPage, runs: list[Run]) -> None:
         from iceskate_viewer.pose import ViewFrame
         self._frame_of = ViewFrame.of_columns
         self.page, self.runs = page, runs
