@@ -232,7 +232,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             _print_outputs(args.out)
         return 1
     summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'end', 'failure',
-                                           'forward_distance_m', 'real_time_factor')}
+                                           'forward_distance_m', 'head_error_rms', 'arm_swing',
+                                           'real_time_factor')}
     with contextlib.suppress(OSError, ValueError):  # stdout gone (a closed terminal)
         print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)
