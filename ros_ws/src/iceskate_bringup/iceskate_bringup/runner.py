@@ -26,7 +26,9 @@ from iceskate_sim.shutdown import StopRequest, say
 from iceskate_sim.yaml_io import yaml_value
 
 if TYPE_CHECKING:
+    from iceskate_sim.model.robot import Robot
     from iceskate_sim.run.scene import Scene
+    from iceskate_viewer.live import LiveView
 
 #: Control periods run per call of ``Session.run_periods`` at the most (one native call, ~20 ms
 #: at the shipped settings): a signal is answered, and the progress shown, between two such
@@ -82,7 +84,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         if stop is None:
             stop = signals.enter_context(StopRequest())
         bag = out / 'bag' if out is not None and scene.record_bag else None
-        session = Session(scene, out, bag)  # forks the bag writer
+        session = Session(scene, out, bag)  # forks the bag writer (before any thread starts)
         stack = ControlStack(scene, session.robot, session.observation())
         # The summary's plotting library loads while the run goes on: after the fork (a child
         # forked while a thread imports waits forever for that import's lock) and joined before
@@ -95,7 +97,6 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             plotting.start()
             signals.callback(plotting.join)
         bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
-        live = _live_view(watch, session, signals)
         ended: SimulationError | None = None
         controller_failed = False
 
@@ -109,7 +110,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
 
         crashed = False
         block = FIRST_BLOCK
+        live = None
         try:
+            live = _live_view(watch, session.robot, scene.name, signals)
             while not session.done:
                 if stop.requested:
                     ended = stop.error(session.sim.time)
@@ -138,15 +141,15 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     return metrics, ended if controller_failed else session.error
 
 
-def _live_view(watch: Watch | None, session: Any, closing: contextlib.ExitStack) -> Any:
-    """The live page of ``watch`` (None: not watched), closed with ``closing``; its address
-    is printed."""
+def _live_view(watch: Watch | None, robot: Robot, name: str,
+               closing: contextlib.ExitStack) -> LiveView | None:
+    """The live page of ``watch`` showing run ``name`` (None: not watched), closed with
+    ``closing``; its address is printed."""
     if watch is None:
         return None
     from iceskate_viewer.live import LiveView
     from iceskate_viewer.pose import BodyPose
-    live = LiveView(BodyPose(session.robot), session.scene.name, watch.host, watch.port,
-                    watch.pace)
+    live = LiveView(BodyPose(robot), name, watch.host, watch.port, watch.pace)
     closing.callback(live.close)
     say(f'run_scene: the live view is at {live.url} (pause and pace on the page)')
     return live
@@ -188,7 +191,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                         help='with --ros: run the nodes under SCHED_FIFO at priority N (1-99; '
                              'needs root, CAP_SYS_NICE or an rtprio limit; default 0: off)')
     parser.add_argument('--view', action='store_true',
-                        help='watch the run in 3D in the browser (the page prints its address)')
+                        help='watch the run in 3D in the browser (run_scene prints the address)')
     parser.add_argument('--pace', type=float, metavar='X',
                         help='with --view: simulated seconds per wall second (default 1; 0: as '
                              'fast as it runs; also a control on the page)')
@@ -251,6 +254,8 @@ def _watch(args: argparse.Namespace) -> Watch | None:
     if args.ros:
         raise SimulationError('--view watches a headless run; a --ros run is watched '
                               'afterwards with `view DIR`')
+    from iceskate_viewer.page import check_host
+    check_host(args.view_host or '127.0.0.1')  # refused before anything starts
     pace = 1.0 if args.pace is None else args.pace
     if not (math.isfinite(pace) and pace >= 0.0):
         raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs), got {pace:g}')

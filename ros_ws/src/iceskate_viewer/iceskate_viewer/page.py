@@ -41,13 +41,7 @@ def serve(host: str, port: int) -> viser.ViserServer:
     with a warning when ``host`` is not a loopback address. The page has no share link (it
     would tunnel the page through a server outside this machine): the button is hidden and a
     request is refused."""
-    try:  # viser would retry every port of a host it cannot bind: say so at once
-        with socket.create_server((host, 0), family=socket.AF_INET6 if ':' in host
-                                  else socket.AF_INET):
-            pass
-    except OSError as exc:
-        raise SimulationError(f'cannot serve the view on {host}: '
-                              f'{exc.strerror or exc}') from None
+    check_host(host)
     if not _loopback(host):
         say(f'warning: the view is served on {host}, reachable from other machines '
             '(127.0.0.1 keeps it on this one)')
@@ -56,6 +50,18 @@ def serve(host: str, port: int) -> viser.ViserServer:
     server.request_share_url = _no_share_url
     server.gui.configure_theme(show_share_button=False, dark_mode=False)
     return server
+
+
+def check_host(host: str) -> None:
+    """Refuse, in one sentence, a host this machine cannot serve on (viser would retry
+    every port of it)."""
+    try:
+        with socket.create_server((host, 0), family=socket.AF_INET6 if ':' in host
+                                  else socket.AF_INET):
+            pass
+    except OSError as exc:
+        raise SimulationError(f'cannot serve the view on {host}: '
+                              f'{exc.strerror or exc}') from None
 
 
 def stop_server(server: viser.ViserServer) -> None:
