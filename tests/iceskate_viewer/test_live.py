@@ -74,3 +74,17 @@ def test_pause_holds_the_run_until_resumed_or_stopped(live):
     started = time.perf_counter()
     live.keep_pace(0.0, stop)
     assert time.perf_counter() - started < 1.0
+
+
+def test_a_page_that_fails_says_so_once_and_the_loop_goes_on(live, capsys):
+    def broken(k: int, frame: ViewFrame) -> None:
+        raise RuntimeError('the socket is gone')
+    live.page.show = broken
+    live.offer(_frame(0.25))
+    live._thread.join(timeout=5.0)
+    assert not live._thread.is_alive()
+    for k in range(100):
+        live.offer(_frame(k * 1e-3))  # still never waits
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'stopped drawing at t=0.250 s: the socket is gone' in err
+    assert 'Traceback' not in err

@@ -13,7 +13,7 @@ import sys
 import threading
 import time
 
-from iceskate_sim.shutdown import StopRequest
+from iceskate_sim.shutdown import StopRequest, say
 from iceskate_viewer.page import RunPage, serve, stop_server, url_of
 from iceskate_viewer.pose import BodyPose, ViewFrame
 
@@ -114,5 +114,9 @@ class LiveView:
             except queue.Empty:
                 continue
             started = time.perf_counter()
-            self.page.show(0, frame)
+            try:
+                self.page.show(0, frame)
+            except Exception as error:  # the page fails, the run goes on and finishes
+                say(f'run_scene: the live view stopped drawing at t={frame.t:.3f} s: {error}')
+                return
             self._closed.wait(max(0.0, period - (time.perf_counter() - started)))
