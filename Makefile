@@ -22,7 +22,7 @@ help:
 	@echo 'make study      setup, then the shipped arm_swing study into runs/arm_swing (~20 s)'
 	@echo 'make bench      setup, then work-precision and laziness benchmarks into runs/bench (~4-8 min)'
 	@echo 'make stress     setup, then the stress cases and stand for STRESS_DURATION=600 s (long)'
-	@echo 'make sanitize   setup, then the native core under ASan+UBSan: its tests and 2 s of skate'
+	@echo 'make sanitize   setup, then the native core under ASan+UBSan: its tests and the skate scene'
 	@echo 'make lint       setup, then ruff check of ros_ws/src and tests'
 	@echo 'make fix        setup, then ruff check --fix (safe fixes only, e.g. import order)'
 	@echo 'make lock       re-resolve requirements.in into requirements.lock (uv, Python 3.11)'
@@ -48,7 +48,7 @@ study: setup
 	$(IN_ENV) sweep $(STUDY) --out runs/$(notdir $(basename $(STUDY)))
 
 # The native core (iceskate_native) built under AddressSanitizer + UndefinedBehaviorSanitizer in
-# ros_ws/build-sanitize and install-sanitize; runs tests/iceskate_native and 2 s of the skate scene
+# ros_ws/build-sanitize and install-sanitize; runs tests/iceskate_native (not slow) and the whole skate scene
 # with it, and fails on any sanitizer report (docs/usage.md, "Tests").
 sanitize: setup
 	bash $(ROOT)/scripts/sanitize.sh

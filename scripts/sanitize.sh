@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Build the native core (ros_ws/src/iceskate_native) under AddressSanitizer and
 # UndefinedBehaviorSanitizer and run with it
-#   1. the native tests, tests/iceskate_native, and
-#   2. one short run of the `skate` scene (run_scene).
+#   1. the native tests, tests/iceskate_native, but for the `slow` ones (whole scenes stepped
+#      against the Python oracle: their time goes to the uninstrumented oracle), and
+#   2. the whole `skate` scene (run_scene, 15 s simulated, with its bag): every period, event and
+#      block of the shipped loop and the bag writer's child.
 # Exit status 0 only when the build, the tests and the run pass and no sanitizer reported
 # anything; non-zero otherwise. A sanitizer report aborts the process it happens in (exit 86),
 # and is also looked for at the end, in ASan's report files and in the logged output of every
@@ -17,7 +19,7 @@
 # Usage: scripts/sanitize.sh     (needs `make setup`; `make sanitize` runs both)
 # Environment: ICESKATE_SANITIZE_OUT (directory for the run's outputs and the sanitizer reports,
 #   default runs/sanitize), ICESKATE_SANITIZE_DURATION (simulated seconds of the skate run,
-#   default 2), ICESKATE_SANITIZE_BUILD_TYPE (default RelWithDebInfo).
+#   default 15: the whole scene), ICESKATE_SANITIZE_BUILD_TYPE (default RelWithDebInfo).
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -31,7 +33,7 @@ TOOLCHAIN_FILE=$ROOT/scripts/cmake/toolchain.cmake
 ASAN_SUPPRESSIONS=$ROOT/scripts/sanitize-asan.supp
 UBSAN_SUPPRESSIONS=$ROOT/scripts/sanitize-ubsan.supp
 OUT=${ICESKATE_SANITIZE_OUT:-$ROOT/runs/sanitize}
-DURATION=${ICESKATE_SANITIZE_DURATION:-2}
+DURATION=${ICESKATE_SANITIZE_DURATION:-15}
 # RelWithDebInfo, as -O1 -g1 (below): AddressSanitizer's recommended level (its checks work
 # at any level, and -O1 compiles the Pinocchio templates faster than -O2), with
 # file:line in the reports' stack traces.
@@ -155,13 +157,13 @@ done
 # Each step's output (stdout and stderr) is shown and kept in $REPORTS/<step>.log.
 status=0
 run_start=$SECONDS
-log 'python -m pytest tests/iceskate_native (sanitized)'
+log 'python -m pytest tests/iceskate_native -m "not slow" (sanitized)'
 # --capture=sys: pytest captures Python's sys.stdout/stderr only, so a report that native code
 # writes to file descriptor 2 reaches the log even when it aborts the test process.
 # test_the_module_is_the_built_extension asserts the module is ros_ws/install's: here it is
 # install-sanitize's on purpose (checked above), so that one test is left out; test_sanitize.py
 # runs this script (it would wait for itself on the lock above).
-sanitized python -m pytest tests/iceskate_native -q -p no:cacheprovider --capture=sys \
+sanitized python -m pytest tests/iceskate_native -q -p no:cacheprovider --capture=sys -m 'not slow' \
   --deselect tests/iceskate_native/test_kernel.py::test_the_module_is_the_built_extension \
   --ignore tests/iceskate_native/test_sanitize.py \
   2>&1 | tee "$REPORTS/tests.log" || status=$?

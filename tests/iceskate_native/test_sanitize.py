@@ -2,9 +2,9 @@
 
 ``scripts/sanitize.sh`` builds ``iceskate_native`` with ``-fsanitize=address,undefined`` in its
 own colcon bases (``ros_ws/build-sanitize``, ``install-sanitize``), runs ``tests/iceskate_native``
-and 2 s of the ``skate`` scene with that module, and exits non-zero on any
-sanitizer report. On 2 cores, alone, a fresh clone's run took 450 s (276 s of build at -O1
-with an empty ccache, 165 s of tests); a warm ccache saves most of the build.
+(not the ``slow`` ones) and the whole ``skate`` scene with that module, and exits non-zero on any
+sanitizer report. On 2 cores, alone, a fresh clone's run takes about 360 s (276 s of build at
+-O1 with an empty ccache, 81 s of tests and scene); a warm ccache saves most of the build.
 """
 
 import os
@@ -16,8 +16,7 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = REPO_ROOT / 'scripts' / 'sanitize.sh'
-#: Deadline of the whole script, against a hang: four times the 450 s measured on a fresh clone
-#: (753 s beside another test worker).
+#: Deadline of the whole script, against a hang: five times the ~360 s of a fresh clone alone.
 DEADLINE_S = 1800
 
 
