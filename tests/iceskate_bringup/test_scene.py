@@ -68,6 +68,8 @@ def test_stand_runs_only_what_it_declares():
     (('record', 'rate'), 300.0, r'record\.rate.*300 samples/s does not divide the control rate'),
     (('record', 'rate'), 0.0, r'record\.rate'),
     (('record', 'rate'), 2000.0, r'record\.rate.*does not divide'),
+    (('record', 'tf_rate'), 0.0, r'record\.tf_rate'),
+    (('record', 'tf_rate'), 'fast', r'record\.tf_rate'),
 ])
 def test_a_malformed_scene_is_refused_naming_the_key(path, value, match):
     raw = copy.deepcopy(_raw('skate'))
@@ -84,6 +86,21 @@ def test_record_rate_is_a_divisor_of_the_control_rate():
     assert parse_scene(raw).record_every == 1
     raw['record'] = {'rate': 250}
     assert parse_scene(raw).record_every == 4
+
+
+@pytest.mark.parametrize('record, tf_every', [
+    ({}, 10),                               # 1 kHz samples, /tf at 100 Hz by default
+    ({'tf_rate': None}, 1),                 # every sample
+    ({'tf_rate': 300}, 3),                  # 333 Hz: the lowest rate of at least 300
+    ({'tf_rate': 1000}, 1),
+    ({'tf_rate': 5000}, 1),                 # no more than the samples
+    ({'rate': 250}, 2),                     # 125 Hz
+    ({'rate': 50}, 1),
+])
+def test_the_bags_tf_rate_is_at_least_the_one_asked(record, tf_every):
+    raw = copy.deepcopy(_raw('skate'))
+    raw['record'] = record
+    assert parse_scene(raw).tf_every == tf_every
 
 
 def test_control_period_must_be_a_multiple_of_the_step():

@@ -263,7 +263,8 @@ def test_the_bag_of_blocks_holds_the_same_messages(tmp_path: pathlib.Path) -> No
             return [(c.topic, t, bytes(data)) for c, t, data in reader.messages()]
 
     stepped, blocks = messages(tmp_path / 'stepped' / 'bag'), messages(tmp_path / 'blocks' / 'bag')
-    assert len(blocks) == 1 + 6 * 2150 and blocks == stepped
+    assert scene.tf_every == 10  # /tf at 100 Hz by default
+    assert len(blocks) == 1 + 5 * 2150 + 215 and blocks == stepped
 
 
 def test_a_physics_failure_ends_both_paths_alike() -> None:

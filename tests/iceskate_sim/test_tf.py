@@ -1,7 +1,8 @@
-"""/tf in the bags: at every sample the world pose of every URDF link, read back with the
-``mcap`` reader (not rosbags) and checked against forward kinematics of the URDF on a free-flyer
-base placed by the support foot, not by the simulator's support-rooted models. The samples are
-the native loop's block columns (q, support side and pivot, and its /tf rows ``tf``)."""
+"""/tf in the bags: at every (or every n-th) sample the world pose of every URDF link, read
+back with the ``mcap`` reader (not rosbags) and checked against forward kinematics of the URDF
+on a free-flyer base placed by the support foot, not by the simulator's support-rooted models.
+The samples are the native loop's block columns (q, support side and pivot, and its /tf rows
+``tf``)."""
 
 from dataclasses import replace
 import pathlib
@@ -50,9 +51,11 @@ def _urdf_tree(urdf: str) -> tuple[set[str], set[tuple[str, str]]]:
     return links, pairs | {('world', root)}
 
 
-def _record(path: pathlib.Path, blocks: list[tuple[dict, Events]], background: bool) -> None:
+def _record(path: pathlib.Path, blocks: list[tuple[dict, Events]], background: bool,
+            tf_every: int = 1) -> None:
     urdf = load_robot().urdf_path.read_text(encoding='utf-8')
-    with BagRecorder(path, {'scene': 'tf-test'}, urdf, background=background) as recorder:
+    with BagRecorder(path, {'scene': 'tf-test'}, urdf, background=background,
+                     tf_every=tf_every) as recorder:
         for block, events in blocks:
             recorder.write_block(block, events)
 
@@ -176,6 +179,24 @@ def test_tf_of_a_run_places_every_link_as_urdf_kinematics_does(tmp_path, run_blo
     assert np.ptp(rows['q'][:, Q1]) > 0.01  # the support sole tips
     _record(tmp_path / 'bag', blocks, background=True)
     _check_tf(_decoded(tmp_path / 'bag'), rows)
+
+
+def test_tf_at_every_nth_sample_is_the_full_rate_tf_thinned_across_blocks(tmp_path, run_blocks):
+    blocks, rows = run_blocks
+    assert all(len(block['t']) % 7 for block, _ in blocks[:-1])  # the count runs on
+    _record(tmp_path / 'full', blocks, background=False)
+    _record(tmp_path / 'thin', blocks, background=True, tf_every=7)
+
+    def tf(bag: pathlib.Path) -> list[tuple[int, bytes]]:
+        (path,) = bag.glob('*.mcap')
+        with path.open('rb') as stream:
+            return [(m.log_time, m.data)
+                    for _, _, m in make_reader(stream).iter_messages(topics=['/tf'])]
+    full, thin = tf(tmp_path / 'full'), tf(tmp_path / 'thin')
+    assert len(thin) > 10 and thin == full[::7]
+    with AnyReader([tmp_path / 'thin'], default_typestore=make_typestore()) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts['/tf'] == len(full[::7]) and counts['/joint_states'] == len(rows['t'])
 
 
 def test_tf_of_every_mode_side_and_pivot(robot, random_block):

@@ -16,6 +16,7 @@ import queue
 import signal
 from typing import Any
 
+import numpy as np
 from rosbags.typesys.store import Typestore
 
 from iceskate_sim.errors import SimulationError
@@ -23,6 +24,7 @@ from iceskate_sim.model.robot import Robot, load_robot
 from iceskate_sim.recording.bag_types import OFFERED_QOS, make_typestore
 from iceskate_sim.recording.mcap_bag import Bag
 from iceskate_sim.recording.messages import (
+    RECORDED_TOPICS,
     TOPICS,
     Events,
     SampleMessages,
@@ -33,14 +35,20 @@ PROJECT_VERSION = '0.1.0'
 QUEUE_BLOCKS = 40  # blocks in flight before ``write_block`` waits for the writer process
 #: What the writer process takes: a block of samples (columns) and its rows' latest events.
 Batch = tuple[dict[str, Any], Events]
+#: The topics with a message at every recorded sample; /tf has one at every ``tf_every``-th.
+EVERY_SAMPLE = tuple(topic for topic in RECORDED_TOPICS if topic != '/tf')
+#: The sample columns /tf messages are made of.
+TF_COLUMNS = ('t', 'stamps_ns', 'tf')
 
 
 class _BagFile:
     """The open bag: metadata, topics and the URDF written; encodes blocks."""
 
     def __init__(self, path: pathlib.Path, metadata: dict[str, Any], urdf: str,
-                 messages: SampleMessages) -> None:
+                 messages: SampleMessages, tf_every: int) -> None:
         self.messages = messages
+        self.tf_every = tf_every
+        self.samples = 0  # written so far
         custom = {key: value if isinstance(value, str) else json.dumps(value, sort_keys=True)
                   for key, value in metadata.items()}
         self._bag = Bag(path, TOPICS, messages.typestore, OFFERED_QOS,
@@ -48,9 +56,20 @@ class _BagFile:
         self._bag.write('/robot_description', 0, messages.description(urdf))
 
     def write_block(self, block: dict[str, Any], events: Events) -> None:
-        """Write the messages of a block of samples, sample by sample, in one go."""
-        self._bag.write_instants(block['stamps_ns'][:, 0].tolist(),
-                                 self.messages.encode(block, events))
+        """Write the messages of a block of samples, sample by sample, in one go (/tf at
+        every ``tf_every``-th sample of the run)."""
+        rows = len(block['t'])
+        messages = self.messages.encode(block, events, EVERY_SAMPLE)
+        tf: list[bytes | None] = [None] * rows
+        kept = np.flatnonzero((self.samples + np.arange(rows)) % self.tf_every == 0)
+        if len(kept):
+            encoded = self.messages.encode({key: block[key][kept] for key in TF_COLUMNS},
+                                           events, ('/tf',))['/tf']
+            for k, data in zip(kept.tolist(), encoded, strict=True):
+                tf[k] = data
+        messages['/tf'] = tf
+        self._bag.write_instants(block['stamps_ns'][:, 0].tolist(), messages)
+        self.samples += rows
 
     def close(self) -> None:
         """Finish the bag (idempotent)."""
@@ -58,7 +77,7 @@ class _BagFile:
 
 
 def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
-                    messages: SampleMessages, batches: multiprocessing.Queue,
+                    messages: SampleMessages, tf_every: int, batches: multiprocessing.Queue,
                     status: Connection) -> None:
     """Body of the writer process: write the ``Batch``es of ``batches`` until None, then close
     the bag and send ('ok', samples) or ('error', message) on ``status``. Stop signals are
@@ -87,7 +106,7 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
     die_with_parent(signal.SIGUSR1, parent.pid if parent is not None else None)
     count = 0
     try:
-        bag = _BagFile(path, metadata, urdf, messages)
+        bag = _BagFile(path, metadata, urdf, messages, tf_every)
         try:
             while True:
                 if orphaned:
@@ -129,6 +148,7 @@ class BagRecorder:
 
     :param robot: the recorded robot (its links on /tf; default: ``load_robot()``, the package
         URDF's, which the callers record as /robot_description).
+    :param tf_every: /tf at every n-th sample, from the first (the other topics at every one).
     :param background: encode and write the messages in a writer process, forked here (a few
         ms, no re-import of ``__main__``; the writer touches neither ROS nor the simulation, so
         threads of the parent do not matter) and run under SCHED_IDLE: it takes only the CPU
@@ -139,7 +159,7 @@ class BagRecorder:
 
     def __init__(self, path: str | pathlib.Path, metadata: dict[str, Any], urdf: str,
                  typestore: Typestore | None = None, robot: Robot | None = None,
-                 background: bool = False) -> None:
+                 background: bool = False, tf_every: int = 1) -> None:
         self.path = pathlib.Path(path)
         if self.path.exists():
             raise SimulationError(f'bag {self.path} already exists; choose another output '
@@ -150,14 +170,15 @@ class BagRecorder:
         self._bag: _BagFile | None = None
         self._process: multiprocessing.process.BaseProcess | None = None
         if not background:
-            self._bag = _BagFile(self.path, metadata, urdf, self.messages)
+            self._bag = _BagFile(self.path, metadata, urdf, self.messages, tf_every)
             return
         context = multiprocessing.get_context('fork')
         self._batches = context.Queue(maxsize=QUEUE_BLOCKS)
         self._status, child_status = context.Pipe(duplex=False)
         self._process = context.Process(
             target=_writer_process, name='bag-writer', daemon=True,
-            args=(self.path, metadata, urdf, self.messages, self._batches, child_status))
+            args=(self.path, metadata, urdf, self.messages, tf_every, self._batches,
+                  child_status))
         self._process.start()
         # the lowest priority: the writer never delays the run or a lockstep node (its queue
         # is bounded: a parent that gets ahead waits, and the writer then has the CPU)

@@ -107,10 +107,10 @@ class Bag:
         self.write_instants([stamp], {topic: [data]})
 
     def write_instants(self, stamps: Sequence[int],
-                       messages: Mapping[str, Sequence[bytes]]) -> None:
+                       messages: Mapping[str, Sequence[bytes | None]]) -> None:
         """Write the messages of consecutive instants: at each stamp [ns] of ``stamps``, one
-        message of every topic of ``messages`` (topic -> its data at each instant), in that
-        order.
+        message of every topic of ``messages`` (topic -> its data at each instant, None: no
+        message at that instant), in that order.
 
         :raises KeyError: for a topic the bag does not have.
         """
@@ -119,6 +119,8 @@ class Bag:
         first = 0  # the first instant of this call in the open chunk
         for k, stamp in enumerate(stamps):
             for channel, data in channels:
+                if data[k] is None:
+                    continue
                 index[channel].append((stamp, size))
                 parts += (_MESSAGE.pack(0x05, _MESSAGE_FIELDS + len(data[k]), channel, 0, stamp,
                                         stamp), data[k])
@@ -129,8 +131,8 @@ class Bag:
                 parts, index, size, first = self._parts, self._index, 0, k + 1
         self._size = size
         self._widen(self._chunk_times, stamps[first:])
-        for topic in messages:
-            self.topics[topic].count += len(stamps)
+        for topic, data in messages.items():
+            self.topics[topic].count += len(data) - data.count(None)
 
     @staticmethod
     def _widen(times: list[int], stamps: Sequence[int]) -> None:

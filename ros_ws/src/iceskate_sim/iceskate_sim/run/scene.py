@@ -67,6 +67,8 @@ class Scene:
     record_bag: bool = True
     #: control periods per recorded sample (trajectory and bag; ``record.rate`` in the file)
     record_every: int = 1
+    #: recorded samples per /tf message of the bag (``record.tf_rate`` in the file)
+    tf_every: int = 1
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
 
@@ -112,14 +114,23 @@ class PushSettings:
     __post_init__ = _checked
 
 
+#: The bag's default /tf rate [1/s]: smooth in Foxglove and RViz (they draw at 60 Hz), a tenth
+#: of a 1 kHz run's /tf bytes, which are otherwise 40 % of the bag (docs/usage.md, "Run a scene").
+TF_RATE = 100.0
+
+
 @dataclass(frozen=True)
 class RecordSettings:
-    """``record``: the bag and the record rate."""
+    """``record``: the bag, the record rate and the bag's /tf rate."""
 
     bag: bool = setting(True, 'record an MCAP bag')
     rate: float | None = setting(None, 'samples recorded per second, a divisor of the control '
                                  'rate (unset: every period)', unit='1/s', low=0.0,
                                  open_low=True)
+    tf_rate: float | None = setting(TF_RATE, "the bag's /tf messages per second, at least: "
+                                    'every n-th recorded sample, the largest n that gives this '
+                                    'rate (null: every sample)', unit='1/s', low=0.0,
+                                    open_low=True)
     __post_init__ = _checked
 
 
@@ -231,9 +242,12 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
     pushes = tuple(Push(p.start, p.duration, p.frame, p.force) for p in (
         keyed_from_mapping(PushSettings, item, SimulationError, _fail, f'disturbances[{k}]')
         for k, item in enumerate(items)))
+    record_every = _record_every(top.record.rate, simulator.control_period)
+    tf_rate = top.record.tf_rate
+    record_rate = 1.0 / (simulator.control_period * record_every)
+    tf_every = 1 if tf_rate is None else max(1, int(record_rate / tf_rate * (1.0 + 1e-9)))
     return Scene(top.scene, top.description, top.duration, simulator, initial, inputs, pushes,
-                 top.record.bag, _record_every(top.record.rate, simulator.control_period),
-                 raw)
+                 top.record.bag, record_every, tf_every, raw)
 
 
 def _record_every(rate: float | None, control_period: float) -> int:

@@ -176,7 +176,8 @@ class Session:
         try:
             self.recorder = (BagRecorder(bag, scene_metadata(scene),
                                          self.robot.urdf_path.read_text(encoding='utf-8'),
-                                         background=True) if bag is not None else None)
+                                         background=True, tf_every=scene.tf_every)
+                             if bag is not None else None)
         except BaseException:
             if out is not None:
                 release_output(out)
