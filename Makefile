@@ -39,7 +39,7 @@ test: setup
 SCENE ?= skate
 OUT ?= runs/$(SCENE)-$(shell date +%Y%m%d-%H%M%S)
 run: setup
-	$(IN_ENV) run_scene $(SCENE) --out $(OUT) $(RUN_ARGS)
+	$(IN_ENV) run_scene $(SCENE) --out $(OUT) --arm-swing-ratio $(RUN_ARGS)
 
 # The shipped parameter study (iceskate_study/studies/arm_swing.yaml): table and heat maps into
 # runs/arm_swing (a second call resumes; STUDY=... for another study or a SPEC path).

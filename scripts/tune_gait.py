@@ -91,6 +91,7 @@ from gait_manager.parameters import GaitManagerParameters
 from iceskate_bringup.runner import run
 from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.run.metrics import arm_swing_ratio
 from iceskate_sim.run.scene import scene_raw
 
 # block.key -> (low, high)
@@ -207,17 +208,15 @@ def score(metrics: dict, events: list[dict], duration: float,
 def arm_swing_score(with_yaw: dict, without_yaw: dict, events: list[dict],
                     duration: float, max_rate: float = float('inf')) -> float:
     """Walking score of the run with yaw, its clean exchanges counted up to the acceptance
-    rate (12 in 15 s), plus, when both runs stood: the ratio of the smaller shoulder
-    peak-to-peak with yaw to the larger one without (up to 3), plus twice the anti-phase
-    -corr(q11, q14) with yaw."""
+    rate (12 in 15 s), plus, when both runs stood: the arm-swing ratio (up to 3), plus twice
+    the anti-phase -corr(q11, q14) with yaw."""
     walking, clean = score(with_yaw, events, duration, max_rate)
     value = walking - min(clean, max_rate * duration) + 3.0 * min(
         clean / (12.0 * duration / 15.0), 1.0)
     swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
     if with_yaw.get('fell', True) or without_yaw.get('fell', True) or not swing or not reference:
         return value  # fell, or fewer than 4 steps: no arm swing to score
-    ratio = min(swing['q11_peak_to_peak'], swing['q14_peak_to_peak']) / max(
-        reference['q11_peak_to_peak'], reference['q14_peak_to_peak'], 1e-9)
+    ratio = arm_swing_ratio(with_yaw, without_yaw) or 0.0
     return value + min(ratio, 3.0) + 2.0 * max(-swing['corr_q11_q14'], 0.0)
 
 

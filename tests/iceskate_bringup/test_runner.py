@@ -169,3 +169,30 @@ def test_bad_view_options_are_refused_in_one_sentence(tmp_path, capsys, options,
                  *options]) == 1
     err = capsys.readouterr().err
     assert expected in err and 'Traceback' not in err
+
+
+def test_the_arm_swing_ratio_is_the_mean_swing_over_the_same_scene_without_yaw(tmp_path, capsys):
+    """``--arm-swing-ratio`` runs the scene again with ``yaw`` left out of the gait manager's
+    sources; its ratio equals the one of the shipped ``skate_no_yaw`` scene (the same change,
+    written as a scene file) and is written into metrics.json."""
+    from iceskate_sim.run.metrics import arm_swing_ratio
+    assert main(['skate', '--out', str(tmp_path / 'yaw'), '--quiet', '--duration', '6',
+                 '--arm-swing-ratio']) == 0
+    printed = json.loads(capsys.readouterr().out.split('\noutputs in')[0])
+    metrics = json.loads((tmp_path / 'yaw' / 'metrics.json').read_text())
+    without = run(replace(load_scene('skate_no_yaw'), duration=6.0), None, progress=False)
+    expected = arm_swing_ratio(metrics, without)
+    assert expected > 2.0  # the shoulders swing with tau8 from the 4th step
+    assert metrics['arm_swing_ratio'] == pytest.approx(expected, rel=1e-12)
+    assert printed['arm_swing_ratio'] == metrics['arm_swing_ratio']
+    swing = metrics['arm_swing']
+    assert swing['mean_peak_to_peak'] == pytest.approx(
+        (swing['q11_peak_to_peak'] + swing['q14_peak_to_peak']) / 2, rel=1e-15)
+
+
+def test_a_scene_without_the_yaw_input_has_no_arm_swing_ratio(tmp_path, capsys):
+    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', '--duration', '0.05',
+                 '--arm-swing-ratio']) == 0
+    err = capsys.readouterr().err
+    assert 'stand has no torso-yaw input' in err and 'Traceback' not in err
+    assert 'arm_swing_ratio' not in json.loads((tmp_path / 'out' / 'metrics.json').read_text())

@@ -141,6 +141,31 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     return metrics, ended if controller_failed else session.error
 
 
+def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Path,
+                          stop: StopRequest) -> dict[str, Any]:
+    """``metrics`` of the run of ``scene`` with ``arm_swing_ratio`` (None: no ratio, and one
+    line says why): ``scene`` run again without the torso-yaw input tau8, headless and without
+    outputs; also written into ``out/metrics.json``."""
+    from iceskate_sim.run.metrics import arm_swing_ratio
+    enabled = scene.inputs.get('gait_manager', {}).get('enabled', [])
+    if 'yaw' not in enabled:
+        say(f'run_scene: {scene.name} has no torso-yaw input (gait_manager.enabled lacks yaw): '
+            'no arm-swing ratio')
+        return metrics
+    inputs = {**scene.inputs, 'gait_manager': {
+        **scene.inputs['gait_manager'], 'enabled': [s for s in enabled if s != 'yaw']}}
+    without, error = simulate(replace(scene, inputs=inputs), None, progress=False, stop=stop,
+                              picture=False)
+    ratio = arm_swing_ratio(metrics, without) if error is None and not without['fell'] else None
+    if ratio is None:
+        say(f'run_scene: no arm-swing ratio: the run without yaw ended {without["end"]} at '
+            f't={without["sim_time_s"]:.3f} s' if error is not None or without['fell'] else
+            'run_scene: no arm-swing ratio: fewer than 4 steps, or no swing without yaw')
+    metrics = {**metrics, 'arm_swing_ratio': ratio}
+    (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n', encoding='utf-8')
+    return metrics
+
+
 def _live_view(watch: Watch | None, robot: Robot, name: str,
                closing: contextlib.ExitStack) -> LiveView | None:
     """The live page of ``watch`` showing run ``name`` (None: not watched), closed with
@@ -183,6 +208,9 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                              "'inputs.visual_lifting.kp=[30, 290, 1100]'; VALUE in YAML); "
                              'repeatable')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    parser.add_argument('--arm-swing-ratio', action='store_true',
+                        help='then run the scene again without the torso-yaw input (headless, '
+                             'no outputs) and report the arm-swing ratio in metrics.json')
     parser.add_argument('--ros', action='store_true',
                         help='run through the ROS 2 node graph (iceskate_bringup.graph)')
     parser.add_argument('--single-process', action='store_true',
@@ -226,6 +254,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                                 rt_priority=args.rt_priority, stop=stop, overrides=overrides)
         else:
             metrics = run(scene, args.out, progress=not args.quiet, stop=stop, watch=watch)
+        if args.arm_swing_ratio:
+            metrics = _with_arm_swing_ratio(scene, metrics, args.out, stop)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code
         say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
         return exc.exit_code
@@ -236,7 +266,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         return 1
     summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'end', 'failure',
                                            'forward_distance_m', 'head_error_rms', 'arm_swing',
-                                           'real_time_factor')}
+                                           'arm_swing_ratio', 'real_time_factor')
+               if k in metrics}
     with contextlib.suppress(OSError, ValueError):  # stdout gone (a closed terminal)
         print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 import itertools
 import pathlib
 import shutil
 import tempfile
-from typing import Any, Iterator
+from typing import Any
 import weakref
 import zipfile
 
@@ -149,15 +150,29 @@ def _runs(values: np.ndarray) -> list[int]:
 
 
 def _arm_swing(q: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:
-    """Peak-to-peak [rad] of the shoulders q11 and q14 and their correlation over the samples
-    of ``mask`` (None for fewer than 3)."""
+    """Peak-to-peak [rad] of the shoulders q11 and q14, their mean (the arm swing of
+    ``arm_swing_ratio``) and their correlation over the samples of ``mask`` (None for fewer
+    than 3)."""
     if np.count_nonzero(mask) <= 2:
         return None
     q11, q14 = q[mask, 11], q[mask, 14]
     corr = (float(np.corrcoef(q11, q14)[0, 1])
             if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
     return {'q11_peak_to_peak': float(np.ptp(q11)), 'q14_peak_to_peak': float(np.ptp(q14)),
+            'mean_peak_to_peak': float((np.ptp(q11) + np.ptp(q14)) / 2.0),
             'corr_q11_q14': corr, 'samples': int(np.count_nonzero(mask))}
+
+
+def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
+                    ) -> float | None:
+    """The arm-swing ratio: the shoulders' mean peak-to-peak from the 4th step to the end
+    (``arm_swing.mean_peak_to_peak``) of a run with the torso-yaw input tau8 over that of the
+    same scene without it, from the two runs' metrics (None where either has no such window or
+    the one without does not swing)."""
+    swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
+    if not swing or not reference or reference['mean_peak_to_peak'] <= 0.0:
+        return None
+    return swing['mean_peak_to_peak'] / reference['mean_peak_to_peak']
 
 
 def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: float,
