@@ -175,3 +175,57 @@ def test_an_aborted_bag_has_no_metadata_but_its_chunks(tmp_path, typestore):
             kinds.add(type(record).__name__)
     assert {'Header', 'Schema', 'Channel', 'Chunk', 'MessageIndex'} <= kinds
     assert 'Footer' not in kinds
+
+
+class _FillingFile:
+    """A file that takes ``room`` more bytes, then writes part of a record and raises ENOSPC
+    (a disk that fills up), until ``room`` is set again."""
+
+    def __init__(self, file, room: int) -> None:
+        self.file, self.room = file, room
+
+    def write(self, data) -> int:
+        if len(data) > self.room:
+            taken = self.file.write(data[:self.room])  # a short write first, then the error
+            self.room = 0
+            if taken:
+                return taken
+            raise OSError(28, 'No space left on device')
+        self.room -= len(data)
+        return self.file.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self.file, name)
+
+
+def test_a_full_disk_cuts_the_chunk_off_and_the_bag_closes_with_the_others(tmp_path, typestore):
+    """The disk fills up in the middle of the third chunk: that write raises, the chunk is cut
+    off the file, and ``close`` (in the room the bag kept for it) finishes a bag that both
+    readers take, holding exactly the instants of the two chunks before, with its counts."""
+    instants = _instants(400, seed=7)  # 8 MB: the third chunk fills up
+    bag = Bag(tmp_path / 'bag', TOPICS, typestore, OFFERED_QOS, {'scene': 'full'})
+    assert (tmp_path / 'bag' / '.reserved').stat().st_size >= 1 << 20
+    bag.write('/robot_description', 0, b'urdf')
+    written = []
+    with pytest.raises(OSError, match='No space left'):
+        for stamp, row in instants:
+            if len(bag._chunk_indexes) == 2 and not isinstance(bag._file, _FillingFile):
+                bag._file = _FillingFile(bag._file, 100_000)  # less than a chunk
+            bag.write_instants([stamp], {topic: [row[topic]] for topic in ('/clock', '/chatter')})
+            written.append((stamp, row))
+    kept = [('/robot_description', 0, b'urdf'), *_messages(written)]
+    bag._file.room = 1 << 30  # the reserved room, given back by close
+    bag.close()
+    assert not (tmp_path / 'bag' / '.reserved').exists()
+    with (tmp_path / 'bag' / 'bag.mcap').open('rb') as stream:
+        reader = make_reader(stream, validate_crcs=True)
+        summary = reader.get_summary()
+        got = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(
+            log_time_order=False)]
+    assert summary.statistics.chunk_count == 2
+    assert got == kept[:len(got)] and 2 < len(got) < len(kept)  # the open chunk's are lost
+    assert summary.statistics.message_count == len(got)
+    assert _by_time(_read_rosbags(tmp_path / 'bag')) == _by_time(got)
+    with Reader(tmp_path / 'bag') as reader:
+        assert reader.message_count == len(got)
+        assert reader.end_time == max(t for _, t, _ in got) + 1

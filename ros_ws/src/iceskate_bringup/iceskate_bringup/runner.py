@@ -102,11 +102,15 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
 
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
-            error, not after a signal or a bug."""
-            if (picture and len(session.trajectory)
+            error, not after a signal, a bug or a failure to write (a full disk)."""
+            if (picture and len(session.trajectory) and session.metrics['end'] != 'io_error'
                     and not isinstance(ended, RunInterrupted) and not crashed):
                 from iceskate_analysis.summary import SUMMARY_NAME, draw_summary
-                draw_summary(session.trajectory.columns(), session.metrics, out / SUMMARY_NAME)
+                try:
+                    draw_summary(session.trajectory.columns(), session.metrics,
+                                 out / SUMMARY_NAME)
+                except OSError as exc:
+                    say(f'run_scene: {out / SUMMARY_NAME} not written: {exc.strerror or exc}')
 
         crashed = False
         block = FIRST_BLOCK

@@ -34,6 +34,8 @@ from rosbags.typesys.store import Typestore
 import yaml
 import zstandard
 
+from iceskate_sim.disk import reserve
+
 MAGIC = b'\x89MCAP0\r\n'
 #: A chunk is written once its records pass this many bytes (as rosbag2's MCAP storage does).
 CHUNK_BYTES = 2**20
@@ -44,6 +46,11 @@ COMPRESSION = 'zstd'
 _MESSAGE = struct.Struct('<BQHIQQ')
 _MESSAGE_FIELDS = _MESSAGE.size - 9  # the record's own fields before its data
 ROS_DISTRO = 'jazzy'
+#: Room [bytes] the bag keeps on disk from its start (``RESERVE_NAME`` in its folder) for its
+#: summary, footer and ``metadata.yaml``, given back when it closes: on a full disk the bag
+#: still closes, with the chunks written whole (a 600 s bag's summary is about 0.3 MB).
+RESERVE_BYTES = 1 << 20
+RESERVE_NAME = '.reserved'
 
 
 @dataclass
@@ -60,6 +67,10 @@ class _Topic:
 class Bag:
     """Write the rosbag2 bag ``path`` (a new folder holding ``<name>.mcap`` and ``metadata.yaml``).
 
+    A chunk that cannot be written whole (a full disk) is cut off, its messages lost, and the
+    error raised; ``close`` then finishes the bag with the chunks before it (and their counts
+    and times) in the room kept for it.
+
     :param topics: topic -> message type, in channel order.
     :param typestore: the message definitions (schemas and type hashes).
     :param offered_qos: topic -> its offered QoS profiles (rosbag2's YAML form); none elsewhere.
@@ -72,7 +83,10 @@ class Bag:
                  custom_data: Mapping[str, str]) -> None:
         self.path = path
         path.mkdir(parents=True, exist_ok=False)
-        self._file: BinaryIO = (path / f'{path.name}.mcap').open('xb')
+        # unbuffered: what ``_put`` wrote is on the file, and a full disk raises there
+        self._file: BinaryIO = (path / f'{path.name}.mcap').open('xb', buffering=0)
+        extra = sum(len(key) + len(value) for key, value in custom_data.items())
+        reserve(path / RESERVE_NAME, RESERVE_BYTES + 2 * extra)  # twice: mcap and yaml
         self._custom_data = dict(custom_data)
         self._compressor = zstandard.ZstdCompressor(level=1)
         self._schemas: dict[str, Schema] = {}
@@ -91,7 +105,7 @@ class Bag:
                 schema_id=self._schemas[msgtype].id,
                 metadata={'offered_qos_profiles': yaml.safe_dump(qos, sort_keys=False).strip()
                           if qos else ''}))
-        self._file.write(MAGIC)
+        self._put(MAGIC)
         self._write([Header(profile='ros2', library=f'iceskate-{ROS_DISTRO}'),
                      *self._schemas.values(),
                      *self._channels])
@@ -99,8 +113,9 @@ class Bag:
         self._size = 0  # their bytes
         self._index: dict[int, list[tuple[int, int]]] = defaultdict(list)
         self._chunk_times = [2**64 - 1, 0]
-        self._times = [2**64 - 1, 0]
+        self._times = [2**64 - 1, 0]  # of the chunks written
         self._chunk_indexes: list[ChunkIndex] = []
+        self._written = self._file.tell()  # the end of the last chunk written whole
 
     def write(self, topic: str, stamp: int, data: bytes) -> None:
         """Write one message of ``topic`` stamped ``stamp`` [ns]."""
@@ -131,8 +146,6 @@ class Bag:
                 parts, index, size, first = self._parts, self._index, 0, k + 1
         self._size = size
         self._widen(self._chunk_times, stamps[first:])
-        for topic, data in messages.items():
-            self.topics[topic].count += len(data) - data.count(None)
 
     @staticmethod
     def _widen(times: list[int], stamps: Sequence[int]) -> None:
@@ -141,10 +154,23 @@ class Bag:
             times[0], times[1] = min(times[0], min(stamps)), max(times[1], max(stamps))
 
     def _close_chunk(self) -> None:
-        """Write the open chunk and its message indexes."""
+        """Write the open chunk and its message indexes (whole, or cut off from the file and
+        the error raised)."""
         if not self._parts:
             return
-        self._widen(self._times, self._chunk_times)
+        try:
+            self._write_chunk()
+        except OSError:
+            self._file.truncate(self._written)
+            self._file.seek(self._written)
+            raise
+        finally:  # written or lost
+            self._parts, self._size, self._index = [], 0, defaultdict(list)
+            self._chunk_times = [2**64 - 1, 0]
+        self._written = self._file.tell()
+
+    def _write_chunk(self) -> None:
+        """Write the open chunk, its message indexes, and count it."""
         raw = b''.join(self._parts)
         data = self._compressor.compress(raw)
         start = self._file.tell()
@@ -162,14 +188,20 @@ class Bag:
             chunk_length=chunk_end - start, message_index_offsets=offsets,
             message_index_length=self._file.tell() - chunk_end, compression=COMPRESSION,
             compressed_size=len(data), uncompressed_size=len(raw)))
-        self._parts, self._size, self._index = [], 0, defaultdict(list)
-        self._chunk_times = [2**64 - 1, 0]
+        self._widen(self._times, self._chunk_times)
+        channels = {channel: len(records) for channel, records in self._index.items()}
+        for topic in self.topics.values():
+            topic.count += channels.get(topic.channel, 0)
 
     def close(self) -> None:
         """Finish the file (summary, footer) and write ``metadata.yaml`` (idempotent)."""
         if self._file.closed:
             return
-        self._close_chunk()
+        (self.path / RESERVE_NAME).unlink(missing_ok=True)  # the room for what follows
+        try:
+            self._close_chunk()
+        except OSError:
+            pass  # the messages of the open chunk are lost; the bag closes with the others
         info = self._metadata()
         metadata_start = self._file.tell()
         self._write([Metadata(name='rosbag2', metadata={
@@ -202,7 +234,7 @@ class Bag:
         self._write([*offsets, Footer(summary_start=summary_start,
                                       summary_offset_start=summary_offset_start,
                                       summary_crc=0)])
-        self._file.write(MAGIC)
+        self._put(MAGIC)
         self._file.close()
         text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
         staged = self.path / 'metadata.yaml.tmp'
@@ -235,4 +267,10 @@ class Bag:
         builder = RecordBuilder()
         for record in records:
             record.write(builder)
-        self._file.write(builder.end())
+        self._put(builder.end())
+
+    def _put(self, data: bytes) -> None:
+        """Write ``data`` at the end of the file, all of it (a write may take only part)."""
+        view = memoryview(data)
+        while view:
+            view = view[self._file.write(view):]

@@ -98,14 +98,23 @@ class Trajectory:
         self._held = 0
 
     def _write(self, key: str, block: np.ndarray) -> None:
-        """Append a block of column ``key`` to its spill file (zeros in chunks)."""
+        """Append a block of column ``key`` to its spill file (zeros in chunks).
+
+        :raises SimulationError: (``io_error``) when the file cannot be written (a full disk).
+        """
         block = np.asarray(block)
         layout = self._layout.setdefault(key, (block.dtype, block.shape[1:]))
         if (block.dtype, block.shape[1:]) != layout:
             block = block.astype(layout[0])
-        with (self._spill_dir / f'{key}.bin').open('ab') as stream:
-            for start in range(0, len(block), _SPILL_CHUNK):
-                stream.write(np.ascontiguousarray(block[start:start + _SPILL_CHUNK]).tobytes())
+        path = self._spill_dir / f'{key}.bin'
+        try:
+            with path.open('ab') as stream:
+                for start in range(0, len(block), _SPILL_CHUNK):
+                    stream.write(
+                        np.ascontiguousarray(block[start:start + _SPILL_CHUNK]).tobytes())
+        except OSError as exc:
+            raise SimulationError(f'cannot write {path}: {exc.strerror or exc}',
+                                  end='io_error') from None
 
     def __len__(self) -> int:
         """Number of samples."""

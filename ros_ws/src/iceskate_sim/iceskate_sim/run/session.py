@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from iceskate_sim.disk import reserve
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot, load_robot
@@ -53,6 +54,11 @@ def scene_metadata(scene: Scene) -> dict[str, str]:
 
 #: The lock file of an output directory, held by the one run that writes into it.
 LOCK_NAME = '.run.lock'
+#: Room [bytes] a run keeps in its output directory from its start (``RESERVE_NAME``, given
+#: back just before they are written) for metrics.json and events.json: a full disk ends the
+#: run with its metrics written (a 15 s run's are 50 kB, a 600 s run's about 2 MB).
+RESERVE_BYTES = 4 << 20
+RESERVE_NAME = '.reserved'
 #: How a launcher hands its lock on the output directory to the simulator process it starts:
 #: the number of the inherited descriptor.
 LOCK_FD_ENV = 'ICESKATE_OUTPUT_LOCK_FD'
@@ -174,12 +180,20 @@ class Session:
         if out is not None:
             prepare_output(out, bag)
         try:
+            if out is not None:
+                try:
+                    reserve(out / RESERVE_NAME, RESERVE_BYTES)
+                except OSError as exc:
+                    raise SimulationError(f'output directory {out} has not even '
+                                          f'{RESERVE_BYTES >> 20} MiB free for the metrics: '
+                                          f'{_reason(exc)}', end='io_error') from None
             self.recorder = (BagRecorder(bag, scene_metadata(scene),
                                          self.robot.urdf_path.read_text(encoding='utf-8'),
                                          background=True, tf_every=scene.tf_every)
                              if bag is not None else None)
         except BaseException:
             if out is not None:
+                (out / RESERVE_NAME).unlink(missing_ok=True)
                 release_output(out)
             raise
         self.metrics: dict[str, Any] | None = None
@@ -249,8 +263,9 @@ class Session:
 
         The whole block is one call of the native control loop (``Simulator.control_loop``:
         the laws, the sum of their commands, the hold, the push and the period, with no Python
-        in between). A failure of the physics ends the run (``error``); a controller's own
-        error is raised once the samples before it are recorded.
+        in between). A failure of the physics, or of writing the samples (a full disk), ends
+        the run (``error``); a controller's own error is raised once the samples before it are
+        recorded.
         """
         if self.done:
             return 0
@@ -262,7 +277,10 @@ class Session:
         block, error = self.sim.run_loop(self._loop, min(count, self.n_periods - self.periods))
         taken = len(block['t'])
         if taken:
-            self._record_block(block, self.periods)
+            try:
+                self._record_block(block, self.periods)
+            except SimulationError as exc:  # the bag's or the trajectory's files: the run ends
+                error = exc if not isinstance(error, SimulationError) else error
             self.periods += taken
         if isinstance(error, SimulationError):
             self.error = error
@@ -330,14 +348,16 @@ class Session:
             self.flush()
         except SimulationError as exc:  # the bag failed: the other outputs are still written
             bag_error = exc
-        if self.out is not None:
-            self.trajectory.save(self.out / 'trajectory.npz')
-        self._write_metrics(extra, bag_error)
         closed: SimulationError | None = None
         try:
+            if self.out is not None:
+                saved = self._save_trajectory()
+                bag_error = bag_error or saved
+                (self.out / RESERVE_NAME).unlink(missing_ok=True)  # the metrics' room
+            self._write_metrics(extra, bag_error)
             if written is not None:
                 written()
-        finally:  # the bag is closed whatever ``written`` does
+        finally:  # the bag is closed whatever happens before
             if self.recorder is not None:
                 try:
                     self.recorder.close()
@@ -351,6 +371,17 @@ class Session:
             release_output(self.out)
         return self.metrics
 
+    def _save_trajectory(self) -> SimulationError | None:
+        """Write trajectory.npz; a failure to write (a full disk) is returned, the partial
+        file removed (unreadable, and its room is the metrics')."""
+        path = self.out / 'trajectory.npz'
+        try:
+            self.trajectory.save(path)
+        except OSError as exc:
+            path.unlink(missing_ok=True)
+            return SimulationError(f'cannot write {path}: {_reason(exc)}', end='io_error')
+        return None
+
     def _write_metrics(self, extra: Mapping[str, Any] | None,
                        bag_error: SimulationError | None) -> None:
         """Compute the metrics (a failed bag is the run's error unless it has one) and write
@@ -362,6 +393,11 @@ class Session:
                                        time.perf_counter() - start, self.error)
         self.metrics.update(extra or {})
         if self.out is not None:
-            (self.out / 'metrics.json').write_text(json.dumps(self.metrics, indent=2) + '\n')
-            (self.out / 'events.json').write_text(json.dumps(
-                [asdict(e) for e in self.sim.events], indent=1, default=float) + '\n')
+            for name, text in (('metrics.json', json.dumps(self.metrics, indent=2)),
+                               ('events.json', json.dumps([asdict(e) for e in self.sim.events],
+                                                          indent=1, default=float))):
+                try:
+                    (self.out / name).write_text(text + '\n')
+                except OSError as exc:
+                    raise SimulationError(f'cannot write {self.out / name}: {_reason(exc)}',
+                                          end='io_error') from None
