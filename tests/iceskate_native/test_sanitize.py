@@ -4,7 +4,7 @@
 own colcon bases (``ros_ws/build-sanitize``, ``install-sanitize``), runs ``tests/iceskate_native``
 (not the ``slow`` ones) and the whole ``skate`` scene with that module, and exits non-zero on any
 sanitizer report. On 2 cores, alone, a fresh clone's run takes about 360 s (276 s of build at
--O1 with an empty ccache, 81 s of tests and scene); a warm ccache saves most of the build.
+-O1 with an empty ccache, 88 s of tests and scene); a warm ccache saves most of the build.
 """
 
 import os

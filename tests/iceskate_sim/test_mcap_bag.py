@@ -178,19 +178,19 @@ def test_an_aborted_bag_has_no_metadata_but_its_chunks(tmp_path, typestore):
 
 
 class _FillingFile:
-    """A file that takes ``room`` more bytes, then writes part of a record and raises ENOSPC
-    (a disk that fills up), until ``room`` is set again."""
+    """A file that takes ``room`` more bytes (the last write short), then raises ENOSPC once:
+    what follows goes into the room the bag kept (given back as it closes)."""
 
     def __init__(self, file, room: int) -> None:
-        self.file, self.room = file, room
+        self.file, self.room, self.state = file, room, 'filling'
 
     def write(self, data) -> int:
-        if len(data) > self.room:
-            taken = self.file.write(data[:self.room])  # a short write first, then the error
-            self.room = 0
-            if taken:
-                return taken
+        if self.state == 'full':
+            self.state = 'freed'
             raise OSError(28, 'No space left on device')
+        if self.state == 'filling' and len(data) >= self.room:
+            self.state = 'full'
+            return self.file.write(data[:self.room])  # a short write
         self.room -= len(data)
         return self.file.write(data)
 
@@ -204,7 +204,7 @@ def test_a_full_disk_cuts_the_chunk_off_and_the_bag_closes_with_the_others(tmp_p
     readers take, holding exactly the instants of the two chunks before, with its counts."""
     instants = _instants(400, seed=7)  # 8 MB: the third chunk fills up
     bag = Bag(tmp_path / 'bag', TOPICS, typestore, OFFERED_QOS, {'scene': 'full'})
-    assert (tmp_path / 'bag' / '.reserved').stat().st_size >= 1 << 20
+    assert (tmp_path / 'bag' / '.summary.room').stat().st_size >= 256 << 10
     bag.write('/robot_description', 0, b'urdf')
     written = []
     with pytest.raises(OSError, match='No space left'):
@@ -214,9 +214,8 @@ def test_a_full_disk_cuts_the_chunk_off_and_the_bag_closes_with_the_others(tmp_p
             bag.write_instants([stamp], {topic: [row[topic]] for topic in ('/clock', '/chatter')})
             written.append((stamp, row))
     kept = [('/robot_description', 0, b'urdf'), *_messages(written)]
-    bag._file.room = 1 << 30  # the reserved room, given back by close
     bag.close()
-    assert not (tmp_path / 'bag' / '.reserved').exists()
+    assert not (tmp_path / 'bag' / '.summary.room').exists()
     with (tmp_path / 'bag' / 'bag.mcap').open('rb') as stream:
         reader = make_reader(stream, validate_crcs=True)
         summary = reader.get_summary()
@@ -229,3 +228,25 @@ def test_a_full_disk_cuts_the_chunk_off_and_the_bag_closes_with_the_others(tmp_p
     with Reader(tmp_path / 'bag') as reader:
         assert reader.message_count == len(got)
         assert reader.end_time == max(t for _, t, _ in got) + 1
+
+
+def test_a_last_chunk_the_disk_has_no_room_for_is_an_error_of_close(tmp_path, typestore):
+    """The open chunk cannot be written when the bag closes: ``close`` finishes the bag with
+    the chunks before it (in the room kept), then raises, so the run says its bag is short."""
+    instants = _instants(100, seed=9)
+    bag = Bag(tmp_path / 'bag', TOPICS, typestore, OFFERED_QOS, {'scene': 'full'})
+    bag.write('/robot_description', 0, b'urdf')
+    for stamp, row in instants:
+        bag.write_instants([stamp], {topic: [row[topic]] for topic in ('/clock', '/chatter')})
+    bag.write_instants([10**12], {'/clock': [b'c'], '/chatter': [b'open']})
+    whole, lost = len(bag._chunk_indexes), sum(len(r) for r in bag._index.values())
+    assert whole >= 1 and lost >= 2  # some chunks written, one open
+    bag._file = _FillingFile(bag._file, 10)  # less than the open chunk's record
+    with pytest.raises(OSError, match='No space left'):
+        bag.close()
+    with (tmp_path / 'bag' / 'bag.mcap').open('rb') as stream:
+        summary = make_reader(stream, validate_crcs=True).get_summary()
+    assert summary.statistics.chunk_count == whole
+    with Reader(tmp_path / 'bag') as reader:
+        assert reader.message_count == summary.statistics.message_count == (
+            1 + 2 * (len(instants) + 1) - lost)

@@ -304,3 +304,37 @@ def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, blocks):
     import gc
     gc.collect()
     assert not folder.exists()
+
+
+def test_a_spill_that_meets_a_full_disk_leaves_every_sample_readable(tmp_path, blocks,
+                                                                      monkeypatch):
+    """The disk fills up while the samples move to files, after some columns were appended:
+    the move is undone (the files as before, the samples kept in memory) and raised as an
+    ``io_error``; the columns still hold every sample, and a later move completes it."""
+    from iceskate_sim.errors import SimulationError
+    from iceskate_sim.run.metrics import Trajectory
+    kept, spilled = Trajectory(), Trajectory(tmp_path, spill_bytes=20_000)
+    rows = {key: np.concatenate([b[key] for b, _ in blocks]) for key in ('t', 'q', 'v')}
+    write = Trajectory._write
+    calls = {'n': 0, 'full': False}
+
+    def filling(self, key, block):
+        calls['n'] += 1
+        if calls['full'] and calls['n'] % 3 == 0:
+            raise OSError(28, 'No space left on device')
+        write(self, key, block)
+    monkeypatch.setattr(Trajectory, '_write', filling)
+    failed = 0
+    for start in range(0, PERIODS, 20):
+        columns = {key: value[start:start + 20] for key, value in rows.items()}
+        calls['full'] = 60 <= start < 160
+        kept.extend(columns, {})
+        try:
+            spilled.extend(columns, {})
+        except SimulationError as exc:
+            assert exc.end == 'io_error' and 'No space left on device' in str(exc)
+            failed += 1
+    assert failed >= 1 and spilled._spilled > 0
+    a, b = kept.arrays(), spilled.arrays()
+    for key in a:
+        assert np.array_equal(a[key], b[key], equal_nan=True), key

@@ -108,3 +108,60 @@ def test_a_bad_spec_or_another_sweeps_folder_is_refused_in_one_line(tmp_path, gr
     assert main([str(tmp_path / 'missing.yaml'), '--out', str(tmp_path / 'out')]) == 1
     assert capsys.readouterr().err.startswith('sweep: error: cannot read SPEC')
     assert not os.path.exists(tmp_path / 'out' / RESULTS)
+
+
+@pytest.mark.slow
+def test_a_raylet_killed_mid_sweep_leaves_its_runs_for_the_next_call(tmp_path, grid, write_spec):
+    """Ray's node dies mid-sweep (its raylet killed): the runs it lost are Ray's failure, not
+    theirs, so no run gets a failed row; the sweep ends in one line saying how many runs are
+    left, and the same command (here on the local pool) runs them."""
+    pytest.importorskip('ray')
+    grid['axes'] = {'floor.mu': {'linspace': [0.004, 0.0155, 24]}}
+    grid['overrides'] = {'duration': 6.0}
+    spec, out = write_spec(grid), tmp_path / 'out'
+    command = [sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out', str(out),
+               '--quiet']
+    proc = subprocess.Popen([*command, '--ray', 'local', '--workers', '2'],
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while not (out / RESULTS).exists() and proc.poll() is None:
+            assert time.monotonic() < deadline, 'no table within 180 s'
+            time.sleep(0.02)
+        raylets = [pid for pid in _descendants(proc.pid)
+                   if Path(f'/proc/{pid}/comm').read_text().strip() == 'raylet']
+        assert len(raylets) == 1, 'the local Ray instance has one raylet'
+        os.kill(raylets[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 1, err
+    (line,) = [line for line in err.splitlines() if line.startswith('sweep: ')]
+    assert line.startswith('sweep: error: Ray lost a run') and 'the same command runs them' in line
+    before = _rows(out)
+    assert 1 <= len(before) < 24 and all(row['status'] == 'ok' for row in before), before
+    assert f'{24 - len(before)} runs have no row yet' in line
+    done = subprocess.run([*command, '--workers', '2'], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f'{len(before)} before): 24 ok' in done.stderr
+
+
+def _descendants(pid: int) -> list[int]:
+    """The live processes below ``pid`` (read from /proc)."""
+    parents = {}
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+            except OSError:
+                continue
+            parents.setdefault(int(stat[1]), []).append(int(entry.name))
+    out, todo = [], [pid]
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out

@@ -13,6 +13,7 @@ import contextlib
 from dataclasses import dataclass, replace
 import json
 import math
+import os
 import pathlib
 import sys
 import threading
@@ -103,14 +104,21 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
             error, not after a signal, a bug or a failure to write (a full disk)."""
-            if (picture and len(session.trajectory) and session.metrics['end'] != 'io_error'
-                    and not isinstance(ended, RunInterrupted) and not crashed):
-                from iceskate_analysis.summary import SUMMARY_NAME, draw_summary
+            if not picture:
+                return
+            from iceskate_analysis.summary import SUMMARY_NAME, draw_summary
+            path = out / SUMMARY_NAME
+            if session.metrics['end'] == 'io_error':  # drawn before the bag failed
+                path.unlink(missing_ok=True)
+            elif (len(session.trajectory) and not isinstance(ended, RunInterrupted)
+                    and not crashed):
+                staged = path.with_name(f'.{SUMMARY_NAME}')
                 try:
-                    draw_summary(session.trajectory.columns(), session.metrics,
-                                 out / SUMMARY_NAME)
+                    draw_summary(session.trajectory.columns(), session.metrics, staged)
+                    os.replace(staged, path)
                 except OSError as exc:
-                    say(f'run_scene: {out / SUMMARY_NAME} not written: {exc.strerror or exc}')
+                    staged.unlink(missing_ok=True)
+                    say(f'run_scene: {path} not written: {exc.strerror or exc}')
 
         crashed = False
         block = FIRST_BLOCK
@@ -150,8 +158,11 @@ def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Pa
     """``metrics`` of the run of ``scene`` with ``arm_swing_ratio`` (None: no ratio, and one
     line says why): ``scene`` run again without the torso-yaw input tau8, headless and without
     outputs; also written into ``out/metrics.json``."""
+    from gait_manager.parameters import GaitManagerParameters
+    from iceskate_sim.disk import write_atomically
     from iceskate_sim.run.metrics import arm_swing_ratio
-    enabled = scene.inputs.get('gait_manager', {}).get('enabled', [])
+    gait = scene.inputs.get('gait_manager')
+    enabled = list(GaitManagerParameters.from_dict(gait).enabled) if gait is not None else []
     if 'yaw' not in enabled:
         say(f'run_scene: {scene.name} has no torso-yaw input (gait_manager.enabled lacks yaw): '
             'no arm-swing ratio')
@@ -160,13 +171,18 @@ def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Pa
         **scene.inputs['gait_manager'], 'enabled': [s for s in enabled if s != 'yaw']}}
     without, error = simulate(replace(scene, inputs=inputs), None, progress=False, stop=stop,
                               picture=False)
-    ratio = arm_swing_ratio(metrics, without) if error is None and not without['fell'] else None
+    ratio = arm_swing_ratio(metrics, without) if error is None else None
     if ratio is None:
-        say(f'run_scene: no arm-swing ratio: the run without yaw ended {without["end"]} at '
-            f't={without["sim_time_s"]:.3f} s' if error is not None or without['fell'] else
-            'run_scene: no arm-swing ratio: fewer than 4 steps, or no swing without yaw')
+        say('run_scene: no arm-swing ratio: '
+            + (f'the run without yaw ended {without["end"]} at t={without["sim_time_s"]:.3f} s'
+               if error is not None or without['end'] != 'completed' else
+               'a run fell, took fewer than 4 steps, or did not swing without yaw'))
     metrics = {**metrics, 'arm_swing_ratio': ratio}
-    (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n', encoding='utf-8')
+    try:
+        write_atomically(out / 'metrics.json', (json.dumps(metrics, indent=2) + '\n').encode())
+    except OSError as exc:
+        say(f'run_scene: the arm-swing ratio is not in {out / "metrics.json"}: '
+            f'{exc.strerror or exc}')
     return metrics
 
 

@@ -44,6 +44,9 @@ class _Executor(abc.ABC):
         self.workers = workers
         self._queue: deque[Task] = deque()
         self._futures: dict[cf.Future[Row | None], Task] = {}
+        #: why the runs left cannot run here any more (None: they can); they have no row, so
+        #: the next call runs them
+        self.lost: str | None = None
 
     @abc.abstractmethod
     def _start(self, task: Task) -> cf.Future[Row | None]:
@@ -203,11 +206,27 @@ class RayExecutor(_Executor):
         return future
 
     def _failed(self, failed: list[tuple[Task, BaseException]]) -> list[Row]:
-        """A cancelled run has no row; a task Ray gave up on (its worker died) is a failed
-        row."""
-        return [crashed_row(task, f'the Ray task failed: {str(error).splitlines()[0]}')
-                for task, error in failed
-                if not isinstance(error, self._ray.exceptions.TaskCancelledError)]
+        """A cancelled run has no row; a run whose task raised, or whose worker died each
+        time Ray tried it, is a failed row; any other loss (the node's raylet died, the object
+        store lost the result, ...) is Ray's, not the run's: no row for it or for any run not
+        finished, and ``lost`` says why (the next call runs them)."""
+        errors = self._ray.exceptions
+        rows = []
+        for task, error in failed:
+            if isinstance(error, errors.TaskCancelledError):
+                continue
+            if isinstance(error, (errors.RayTaskError, errors.WorkerCrashedError)):
+                rows.append(crashed_row(task, f'the Ray task failed: '
+                                              f'{str(error).splitlines()[0]}'))
+            elif self.lost is None:
+                self.lost = (f'Ray lost a run ({type(error).__name__}: '
+                             f'{(str(error).splitlines() or [""])[0]})')
+        if self.lost is not None:  # what is left would be lost the same way
+            self._queue.clear()
+            for future in self._futures:
+                future.cancel()
+            self._futures.clear()
+        return rows
 
     def interrupt(self, signum: int) -> None:
         """Cancel the runs in flight (their workers are stopped) and drop the queued ones."""

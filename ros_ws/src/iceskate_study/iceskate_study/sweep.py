@@ -79,6 +79,7 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
         with contextlib.ExitStack() as stack:
             if stop is None:
                 stop = stack.enter_context(StopRequest())
+            lost: str | None = None  # why the runs left could not run (Ray lost them)
             if todo and not stop.requested:
                 from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
                 executor = (RayExecutor(ray, workers) if ray is not None
@@ -108,8 +109,13 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
                         table.write()
                         written = time.perf_counter()
                 result.wall_time_s = time.perf_counter() - start
+                lost = executor.lost
             if table.dirty or not table.path.exists():
                 table.write()
+            if lost is not None and not stop.requested:
+                left = len(points) - len(table.rows)
+                raise StudyError(f'{lost}; {left} runs have no row yet: the same command '
+                                 'runs them')
             result.counts = dict(Counter(row['status'] for row in table.rows.values()))
             if stop.requested:
                 result.signum = stop.signum

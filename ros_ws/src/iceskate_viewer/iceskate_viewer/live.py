@@ -83,8 +83,8 @@ class LiveView:
     def keep_pace(self, t: float, stop: StopRequest) -> None:
         """Wait while the page is paused, then until simulated time ``t`` [s] is due at the
         pace; returns at once on a stop request."""
-        while self._pause.value and not stop.requested:
-            time.sleep(WAIT_SLICE)
+        while self._pause.value and not stop.requested and self._thread.is_alive():
+            time.sleep(WAIT_SLICE)  # (a page that stopped drawing holds nothing)
         pace = self.pace
         if pace <= 0.0:
             return
@@ -117,6 +117,7 @@ class LiveView:
             try:
                 self.page.show(0, frame)
             except Exception as error:  # the page fails, the run goes on and finishes
-                say(f'run_scene: the live view stopped drawing at t={frame.t:.3f} s: {error}')
+                say(f'run_scene: the live view stopped drawing at t={frame.t:.3f} s: '
+                    f'{type(error).__name__}: {error}')
                 return
             self._closed.wait(max(0.0, period - (time.perf_counter() - started)))

@@ -45,7 +45,7 @@ class _BagFile:
     """The open bag: metadata, topics and the URDF written; encodes blocks."""
 
     def __init__(self, path: pathlib.Path, metadata: dict[str, Any], urdf: str,
-                 messages: SampleMessages, tf_every: int) -> None:
+                 messages: SampleMessages, tf_every: int = 1) -> None:
         self.messages = messages
         self.tf_every = tf_every
         self.samples = 0  # written so far

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+import errno
 import pathlib
 import struct
 from typing import Any, BinaryIO
@@ -34,7 +35,7 @@ from rosbags.typesys.store import Typestore
 import yaml
 import zstandard
 
-from iceskate_sim.disk import reserve
+from iceskate_sim.disk import Room
 
 MAGIC = b'\x89MCAP0\r\n'
 #: A chunk is written once its records pass this many bytes (as rosbag2's MCAP storage does).
@@ -46,11 +47,11 @@ COMPRESSION = 'zstd'
 _MESSAGE = struct.Struct('<BQHIQQ')
 _MESSAGE_FIELDS = _MESSAGE.size - 9  # the record's own fields before its data
 ROS_DISTRO = 'jazzy'
-#: Room [bytes] the bag keeps on disk from its start (``RESERVE_NAME`` in its folder) for its
-#: summary, footer and ``metadata.yaml``, given back when it closes: on a full disk the bag
-#: still closes, with the chunks written whole (a 600 s bag's summary is about 0.3 MB).
-RESERVE_BYTES = 1 << 20
-RESERVE_NAME = '.reserved'
+#: Disk [bytes] the bag keeps from its start (``.summary.room`` in its folder) for its summary,
+#: footer and ``metadata.yaml``, grown by ``CHUNK_ROOM`` with each chunk (its index), given back
+#: when it closes: on a full disk the bag still closes, with the chunks written whole.
+SUMMARY_ROOM = 256 << 10
+CHUNK_ROOM = 256
 
 
 @dataclass
@@ -83,10 +84,11 @@ class Bag:
                  custom_data: Mapping[str, str]) -> None:
         self.path = path
         path.mkdir(parents=True, exist_ok=False)
+        # twice the custom data: in the mcap file and in metadata.yaml
+        self._room_base = SUMMARY_ROOM + 2 * sum(len(k) + len(v) for k, v in custom_data.items())
+        self._room = Room(path / '.summary.room', self._room_base)
         # unbuffered: what ``_put`` wrote is on the file, and a full disk raises there
         self._file: BinaryIO = (path / f'{path.name}.mcap').open('xb', buffering=0)
-        extra = sum(len(key) + len(value) for key, value in custom_data.items())
-        reserve(path / RESERVE_NAME, RESERVE_BYTES + 2 * extra)  # twice: mcap and yaml
         self._custom_data = dict(custom_data)
         self._compressor = zstandard.ZstdCompressor(level=1)
         self._schemas: dict[str, Schema] = {}
@@ -183,6 +185,7 @@ class Bag:
         for channel, records in sorted(self._index.items()):
             offsets[channel] = self._file.tell()
             self._write([MessageIndex(channel_id=channel, records=records)])
+        self._room.grow(self._room_base + CHUNK_ROOM * (len(self._chunk_indexes) + 1))
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start_time, message_end_time=end_time, chunk_start_offset=start,
             chunk_length=chunk_end - start, message_index_offsets=offsets,
@@ -194,14 +197,33 @@ class Bag:
             topic.count += channels.get(topic.channel, 0)
 
     def close(self) -> None:
-        """Finish the file (summary, footer) and write ``metadata.yaml`` (idempotent)."""
+        """Finish the file (summary, footer) and write ``metadata.yaml`` (idempotent).
+
+        :raises OSError: when the open chunk could not be written (a full disk): the bag is
+            then finished with the chunks before it.
+        """
         if self._file.closed:
             return
-        (self.path / RESERVE_NAME).unlink(missing_ok=True)  # the room for what follows
+        lost: OSError | None = None
         try:
             self._close_chunk()
-        except OSError:
-            pass  # the messages of the open chunk are lost; the bag closes with the others
+        except OSError as exc:  # its messages are lost; the bag closes with the others
+            lost = exc
+        self._room.release()  # the room for what follows
+        try:
+            self._finish_file()
+        finally:
+            self._file.close()
+        text = yaml.safe_dump({'rosbag2_bagfile_information': self._metadata()},
+                              sort_keys=False)
+        staged = self.path / 'metadata.yaml.tmp'
+        staged.write_text(text, encoding='utf-8')
+        staged.replace(self.path / 'metadata.yaml')
+        if lost is not None:
+            raise lost
+
+    def _finish_file(self) -> None:
+        """Write the metadata, the summary and the footer."""
         info = self._metadata()
         metadata_start = self._file.tell()
         self._write([Metadata(name='rosbag2', metadata={
@@ -235,11 +257,6 @@ class Bag:
                                       summary_offset_start=summary_offset_start,
                                       summary_crc=0)])
         self._put(MAGIC)
-        self._file.close()
-        text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
-        staged = self.path / 'metadata.yaml.tmp'
-        staged.write_text(text, encoding='utf-8')
-        staged.replace(self.path / 'metadata.yaml')
 
     def _metadata(self) -> dict[str, Any]:
         """rosbag2's bag information (``metadata.yaml``, format version 9)."""
@@ -273,4 +290,7 @@ class Bag:
         """Write ``data`` at the end of the file, all of it (a write may take only part)."""
         view = memoryview(data)
         while view:
-            view = view[self._file.write(view):]
+            taken = self._file.write(view)
+            if not taken:
+                raise OSError(errno.ENOSPC, 'no byte written')
+            view = view[taken:]

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+import contextlib
 import itertools
+import os
 import pathlib
 import shutil
 import tempfile
@@ -74,47 +76,67 @@ class Trajectory:
             self._spill()
 
     def _add_sources(self, efforts: dict[str, np.ndarray]) -> None:
-        """New source columns, 0 for the samples before."""
+        """New source columns, 0 for the samples before.
+
+        :raises SimulationError: (``io_error``) when the zeros of the spilled samples cannot
+            be written (the source is then not added).
+        """
         for source in efforts:
             if source not in self.sources:
-                self.sources.append(source)
                 key = f'tau_{source}'
                 if self._spilled:  # the spilled samples' zeros go straight to its file
-                    self._write(key, np.zeros((self._spilled, 18)))
+                    try:
+                        self._write(key, np.zeros((self._spilled, 18)))
+                    except OSError as exc:
+                        self._file(key).unlink(missing_ok=True)
+                        self._layout.pop(key, None)
+                        raise SimulationError(f"cannot write the trajectory's columns into "
+                                              f'{self._spill_parent}: {exc.strerror or exc}',
+                                              end='io_error') from None
+                self.sources.append(source)
                 self._blocks[key] = [np.zeros((self._count - self._spilled, 18))]
 
     def _spill(self) -> None:
-        """Append every column's blocks to its file (all rows are in blocks)."""
+        """Append every column's blocks to its file (all rows are in blocks), all or none.
+
+        :raises SimulationError: (``io_error``) when a file cannot be written (a full disk):
+            the files are then as before and the blocks kept.
+        """
         if self._spill_dir is None:
             self._spill_parent.mkdir(parents=True, exist_ok=True)
             self._spill_dir = pathlib.Path(tempfile.mkdtemp(prefix='.trajectory-',
                                                             dir=self._spill_parent))
             weakref.finalize(self, shutil.rmtree, self._spill_dir, True)
-        for key, blocks in self._blocks.items():
-            for block in blocks:
-                self._write(key, block)
+        sizes = {key: self._file(key).stat().st_size if self._file(key).exists() else 0
+                 for key in self._blocks}
+        try:
+            for key, blocks in self._blocks.items():
+                for block in blocks:
+                    self._write(key, block)
+        except OSError as exc:
+            for key, size in sizes.items():
+                if self._file(key).exists():
+                    os.truncate(self._file(key), size)
+            raise SimulationError(f"cannot write the trajectory's columns into "
+                                  f'{self._spill_parent}: {exc.strerror or exc}',
+                                  end='io_error') from None
         self._blocks = {key: [] for key in self._blocks}
         self._spilled = self._count
         self._held = 0
 
-    def _write(self, key: str, block: np.ndarray) -> None:
-        """Append a block of column ``key`` to its spill file (zeros in chunks).
+    def _file(self, key: str) -> pathlib.Path:
+        """The spill file of column ``key``."""
+        return self._spill_dir / f'{key}.bin'
 
-        :raises SimulationError: (``io_error``) when the file cannot be written (a full disk).
-        """
+    def _write(self, key: str, block: np.ndarray) -> None:
+        """Append a block of column ``key`` to its spill file (zeros in chunks)."""
         block = np.asarray(block)
         layout = self._layout.setdefault(key, (block.dtype, block.shape[1:]))
         if (block.dtype, block.shape[1:]) != layout:
             block = block.astype(layout[0])
-        path = self._spill_dir / f'{key}.bin'
-        try:
-            with path.open('ab') as stream:
-                for start in range(0, len(block), _SPILL_CHUNK):
-                    stream.write(
-                        np.ascontiguousarray(block[start:start + _SPILL_CHUNK]).tobytes())
-        except OSError as exc:
-            raise SimulationError(f'cannot write {path}: {exc.strerror or exc}',
-                                  end='io_error') from None
+        with self._file(key).open('ab') as stream:
+            for start in range(0, len(block), _SPILL_CHUNK):
+                stream.write(np.ascontiguousarray(block[start:start + _SPILL_CHUNK]).tobytes())
 
     def __len__(self) -> int:
         """Number of samples."""
@@ -128,15 +150,19 @@ class Trajectory:
     def columns(self) -> Iterator[tuple[str, np.ndarray]]:
         """(name, array) of each column in turn, as ``arrays`` gives them: a spilled column
         is mapped only while the caller holds it, so reading them one after the other keeps
-        one column resident at a time."""
+        one column resident at a time (on a full disk, the rows not spilled are joined to it
+        in memory)."""
         if not self._spilled:
             for key, blocks in self._blocks.items():
                 yield key, np.concatenate(blocks)
             return
-        self._spill()
+        with contextlib.suppress(SimulationError):  # a full disk: the rest stays in memory
+            self._spill()
         for key, (dtype, shape) in self._layout.items():
-            yield key, np.memmap(self._spill_dir / f'{key}.bin', dtype=dtype, mode='r',
-                                 shape=(self._count, *shape))
+            spilled = np.memmap(self._file(key), dtype=dtype, mode='r',
+                                shape=(self._spilled, *shape))
+            yield key, (np.concatenate([spilled, *self._blocks[key]]) if self._blocks[key]
+                        else spilled)
 
     def save(self, path: pathlib.Path) -> None:
         """Write the columns to an uncompressed ``.npz`` file, one after the other (what
@@ -176,10 +202,11 @@ def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
                     ) -> float | None:
     """The arm-swing ratio: the shoulders' mean peak-to-peak from the 4th step to the end
     (``arm_swing.mean_peak_to_peak``) of a run with the torso-yaw input tau8 over that of the
-    same scene without it, from the two runs' metrics (None where either has no such window or
-    the one without does not swing)."""
+    same scene without it, from the two runs' metrics (None where either fell or has no such
+    window, or the one without does not swing)."""
     swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
-    if not swing or not reference or reference['mean_peak_to_peak'] <= 0.0:
+    if (with_yaw.get('fell') or without_yaw.get('fell') or not swing or not reference
+            or reference['mean_peak_to_peak'] <= 0.0):
         return None
     return swing['mean_peak_to_peak'] / reference['mean_peak_to_peak']
 

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from iceskate_sim.disk import reserve
+from iceskate_sim.disk import Room, write_atomically
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot, load_robot
@@ -54,11 +54,12 @@ def scene_metadata(scene: Scene) -> dict[str, str]:
 
 #: The lock file of an output directory, held by the one run that writes into it.
 LOCK_NAME = '.run.lock'
-#: Room [bytes] a run keeps in its output directory from its start (``RESERVE_NAME``, given
-#: back just before they are written) for metrics.json and events.json: a full disk ends the
-#: run with its metrics written (a 15 s run's are 50 kB, a 600 s run's about 2 MB).
-RESERVE_BYTES = 4 << 20
-RESERVE_NAME = '.reserved'
+#: Disk [bytes] a run keeps in its output directory from its start for metrics.json (its
+#: 600 s run's is 0.2 MB) and for events.json (grown with the events: a 15 s skate run's 245
+#: take 48 kB), written into it at the end: a full disk ends the run with both written.
+METRICS_ROOM = 1 << 20
+EVENTS_ROOM = 64 << 10
+EVENT_ROOM = 512  # per event
 #: How a launcher hands its lock on the output directory to the simulator process it starts:
 #: the number of the inherited descriptor.
 LOCK_FD_ENV = 'ICESKATE_OUTPUT_LOCK_FD'
@@ -179,21 +180,26 @@ class Session:
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         if out is not None:
             prepare_output(out, bag)
+        #: the disk kept for metrics.json and events.json (none without ``out``)
+        self._rooms: dict[str, Room] = {}
         try:
             if out is not None:
                 try:
-                    reserve(out / RESERVE_NAME, RESERVE_BYTES)
+                    for name, size in (('metrics.json', METRICS_ROOM),
+                                       ('events.json', EVENTS_ROOM)):
+                        self._rooms[name] = Room(out / f'.{name}.room', size)
                 except OSError as exc:
-                    raise SimulationError(f'output directory {out} has not even '
-                                          f'{RESERVE_BYTES >> 20} MiB free for the metrics: '
-                                          f'{_reason(exc)}', end='io_error') from None
+                    raise SimulationError(f'output directory {out} has no room for the '
+                                          f'metrics ({(METRICS_ROOM + EVENTS_ROOM) >> 10} '
+                                          f'KiB): {_reason(exc)}', end='io_error') from None
             self.recorder = (BagRecorder(bag, scene_metadata(scene),
                                          self.robot.urdf_path.read_text(encoding='utf-8'),
                                          background=True, tf_every=scene.tf_every)
                              if bag is not None else None)
         except BaseException:
+            for room in self._rooms.values():
+                room.release()
             if out is not None:
-                (out / RESERVE_NAME).unlink(missing_ok=True)
                 release_output(out)
             raise
         self.metrics: dict[str, Any] | None = None
@@ -306,6 +312,12 @@ class Session:
         self.trajectory.extend(columns, dict(zip(block['sources'], block['efforts'],
                                                  strict=True)))
         self.latest = columns
+        if 'events.json' in self._rooms:
+            try:
+                self._rooms['events.json'].grow(EVENTS_ROOM + EVENT_ROOM * len(self.sim.events))
+            except OSError as exc:
+                raise SimulationError(f'no room left on disk for {self.out / "events.json"}: '
+                                      f'{_reason(exc)}', end='io_error') from None
         if self.recorder is not None and len(block['t']):
             self.recorder.write_block(block, Events.of(block['last_event'], self.sim.events))
 
@@ -343,27 +355,28 @@ class Session:
             return self.metrics
         if error is not None and self.error is None:
             self.error = error
-        bag_error: SimulationError | None = None
+        output_error: SimulationError | None = None  # an output that could not be written
         try:
             self.flush()
         except SimulationError as exc:  # the bag failed: the other outputs are still written
-            bag_error = exc
+            output_error = exc
         closed: SimulationError | None = None
         try:
             if self.out is not None:
                 saved = self._save_trajectory()
-                bag_error = bag_error or saved
-                (self.out / RESERVE_NAME).unlink(missing_ok=True)  # the metrics' room
-            self._write_metrics(extra, bag_error)
+                output_error = output_error or saved
+            self._write_metrics(extra, output_error)
             if written is not None:
                 written()
         finally:  # the bag is closed whatever happens before
+            for room in self._rooms.values():
+                room.release()
             if self.recorder is not None:
                 try:
                     self.recorder.close()
                 except SimulationError as exc:
                     closed = exc
-        if closed is not None and bag_error is None and self.error is None:
+        if closed is not None and output_error is None and self.error is None:
             self._write_metrics(extra, closed)
             if written is not None:
                 written()
@@ -377,27 +390,47 @@ class Session:
         path = self.out / 'trajectory.npz'
         try:
             self.trajectory.save(path)
-        except OSError as exc:
+        except (OSError, SimulationError) as exc:  # SimulationError: its spilled columns
             path.unlink(missing_ok=True)
-            return SimulationError(f'cannot write {path}: {_reason(exc)}', end='io_error')
+            reason = _reason(exc) if isinstance(exc, OSError) else str(exc)
+            return SimulationError(f'cannot write {path}: {reason}', end='io_error')
         return None
 
     def _write_metrics(self, extra: Mapping[str, Any] | None,
-                       bag_error: SimulationError | None) -> None:
-        """Compute the metrics (a failed bag is the run's error unless it has one) and write
-        metrics.json and events.json."""
-        if bag_error is not None and self.error is None:
-            self.error = bag_error
+                       output_error: SimulationError | None) -> None:
+        """Write events.json, compute the metrics (an output that could not be written is the
+        run's error unless it has one) and write metrics.json, each whole or not at all.
+
+        :raises SimulationError: when metrics.json cannot be written.
+        """
+        if output_error is not None and self.error is None:
+            self.error = output_error
+        if self.out is not None:
+            try:
+                self._write_output('events.json', json.dumps(
+                    [asdict(e) for e in self.sim.events], indent=1, default=float))
+            except SimulationError as exc:
+                self.error = self.error or exc
         start = self._wall_start if self._wall_start is not None else time.perf_counter()
         self.metrics = compute_metrics(self.scene, self.sim, self.trajectory,
                                        time.perf_counter() - start, self.error)
         self.metrics.update(extra or {})
         if self.out is not None:
-            for name, text in (('metrics.json', json.dumps(self.metrics, indent=2)),
-                               ('events.json', json.dumps([asdict(e) for e in self.sim.events],
-                                                          indent=1, default=float))):
-                try:
-                    (self.out / name).write_text(text + '\n')
-                except OSError as exc:
-                    raise SimulationError(f'cannot write {self.out / name}: {_reason(exc)}',
-                                          end='io_error') from None
+            self._write_output('metrics.json', json.dumps(self.metrics, indent=2))
+
+    def _write_output(self, name: str, text: str) -> None:
+        """Write ``text`` as the file ``name`` of the output directory, whole or not at all,
+        into the room kept for it (the first time).
+
+        :raises SimulationError: (``io_error``) when it cannot be written.
+        """
+        data, path = (text + '\n').encode(), self.out / name
+        try:
+            room = self._rooms.pop(name, None)
+            if room is not None:
+                room.write(path, data)
+            else:
+                write_atomically(path, data)
+        except OSError as exc:
+            raise SimulationError(f'cannot write {path}: {_reason(exc)}',
+                                  end='io_error') from None
