@@ -185,6 +185,24 @@ def test_a_trajectory_without_samples_is_refused(stand_run, tmp_path):
         write_summary(tmp_path)
 
 
+def test_summary_draws_the_picture_of_a_run_that_has_none(stand_run, tmp_path, capsys):
+    """``summary DIR`` (for the nodes run by hand, which draw none): the picture, its path on
+    stdout; a damaged or missing run refused in one line."""
+    from iceskate_analysis.summary import main
+    for name in ('metrics.json', 'trajectory.npz'):
+        (tmp_path / name).write_bytes((stand_run[0] / name).read_bytes())
+    assert main([str(tmp_path)]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / 'summary.png')
+    _assert_picture(tmp_path / 'summary.png')
+    (tmp_path / 'trajectory.npz').write_bytes(b'PK\x03\x04 cut short')
+    assert main([str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f'summary: error: cannot read the run in {tmp_path}') and (
+        err.count('\n') == 1 and 'Traceback' not in err)
+    assert main([str(tmp_path / 'missing')]) == 1
+    assert 'trajectory.npz, metrics.json missing' in capsys.readouterr().err
+
+
 def test_decimation_keeps_every_extreme_and_the_time_order():
     t = np.arange(15_000) * 1e-3
     y = np.sin(2.0 * np.pi * 2.7 * t)

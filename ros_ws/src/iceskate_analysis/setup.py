@@ -17,5 +17,6 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': ['coupling_analysis = iceskate_analysis.coupling_cli:main',
-                                      'replay = iceskate_analysis.replay:main']},
+                                      'replay = iceskate_analysis.replay:main',
+                                      'summary = iceskate_analysis.summary:main']},
 )

@@ -1,13 +1,16 @@
 """The picture of a run, ``summary.png``, from its trajectory and metrics (no bag, no ROS): head
 height and pitch against their targets, gait mode, shoulder angles and forward speed over time,
 the support exchanges marked. Long series are decimated (min/max per bucket) for drawing.
+``summary DIR`` draws it for a run that has none (the nodes run by hand write none).
 """
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Iterable, Mapping
 import json
 import pathlib
+import sys
 import textwrap
 from typing import TYPE_CHECKING, Any
 import zipfile
@@ -17,6 +20,7 @@ import numpy as np
 from iceskate_analysis.plots import clip_to_bulk
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
+from iceskate_sim.shutdown import say
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -61,13 +65,41 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
                if not (out_dir / name).is_file()]
     if missing:
         raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
-    metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
     trajectory = out_dir / 'trajectory.npz'
-    with np.load(trajectory) as npz:
-        a = {key: npz[key] for key in _COLUMNS if key in npz.files and key != 'q'}
-        if 'q' in npz.files:
-            a['shoulders'] = _shoulders(trajectory)
+    try:
+        metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
+        with np.load(trajectory) as npz:
+            a = {key: npz[key] for key in _COLUMNS if key in npz.files and key != 'q'}
+            if 'q' in npz.files:
+                a['shoulders'] = _shoulders(trajectory)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # damaged files
+        raise SimulationError(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
+                              f'{exc}') from None
     return _checked_draw(a, metrics, out_dir / SUMMARY_NAME, str(trajectory))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point ``summary DIR``: exit 0 (the picture's path on stdout), or 1 with
+    one line on stderr saying why."""
+    parser = argparse.ArgumentParser(
+        prog='summary', description="Draw DIR/summary.png from a finished run's "
+        'trajectory.npz and metrics.json (e.g. of the nodes run by hand, which draw none).')
+    parser.add_argument('dir', type=pathlib.Path, help='output folder of a run')
+    args = parser.parse_args(argv)
+    try:
+        path = write_summary(args.dir)
+    except SimulationError as exc:
+        say(f'summary: error: {exc}')
+        return 1
+    except OSError as exc:  # the picture cannot be written
+        say(f'summary: error: cannot write {args.dir / SUMMARY_NAME}: {exc.strerror or exc}')
+        return 1
+    print(path, flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
 
 
 def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pathlib.Path,
