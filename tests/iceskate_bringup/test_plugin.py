@@ -48,7 +48,8 @@ def _with_plugin(name: str, duration: float) -> dict:
 
 
 def _run(raw: dict, out: Path) -> tuple[dict, SimulationError | None]:
-    return simulate(parse_scene(raw), out, progress=False, picture=False)
+    outcome = simulate(parse_scene(raw), out, progress=False, picture=False)
+    return outcome.metrics, outcome.error
 
 
 def _compare(a: Path, b: Path, tol: float) -> None:

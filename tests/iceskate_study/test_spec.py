@@ -202,6 +202,7 @@ def test_metric_names_are_the_entries_of_metrics_json():
     scene = parse_scene({**load_scene('stand').raw, 'duration': 0.05, 'record': {'bag': False},
                          'disturbances': [{'start': 0.0, 'duration': 0.01, 'frame': 'chest',
                                            'force': [0.0, 1.0, 0.0]}]})
-    metrics, error = simulate(scene, None, progress=False)
+    outcome = simulate(scene, None, progress=False)
+    metrics, error = outcome.metrics, outcome.error
     assert error is None
     assert set(metrics) == set(METRIC_NAMES)

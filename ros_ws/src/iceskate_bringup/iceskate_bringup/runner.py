@@ -29,6 +29,7 @@ from iceskate_sim.yaml_io import yaml_value
 if TYPE_CHECKING:
     from iceskate_sim.model.robot import Robot
     from iceskate_sim.run.scene import Scene
+    from iceskate_sim.run.session import Session
     from iceskate_viewer.live import LiveView
 
 #: Control periods run per call of ``Session.run_periods`` at the most (one native call, ~20 ms
@@ -40,6 +41,17 @@ BLOCK_PERIODS = 1000
 BLOCK_SECONDS = 0.2
 #: Periods of the first block (then at most ten times the last, as their cost allows).
 FIRST_BLOCK = 10
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How ``simulate`` ended: the ``metrics``; the ``error`` of the physics or of a controller
+    that ended the run (None: it completed or fell); the ``session``, with the samples
+    (``session.trajectory``) and events (``session.sim.events``) in memory."""
+
+    metrics: dict[str, Any]
+    error: SimulationError | None
+    session: Session
 
 
 @dataclass(frozen=True)
@@ -63,18 +75,18 @@ def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
-    metrics, error = simulate(scene, out, progress, stop, picture, watch)
-    if error is not None:
-        raise error
-    return metrics
+    outcome = simulate(scene, out, progress, stop, picture, watch)
+    if outcome.error is not None:
+        raise outcome.error
+    return outcome.metrics
 
 
 def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
              stop: StopRequest | None = None, picture: bool = True, watch: Watch | None = None
-             ) -> tuple[dict[str, Any], SimulationError | None]:
+             ) -> Outcome:
     """``run``, but a failure of the physics, or of a controller written in Python
     (``iceskate_native.ControllerError``: it raised or answered a bad command), is returned
-    beside the metrics (which say where the run stopped) instead of raised.
+    in the ``Outcome`` beside the metrics (which say where the run stopped) instead of raised.
 
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     """
@@ -150,7 +162,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             metrics = session.finish(ended, written=summary)
     if isinstance(ended, RunInterrupted):
         raise ended
-    return metrics, ended if controller_failed else session.error
+    return Outcome(metrics, ended if controller_failed else session.error, session)
 
 
 def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Path,
@@ -169,8 +181,9 @@ def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Pa
         return metrics
     inputs = {**scene.inputs, 'gait_manager': {
         **scene.inputs['gait_manager'], 'enabled': [s for s in enabled if s != 'yaw']}}
-    without, error = simulate(replace(scene, inputs=inputs), None, progress=False, stop=stop,
-                              picture=False)
+    outcome = simulate(replace(scene, inputs=inputs), None, progress=False, stop=stop,
+                       picture=False)
+    without, error = outcome.metrics, outcome.error
     ratio = arm_swing_ratio(metrics, without) if error is None else None
     if ratio is None:
         say('run_scene: no arm-swing ratio: '

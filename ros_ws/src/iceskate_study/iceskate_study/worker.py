@@ -89,7 +89,8 @@ def run_task(task: Task) -> dict[str, Any] | None:
         if out is not None:
             shutil.rmtree(out, ignore_errors=True)  # an earlier, interrupted attempt
             row['run_dir'] = str(out)
-        metrics, error = simulate(scene, out, progress=False)
+        outcome = simulate(scene, out, progress=False)
+        metrics, error = outcome.metrics, outcome.error
     except RunInterrupted:
         return None
     except SimulationError as exc:  # it could not start (e.g. its initial state)
