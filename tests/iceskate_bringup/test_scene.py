@@ -134,3 +134,21 @@ def test_a_base_chain_merges_in_order_and_a_loop_is_refused(tmp_path):
     (tmp_path / 'd.yaml').write_text('base: nowhere\nscene: d\n')
     with pytest.raises(SimulationError, match="unknown scene 'nowhere'"):
         scene_raw(tmp_path / 'd.yaml')
+
+
+def test_every_key_of_a_shipped_scene_has_its_rules_in_a_schema():
+    """``key_rules``: the description and unit of a scene key, from the class declaring it."""
+    from iceskate_bringup.scene import key_rules
+
+    def leaves(node: dict, prefix: str = '') -> list[str]:
+        return [key for name, value in node.items()
+                for key in (leaves(value, f'{prefix}{name}.') if isinstance(value, dict)
+                            else [f'{prefix}{name}'])]
+    keys = [k for k in leaves(_raw('skate'))
+            if not k.startswith(('disturbances', 'initial.q.', 'initial.v.'))]
+    assert len(keys) > 40
+    missing = [k for k in keys if key_rules(k) is None]
+    assert not missing, missing
+    assert key_rules('record.tf_rate').unit == '1/s'
+    assert key_rules('inputs.visual_lifting.kp').unit == 'N/m, N/m, N m/rad'
+    assert key_rules('inputs.knees.gain') is None and key_rules('floor.nothing') is None

@@ -82,3 +82,12 @@ def test_a_vector_valued_axis_is_drawn_one_column_per_vector(tmp_path, grid):
     assert [p.name for p in written] == ['steps.png']
     assert np.std(matplotlib.image.imread(written[0])[..., :3]) > 0.05
     assert _ordered([[40, 2], None, [30, 2], [40, 2], [30, 1]]) == [[30, 1], [30, 2], [40, 2]]
+
+
+def test_map_axes_are_labelled_with_unit_and_meaning_from_the_schema():
+    from iceskate_study.plot import axis_label
+    assert axis_label('inputs.gait_manager.yaw.amplitude') == (
+        'inputs.gait_manager.yaw.amplitude [N m]\nA of eq. (10)')
+    assert axis_label('floor.mu').startswith('floor.mu [-]\nCoulomb coefficient')
+    assert axis_label('duration') == 'duration [s]\nrun length'
+    assert axis_label('disturbances[0].force[1]') == 'disturbances[0].force[1]'  # no schema

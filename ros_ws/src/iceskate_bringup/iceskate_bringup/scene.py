@@ -6,7 +6,7 @@ See docs/architecture.md, 'Packages, bottom up'.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import is_dataclass, replace
 import pathlib
 from typing import Any
 
@@ -20,7 +20,8 @@ from iceskate_bringup.plugin import (
     plugin_sources,
 )
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.scene import Scene
+from iceskate_sim.parameters import Rules, field_types, rules_of
+from iceskate_sim.run.scene import Scene, SceneSettings
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
 from visual_lifting.errors import VisualLiftingError
@@ -114,6 +115,24 @@ def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
             if enabled:
                 out[node] = tuple(s for s in SOURCES if s in enabled)
     return out
+
+
+def key_rules(key: str) -> Rules | None:
+    """The rules (description, unit, range) of scene key ``key`` (dotted, e.g. 'floor.mu' or
+    'inputs.gait_manager.yaw.amplitude'), from the schema that declares it; None for a key no
+    schema declares (a list entry, a plug-in's parameter)."""
+    controllers = {'visual_lifting': VisualLiftingParameters,
+                   'gait_manager': GaitManagerParameters}
+    head, _, rest = key.partition('.')
+    node, _, field = rest.partition('.')
+    cls, names = ((controllers[node], field) if head == 'inputs' and node in controllers
+                  else (SceneSettings, key))
+    *blocks, last = names.split('.')
+    for name in blocks:
+        cls = field_types(cls).get(name)
+        if not is_dataclass(cls):
+            return None
+    return rules_of(cls).get(last)
 
 
 def load_scene(name_or_path: str | pathlib.Path,

@@ -38,7 +38,18 @@ _MAX_ANNOTATED = 400  # cells: values are written in the cells of grids up to th
 
 
 def _label(value: Any) -> str:
-    return f'{value:.4g}' if isinstance(value, float) else str(value)
+    return f'{value:.3g}' if isinstance(value, float) else str(value)
+
+
+def axis_label(key: str) -> str:
+    """A map's axis label: the scene key, its unit and, below, its description, from the
+    schema that declares it (the key alone where none does)."""
+    from iceskate_bringup.scene import key_rules
+    rules = key_rules(key)
+    if rules is None:
+        return key
+    text = rules.description if len(rules.description) <= 60 else rules.description[:57] + '...'
+    return f'{key} [{rules.unit or "-"}]\n{text}'
 
 
 def _numbers(values: list[Any]) -> np.ndarray:
@@ -117,8 +128,8 @@ def draw_maps(table_path: pathlib.Path, x: str | None, y: str | None,
             ax.set_xscale('log' if axes[x].get('log') else 'linear')
             ax.set_yscale('log' if axes[y].get('log') else 'linear')
         fig.colorbar(image, ax=ax, label=LABELS.get(metric, metric))
-        ax.set_xlabel(x)
-        ax.set_ylabel(y)
+        ax.set_xlabel(axis_label(x), fontsize=9)
+        ax.set_ylabel(axis_label(y), fontsize=9)
         note = f' (mean of {per_cell} runs per cell)' if per_cell > 1 else ''
         ax.set_title(f'{meta.get("study", "sweep")}: {metric}{note}', fontsize=10)
         path = out_dir / (re.sub(r'[^A-Za-z0-9_.-]', '_', metric) + '.png')
