@@ -28,8 +28,8 @@ def test_paper_figures_are_written_for_the_right_cases(compared):
     assert comparison['with_yaw'] == 'synthetic_yaw'
     assert comparison['assigned_by'] == 'yaw source'
     for name in ('fig5_shoulders.png', 'fig6_shoulders.png', 'fig7_terms_q11.png',
-                 'fig8_terms_q11.png', 'fig7_terms_q11_averaged.png',
-                 'fig8_terms_q11_averaged.png', 'compare_shoulders.png'):
+                 'fig8_terms_q11.png', 'fig7_terms_q11_instantaneous.png',
+                 'fig8_terms_q11_instantaneous.png', 'compare_shoulders.png'):
         assert (compared / name).stat().st_size > 10_000, name
     assert comparison['arm_peak_to_peak_ratio_with_over_without']['q11'] > 1.0
     for joint in ('q11', 'q14'):  # the paper's reading, in numbers, at both shoulders
@@ -48,7 +48,7 @@ def test_every_case_gets_figures_csv_and_animation(compared):
     for label in ('synthetic_yaw', 'synthetic_no_yaw'):
         files = summary['files'][label]
         assert set(files) == {f'{label}_shoulders.png', f'{label}_terms_q11.png',
-                              f'{label}_terms_q11_averaged.png',
+                              f'{label}_terms_q11_instantaneous.png',
                               f'{label}_coupling_q11.png', f'{label}_series.csv',
                               f'{label}_animation.gif', f'{label}_keyframes.png'}
         for name in files:

@@ -35,6 +35,12 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
+def legend_above(ax: Axes, ncol: int = 4) -> None:
+    """The legend of ``ax`` in a row above it, right-aligned, off the data."""
+    ax.legend(loc='lower right', bbox_to_anchor=(1.0, 0.99), ncol=ncol, fontsize=7.5,
+              frameon=False, borderaxespad=0.0, handlelength=2.2)
+
+
 def clip_to_bulk(ax: Axes, series: Sequence[np.ndarray], percentile: float = 2.0,
                  margin: float = 0.5, reach: float = 0.5, note: str = '') -> None:
     """Clip the y range of ``ax`` to the bulk of the data when a few samples (a fall, a
@@ -78,7 +84,7 @@ def _shoulder_lines(ax: Axes, case: CaseResult, lw: float, label: str = '') -> N
                 label=f'q{joint} {side}{label}')
     _mark_steps(ax, case)
     ax.grid(True, alpha=0.3)
-    ax.legend(loc='upper right', fontsize=8)
+    legend_above(ax)
 
 
 def plot_shoulders(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
@@ -143,7 +149,7 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     clip_to_bulk(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia],
                  note='; full values in the CSV')
     _mark_steps(ax, case)
-    ax.legend(loc='upper right', fontsize=7, ncol=3)
+    legend_above(ax, ncol=6)
 
     ax = axes[1]
     ax.plot(t, d.m_total - d.gravity, color='tab:purple', lw=1.3, label=f'M_total − g_{i}')
@@ -154,7 +160,7 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
                  note='; full values in the CSV')
     ax.set_ylabel('torque [N m]')
     _mark_steps(ax, case, legend=False)
-    ax.legend(loc='upper right', fontsize=7, ncol=3)
+    legend_above(ax, ncol=6)
 
     ax = axes[2]
     rel = np.where(exact.valid, np.maximum(exact.residual_rel, 1e-18), np.nan)
@@ -164,7 +170,7 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     ax.set_ylabel('relative residual')
     ax.set_xlabel('time [s]')
     _mark_steps(ax, case, legend=False)
-    ax.legend(loc='upper right', fontsize=7)
+    legend_above(ax)
     for ax in axes:
         ax.grid(True, alpha=0.3)
     return _save(fig, path)
@@ -189,5 +195,5 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
     ax.set_xlabel('time [s]')
     ax.set_ylabel('torque [N m]')
     ax.grid(True, alpha=0.3)
-    ax.legend(loc='upper right', fontsize=7, ncol=2)
+    legend_above(ax, ncol=4)
     return _save(fig, path)

@@ -88,9 +88,8 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
     for case in cases:
         written = [
             plots.plot_shoulders(case, out / f'{case.label}_shoulders.png'),
-            plots.plot_terms(case, out / f'{case.label}_terms_{name}.png'),
-            plots.plot_terms(case, out / f'{case.label}_terms_{name}_averaged.png',
-                             averaged=True),
+            plots.plot_terms(case, out / f'{case.label}_terms_{name}.png', averaged=True),
+            plots.plot_terms(case, out / f'{case.label}_terms_{name}_instantaneous.png'),
             plots.plot_coupling(case, out / f'{case.label}_coupling_{name}.png'),
             write_csv(out / f'{case.label}_series.csv', case_columns(case)),
         ]
@@ -113,11 +112,12 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
                                       f'Fig. {n}: shoulder angles {which} torso-yaw input τ8 '
                                       f'({case.label})') for case, which, n in pairs]
         paper += [plots.plot_terms(case, out / f'fig{n + 2}_terms_{name}.png',
-                                   f'Fig. {n + 2}: terms of eq. (11) at {name} {which} τ8 '
-                                   f'({case.label})') for case, which, n in pairs]
-        paper += [plots.plot_terms(case, out / f'fig{n + 2}_terms_{name}_averaged.png',
-                                   f'Fig. {n + 2}, q̈ averaged over each interval ({case.label})',
-                                   averaged=True) for case, _, n in pairs]
+                                   f'Fig. {n + 2}: terms of eq. (11) at {name} {which} τ8, q̈ '
+                                   f'averaged over each interval ({case.label})', averaged=True)
+                  for case, which, n in pairs]
+        paper += [plots.plot_terms(case, out / f'fig{n + 2}_terms_{name}_instantaneous.png',
+                                   f'Fig. {n + 2}, the recorded (instantaneous) q̈ '
+                                   f'({case.label})') for case, _, n in pairs]
         paper.append(plots.plot_compare_shoulders([without, with_yaw],
                                                   out / 'compare_shoulders.png'))
         files['comparison'] = [p.name for p in paper]

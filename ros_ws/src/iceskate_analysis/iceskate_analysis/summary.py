@@ -17,7 +17,7 @@ import zipfile
 
 import numpy as np
 
-from iceskate_analysis.plots import clip_to_bulk
+from iceskate_analysis.plots import clip_to_bulk, legend_above
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 from iceskate_sim.shutdown import say
@@ -193,8 +193,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
             ax.grid(True, axis='y', color='0.9', lw=0.6)
         ax.tick_params(labelsize=8)
         ax.yaxis.label.set_size(9)
-        ax.legend(loc='lower right', bbox_to_anchor=(1.0, 0.99), ncol=4, fontsize=7.5,
-                  frameon=False, borderaxespad=0.0, handlelength=2.2)
+        legend_above(ax)
     axes[-1].set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1e-3)
     fig.align_ylabels(axes)
     fig.savefig(path, dpi=_DPI)
