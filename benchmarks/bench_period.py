@@ -114,7 +114,8 @@ def measure_run(scene: Scene, directory: pathlib.Path, picture: bool) -> dict[st
         stack.enter_context(timed(Session, '_record_block', spent, RUN_PARTS[1]))
         stack.enter_context(timed(Session, 'finish', spent, PARTS[-1]))
         cpu_start, wall_start = time.process_time(), clock()
-        metrics, error = simulate(scene, directory, progress=False, picture=picture)
+        outcome = simulate(scene, directory, progress=False, picture=picture)
+        metrics, error = outcome.metrics, outcome.error
         total, cpu = clock() - wall_start, time.process_time() - cpu_start
     if error is not None or metrics['failure']:
         raise SystemExit(f'the run stopped at t={metrics["sim_time_s"]:.3f} s '

@@ -38,7 +38,8 @@ def main() -> None:
         for k in range(args.rounds):
             for name, watch in (('no view', None), ('view', Watch(pace=0.0, port=0))):
                 out = pathlib.Path(tmp) / f'{name.replace(" ", "_")}_{k}'
-                metrics, error = simulate(scene, out, progress=False, watch=watch)
+                outcome = simulate(scene, out, progress=False, watch=watch)
+                metrics, error = outcome.metrics, outcome.error
                 assert error is None, error
                 factors[name].append(metrics['real_time_factor'])
     print(machine_info())

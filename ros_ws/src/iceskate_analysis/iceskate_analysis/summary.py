@@ -32,8 +32,8 @@ MAX_POINTS = 3000  # per drawn series (decimated above)
 _DPI = 100
 _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # first mode: swing
 #: The swing foot's states of docs/model.md §3.2, in words (the mode panel's key).
-_SWING_WORDS = ('A in the air', 'Hs heel sliding', 'Hp heel pinned', 'Fs sole flat, sliding',
-                'Fp sole flat, stuck')
+_SWING_KEY = ('swing foot (right): A air · Hs/Hp heel sliding/pinned · '
+              'Fs/Fp sole flat sliding/stuck')
 _COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
 #: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
 _DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
@@ -279,5 +279,4 @@ def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
         ax.text(1.006, m + 1.5, code, transform=ax.get_yaxis_transform(), fontsize=7.5,
                 color='0.35', va='center', ha='left')
     ax.set_ylabel('gait mode [no. 1-20]\n(labelled: visited)')
-    ax.set_title('swing foot (right): ' + ' · '.join(_SWING_WORDS), loc='left', fontsize=7.5,
-                 color='0.35')
+    ax.set_title(_SWING_KEY, loc='left', fontsize=7, color='0.35')
