@@ -16,7 +16,6 @@ import math
 import os
 import pathlib
 import sys
-import threading
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -99,16 +98,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         bag = out / 'bag' if out is not None and scene.record_bag else None
         session = Session(scene, out, bag)  # forks the bag writer (before any thread starts)
         stack = ControlStack(scene, session.robot, session.observation())
-        # The summary's plotting library loads while the run goes on: after the fork (a child
-        # forked while a thread imports waits forever for that import's lock) and joined before
-        # this returns (no other fork of this process meets it). Not beside a controller
-        # written in Python: the import would hold the GIL that controller waits for.
         picture = picture and out is not None
-        plotting = (threading.Thread(target=_import_plotting, name='import-plotting')
-                    if picture and not stack.plugins else None)
-        if plotting is not None:
-            plotting.start()
-            signals.callback(plotting.join)
         bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
         ended: SimulationError | None = None
         controller_failed = False
@@ -211,13 +201,6 @@ def _live_view(watch: Watch | None, robot: Robot, name: str,
     closing.callback(live.close)
     say(f'run_scene: the live view is at {live.url} (pause and pace on the page)')
     return live
-
-
-def _import_plotting() -> None:
-    """Import what ``write_summary`` draws with (a third of a second; the native loop releases
-    the interpreter while it runs, so this happens meanwhile)."""
-    import matplotlib.backends.backend_agg  # noqa: F401
-    import matplotlib.figure  # noqa: F401
 
 
 def main(argv: list[str] | None = None) -> int:
