@@ -2,14 +2,14 @@
 """What the live view costs a run: ``run_scene SCENE --view --pace 0`` against the same run
 without the view, as the user sees it (metrics.json's ``real_time_factor``).
 
-Runs ``--duration`` s of a scene headless, alternately without and with the live page (unpaced,
-no browser attached: the page is drawn for the server as it would be for a client; a browser
-adds its rendering on its own process), ``--rounds`` times, and prints the median real-time
-factors and their ratio, measured in this one run. The goal: the view costs <= 10 % (ratio
->= 0.90).
+Runs ``--duration`` s of a scene headless (``--ros``: through the node graph, the page fed by
+its own node), alternately without and with the live page (unpaced, no browser attached: the
+page is drawn for the server as it would be for a client; a browser adds its rendering on its
+own process), ``--rounds`` times, and prints the median real-time factors and their ratio,
+measured in this one run. The goal: the view costs <= 10 % (ratio >= 0.90).
 
 Usage (from the repository root, environment sourced):
-    python benchmarks/bench_view.py [skate] [--duration 15] [--rounds 3]
+    python benchmarks/bench_view.py [skate] [--duration 15] [--rounds 3] [--ros]
 """
 
 from __future__ import annotations
@@ -22,8 +22,10 @@ import tempfile
 
 from bench_work_precision import machine_info
 
-from iceskate_bringup.runner import Watch, simulate
+from iceskate_bringup.graph import run_graph
+from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene
+from iceskate_bringup.watch import Watch
 
 
 def main() -> None:
@@ -31,6 +33,7 @@ def main() -> None:
     parser.add_argument('scene', nargs='?', default='skate')
     parser.add_argument('--duration', type=float, default=15.0, help='simulated seconds')
     parser.add_argument('--rounds', type=int, default=3)
+    parser.add_argument('--ros', action='store_true', help='through the ROS node graph')
     args = parser.parse_args()
     scene = replace(load_scene(args.scene), duration=args.duration)
     factors: dict[str, list[float]] = {'no view': [], 'view': []}
@@ -38,12 +41,16 @@ def main() -> None:
         for k in range(args.rounds):
             for name, watch in (('no view', None), ('view', Watch(pace=0.0, port=0))):
                 out = pathlib.Path(tmp) / f'{name.replace(" ", "_")}_{k}'
-                outcome = simulate(scene, out, progress=False, watch=watch)
-                metrics, error = outcome.metrics, outcome.error
-                assert error is None, error
+                if args.ros:
+                    metrics = run_graph(args.scene, out, duration=args.duration, watch=watch)
+                else:
+                    outcome = simulate(scene, out, progress=False, watch=watch)
+                    metrics, error = outcome.metrics, outcome.error
+                    assert error is None, error
                 factors[name].append(metrics['real_time_factor'])
     print(machine_info())
-    print(f'{args.scene}, {args.duration:g} s simulated, {args.rounds} rounds (medians):')
+    print(f'{args.scene}{" through ROS" if args.ros else ""}, {args.duration:g} s simulated, '
+          f'{args.rounds} rounds (medians):')
     for name, values in factors.items():
         print(f'  {name:8s} real-time factor {statistics.median(values):6.1f}  '
               f'({", ".join(f"{v:.1f}" for v in values)})')

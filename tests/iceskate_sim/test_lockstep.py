@@ -7,6 +7,7 @@ answers with one ControllerCommand (its sources summed, with the breakdown).
 from dataclasses import replace
 import json
 from pathlib import Path
+import time
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from iceskate_bringup.runner import run
 from iceskate_bringup.scene import load_scene, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.stamps import seconds_to_ns
-from iceskate_sim.ros.lockstep import LockstepSession
+from iceskate_sim.ros.lockstep import UNCONTROLLED_BATCH, LockstepSession
 from iceskate_sim.run.session import Session
 from oracle.commands import ControllerCommand, JointCommand, stack_commands, values_of
 from oracle.messages import observation_from_gait_state
@@ -219,3 +220,22 @@ def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):
         loop.tick()
     assert loop.phase == 'finished' and loop.session.session.metrics['failure'] is None
     assert loop.session.session.periods == 120
+
+
+def test_a_lockstep_run_keeps_its_pace():
+    """With a pace the loop steps only the periods due (0.05 s of simulated time a second:
+    about 15 periods of 1 ms in 0.3 s), however often its timer ticks."""
+    from iceskate_sim.ros.lockstep import LockstepLoop
+    scene = replace(load_scene(TINY), inputs={}, duration=1.0)
+    loop = LockstepLoop(LockstepSession(Session(scene), {}), lambda *a: None,
+                        lambda *a: None, pace=0.05)
+    assert loop.try_begin(set(), 0, 1.0)
+    end = time.monotonic() + 0.3
+    while time.monotonic() < end:
+        loop.tick()
+        time.sleep(0.002)
+    assert 10 <= loop.session.session.periods <= 17
+    loop.pace = 0.0  # none: the timer's batches, as fast as it goes
+    loop.tick()
+    assert loop.session.session.periods >= 10 + UNCONTROLLED_BATCH
+    loop.stop()

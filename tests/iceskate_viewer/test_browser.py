@@ -125,14 +125,16 @@ def test_the_replay_page_shows_two_runs_that_move_with_the_slider(browser, skate
         stop_server(server)
 
 
-def test_the_live_page_follows_the_run_and_ctrl_c_ends_it(browser, tmp_path):
+@pytest.mark.parametrize('transport', [[], ['--ros']], ids=['headless', 'ros'])
+def test_the_live_page_follows_the_run_and_ctrl_c_ends_it(browser, tmp_path, transport,
+                                                          ros_env):
     from iceskate_viewer.replay import load_run
     out = tmp_path / 'live'
     scene = os.path.join(os.path.dirname(__file__), '..', 'data', 'fast_skate.yaml')
     run = subprocess.Popen(
         [sys.executable, '-m', 'iceskate_bringup.runner', scene, '--out', str(out), '--view',
-         '--view-port', '0', '--pace', '0.5', '--duration', '60', '--quiet'],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+         '--view-port', '0', '--pace', '0.5', '--duration', '60', '--quiet', *transport],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ros_env)
     try:
         url = None
         deadline = time.monotonic() + 60

@@ -71,7 +71,7 @@ def test_free_running_mode_is_paced_to_wall_time(tmp_path, ros_domain_id):
     # the first tick's delay (up to ~0.1 s) is small against the run (3 s)
     metrics = run_graph(str(TINY), tmp_path / 'free', single_process=True,
                         domain_id=ros_domain_id, timeout=120.0, lockstep=False,
-                        realtime_factor=0.01)
+                        pace=0.01)
     assert metrics['failure'] is None
     assert metrics['sim_time_s'] == pytest.approx(N_PERIODS * 1e-3, abs=1e-9)
     assert metrics['wall_time_s'] >= 0.9 * metrics['sim_time_s'] / 0.01

@@ -23,6 +23,7 @@ import yaml
 
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
+from iceskate_bringup.watch import Watch, live_view
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.model.robot import load_robot
@@ -229,7 +230,7 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
               single_process: bool = False, domain_id: int | None = None,
               timeout: float | None = None, rt_priority: int = 0,
               stop: StopRequest | None = None, overrides: dict[str, Any] | None = None,
-              **simulator_parameters: Any) -> dict[str, Any]:
+              watch: Watch | None = None, **simulator_parameters: Any) -> dict[str, Any]:
     """Run a scene (with ``overrides``: dotted key -> value) through the ROS graph; return its
     metrics (also in ``out/metrics.json``). A signal (``stop``) is passed on to the simulator,
     which ends the run cleanly; then the controllers are stopped (docs/usage.md, "Through ROS 2").
@@ -237,6 +238,7 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
     :param timeout: wall-clock limit of the whole run [s] (None: none).
     :param rt_priority: SCHED_FIFO priority of the nodes (0: the default scheduling).
     :param stop: the caller's StopRequest (None: one is installed for the call).
+    :param watch: show the run live (the simulator keeps the page's pace and pause).
     :param simulator_parameters: extra simulator parameters (e.g. control_timeout=2.0).
     :raises RunInterrupted: after a signal (the outputs are written).
     :raises SimulationError: when the run failed (the simulator's error, or why a node had to
@@ -250,9 +252,15 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
         start_simulator(scene, load_robot())  # refuses an initial state the run cannot start from
         lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
         stack.callback(release_output, out)
+        if watch is not None:  # the live view resumes it once connected
+            simulator_parameters |= {'pace': watch.pace, 'start_paused': True}
         specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
         env = ros_environment(domain_id)
         say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
+        if (live := live_view(watch, load_robot(), scene.name, stack)) is not None:
+            from iceskate_viewer.live_node import watching
+            stack.enter_context(process_environment(env))
+            stack.enter_context(watching(live, int(env['ROS_DOMAIN_ID'])))
         why, early = '', {}
         if single_process:
             with realtime_scheduling(rt_priority):
@@ -402,20 +410,18 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str], timeout: floa
     from rclpy.signals import SignalHandlerOptions
 
     from iceskate_sim.ros.node_support import ConfigError, spin_until
-    keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE', *PROFILE_VARIABLES)
-    saved = {key: os.environ.get(key) for key in keys}
-    os.environ.update({key: env[key] for key in keys})
     context = rclpy.Context()
     nodes: list[Any] = []
     try:
-        rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']),
-                   signal_handler_options=SignalHandlerOptions.NO)  # ``stop`` has them
-        for spec in specs:
-            cls = getattr(importlib.import_module(spec.module), spec.node_class)
-            try:
-                nodes.append(cls(context=context, cli_args=spec.ros_args()))
-            except ConfigError as exc:
-                raise SimulationError(f'node {spec.node}: {exc}') from None
+        with process_environment(env):
+            rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']),
+                       signal_handler_options=SignalHandlerOptions.NO)  # ``stop`` has them
+            for spec in specs:
+                cls = getattr(importlib.import_module(spec.module), spec.node_class)
+                try:
+                    nodes.append(cls(context=context, cli_args=spec.ros_args()))
+                except ConfigError as exc:
+                    raise SimulationError(f'node {spec.node}: {exc}') from None
         executor = EventsExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
@@ -429,6 +435,18 @@ def run_single_process(specs: list[NodeSpec], env: dict[str, str], timeout: floa
         for node in nodes:
             node.destroy_node()
         context.try_shutdown()
+
+
+@contextlib.contextmanager
+def process_environment(env: dict[str, str]) -> Iterator[None]:
+    """This process's environment with the ROS log folder and the DDS settings of ``env``
+    (``ros_environment``) while the block runs: nodes created in it live by them."""
+    keys = ('ROS_LOG_DIR', 'ROS_AUTOMATIC_DISCOVERY_RANGE', *PROFILE_VARIABLES)
+    saved = {key: os.environ.get(key) for key in keys}
+    os.environ.update({key: env[key] for key in keys})
+    try:
+        yield
+    finally:
         for key, value in saved.items():
             if value is None:
                 os.environ.pop(key, None)

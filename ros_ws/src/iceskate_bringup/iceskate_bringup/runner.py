@@ -19,6 +19,8 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
+from iceskate_bringup.watch import Watch, live_view
+
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.progress import ProgressBar
@@ -26,10 +28,8 @@ from iceskate_sim.shutdown import StopRequest, say
 from iceskate_sim.yaml_io import yaml_value
 
 if TYPE_CHECKING:
-    from iceskate_sim.model.robot import Robot
     from iceskate_sim.run.scene import Scene
     from iceskate_sim.run.session import Session
-    from iceskate_viewer.live import LiveView
 
 #: Control periods run per call of ``Session.run_periods`` at the most (one native call, ~20 ms
 #: at the shipped settings): a signal is answered, and the progress shown, between two such
@@ -51,16 +51,6 @@ class Outcome:
     metrics: dict[str, Any]
     error: SimulationError | None
     session: Session
-
-
-@dataclass(frozen=True)
-class Watch:
-    """A run watched live: its page on ``host``:``port``, at ``pace`` simulated seconds per
-    wall second (0: as fast as it runs)."""
-
-    pace: float = 1.0
-    host: str = '127.0.0.1'
-    port: int = 8080
 
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
@@ -126,7 +116,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         block = FIRST_BLOCK
         live = None
         try:
-            live = _live_view(watch, session.robot, scene.name, signals)
+            live = live_view(watch, session.robot, scene.name, signals)
             while not session.done:
                 if stop.requested:
                     ended = stop.error(session.sim.time)
@@ -187,20 +177,6 @@ def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Pa
         say(f'run_scene: the arm-swing ratio is not in {out / "metrics.json"}: '
             f'{exc.strerror or exc}')
     return metrics
-
-
-def _live_view(watch: Watch | None, robot: Robot, name: str,
-               closing: contextlib.ExitStack) -> LiveView | None:
-    """The live page of ``watch`` showing run ``name`` (None: not watched), closed with
-    ``closing``; its address is printed."""
-    if watch is None:
-        return None
-    from iceskate_viewer.live import LiveView
-    from iceskate_viewer.pose import BodyPose
-    live = LiveView(BodyPose(robot), name, watch.host, watch.port, watch.pace)
-    closing.callback(live.close)
-    say(f'run_scene: the live view is at {live.url} (pause and pace on the page)')
-    return live
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -267,7 +243,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             from iceskate_bringup.graph import run_graph
             metrics = run_graph(args.scene, args.out, duration=args.duration,
                                 single_process=args.single_process,
-                                rt_priority=args.rt_priority, stop=stop, overrides=overrides)
+                                rt_priority=args.rt_priority, stop=stop, overrides=overrides,
+                                watch=watch)
         else:
             metrics = run(scene, args.out, progress=not args.quiet, stop=stop, watch=watch)
         if args.arm_swing_ratio:
@@ -298,9 +275,6 @@ def _watch(args: argparse.Namespace) -> Watch | None:
         if given:
             raise SimulationError(f'--{given[0].replace("_", "-")} needs --view')
         return None
-    if args.ros:
-        raise SimulationError('--view watches a headless run; a --ros run is watched '
-                              'afterwards with `view DIR`')
     from iceskate_viewer.page import check_host
     check_host(args.view_host or '127.0.0.1')  # refused before anything starts
     pace = 1.0 if args.pace is None else args.pace

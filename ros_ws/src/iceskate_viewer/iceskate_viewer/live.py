@@ -1,18 +1,21 @@
-"""The live view of a running simulation (``run_scene SCENE --view``).
+"""The live view of a running simulation (``run_scene SCENE --view``, headless or ``--ros``).
 
 The loop ``offer``s frames and never waits for the page: a frame goes into a queue of one,
 replacing one not yet drawn, and a display thread draws the newest at ``DISPLAY_HZ`` of wall
-time at the most. ``keep_pace`` is the loop's only wait: it holds the simulation at ``pace``
-times real time (0: as fast as it runs) and while the page's pause is on.
+time at the most. The page's pause and pace hold a headless loop in ``keep_pace`` (its only
+wait: ``pace`` times real time, 0: as fast as it runs); a ROS run's simulator keeps them itself,
+told by ``on_control``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import queue
 import sys
 import threading
 import time
 
+from iceskate_sim.run.pace import PaceClock
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_viewer.page import RunPage, serve, stop_server, url_of
 from iceskate_viewer.pose import BodyPose, ViewFrame
@@ -27,6 +30,8 @@ class LiveView:
     """A page on ``host``:``port`` showing the run ``name`` as it goes.
 
     :param pace: simulated seconds per wall second (0: no pacing); also a control on the page.
+
+    ``on_control(paused, pace)``, when set, is told every change of the page's controls.
     """
 
     def __init__(self, body: BodyPose, name: str, host: str, port: int, pace: float) -> None:
@@ -36,11 +41,12 @@ class LiveView:
         self._pause = gui.add_checkbox('Pause', False)
         self._pace = gui.add_number('Pace (x real time, 0: fastest)', float(pace), min=0.0,
                                     max=100.0, step=0.1)
-        self._pause.on_update(lambda _: self._restart_clock())
-        self._pace.on_update(lambda _: self._restart_clock())
+        self._pause.on_update(lambda _: self._controls_changed())
+        self._pace.on_update(lambda _: self._controls_changed())
+        self.on_control: Callable[[bool, float], None] | None = None
         self._frames: queue.Queue[ViewFrame] = queue.Queue(maxsize=1)
         self.dropped = 0  # frames replaced before they were drawn
-        self._clock: tuple[float, float] | None = None  # origin of the pace: (wall, simulated) [s]
+        self._clock = PaceClock(pace)
         self._closed = threading.Event()
         self._thread = threading.Thread(target=self._display, name='live-view', daemon=True)
         self._thread.start()
@@ -53,7 +59,12 @@ class LiveView:
     @property
     def pace(self) -> float:
         """Simulated seconds per wall second the run keeps to (0: none)."""
-        return max(0.0, float(self._pace.value))
+        return self._clock.pace
+
+    @property
+    def paused(self) -> bool:
+        """The page's pause is on."""
+        return bool(self._pause.value)
 
     def offer(self, frame: ViewFrame) -> None:
         """Hand ``frame`` to the page without waiting (an undrawn older frame is dropped)."""
@@ -83,19 +94,13 @@ class LiveView:
     def keep_pace(self, t: float, stop: StopRequest) -> None:
         """Wait while the page is paused, then until simulated time ``t`` [s] is due at the
         pace; returns at once on a stop request."""
-        while self._pause.value and not stop.requested and self._thread.is_alive():
+        while self.paused and not stop.requested and self._thread.is_alive():
             time.sleep(WAIT_SLICE)  # (a page that stopped drawing holds nothing)
-        pace = self.pace
-        if pace <= 0.0:
-            return
-        if self._clock is None:
-            self._clock = (time.perf_counter(), t)
-        wall, simulated = self._clock
-        while not stop.requested and not self._pause.value:
-            late = wall + (t - simulated) / pace - time.perf_counter()
-            if late <= 0.0 or self._clock != (wall, simulated):
+        while not stop.requested and not self.paused:
+            wait = self._clock.wait(t)  # (a new pace counts from its next look)
+            if wait <= 0.0:
                 return
-            time.sleep(min(late, WAIT_SLICE))
+            time.sleep(min(wait, WAIT_SLICE))
 
     def close(self) -> None:
         """Stop the display thread and the server."""
@@ -103,8 +108,11 @@ class LiveView:
         self._thread.join(timeout=5.0)
         stop_server(self.server)
 
-    def _restart_clock(self) -> None:
-        self._clock = None
+    def _controls_changed(self) -> None:
+        """The page's pause or pace changed: the pace counts anew (no catching up)."""
+        self._clock.pace = max(0.0, float(self._pace.value))
+        if self.on_control is not None:
+            self.on_control(self.paused, self.pace)
 
     def _display(self) -> None:
         period = 1.0 / DISPLAY_HZ

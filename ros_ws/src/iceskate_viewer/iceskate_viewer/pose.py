@@ -14,10 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_sim.model.robot import PIVOT_Y, PIVOTS, Q1, SIDES, Y0, Robot, anatomical_map
-
-#: GaitState's pivot code of a trajectory (0: flat sole, 1: toe, 2: heel) -> the pivot edge;
-#: on a flat sole q1 is locked and both edges give the same pose.
-PIVOT_OF_CODE = ('toe', 'toe', 'heel')
+from iceskate_sim.ros.conversions import PIVOT_OF_CODE  # on a flat sole both edges: one pose
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable
 import json
+import math
 import pathlib
 import re
 import time
@@ -22,6 +23,7 @@ from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.messages import SampleMessages
 from iceskate_sim.ros.effort_cdr import CommandDecoder
+from iceskate_sim.run.pace import PaceClock
 from iceskate_sim.run.session import Session
 
 #: Live state topics the controllers read, published first, as soon as the state is known (the
@@ -33,6 +35,8 @@ STATE_TOPICS = CONTROL_TOPICS + ('/joint_states', '/head_pose')
 FIRST_REJECTED = 5
 #: Lockstep without controllers: periods stepped per timer tick (nothing to wait for).
 UNCONTROLLED_BATCH = 50
+#: Period of the simulator node's wall-clock timer [s]: timeouts, resends, the pace.
+TICK = 0.02
 _NUMBERS = re.compile(r'[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?')
 
 
@@ -186,14 +190,15 @@ class LoopMonitor:
 
     :param sources: the controllers of the scene (the sources of commands).
     :param control_timeout: a source silent this long [s] ends the run.
-    :param period: control period [s]; ``realtime_factor``: free-running pace [-].
+    :param period: control period [s].
+    :param pace: simulated seconds per wall second (0: none); free-running needs one.
     :param resend_after: publish the state t_k again after this long without every command [s].
     """
 
     def __init__(self, sources: tuple[str, ...], control_timeout: float, period: float,
-                 realtime_factor: float = 1.0, resend_after: float = 0.25) -> None:
+                 pace: float = 0.0, resend_after: float = 0.25) -> None:
         self.sources, self.timeout, self.resend_after = sources, control_timeout, resend_after
-        self.period, self.realtime_factor = period, realtime_factor
+        self.period, self.clock = period, PaceClock(pace)
         self.started_at = self.published_at = self.waiting_since = time.monotonic()
         self.heard = dict.fromkeys(sources, self.started_at)
         self.samples: dict[str, list[float]] = {'round_trip': [], 'physics': []}
@@ -215,8 +220,9 @@ class LoopMonitor:
                 'first': list(self.rejected_first)}
 
     def start(self) -> None:
-        """The run starts now (origin of the free-running pace)."""
+        """The run starts now (the pace counts from here)."""
         self.started_at = self.waiting_since = time.monotonic()
+        self.clock.restart()
         self.heard = dict.fromkeys(self.sources, self.started_at)
 
     def published(self, again: bool = False) -> None:
@@ -242,10 +248,9 @@ class LoopMonitor:
         """Time to publish the state t_k again (a state may be lost before discovery ends)."""
         return time.monotonic() - self.published_at > self.resend_after
 
-    def due(self, periods: int, limit: int = 10) -> int:
-        """Free-running: how many periods to simulate now to keep the pace (at most limit)."""
-        elapsed = (time.monotonic() - self.started_at) * self.realtime_factor
-        return max(0, min(limit, int(elapsed / self.period) - periods))
+    def due(self, t: float, most: int) -> int:
+        """Periods due now from simulated time ``t`` [s] at the pace (no pace: ``most``)."""
+        return self.clock.due(t, self.period, most)
 
     def stats(self, periods: int, wall_time: float) -> dict[str, Any]:
         """Median, p95 and p99 [s] of the round trip and the physics step per period; counts."""
@@ -261,7 +266,8 @@ class LockstepLoop:
     :param publish: ``publish(topic, data)`` sends one live state message (CDR bytes).
     :param report: ``report(text, failed)`` tells how the run ended (once).
     :param control_timeout: a source silent this long [s] ends the run.
-    :param realtime_factor: free-running pace [simulated s per wall s].
+    :param pace: simulated seconds per wall second that the run never goes beyond (0: as fast
+        as the controllers answer); free-running: the pace it keeps (> 0).
     :param paused: start paused (``~/step``, ``resume``).
     :param stats_file: JSON file for the loop timings (None or '': none).
     :param listened: ``listened(topic)``: whether a live topic has readers (its messages are
@@ -270,13 +276,13 @@ class LockstepLoop:
 
     def __init__(self, session: LockstepSession, publish: Callable[[str, bytes], None],
                  report: Callable[[str, bool], None], control_timeout: float = 5.0,
-                 realtime_factor: float = 1.0, paused: bool = False,
+                 pace: float = 0.0, paused: bool = False,
                  stats_file: str | pathlib.Path | None = None,
                  listened: Callable[[str], bool] = lambda topic: True) -> None:
         self.session = session
         self._listened = listened
         self.monitor = LoopMonitor(session.controllers, control_timeout,
-                                   session.scene.simulator.control_period, realtime_factor)
+                                   session.scene.simulator.control_period, pace)
         self._publish, self._report = publish, report
         self._decoder = CommandDecoder()
         self._stats_file = pathlib.Path(stats_file) if stats_file else None
@@ -284,9 +290,19 @@ class LockstepLoop:
 
     @property
     def timer_period(self) -> float:
-        """Period of the node's wall-clock timer (``tick``) [s]: 20 ms, or the free pace."""
+        """Period of the node's wall-clock timer (``tick``) [s]: ``TICK``; free-running: a
+        period at its pace, at the most ``TICK``."""
         m = self.monitor
-        return 0.02 if self.session.lockstep else min(0.02, m.period / m.realtime_factor)
+        return TICK if self.session.lockstep else min(TICK, m.period / m.clock.pace)
+
+    @property
+    def pace(self) -> float:
+        """Simulated seconds per wall second the run keeps to (0: none)."""
+        return self.monitor.clock.pace
+
+    @pace.setter
+    def pace(self, pace: float) -> None:
+        self.monitor.clock.pace = pace
 
     def may_step(self) -> bool:
         """Running, and not paused or with ~/step periods left."""
@@ -357,8 +373,19 @@ class LockstepLoop:
         complete = self.session.lockstep and not self.session.missing()
         self.monitor.command(source, complete)
         if complete and self.may_step():
-            self.step()
+            self._step_on_pace()
         return None
+
+    def _step_on_pace(self) -> None:
+        """Lockstep, every command in: step now, or when the pace allows (waiting here up to
+        one ``TICK``; later: the timer's ``tick`` steps)."""
+        wait = self.monitor.clock.wait(self.session.sim.time
+                                       + self.session.scene.simulator.control_period)
+        if wait > TICK:
+            return
+        if wait > 0.0:
+            time.sleep(wait)
+        self.step()
 
     def tick(self) -> None:
         """Wall-clock timer: command timeout, resend of an unanswered state, free-running pace."""
@@ -373,10 +400,14 @@ class LockstepLoop:
                 end='controller_timeout'))
         if s.lockstep and s.missing() and m.resend_due():
             self.publish_state(again=True)
+        if s.lockstep and s.controllers:
+            if not s.missing():  # a step the pace held back
+                self._step_on_pace()
+            return
         # free-running: keep the pace; lockstep without controllers: nothing to wait for
-        count = (UNCONTROLLED_BATCH if not s.controllers else 0) if s.lockstep else m.due(
-            s.session.periods)
-        for _ in range(count):
+        most = UNCONTROLLED_BATCH if s.lockstep else max(
+            10, math.ceil(2 * TICK * self.pace / m.period))
+        for _ in range(m.due(s.sim.time, most)):
             if self.may_step():
                 self.step()
 
@@ -423,8 +454,9 @@ class LockstepLoop:
 
     def _go_on(self) -> None:
         self.monitor.waiting_since = time.monotonic()  # the command timeout starts anew
+        self.monitor.clock.restart()  # no catching up after a pause
         if self.session.lockstep and not self.session.missing() and self.may_step():
-            self.step()
+            self._step_on_pace()
 
     def pause(self) -> tuple[bool, str]:
         """Stop after the current period."""

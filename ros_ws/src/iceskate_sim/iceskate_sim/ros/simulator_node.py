@@ -54,8 +54,9 @@ class SimulatorNodeParameters:
     duration: float = setting(0.0, 'run length; 0: the scene duration', unit='s', low=0.0,
                               high=MAX_DURATION)
     lockstep: bool = setting(True, 'wait for every command stamped t_k (else free-running)')
-    realtime_factor: float = setting(1.0, 'free-running pace [simulated s per wall s]',
-                                     low=1e-3, high=1e3)
+    pace: float = setting(0.0, 'simulated s per wall s the run never goes beyond (0: as fast '
+                          'as the controllers answer; free-running needs one); also settable '
+                          'while it runs', low=0.0, high=1e3)
     control_timeout: float = setting(5.0, 'a controller silent this long ends the run',
                                      unit='s', low=1e-3, high=3600.0)
     startup_timeout: float = setting(60.0, 'wait for the controller nodes', unit='s', low=0.0,
@@ -66,7 +67,12 @@ class SimulatorNodeParameters:
     start_paused: bool = setting(False, 'start paused (~/step, ~/resume)')
     exit_on_end: bool = setting(True, 'exit when the run is over')
     stats_file: str = setting('', 'JSON file for the loop timings; empty: none')
-    __post_init__ = checked(SimulationError)
+
+    def __post_init__(self) -> None:
+        checked(SimulationError)(self)
+        if not self.lockstep and self.pace <= 0.0:
+            raise SimulationError('pace must be > 0 when lockstep is false (a free-running run '
+                                  'keeps it)')
 
 
 class SimulatorNode(Node):
@@ -74,7 +80,8 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **kwargs)
-        c = self.config = declare_parameters(self, SimulatorNodeParameters, SimulationError)
+        c = self.config = declare_parameters(self, SimulatorNodeParameters, SimulationError,
+                                             self._on_parameters)
         self._declare_controllers()
         check_unknown(self)
         try:
@@ -88,7 +95,7 @@ class SimulatorNode(Node):
         self.session = LockstepSession(session, controllers, c.lockstep)
         self.loop = LockstepLoop(
             self.session, lambda topic, data: self._pub[topic].publish(data), self._report,
-            c.control_timeout, c.realtime_factor, c.start_paused, c.stats_file,
+            c.control_timeout, c.pace, c.start_paused, c.stats_file,
             lambda topic: topic in self._readers)
         self._pub = {'/clock': self.create_publisher(Clock, '/clock', CLOCK_QOS)} | {
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
@@ -104,6 +111,13 @@ class SimulatorNode(Node):
         self.create_timer(self.loop.timer_period, self.timer_callback)
         self.create_subscription(EffortCommand, 'effort_commands', self.on_effort_commands,
                                  LOCKSTEP_READER_QOS, raw=True)
+
+    def _on_parameters(self, config: SimulatorNodeParameters) -> None:
+        """``ros2 param set``: a new ``pace`` holds from now on (the others are read once)."""
+        if config.pace != self.loop.pace:
+            self.loop.pace = config.pace
+            self.get_logger().info(f'pace {config.pace:g}x real time'
+                                   + (' (none)' if config.pace == 0 else ''))
 
     def _declare_controllers(self) -> None:
         """``controllers`` and, for each, ``sources.<controller>`` (string arrays)."""

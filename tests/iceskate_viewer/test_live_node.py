@@ -1,0 +1,129 @@
+"""The live view of a run through the ROS graph (``run_scene --ros --view``): its frames are
+the simulator's states (forward kinematics of ``gait_state``, the head target of visual
+lifting), and the page's pace and pause hold the simulator itself."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import threading
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+pytestmark = pytest.mark.slow
+
+FAST_SKATE = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fast_skate.yaml'
+#: Deadline [s] of each phase of the run watched.
+PHASE_S = 60.0
+
+
+class Watcher:
+    """Records the frames a run's ``LiveView`` is offered: (wall time [s], frame)."""
+
+    def __init__(self) -> None:
+        self.live = None
+        self.frames: list[tuple[float, object]] = []
+        self.lock = threading.Lock()
+
+    def wrap(self, live_view):
+        def opened(*args, **kwargs):
+            live = live_view(*args, **kwargs)
+            offer = live.offer
+
+            def recorded(frame):
+                with self.lock:
+                    self.frames.append((time.monotonic(), frame))
+                offer(frame)
+            live.offer = recorded
+            self.live = live
+            return live
+        return opened
+
+    def latest(self) -> tuple[float, object] | None:
+        with self.lock:
+            return self.frames[-1] if self.frames else None
+
+    def wait_for(self, condition, what: str) -> None:
+        deadline = time.monotonic() + PHASE_S
+        while not condition():
+            assert time.monotonic() < deadline, what
+            time.sleep(0.05)
+
+
+def _pace(watcher: Watcher, seconds: float) -> float:
+    """Simulated seconds per wall second of the frames offered over ``seconds`` of wall time."""
+    first = watcher.latest()
+    time.sleep(seconds)
+    last = watcher.latest()
+    return (last[1].t - first[1].t) / (last[0] - first[0]) if last[0] > first[0] else 0.0
+
+
+def test_the_page_paces_and_pauses_the_simulator(tmp_path, ros_domain_id, monkeypatch):
+    import iceskate_bringup.graph as graph
+    from iceskate_bringup.watch import Watch
+    watcher = Watcher()
+    monkeypatch.setattr(graph, 'live_view', watcher.wrap(graph.live_view))
+    seen: dict[str, object] = {}
+
+    def drive() -> None:  # the person at the page
+        try:
+            watcher.wait_for(lambda: watcher.latest() is not None and watcher.latest()[1].t > 0.05,
+                             'no frame of the run')
+            seen['paced'] = _pace(watcher, 1.5)
+            watcher.live._pause.value = True
+            time.sleep(0.5)  # the pause reaches the simulator
+            seen['paused'] = _pace(watcher, 1.0)
+            watcher.live._pace.value = 4.0  # the simulator's parameter, then go on
+            watcher.live._pause.value = False
+            time.sleep(0.3)
+            seen['faster'] = _pace(watcher, 0.5)
+            watcher.live._pace.value = 0.0  # then as fast as it goes, to the end
+        except BaseException as exc:  # noqa: BLE001 (reported by the test below)
+            seen['error'] = exc
+            watcher.live._pace.value = 0.0
+            watcher.live._pause.value = False
+
+    thread = threading.Thread(target=drive)
+    thread.start()
+    metrics = graph.run_graph(str(FAST_SKATE), tmp_path / 'run', domain_id=ros_domain_id,
+                              timeout=240.0, duration=1.0, watch=Watch(0.25, '127.0.0.1', 0))
+    thread.join(timeout=PHASE_S)
+    assert 'error' not in seen, seen.get('error')
+    assert metrics['failure'] is None and metrics['sim_time_s'] == pytest.approx(1.0)
+    assert seen['paced'] == pytest.approx(0.25, rel=0.3)
+    assert seen['paused'] == 0.0
+    assert seen['faster'] > 2 * 0.25  # (the graph's own speed may stay below 4x)
+    frames = [frame for _, frame in watcher.frames]
+    assert len(frames) >= 10
+    assert np.all(np.diff([f.t for f in frames]) > 0)  # the newest state, in order
+    # visual lifting's target, from its commands (none yet at the first states)
+    assert all(np.all(np.isfinite(f.head_target)) for f in frames if f.t >= 0.01)
+
+
+def test_a_frame_is_the_state_the_simulator_recorded(tmp_path, ros_domain_id, monkeypatch):
+    """Each frame's coordinates, support and mode are the trajectory's sample at its time
+    (the run's own record)."""
+    import iceskate_bringup.graph as graph
+    from iceskate_bringup.watch import Watch
+    from iceskate_viewer.pose import ViewFrame
+    from iceskate_viewer.replay import load_run
+    watcher = Watcher()
+    monkeypatch.setattr(graph, 'live_view', watcher.wrap(graph.live_view))
+    graph.run_graph(str(FAST_SKATE), tmp_path / 'run', domain_id=ros_domain_id, timeout=240.0,
+                    duration=0.6, watch=Watch(0.0, '127.0.0.1', 0))
+    run = load_run(tmp_path / 'run')
+    events = json.loads((tmp_path / 'run' / 'events.json').read_text())
+    assert len(watcher.frames) >= 2
+    for _, frame in watcher.frames:
+        k = int(np.argmin(np.abs(run.t - frame.t)))
+        assert run.t[k] == pytest.approx(frame.t, abs=1e-9)
+        recorded = ViewFrame.of_columns(run.columns, k)
+        np.testing.assert_array_equal(recorded.q, frame.q)
+        assert (recorded.side, recorded.step_index) == (frame.side, frame.step_index)
+        # a transition decided at t_k itself (once the commands of t_k are in) is in the
+        # sample, not yet in the state the controllers (and the page) were sent
+        assert frame.mode in {recorded.mode} | {
+            e['from_mode'] for e in events if abs(e['t'] - frame.t) < 1e-9}
