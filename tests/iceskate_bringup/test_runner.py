@@ -158,10 +158,11 @@ def test_a_bad_set_is_refused_in_one_sentence(tmp_path, capsys, setting, expecte
 @pytest.mark.parametrize('options, expected', [
     (['--pace', '2'], '--pace needs --view'),
     (['--view-port', '9000'], '--view-port needs --view'),
-    (['--view', '--pace', '-1'], '--pace must be >= 0'),
+    (['--view', '--pace', '-1'], '--pace must be >= 0 (0: as fast as it runs) and <= 1000'),
     (['--view', '--pace', 'nan'], '--pace must be >= 0'),
     (['--view', '--view-port', '70000'], '--view-port must be 0..65535'),
-    (['--view', '--ros'], 'a --ros run is watched afterwards with `view DIR`'),
+    (['--view', '--ros', '--pace', '2000'], '--pace must be >= 0 (0: as fast as it runs) and '
+                                            '<= 1000'),
     (['--view', '--view-host', '192.0.2.1'], 'cannot serve the view on 192.0.2.1'),
 ])
 def test_bad_view_options_are_refused_in_one_sentence(tmp_path, capsys, options, expected):

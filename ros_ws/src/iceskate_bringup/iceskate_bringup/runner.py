@@ -278,8 +278,10 @@ def _watch(args: argparse.Namespace) -> Watch | None:
     from iceskate_viewer.page import check_host
     check_host(args.view_host or '127.0.0.1')  # refused before anything starts
     pace = 1.0 if args.pace is None else args.pace
-    if not (math.isfinite(pace) and pace >= 0.0):
-        raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs), got {pace:g}')
+    from iceskate_sim.run.pace import MAX_PACE
+    if not (math.isfinite(pace) and 0.0 <= pace <= MAX_PACE):
+        raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs) and <= '
+                              f'{MAX_PACE:g}, got {pace:g}')
     port = 8080 if args.view_port is None else args.view_port
     if not 0 <= port <= 65535:
         raise SimulationError(f'--view-port must be 0..65535, got {port}')

@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 
-from iceskate_sim.run.pace import PaceClock
+from iceskate_sim.run.pace import MAX_PACE, PaceClock
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_viewer.page import RunPage, serve, stop_server, url_of
 from iceskate_viewer.pose import BodyPose, ViewFrame
@@ -40,7 +40,7 @@ class LiveView:
         gui = self.server.gui
         self._pause = gui.add_checkbox('Pause', False)
         self._pace = gui.add_number('Pace (x real time, 0: fastest)', float(pace), min=0.0,
-                                    max=100.0, step=0.1)
+                                    max=MAX_PACE, step=0.1)
         self._pause.on_update(lambda _: self._controls_changed())
         self._pace.on_update(lambda _: self._controls_changed())
         self.on_control: Callable[[bool, float], None] | None = None

@@ -39,6 +39,7 @@ from iceskate_sim.ros.node_support import (
     declare_parameters,
     run_node,
 )
+from iceskate_sim.run.pace import MAX_PACE
 from iceskate_sim.run.scene import MAX_DURATION, Scene, load_scene
 from iceskate_sim.run.session import Session
 
@@ -56,7 +57,7 @@ class SimulatorNodeParameters:
     lockstep: bool = setting(True, 'wait for every command stamped t_k (else free-running)')
     pace: float = setting(0.0, 'simulated s per wall s the run never goes beyond (0: as fast '
                           'as the controllers answer; free-running needs one); also settable '
-                          'while it runs', low=0.0, high=1e3)
+                          'while it runs', low=0.0, high=MAX_PACE)
     control_timeout: float = setting(5.0, 'a controller silent this long ends the run',
                                      unit='s', low=1e-3, high=3600.0)
     startup_timeout: float = setting(60.0, 'wait for the controller nodes', unit='s', low=0.0,

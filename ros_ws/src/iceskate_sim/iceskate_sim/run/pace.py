@@ -7,6 +7,9 @@ from __future__ import annotations
 import math
 import time
 
+#: Fastest pace a run is held to [simulated s per wall s].
+MAX_PACE = 1000.0
+
 
 class PaceClock:
     """When a simulated time is due at a pace, counted from an origin (wall, simulated time)
