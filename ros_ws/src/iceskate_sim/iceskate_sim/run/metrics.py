@@ -90,9 +90,7 @@ class Trajectory:
                     except OSError as exc:
                         self._file(key).unlink(missing_ok=True)
                         self._layout.pop(key, None)
-                        raise SimulationError(f"cannot write the trajectory's columns into "
-                                              f'{self._spill_parent}: {exc.strerror or exc}',
-                                              end='io_error') from None
+                        raise self._spill_failed(exc) from None
                 self.sources.append(source)
                 self._blocks[key] = [np.zeros((self._count - self._spilled, 18))]
 
@@ -117,12 +115,15 @@ class Trajectory:
             for key, size in sizes.items():
                 if self._file(key).exists():
                     os.truncate(self._file(key), size)
-            raise SimulationError(f"cannot write the trajectory's columns into "
-                                  f'{self._spill_parent}: {exc.strerror or exc}',
-                                  end='io_error') from None
+            raise self._spill_failed(exc) from None
         self._blocks = {key: [] for key in self._blocks}
         self._spilled = self._count
         self._held = 0
+
+    def _spill_failed(self, exc: OSError) -> SimulationError:
+        """The ``io_error`` of a spill file that could not be written."""
+        return SimulationError(f"cannot write the trajectory's columns into "
+                               f'{self._spill_parent}: {exc.strerror or exc}', end='io_error')
 
     def _file(self, key: str) -> pathlib.Path:
         """The spill file of column ``key``."""
