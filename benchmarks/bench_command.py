@@ -8,7 +8,7 @@ factor (metrics.json), beside the machine's load when it started: all measured i
 run. ``--ros`` times ``run_scene SCENE --ros`` (the node graph) instead.
 
 Usage (from the repository root, environment sourced):
-    python benchmarks/bench_command.py [skate] [--rounds 5] [--ros] [-- extra run_scene options]
+    python benchmarks/bench_command.py [skate] [--rounds 5] [--ros] [more run_scene options]
 """
 
 from __future__ import annotations
@@ -29,21 +29,20 @@ def main() -> None:
     parser.add_argument('scene', nargs='?', default='skate')
     parser.add_argument('--rounds', type=int, default=5)
     parser.add_argument('--ros', action='store_true', help='run_scene --ros (the node graph)')
-    parser.add_argument('extra', nargs='*', help='more run_scene options (after --)')
-    args = parser.parse_args()
+    args, extra = parser.parse_known_args()  # the rest: run_scene's own options
     print(machine_info())
     walls, factors = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(args.rounds):
             out = pathlib.Path(tmp) / f'run_{k}'
             command = ['run_scene', args.scene, '--out', str(out), '--quiet',
-                       *(['--ros'] if args.ros else []), *args.extra]
+                       *(['--ros'] if args.ros else []), *extra]
             started = time.perf_counter()
             subprocess.run(command, check=True, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL)
             walls.append(time.perf_counter() - started)
             factors.append(json.loads((out / 'metrics.json').read_text())['real_time_factor'])
-    print(f'{" ".join(command[:2])}{" --ros" if args.ros else ""} {" ".join(args.extra)}, '
+    print(f'{" ".join(command[:2])}{" --ros" if args.ros else ""} {" ".join(extra)}, '
           f'{args.rounds} rounds:')
     print(f'  whole command [s]: median {statistics.median(walls):.2f}, '
           f'{min(walls):.2f}-{max(walls):.2f} ({", ".join(f"{w:.2f}" for w in walls)})')

@@ -20,6 +20,8 @@ BENCH = REPO / 'benchmarks'
 CASES = {
     'bench_bag_write': (['stand', '--duration', '0.3', '--rounds', '1'],
                         'the two bags hold the same messages'),
+    'bench_command': (['stand', '--rounds', '1', '--duration', '0.1'], 'whole command [s]'),
+    'bench_view': (['stand', '--rounds', '1', '--duration', '0.1'], 'view / no view'),
     'bench_dynamics': (['--repeat', '1', '--number', '2'], '18-coordinate modes: worst evaluate'),
     'bench_period': (['stand', '--duration', '0.05', '--no-picture'],
                      "the run's own / the native loop's"),
