@@ -27,7 +27,8 @@ from bench_work_precision import machine_info
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('scene', nargs='?', default='skate')
-    parser.add_argument('--rounds', type=int, default=5)
+    parser.add_argument('--rounds', type=int, default=5, choices=range(1, 101),
+                        metavar='1..100')
     parser.add_argument('--ros', action='store_true', help='run_scene --ros (the node graph)')
     args, extra = parser.parse_known_args()  # the rest: run_scene's own options
     print(machine_info())
@@ -38,9 +39,11 @@ def main() -> None:
             command = ['run_scene', args.scene, '--out', str(out), '--quiet',
                        *(['--ros'] if args.ros else []), *extra]
             started = time.perf_counter()
-            subprocess.run(command, check=True, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
+            done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                  text=True)
             walls.append(time.perf_counter() - started)
+            if done.returncode != 0:
+                raise SystemExit(f'bench_command: {" ".join(command)} failed:\n{done.stderr}')
             factors.append(json.loads((out / 'metrics.json').read_text())['real_time_factor'])
     print(f'{" ".join(command[:2])}{" --ros" if args.ros else ""} {" ".join(extra)}, '
           f'{args.rounds} rounds:')

@@ -127,3 +127,47 @@ def test_a_frame_is_the_state_the_simulator_recorded(tmp_path, ros_domain_id, mo
         # sample, not yet in the state the controllers (and the page) were sent
         assert frame.mode in {recorded.mode} | {
             e['from_mode'] for e in events if abs(e['t'] - frame.t) < 1e-9}
+
+
+class _Page:
+    """The page's controls as the node reads them."""
+
+    def __init__(self) -> None:
+        self.paused, self.pace, self.on_control = False, 1.0, None
+
+
+class _Future:
+    def add_done_callback(self, callback) -> None:
+        pass
+
+
+def test_controls_before_the_connection_are_sent_once_connected(ros_context):
+    """The page's controls changed while the graph starts are not lost: nothing is sent
+    before the node connects (the simulator's services may not be up), then the page's state
+    as it is then, and later only what changed."""
+    from iceskate_viewer.live_node import LiveViewNode
+    page = _Page()
+    node = LiveViewNode(page, context=ros_context)
+    sent: list[tuple[str, object]] = []
+    try:
+        for name in ('_pause', '_resume'):
+            client = getattr(node, name)
+            client.call_async = lambda request, name=name: sent.append((name, None)) or _Future()
+            client.service_is_ready = lambda: True
+        node._parameters.set_parameters = (
+            lambda ps: sent.append(('pace', ps[0].value)) or _Future())
+        page.pace = 0.5
+        page.on_control(page.paused, page.pace)  # the page's thread, before the connection
+        page.paused = True
+        page.on_control(page.paused, page.pace)
+        page.paused = False
+        page.on_control(page.paused, page.pace)
+        assert sent == []
+        node._states.get_publisher_count = lambda: 1
+        node._connect()
+        assert sent == [('_resume', None), ('pace', 0.5)]
+        page.paused = True
+        page.on_control(page.paused, page.pace)
+        assert sent[2:] == [('_pause', None)]  # the pace unchanged: not sent again
+    finally:
+        node.destroy_node()

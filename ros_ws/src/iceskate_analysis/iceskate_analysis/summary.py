@@ -14,6 +14,7 @@ import sys
 import textwrap
 from typing import TYPE_CHECKING, Any
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -75,7 +76,7 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
             a = {key: npz[key] for key in _COLUMNS if key in npz.files and key != 'q'}
             if 'q' in npz.files:
                 a['shoulders'] = _shoulders(trajectory)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # damaged files
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # damaged
         raise SimulationError(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
                               f'{exc}') from None
     return _checked_draw(a, metrics, out_dir / SUMMARY_NAME, str(trajectory))

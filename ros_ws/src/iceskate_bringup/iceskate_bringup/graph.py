@@ -249,7 +249,8 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
         if stop is None:
             stop = stack.enter_context(StopRequest())
         scene = load_scene(scene_arg, overrides)
-        start_simulator(scene, load_robot())  # refuses an initial state the run cannot start from
+        robot = load_robot()
+        start_simulator(scene, robot)  # refuses an initial state the run cannot start from
         lock = prepare_output(out, out / 'bag' if scene.record_bag else None)
         stack.callback(release_output, out)
         if watch is not None:  # the live view resumes it once connected
@@ -257,7 +258,7 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
         specs = graph_nodes(scene_arg, out, duration, overrides, **simulator_parameters)
         env = ros_environment(domain_id)
         say(f'graph: domain {env["ROS_DOMAIN_ID"]}, logs in {env["ROS_LOG_DIR"]}')
-        if (live := live_view(watch, load_robot(), scene.name, stack)) is not None:
+        if (live := live_view(watch, robot, scene.name, stack)) is not None:
             from iceskate_viewer.live_node import watching
             stack.enter_context(process_environment(env))
             stack.enter_context(watching(live, int(env['ROS_DOMAIN_ID'])))

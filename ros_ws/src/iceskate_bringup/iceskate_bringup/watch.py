@@ -1,5 +1,5 @@
 """A run watched live (``run_scene SCENE --view``, headless or ``--ros``): the ``Watch`` the
-options ask for and the page that shows it (docs/usage.md, "Watch a run")."""
+options ask for and the page that shows it (docs/usage.md, "Watch the robot")."""
 
 from __future__ import annotations
 

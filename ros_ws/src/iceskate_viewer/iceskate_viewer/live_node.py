@@ -4,7 +4,8 @@
 ``effort_commands``) best effort, so it never holds the lockstep back, and offers a frame to the
 ``LiveView`` at its display rate; the page's pause and pace go to the simulator (``~/pause``,
 ``~/resume``, its ``pace`` parameter), which keeps them. The simulator starts paused; the
-node resumes it once it reads its state, so that a short run is seen from its start.
+node resumes it once the simulator's state publisher is matched and its services are up, so
+that a short run is seen from its start.
 ``watching`` runs the node on its own context and executor thread for as long as the run goes.
 """
 
@@ -30,7 +31,8 @@ from std_srvs.srv import Trigger
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_sim.model.robot import SIDES
 from iceskate_sim.ros.conversions import PIVOT_OF_CODE
-from iceskate_sim.ros.node_support import LOCKSTEP_READER_QOS
+from iceskate_sim.ros.node_support import LOCKSTEP_READER_QOS, spin_until
+from iceskate_sim.shutdown import say
 from iceskate_viewer.live import DISPLAY_HZ, LiveView
 from iceskate_viewer.pose import ViewFrame
 
@@ -56,7 +58,9 @@ class LiveViewNode(Node):
         self.live = live
         self._commands: deque[bytes] = deque(maxlen=RECENT_COMMANDS)
         self._offered_at = -np.inf  # wall time [s] of the last frame offered
-        self._paused = True  # the simulator starts paused, until this node reads its state
+        self._lock = threading.Lock()  # the page's controls come from its worker threads
+        self._connected = False  # the simulator has been told the page's controls
+        self._told: tuple[bool, float] | None = None  # (paused, pace) it was told last
         self._states = self.create_subscription(GaitState, 'gait_state', self._on_state,
                                                 LOCKSTEP_READER_QOS, raw=True)
         self.create_subscription(EffortCommand, 'effort_commands', self._on_command,
@@ -69,17 +73,27 @@ class LiveViewNode(Node):
         self._connecting = self.create_timer(0.05, self._connect)
 
     def _connect(self) -> None:
-        """Resume the simulator (started paused) once its state reaches this node, unless the
-        page is paused; after ``CONNECT_TIMEOUT`` s anyway, saying so."""
-        if not self._resume.service_is_ready():
+        """Tell the simulator (started paused) the page's controls, which resumes it unless the
+        page is paused, once its state publisher is matched and its services are up; after
+        ``CONNECT_TIMEOUT`` s without the publisher anyway, saying so."""
+        if not (self._resume.service_is_ready() and self._pause.service_is_ready()):
             return
         if not self._states.get_publisher_count() and time.monotonic() < self._connect_by:
             return
         if not self._states.get_publisher_count():
             self.get_logger().warning(f"the simulator's state did not reach the live view "
                                       f'within {CONNECT_TIMEOUT:g} s: the run goes on unseen')
-        self.destroy_timer(self._connecting)
-        self._control(self.live.paused, self.live.pace)
+        self._connecting.cancel()
+        with self._lock:
+            self._connected = True
+        self._control()
+
+    def let_go(self) -> None:
+        """Resume the simulator if it was never told (this node stops before it connected)."""
+        with self._lock:
+            if not self._connected and self._resume.service_is_ready():
+                self._resume.call_async(Trigger.Request())
+            self._connected = True
 
     def _on_state(self, data: bytes) -> None:
         """A state: offered to the page when a frame is due (at ``DISPLAY_HZ`` at the most)."""
@@ -102,12 +116,30 @@ class LiveViewNode(Node):
                 return np.asarray(target[:2], dtype=float)
         return np.full(2, np.nan)
 
-    def _control(self, paused: bool, pace: float) -> None:
-        """The page's controls changed (the page's thread): tell the simulator."""
-        if paused != self._paused:
-            self._paused = paused
-            (self._pause if paused else self._resume).call_async(Trigger.Request())
-        self._parameters.set_parameters([Parameter('pace', value=float(pace))])
+    def _control(self, *_: object) -> None:
+        """Tell the simulator the page's pause and pace where they differ from what it was
+        told (nothing before ``_connect``, which tells it all); called by the page's threads."""
+        with self._lock:
+            if not self._connected:
+                return
+            paused, pace = self.live.paused, self.live.pace
+            if self._told is None or paused != self._told[0]:
+                call = (self._pause if paused else self._resume).call_async(Trigger.Request())
+                call.add_done_callback(self._answered)
+            if self._told is None or pace != self._told[1]:
+                call = self._parameters.set_parameters([Parameter('pace', value=float(pace))])
+                call.add_done_callback(self._answered)
+            self._told = (paused, pace)
+
+    def _answered(self, call: Any) -> None:
+        """A call to the simulator came back: one line if it was refused."""
+        answer = call.result()
+        if answer is None:  # cancelled: the run is over
+            return
+        refused = (not answer.success if hasattr(answer, 'success')
+                   else not all(r.successful for r in answer.results))
+        if refused:
+            self.get_logger().warning(f"the simulator refused the page's control: {answer}")
 
 
 @contextlib.contextmanager
@@ -125,12 +157,16 @@ def watching(live: LiveView, domain_id: int) -> Iterator[LiveViewNode]:
         executor.add_node(node)
 
         def spin() -> None:
-            while not done.is_set() and context.ok():
-                executor.spin_once(timeout_sec=0.1)
+            try:
+                spin_until(executor, done.is_set, context)
+            except Exception as error:  # the page stops following; the run goes on
+                say(f'run_scene: the live view stopped: {type(error).__name__}: {error}')
+                node.let_go()
         thread = threading.Thread(target=spin, name='live-view-node', daemon=True)
         thread.start()
         yield node
     finally:
+        live.on_control = None
         done.set()
         if thread is not None:
             thread.join(timeout=5.0)

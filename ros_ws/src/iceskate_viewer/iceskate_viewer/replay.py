@@ -15,6 +15,7 @@ import threading
 import time
 from typing import TYPE_CHECKING
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def load_run(path: str | pathlib.Path) -> Run:
                 if missing:
                     raise SimulationError(f'{npz} lacks the columns {", ".join(missing)}')
                 columns = {name: np.asarray(data[name]) for name in COLUMNS}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise SimulationError(f'{npz} cannot be read: {exc}') from None
     elif (run_dir / 'bag').is_dir():
         from iceskate_analysis.bag_io import read_bag

@@ -37,6 +37,9 @@ FIRST_REJECTED = 5
 UNCONTROLLED_BATCH = 50
 #: Period of the simulator node's wall-clock timer [s]: timeouts, resends, the pace.
 TICK = 0.02
+#: Free-running: periods stepped per timer tick at the most (a pace the machine cannot keep
+#: does not hold the node's services for long).
+FREE_BATCH = 200
 _NUMBERS = re.compile(r'[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?')
 
 
@@ -279,6 +282,8 @@ class LockstepLoop:
                  pace: float = 0.0, paused: bool = False,
                  stats_file: str | pathlib.Path | None = None,
                  listened: Callable[[str], bool] = lambda topic: True) -> None:
+        if not session.lockstep and pace <= 0.0:
+            raise SimulationError('a free-running run (lockstep false) needs a pace > 0')
         self.session = session
         self._listened = listened
         self.monitor = LoopMonitor(session.controllers, control_timeout,
@@ -358,7 +363,7 @@ class LockstepLoop:
 
     def take(self, data: bytes) -> str | None:
         """Take an EffortCommand (its CDR bytes); step once every source has answered t_k
-        (lockstep).
+        (lockstep), when the pace allows (``_step_on_pace``).
 
         :returns: why the command was rejected (None: taken, or ignored while not running).
         """
@@ -388,7 +393,8 @@ class LockstepLoop:
         self.step()
 
     def tick(self) -> None:
-        """Wall-clock timer: command timeout, resend of an unanswered state, free-running pace."""
+        """Wall-clock timer: command timeout, resend of an unanswered state, a lockstep step the
+        pace held back, the periods due of a run without controllers or free-running."""
         if not self.may_step():
             return
         s, m = self.session, self.monitor
@@ -404,9 +410,10 @@ class LockstepLoop:
             if not s.missing():  # a step the pace held back
                 self._step_on_pace()
             return
-        # free-running: keep the pace; lockstep without controllers: nothing to wait for
-        most = UNCONTROLLED_BATCH if s.lockstep else max(
-            10, math.ceil(2 * TICK * self.pace / m.period))
+        # free-running: keep the pace (its batch: twice a timer period's worth, at most
+        # FREE_BATCH); lockstep without controllers: nothing to wait for
+        most = UNCONTROLLED_BATCH if s.lockstep else min(FREE_BATCH, max(
+            10, math.ceil(2 * self.timer_period * self.pace / m.period)))
         for _ in range(m.due(s.sim.time, most)):
             if self.may_step():
                 self.step()
@@ -476,5 +483,6 @@ class LockstepLoop:
         except SimulationError as exc:
             return False, str(exc)
         self.phase, self.budget = 'running', 0
+        self.monitor.clock.restart()
         self.publish_state()
         return True, 'reset to t=0'

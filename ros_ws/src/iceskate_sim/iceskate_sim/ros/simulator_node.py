@@ -166,12 +166,13 @@ class SimulatorNode(Node):
             (self.get_logger().error if failed else self.get_logger().info)(text)
 
     def on_effort_commands(self, data: bytes) -> None:
-        """Take one command (CDR bytes); step once every source has answered t_k (lockstep)."""
+        """Take one command (CDR bytes); step once every source has answered t_k (lockstep),
+        at the pace."""
         if rejected := self.loop.take(data):
             self.get_logger().error(rejected)
 
     def timer_callback(self) -> None:
-        """Start once the controllers are up; watchdog and resend; free-running pace."""
+        """Start once the controllers are up; watchdog and resend; the pace (``tick``)."""
         # the live topics with readers (4 rmw calls: here, not at every instant)
         self._readers = {t for t, pub in self._pub.items() if pub.get_subscription_count()}
         self._try_start() if self.loop.phase == 'starting' else self.loop.tick()

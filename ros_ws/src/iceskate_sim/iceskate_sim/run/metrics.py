@@ -174,9 +174,9 @@ class Trajectory:
         with zipfile.ZipFile(path, 'w', zipfile.ZIP_DEFLATED, allowZip64=True,
                              compresslevel=1) as archive:
             for key, column in self.columns():
-                sparse = (column.dtype.kind in 'biu'
-                          or np.count_nonzero(column) <= column.size // 4)
-                member = f'{key}.npy' if sparse else zipfile.ZipInfo(f'{key}.npy')  # stored
+                deflate = (column.dtype.kind in 'biu'
+                           or np.count_nonzero(column) <= column.size // 4)
+                member = f'{key}.npy' if deflate else zipfile.ZipInfo(f'{key}.npy')  # stored
                 with archive.open(member, 'w', force_zip64=True) as stream:
                     np.lib.format.write_array(stream, column, allow_pickle=False)
                 del column  # unmapped before the next one is read

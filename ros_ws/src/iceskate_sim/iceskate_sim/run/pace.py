@@ -1,6 +1,6 @@
 """The pace of a run watched by a person: ``PaceClock`` holds simulated time to ``pace``
 simulated seconds per wall second. The headless live view waits on it between blocks, the
-simulator node steps by it (lockstep or free-running); docs/usage.md, "Watch a run"."""
+simulator node steps by it (lockstep or free-running); docs/usage.md, "Watch the robot"."""
 
 from __future__ import annotations
 
@@ -13,14 +13,15 @@ MAX_PACE = 1000.0
 
 class PaceClock:
     """When a simulated time is due at a pace, counted from an origin (wall, simulated time)
-    set by the first question after ``restart`` (a new pace, a resume).
+    set by the first question after ``restart`` (a new pace, a resume). Another thread (a
+    page's control) may set the pace or restart it while one asks.
 
     :param pace: simulated seconds per wall second (0: no pace, everything is due at once).
     """
 
     def __init__(self, pace: float = 0.0) -> None:
-        self.pace = pace
         self._origin: tuple[float, float] | None = None
+        self.pace = pace
 
     @property
     def pace(self) -> float:
@@ -40,19 +41,22 @@ class PaceClock:
 
     def wait(self, t: float) -> float:
         """Wall seconds [s] until simulated time ``t`` [s] is due (0: it is)."""
-        return 0.0 if self._pace <= 0.0 else max(0.0, -self._ahead(t) / self._pace)
+        pace = self._pace  # read once: the page's thread may change it
+        return 0.0 if pace <= 0.0 else max(0.0, -self._ahead(t, pace) / pace)
 
     def due(self, t: float, period: float, most: int) -> int:
         """Periods of ``period`` [s] due now from simulated time ``t`` [s] on, at most ``most``
         (no pace: ``most``)."""
-        if self._pace <= 0.0:
+        pace = self._pace
+        if pace <= 0.0:
             return most
-        return max(0, min(most, int(self._ahead(t) / period + 1e-9)))
+        return max(0, min(most, int(self._ahead(t, pace) / period + 1e-9)))
 
-    def _ahead(self, t: float) -> float:
-        """Simulated seconds [s] due now beyond ``t`` (negative: ``t`` is not due yet)."""
+    def _ahead(self, t: float, pace: float) -> float:
+        """Simulated seconds [s] due now beyond ``t`` at ``pace`` (negative: not yet)."""
         now = time.monotonic()
-        if self._origin is None:
-            self._origin = (now, t)
-        wall, simulated = self._origin
-        return (now - wall) * self._pace + simulated - t
+        origin = self._origin
+        if origin is None:
+            origin = self._origin = (now, t)
+        wall, simulated = origin
+        return (now - wall) * pace + simulated - t
