@@ -27,6 +27,10 @@ RUN_SPACING = 1.2
 ICE_HALF_WIDTH, ICE_AHEAD, ICE_BEHIND = 3.0, 40.0, 5.0
 #: Colours (RGB 0-255): the ice, its metre marks, the support-foot highlight, the head target.
 ICE, MARK, SUPPORT, TARGET = (196, 222, 240), (115, 120, 125), (255, 196, 0), (40, 170, 80)
+#: Least move [m] of a following camera (smaller ones wait for the next frame).
+FOLLOW_STEP = 0.005
+#: How far ahead of the robots' heads (along y) the cameras look [m].
+LOOK_AHEAD = 0.6
 
 
 #: Unit meshes of the URDF's shapes (a box of side 1, a sphere and a cylinder along z of
@@ -91,7 +95,9 @@ def _loopback(host: str) -> bool:
 class RunPage:
     """The scene of ``names`` runs (one robot each, ``RUN_SPACING`` apart along x) on ``server``.
 
-    ``show(k, frame)`` places run ``k``'s robot and overlays; safe from any thread.
+    ``show(k, frame)`` places run ``k``'s robot and overlays; safe from any thread. While the
+    page's **Follow** box is on, every browser's camera moves along y to look ``LOOK_AHEAD``
+    ahead of the robots (their heads' mean y), keeping the angle and distance its user chose.
     """
 
     def __init__(self, server: viser.ViserServer, body: BodyPose, names: Sequence[str]) -> None:
@@ -113,7 +119,7 @@ class RunPage:
         for metre in metres[metres >= 0].astype(int):
             scene.add_label(f'/marks/{metre}m', f'{metre} m', position=(0.45, metre, 0.01))
         server.initial_camera.position = (centre[0] + 3.2, -0.8, 1.3)
-        server.initial_camera.look_at = (centre[0], 0.6, 0.75)
+        server.initial_camera.look_at = (centre[0], LOOK_AHEAD, 0.75)
         self._bodies, self._support, self._target, self._names = [], [], [], []
         for k, name in enumerate(names):
             root = f'/run{k}'
@@ -126,6 +132,8 @@ class RunPage:
             self._names.append(scene.add_label(f'{root}/name', name))
         self._text = server.gui.add_markdown('')
         self._texts = [''] * len(names)
+        self._follow = server.gui.add_checkbox('Follow the robot', True)
+        self._head_y = [0.0] * len(names)  # of each run's last frame [m]
 
     def show(self, k: int, frame: ViewFrame) -> None:
         """Place run ``k``'s robot at ``frame`` (its name above its head), highlight its
@@ -151,6 +159,19 @@ class RunPage:
             if self._target[k].visible:
                 self._target[k].position = (head.translation[0], target[0], target[1])
             self._text.content = '  \n'.join(self._texts)
+        self._head_y[k] = float(head.translation[1])
+        if self._follow.value:
+            self._follow_robots(float(np.mean(self._head_y)))
+
+    def _follow_robots(self, y: float) -> None:
+        """Move each client's camera along y to look ``LOOK_AHEAD`` ahead of ``y`` [m] (its
+        orientation and distance kept; from where it looks now, so a late report of the
+        browser's own camera is caught up with at the next frame)."""
+        for client in self.server.get_clients().values():
+            with contextlib.suppress(AssertionError):  # its camera not reported yet
+                shift = y + LOOK_AHEAD - float(client.camera.look_at[1])
+                if abs(shift) >= FOLLOW_STEP:
+                    client.camera.position = client.camera.position + np.array([0, shift, 0])
 
 
 class _Body:
