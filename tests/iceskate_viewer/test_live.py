@@ -76,16 +76,41 @@ def test_pause_holds_the_run_until_resumed_or_stopped(live):
     assert time.perf_counter() - started < 1.0
 
 
-def test_a_page_that_fails_says_so_once_and_the_loop_goes_on(live, capsys):
+def test_a_frame_the_page_fails_is_said_once_and_the_next_is_drawn(live, capsys):
+    drawn, failed = [], threading.Event()
+
+    def flaky(k: int, frame: ViewFrame) -> None:
+        if not failed.is_set():
+            failed.set()
+            raise RuntimeError('deque mutated during iteration')
+        drawn.append(frame.t)
+    live.page.show = flaky
+    live.offer(_frame(0.25))
+    assert failed.wait(5.0)
+    deadline = time.monotonic() + 5.0
+    while not drawn and time.monotonic() < deadline:
+        live.offer(_frame(0.5))
+        time.sleep(0.05)
+    assert drawn and drawn[0] == 0.5 and live._thread.is_alive()
+    err = capsys.readouterr().err
+    assert err == ('run_scene: the live view missed a frame at t=0.250 s: RuntimeError: deque '
+                   'mutated during iteration\n')
+
+
+def test_a_page_that_keeps_failing_stops_drawing_and_the_loop_goes_on(live, capsys):
     def broken(k: int, frame: ViewFrame) -> None:
         raise RuntimeError('the socket is gone')
     live.page.show = broken
-    live.offer(_frame(0.25))
-    live._thread.join(timeout=5.0)
+    deadline = time.monotonic() + 10.0
+    k = 0
+    while live._thread.is_alive() and time.monotonic() < deadline:
+        live.offer(_frame(k * 1e-3))  # never waits
+        k += 1
+        time.sleep(0.01)
     assert not live._thread.is_alive()
-    for k in range(100):
-        live.offer(_frame(k * 1e-3))  # still never waits
-    err = capsys.readouterr().err
-    assert err.count('\n') == 1
-    assert 'stopped drawing at t=0.250 s: RuntimeError: the socket is gone' in err
-    assert 'Traceback' not in err
+    for j in range(100):
+        live.offer(_frame(j * 1e-3))  # still never waits
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2, lines
+    assert 'missed a frame' in lines[0] and 'RuntimeError: the socket is gone' in lines[0]
+    assert 'stopped drawing' in lines[1] and 'Traceback' not in ''.join(lines)

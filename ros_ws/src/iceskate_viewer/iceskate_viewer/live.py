@@ -24,6 +24,9 @@ from iceskate_viewer.pose import BodyPose, ViewFrame
 DISPLAY_HZ = 30.0
 #: Longest single wait [s] of ``keep_pace`` between two looks at a stop request.
 WAIT_SLICE = 0.05
+#: Frames in a row the page may fail to draw before the view stops drawing (one failed
+#: frame is a race inside the web server's threads, and the next one is drawn).
+FAILED_FRAMES = 30
 
 
 class LiveView:
@@ -115,7 +118,9 @@ class LiveView:
             self.on_control(self.paused, self.pace)
 
     def _display(self) -> None:
-        period = 1.0 / DISPLAY_HZ
+        """Draw the newest frame at ``DISPLAY_HZ`` at the most; a frame the page fails to draw
+        is said once, and after ``FAILED_FRAMES`` in a row the view stops (the run goes on)."""
+        period, failed = 1.0 / DISPLAY_HZ, 0
         while not self._closed.is_set():
             try:
                 frame = self._frames.get(timeout=0.1)
@@ -124,8 +129,13 @@ class LiveView:
             started = time.perf_counter()
             try:
                 self.page.show(0, frame)
+                failed = 0
             except Exception as error:  # the page fails, the run goes on and finishes
-                say(f'run_scene: the live view stopped drawing at t={frame.t:.3f} s: '
-                    f'{type(error).__name__}: {error}')
-                return
+                failed += 1
+                if failed == 1 or failed == FAILED_FRAMES:
+                    say(f'run_scene: the live view '
+                        f'{"stopped drawing" if failed == FAILED_FRAMES else "missed a frame"} '
+                        f'at t={frame.t:.3f} s: {type(error).__name__}: {error}')
+                if failed == FAILED_FRAMES:
+                    return
             self._closed.wait(max(0.0, period - (time.perf_counter() - started)))
