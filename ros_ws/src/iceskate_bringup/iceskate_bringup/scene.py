@@ -27,9 +27,11 @@ from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
 from visual_lifting.errors import VisualLiftingError
 from visual_lifting.parameters import VisualLiftingParameters
 
-#: The shipped controller nodes a scene may run (besides plug-ins); the commands of a scene's
-#: controllers are summed in the order the scene lists them.
-CONTROLLERS = ('visual_lifting', 'gait_manager')
+#: The shipped controller nodes a scene may run (besides plug-ins), with their parameter
+#: classes; the commands of a scene's controllers are summed in the order the scene lists them.
+PARAMETER_CLASSES = {'visual_lifting': VisualLiftingParameters,
+                     'gait_manager': GaitManagerParameters}
+CONTROLLERS = tuple(PARAMETER_CLASSES)
 
 
 def validate_inputs(node: str, block: dict[str, Any]) -> None:
@@ -49,10 +51,8 @@ def controller_parameters(node: str, block: dict[str, Any]
     given: its class is checked by ``validate_inputs`` and when it is built)."""
     if is_plugin(block):
         return PluginBlock(block['plugin'], dict(block.get('parameters') or {}))
-    if node == 'visual_lifting':
-        return VisualLiftingParameters.from_dict(block)
-    if node == 'gait_manager':
-        return GaitManagerParameters.from_dict(block)
+    if node in PARAMETER_CLASSES:
+        return PARAMETER_CLASSES[node].from_dict(block)
     raise SimulationError(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
                           f"{list(CONTROLLERS)}, or a controller written in Python (a block "
                           "with 'plugin: package.module:Class')")
@@ -121,11 +121,10 @@ def key_rules(key: str) -> Rules | None:
     """The rules (description, unit, range) of scene key ``key`` (dotted, e.g. 'floor.mu' or
     'inputs.gait_manager.yaw.amplitude'), from the schema that declares it; None for a key no
     schema declares (a list entry, a plug-in's parameter)."""
-    controllers = {'visual_lifting': VisualLiftingParameters,
-                   'gait_manager': GaitManagerParameters}
     head, _, rest = key.partition('.')
     node, _, field = rest.partition('.')
-    cls, names = ((controllers[node], field) if head == 'inputs' and node in controllers
+    cls, names = ((PARAMETER_CLASSES[node], field)
+                  if head == 'inputs' and node in PARAMETER_CLASSES
                   else (SceneSettings, key))
     *blocks, last = names.split('.')
     for name in blocks:
