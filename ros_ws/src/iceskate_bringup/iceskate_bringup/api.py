@@ -22,7 +22,7 @@ import numpy as np
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.scene import Scene, set_key
+from iceskate_sim.run.scene import Scene, set_keys
 
 __all__ = ['Run', 'load_scene', 'run', 'with_overrides']
 
@@ -54,11 +54,7 @@ def with_overrides(scene: Scene, overrides: Mapping[str, Any]) -> Scene:
     :raises SimulationError: for a bad key or value, naming it.
     """
     raw = copy.deepcopy(scene.raw)
-    for key, value in overrides.items():
-        try:
-            set_key(raw, key, value)
-        except SimulationError as exc:
-            raise SimulationError(f'override {key}: {exc}') from None
+    set_keys(raw, overrides)
     return parse_scene(raw)
 
 

@@ -356,12 +356,20 @@ def scene_raw(name_or_path: str | pathlib.Path, overrides: Mapping[str, Any] | N
     if not isinstance(raw, dict):
         raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__} '
                               f'({path})')
-    for key, value in (overrides or {}).items():
+    set_keys(raw, overrides or {})
+    return raw
+
+
+def set_keys(raw: dict[str, Any], overrides: Mapping[str, Any]) -> None:
+    """Set the dotted keys of ``overrides`` in the scene mapping ``raw`` (``set_key``).
+
+    :raises SimulationError: 'override KEY: ...' for a key that cannot be set.
+    """
+    for key, value in overrides.items():
         try:
             set_key(raw, key, value)
         except SimulationError as exc:
             raise SimulationError(f'override {key}: {exc}') from None
-    return raw
 
 
 def load_scene(name_or_path: str | pathlib.Path,
