@@ -143,11 +143,12 @@ class _Future:
 
 def test_controls_before_the_connection_are_sent_once_connected(ros_context):
     """The page's controls changed while the graph starts are not lost: nothing is sent
-    before the node connects (the simulator's services may not be up), then the page's state
-    as it is then, and later only what changed."""
+    before the node connects (the simulator's services may not be up, or a controller's
+    commands not yet matched), then the page's state as it is then, and later only what
+    changed."""
     from iceskate_viewer.live_node import LiveViewNode
     page = _Page()
-    node = LiveViewNode(page, context=ros_context)
+    node = LiveViewNode(page, 2, context=ros_context)
     sent: list[tuple[str, object]] = []
     try:
         for name in ('_pause', '_resume'):
@@ -164,6 +165,10 @@ def test_controls_before_the_connection_are_sent_once_connected(ros_context):
         page.on_control(page.paused, page.pace)
         assert sent == []
         node._states.get_publisher_count = lambda: 1
+        node._commands_in.get_publisher_count = lambda: 1  # one of the two controllers
+        node._connect()
+        assert sent == []
+        node._commands_in.get_publisher_count = lambda: 2
         node._connect()
         assert sent == [('_resume', None), ('pace', 0.5)]
         page.paused = True

@@ -261,7 +261,8 @@ def run_graph(scene_arg: str, out: pathlib.Path, *, duration: float | None = Non
         if (live := live_view(watch, robot, scene.name, stack)) is not None:
             from iceskate_viewer.live_node import watching
             stack.enter_context(process_environment(env))
-            stack.enter_context(watching(live, int(env['ROS_DOMAIN_ID'])))
+            controllers = sum(spec.node != 'simulator' for spec in specs)
+            stack.enter_context(watching(live, int(env['ROS_DOMAIN_ID']), controllers))
         why, early = '', {}
         if single_process:
             with realtime_scheduling(rt_priority):

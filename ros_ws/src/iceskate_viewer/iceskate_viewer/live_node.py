@@ -4,8 +4,9 @@
 ``effort_commands``) best effort, so it never holds the lockstep back, and offers a frame to the
 ``LiveView`` at its display rate; the page's pause and pace go to the simulator (``~/pause``,
 ``~/resume``, its ``pace`` parameter), which keeps them. The simulator starts paused; the
-node resumes it once the simulator's state publisher is matched and its services are up, so
-that a short run is seen from its start.
+node resumes it once the simulator's state publisher and every controller's command publisher
+are matched and its services are up, so that a short run is seen from its start, head target
+included.
 ``watching`` runs the node on its own context and executor thread for as long as the run goes.
 """
 
@@ -38,7 +39,8 @@ from iceskate_viewer.pose import ViewFrame
 
 #: Latest commands kept (raw) to find the head target among: one per controller and period.
 RECENT_COMMANDS = 4
-#: Longest wait [s] for the simulator's state before the run is let go unseen.
+#: Longest wait [s] for the simulator's state (and the controllers' commands) before the run is
+#: let go unseen.
 CONNECT_TIMEOUT = 60.0
 
 
@@ -51,11 +53,14 @@ def frame_of_gait_state(state: Any, head_target: np.ndarray) -> ViewFrame:
 
 
 class LiveViewNode(Node):
-    """Shows the run of the node ``simulator`` on ``live``, and drives its pause and pace."""
+    """Shows the run of the node ``simulator`` (with ``controllers`` command publishers) on
+    ``live``, and drives its pause and pace."""
 
-    def __init__(self, live: LiveView, simulator: str = 'simulator', **kwargs: Any) -> None:
+    def __init__(self, live: LiveView, controllers: int, simulator: str = 'simulator',
+                 **kwargs: Any) -> None:
         super().__init__('live_view', **kwargs)
         self.live = live
+        self._controllers = controllers
         self._commands: deque[bytes] = deque(maxlen=RECENT_COMMANDS)
         self._offered_at = -np.inf  # wall time [s] of the last frame offered
         self._lock = threading.Lock()  # the page's controls come from its worker threads
@@ -63,8 +68,8 @@ class LiveViewNode(Node):
         self._told: tuple[bool, float] | None = None  # (paused, pace) it was told last
         self._states = self.create_subscription(GaitState, 'gait_state', self._on_state,
                                                 LOCKSTEP_READER_QOS, raw=True)
-        self.create_subscription(EffortCommand, 'effort_commands', self._on_command,
-                                 LOCKSTEP_READER_QOS, raw=True)
+        self._commands_in = self.create_subscription(
+            EffortCommand, 'effort_commands', self._on_command, LOCKSTEP_READER_QOS, raw=True)
         self._pause = self.create_client(Trigger, f'/{simulator}/pause')
         self._resume = self.create_client(Trigger, f'/{simulator}/resume')
         self._parameters = AsyncParameterClient(self, simulator)
@@ -74,15 +79,19 @@ class LiveViewNode(Node):
 
     def _connect(self) -> None:
         """Tell the simulator (started paused) the page's controls, which resumes it unless the
-        page is paused, once its state publisher is matched and its services are up; after
-        ``CONNECT_TIMEOUT`` s without the publisher anyway, saying so."""
+        page is paused, once its state publisher and the controllers' command publishers are
+        matched and its services are up; after ``CONNECT_TIMEOUT`` s without them anyway,
+        saying so."""
         if not (self._resume.service_is_ready() and self._pause.service_is_ready()):
             return
-        if not self._states.get_publisher_count() and time.monotonic() < self._connect_by:
+        seen = (self._states.get_publisher_count() > 0
+                and self._commands_in.get_publisher_count() >= self._controllers)
+        if not seen and time.monotonic() < self._connect_by:
             return
-        if not self._states.get_publisher_count():
-            self.get_logger().warning(f"the simulator's state did not reach the live view "
-                                      f'within {CONNECT_TIMEOUT:g} s: the run goes on unseen')
+        if not seen:
+            self.get_logger().warning(f"the simulator's state or the controllers' commands did "
+                                      f'not reach the live view within {CONNECT_TIMEOUT:g} s: '
+                                      'the run goes on, maybe unseen')
         self._connecting.cancel()
         with self._lock:
             self._connected = True
@@ -143,16 +152,17 @@ class LiveViewNode(Node):
 
 
 @contextlib.contextmanager
-def watching(live: LiveView, domain_id: int) -> Iterator[LiveViewNode]:
-    """A ``LiveViewNode`` on ``live`` in ROS domain ``domain_id``, spun by its own thread until
-    the block ends (the environment's DDS settings apply: set them first)."""
+def watching(live: LiveView, domain_id: int, controllers: int) -> Iterator[LiveViewNode]:
+    """A ``LiveViewNode`` on ``live`` in ROS domain ``domain_id`` (a graph of ``controllers``
+    controller nodes), spun by its own thread until the block ends (the environment's DDS
+    settings apply: set them first)."""
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)  # the run has its own
     node = executor = thread = None
     done = threading.Event()
     try:
-        node = LiveViewNode(live, context=context)
+        node = LiveViewNode(live, controllers, context=context)
         executor = EventsExecutor(context=context)
         executor.add_node(node)
 
