@@ -34,6 +34,65 @@ def test_read_bag_aligns_every_sample_of_a_run(sim_bag, spec):
     np.testing.assert_allclose(bag.effort_total, total, rtol=0, atol=1e-9)
 
 
+def _edited_copy(source: pathlib.Path, target: pathlib.Path, edit) -> pathlib.Path:
+    """A copy of bag ``source`` with each message passed through ``edit(topic, index, msg,
+    typestore)`` (index: the message's number on its topic), which returns the messages to
+    write in its place."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    with AnyReader([source]) as reader:
+        writer = Writer(target, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        try:
+            out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=reader.typestore)
+                   for c in reader.connections}
+            seen: dict[str, int] = {}
+            for conn, stamp, raw in reader.messages():
+                index = seen[conn.topic] = seen.get(conn.topic, -1) + 1
+                msg = reader.deserialize(raw, conn.msgtype)
+                for written in edit(conn.topic, index, msg, reader.typestore):
+                    writer.write(out[conn.id], stamp,
+                                 reader.typestore.serialize_cdr(written, conn.msgtype))
+        finally:
+            writer.close()
+    return target
+
+
+def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
+    """A sample needs all three required topics (one missing drops it), a repeated stamp keeps
+    its later message, and a head pose missing at a sample leaves nan there alone."""
+    import copy
+
+    def edit(topic, index, msg, typestore):
+        if topic == '/joint_dynamics' and index == 7:
+            return []
+        if topic == '/head_pose' and index == 3:
+            return []
+        if topic == '/joint_states' and index == 12:
+            later = copy.deepcopy(msg)
+            later.position[0] += 1.0
+            return [msg, later]
+        return [msg]
+    whole = read_bag(sim_bag)
+    bag = read_bag(_edited_copy(sim_bag, tmp_path / 'edited', edit))
+    kept = np.delete(np.arange(whole.n_samples), 7)
+    assert np.array_equal(bag.t_ns, whole.t_ns[kept])
+    assert np.array_equal(bag.qdd, whole.qdd[kept])
+    for source in whole.efforts:
+        assert np.array_equal(bag.efforts[source], whole.efforts[source][kept])
+    assert list(bag.efforts) == list(whole.efforts)
+    expected = whole.q[kept].copy()
+    expected[11, 0] += 1.0  # sample 12, the 12th kept: its later message
+    assert np.array_equal(bag.q, expected)
+    assert np.all(np.isnan(bag.head_position[3])) and np.all(np.isfinite(
+        np.delete(bag.head_position, 3, axis=0)))
+    assert bag.notes == ("1 sample(s) miss one of ['/gait_state', '/joint_dynamics', "
+                         "'/joint_states'] and were dropped",
+                         '1 message(s) repeated a header stamp; the later one was kept',
+                         'the samples have 1 gap(s) (sampled every 0.001 s); the longest from '
+                         't = 0.006000 s to 0.008000 s')
+
+
 def test_read_bag_maps_gait_codes(synthetic_bag, spec):
     bag = read_bag(synthetic_bag)
     modes = [m for m, _, _ in spec.steps]
@@ -196,3 +255,34 @@ def test_the_breakdown_survives_a_rewrite_unchanged(tmp_path, sim_bag):
     assert set(same.efforts) == set(original.efforts)
     for source, tau in original.efforts.items():
         np.testing.assert_array_equal(same.efforts[source], tau)
+
+
+def test_reading_a_bag_keeps_its_samples_as_arrays(tmp_path):
+    """What read_bag needs grows with the bag about as its arrays do (the rows are written into
+    arrays as the messages are decoded; no object per message is kept): from a 1 s to a 4 s
+    bag its peak grows by less than 1.5 times the growth of the arrays it returns."""
+    import dataclasses
+    import tracemalloc
+
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene
+    stand = load_scene(str(pathlib.Path(__file__).resolve().parents[1] / 'integration' / 'data'
+                           / 'tiny_stand.yaml'))
+
+    def measured(duration: float) -> tuple[int, int]:  # (peak, arrays) [bytes]
+        out = tmp_path / f'{duration:g}s'
+        run(dataclasses.replace(stand, duration=duration), out, progress=False, picture=False)
+        read_bag(out / 'bag')  # the imports and caches of a first read
+        tracemalloc.start()
+        try:
+            bag = read_bag(out / 'bag')
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert bag.n_samples == round(duration * 1000)
+        arrays = [getattr(bag, f.name) for f in dataclasses.fields(bag)]
+        arrays = [x for x in arrays if isinstance(x, np.ndarray)] + list(bag.efforts.values())
+        return peak, sum(x.nbytes for x in arrays)
+    (short_peak, short_arrays), (long_peak, long_arrays) = measured(1.0), measured(4.0)
+    assert long_peak - short_peak < 1.5 * (long_arrays - short_arrays), (
+        short_peak, long_peak, short_arrays, long_arrays)

@@ -2,13 +2,15 @@
 
 ``open_bag`` reads a bag record by record, so a bag never closed or cut short gives every message
 of its complete chunks; ``read_bag`` joins the samples of the topics the analysis needs on their
-header stamps. Units: SI; times [ns] as ``t_ns``, [s] as ``t``.
+header stamps, each message's row written into arrays as it is decoded (no object per message
+is kept). Units: SI; times [ns] as ``t_ns``, [s] as ``t``.
 """
 
 from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field, replace
+import functools
 import json
 import pathlib
 from typing import TYPE_CHECKING, Any
@@ -417,22 +419,81 @@ def _joint_dynamics(msg: Any, where: str
     return qdd, active, efforts
 
 
-def _head_pose(msg: Any, where: str) -> np.ndarray:
+def _head_pose(msg: Any, where: str) -> tuple[np.ndarray]:
     p = msg.pose.position
-    return np.array([p.x, p.y, p.z], dtype=float)
+    return (np.array([p.x, p.y, p.z], dtype=float),)
 
 
 #: What a message of each sampled topic gives: reader(msg, where) -> its row.
 _READERS = {'/joint_states': _joint_states, '/gait_state': _gait_state,
             '/joint_dynamics': _joint_dynamics, '/head_pose': _head_pose}
+#: The fields of each sampled topic's rows: (name, shape of one row, dtype), in row order
+#: (``/joint_dynamics``' third field, the efforts by source, is kept apart: ``_Table.efforts``).
+_FIELDS = {
+    '/joint_states': (('q', (N_COORDINATES,), float), ('v', (N_COORDINATES,), float),
+                      ('effort_total', (N_COORDINATES,), float)),
+    '/gait_state': (('mode', (), np.int64), ('side', (), np.int64), ('pivot', (), np.int64),
+                    ('step_index', (), np.int64),
+                    ('multipliers', (len(MULTIPLIER_NAMES),), float),
+                    ('support_normal', (), float), ('support_friction', (), float),
+                    ('zmp_y', (), float), ('heel_anchor_y', (), float)),
+    '/joint_dynamics': (('qdd', (N_COORDINATES,), float), ('active', (N_COORDINATES,), bool)),
+    '/head_pose': (('head_position', (3,), float),),
+}
+
+
+class _Table:
+    """The rows of one sampled topic as arrays, filled in place as the messages are read (room
+    for ``capacity`` messages, the channel's count): no Python object per message is kept."""
+
+    def __init__(self, topic: str, capacity: int) -> None:
+        self.by_source = topic == '/joint_dynamics'  # its rows end with the efforts by source
+        self.size = 0
+        self.stamps = np.zeros(capacity, dtype=np.int64)
+        self.fields = {name: np.zeros((capacity, *shape), dtype=dtype)
+                       for name, shape, dtype in _FIELDS[topic]}
+        self.efforts: dict[str, np.ndarray] = {}  # /joint_dynamics: source -> (capacity, 18)
+        self.carries: dict[str, np.ndarray] = {}  # source -> whether each row carries it
+
+    def append(self, stamp: int, row: tuple[Any, ...]) -> None:
+        """Add a message's row (``_READERS``' output) at header ``stamp`` [ns]."""
+        k = self.size
+        if k == self.stamps.size:  # a file still being written grew since the scan
+            self._grow()
+        self.stamps[k] = stamp
+        values, by_source = (row[:-1], row[-1]) if self.by_source else (row, {})
+        for array, value in zip(self.fields.values(), values, strict=True):
+            array[k] = value
+        for source, tau in by_source.items():
+            if source not in self.efforts:
+                self.efforts[source] = np.zeros((self.stamps.size, N_COORDINATES))
+                self.carries[source] = np.zeros(self.stamps.size, dtype=bool)
+            self.efforts[source][k] = tau
+            self.carries[source][k] = True
+        self.size = k + 1
+
+    def _grow(self) -> None:
+        def grown(a: np.ndarray) -> np.ndarray:
+            return np.concatenate([a, np.zeros((max(a.shape[0], 1), *a.shape[1:]), a.dtype)])
+        self.stamps = grown(self.stamps)
+        for group in (self.fields, self.efforts, self.carries):
+            for name in group:
+                group[name] = grown(group[name])
+
+    def latest(self) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps, row of each): every header stamp once, increasing, with the row of its
+        last message."""
+        reversed_stamps = self.stamps[:self.size][::-1]
+        stamps, first = np.unique(reversed_stamps, return_index=True)
+        return stamps, self.size - 1 - first
 
 
 def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
-             progress: bool) -> tuple[dict[str, dict[int, Any]], str, int]:
-    """The rows of each sampled topic by header stamp (the later of a repeated one), the URDF,
-    the count of repeated stamps."""
-    tables: dict[str, dict[int, Any]] = {topic: {} for topic in _READERS}
-    urdf, duplicates = '', 0
+             progress: bool) -> tuple[dict[str, _Table], str]:
+    """The rows of each sampled topic, as read (``_Table``), and the URDF."""
+    tables = {topic: _Table(topic, chosen[topic].count if topic in chosen else 0)
+              for topic in _READERS}
+    urdf = ''
     total = sum(c.count for c in chosen.values())
     bar = ProgressBar(total, f'reading {path.name}', 'msg', progress, leave=False)
     try:
@@ -448,10 +509,7 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
                 if topic == '/robot_description':
                     urdf = str(msg.data)
                 else:
-                    row = _READERS[topic](msg, where)
-                    stamp = _stamp_ns(msg)
-                    duplicates += topic in REQUIRED_TOPICS and stamp in tables[topic]
-                    tables[topic][stamp] = row
+                    tables[topic].append(_stamp_ns(msg), _READERS[topic](msg, where))
             except AttributeError as exc:
                 raise SimulationError(f'bag {path}: {topic} message at {where} lacks a field '
                                       f'the analysis needs ({exc}); the bag was recorded with '
@@ -459,59 +517,59 @@ def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
             bar.update(1)
     finally:
         bar.close()
-    return tables, urdf, duplicates
+    return tables, urdf
 
 
-def _assemble(tables: dict[str, dict[int, Any]], urdf: str, duplicates: int,
-              path: pathlib.Path, custom: dict[str, str]) -> BagData:
-    joint, gait, dyn, head = (tables[t] for t in ('/joint_states', '/gait_state',
-                                                 '/joint_dynamics', '/head_pose'))
-    stamps = sorted(set(joint) & set(gait) & set(dyn))
+def _assemble(tables: dict[str, _Table], urdf: str, path: pathlib.Path,
+              custom: dict[str, str]) -> BagData:
+    """The samples at the header stamps that every required topic has (each topic's last
+    message of a repeated stamp), one field at a time, each table's arrays let go once taken."""
+    latest = {topic: tables[topic].latest() for topic in _READERS}
+    duplicates = sum(tables[t].size - latest[t][0].size for t in REQUIRED_TOPICS)
+    stamps = functools.reduce(functools.partial(np.intersect1d, assume_unique=True),
+                              (latest[t][0] for t in REQUIRED_TOPICS))
+    union = functools.reduce(np.union1d, (latest[t][0] for t in REQUIRED_TOPICS))
     notes = []
-    union = set(joint) | set(gait) | set(dyn)
-    if len(union) > len(stamps):
-        notes.append(f'{len(union) - len(stamps)} sample(s) miss one of '
+    if union.size > stamps.size:
+        notes.append(f'{union.size - stamps.size} sample(s) miss one of '
                      f'{sorted(REQUIRED_TOPICS)} and were dropped')
-    if not stamps:
-        counts = {topic: len(tables[topic]) for topic in REQUIRED_TOPICS}
+    if not stamps.size:
+        counts = {topic: int(latest[topic][0].size) for topic in REQUIRED_TOPICS}
         raise SimulationError(f'bag {path}: no sample has all of {sorted(REQUIRED_TOPICS)} '
                               f'at the same header stamp (messages per topic: {counts})')
-    n = len(stamps)
-    sources = dict.fromkeys(s for k in stamps for s in dyn[k][2])  # first-seen order
-    efforts = {s: np.zeros((n, N_COORDINATES)) for s in sources}
-    for i, k in enumerate(stamps):
-        for source, tau in dyn[k][2].items():
-            efforts[source][i] = tau
-    q, v, effort_total = _columns(joint, stamps)
-    qdd, active = (np.array([dyn[k][i] for k in stamps]) for i in (0, 1))
-    mode, side, pivot, step_index, multipliers, normal, friction, zmp_y, anchor_y = _columns(
-        gait, stamps)
+    columns: dict[str, np.ndarray] = {}
+    for topic in REQUIRED_TOPICS:
+        known, rows = latest[topic]
+        rows = rows[np.searchsorted(known, stamps)]
+        table = tables.pop(topic)
+        for name in list(table.fields):
+            columns[name] = table.fields.pop(name)[rows]
+        if topic == '/joint_dynamics':  # the sources carried at a kept sample, first seen first
+            carried = {s: table.carries[s][rows] for s in table.efforts}
+            first = {s: int(np.argmax(c)) for s, c in carried.items() if c.any()}
+            efforts = {s: table.efforts.pop(s)[rows] for s in sorted(first, key=first.get)}
+    head = tables.pop('/head_pose')
+    known, rows = latest['/head_pose']
+    at = np.minimum(np.searchsorted(known, stamps), max(known.size - 1, 0))
+    has = known[at] == stamps if known.size else np.zeros(stamps.size, dtype=bool)
+    head_position = np.full((stamps.size, 3), np.nan)
+    head_position[has] = head.fields['head_position'][rows[at[has]]]
     if duplicates:
         notes.append(f'{duplicates} message(s) repeated a header stamp; the later one '
                      'was kept')
-    if not head:
+    if not known.size:
         notes.append('no /head_pose: head positions are nan')
     if not urdf:
         notes.append('no /robot_description: the installed URDF is assumed')
-    steps = np.diff(np.array(stamps, dtype=np.int64))
+    steps = np.diff(stamps)
     if steps.size and steps.max() > steps.min():
         gaps = np.flatnonzero(steps > steps.min())
         k = int(gaps[np.argmax(steps[gaps])])
         notes.append(f'the samples have {gaps.size} gap(s) (sampled every {steps.min() * 1e-9:g} '
                      f's); the longest from t = {stamps[k] * 1e-9:.6f} s to '
                      f'{stamps[k + 1] * 1e-9:.6f} s')
-    return BagData(
-        path=path, t_ns=np.array(stamps, dtype=np.int64), q=q, v=v, qdd=qdd,
-        active=active, effort_total=effort_total, efforts=efforts, mode=mode,
-        side=side, pivot=pivot, step_index=step_index, multipliers=multipliers,
-        support_normal=normal, support_friction=friction, zmp_y=zmp_y, heel_anchor_y=anchor_y,
-        head_position=np.array([head.get(k, np.full(3, np.nan)) for k in stamps]),
-        urdf=urdf, custom_data=custom, notes=tuple(notes))
-
-
-def _columns(table: dict[int, tuple[Any, ...]], stamps: list[int]) -> list[np.ndarray]:
-    """The fields of the rows of ``table`` at ``stamps``, one array per field."""
-    return [np.array(c) for c in zip(*(table[k] for k in stamps), strict=True)]
+    return BagData(path=path, t_ns=stamps, efforts=efforts, head_position=head_position,
+                   urdf=urdf, custom_data=custom, notes=tuple(notes), **columns)
 
 
 def _validate(data: BagData) -> None:
@@ -544,9 +602,9 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         lack the fields the analysis needs; the message names what is wrong.
     """
     reader = open_bag(path)
-    tables, urdf, duplicates = _collect(reader, _check_connections(reader, reader.path),
-                                        reader.path, progress)
-    data = _assemble(tables, urdf, duplicates, reader.path, reader.custom_data)
+    tables, urdf = _collect(reader, _check_connections(reader, reader.path), reader.path,
+                            progress)
+    data = _assemble(tables, urdf, reader.path, reader.custom_data)
     if reader.recovered:
         extra = ('' if reader.custom_data
                  else ' (without metadata: the scene parameters are not known)')

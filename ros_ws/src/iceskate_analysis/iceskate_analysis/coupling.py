@@ -38,6 +38,8 @@ TERMS = ('own_inertia', 'tau', 'm_total', 'coriolis', 'gravity', 'damping', 'lim
          'constraint', 'support_friction', 'residual')
 #: Sources that are external forces on a link (recorded as J^T f), not joint inputs.
 EXTERNAL_SOURCES = ('push',)
+#: Rows of a CSV file turned into text at a time (``write_csv``).
+CSV_BLOCK = 4096
 _HEEL_SPEED_EPS = 1e-9  # m/s: below it a sliding heel's friction direction defaults to +1
 
 
@@ -532,14 +534,24 @@ def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
 
 # ---------------------------------------------------------------------------------- export
 def write_csv(path: str | pathlib.Path, columns: dict[str, np.ndarray]) -> pathlib.Path:
-    """Write equal-length columns to a CSV file with a header row (nan written as 'nan')."""
+    """Write equal-length columns to a CSV file with a header row (nan written as 'nan'), in
+    blocks of ``CSV_BLOCK`` rows, so that the text in memory is bounded whatever the length.
+
+    :raises ValueError: when the columns differ in length.
+    """
     path = pathlib.Path(path)
-    text = [[str(int(x)) for x in a] if a.dtype.kind in 'biu' else [repr(float(x)) for x in a]
-            for a in map(np.asarray, columns.values())]
+    arrays = [np.asarray(a) for a in columns.values()]
+    lengths = {len(a) for a in arrays}
+    if len(lengths) > 1:
+        raise ValueError(f'columns of different lengths {sorted(lengths)} for {path}')
     with path.open('w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
         writer.writerow(columns)
-        writer.writerows(zip(*text, strict=True))
+        for start in range(0, lengths.pop() if lengths else 0, CSV_BLOCK):
+            text = [[str(int(x)) for x in block] if block.dtype.kind in 'biu'
+                    else [repr(float(x)) for x in block]
+                    for block in (a[start:start + CSV_BLOCK] for a in arrays)]
+            writer.writerows(zip(*text, strict=True))
     return path
 
 
