@@ -53,9 +53,8 @@ struct StateCache
   Vector18 heel_z_row = Vector18::Zero();            // idem
   bool gravity = false;
   Vector18 g = Vector18::Zero();  // every coordinate
-  bool com = false;
+  bool velocities = false;  // centre, joint_velocities
   CentreOfMass centre;
-  bool velocities = false;
   std::array<Eigen::Vector3d, kCoordinates> joint_velocities;  // world-aligned [m/s]
 };
 
@@ -162,7 +161,6 @@ StateCache & ModelKinematics::at(std::size_t k, const Vector18 & q, const Vector
   if (!c.has_v || c.v != v) {
     c.v = v;
     c.has_v = true;
-    c.com = false;
     c.velocities = false;
   }
   return c;
@@ -242,22 +240,7 @@ Vector18 ModelKinematics::swing_heel_z_row(const SupportState & state, const Vec
 CentreOfMass ModelKinematics::centre_of_mass(
   const SupportState & state, const Vector18 & q, const Vector18 & v)
 {
-  const auto k = model_index(state.side, state.pivot);
-  StateCache & c = at(k, q, v);
-  if (!c.com) {
-    const pinocchio::Model & model = models_[k].model.pin();
-    Workspace & w = *work_;
-    pinocchio::Data & data = w.data[k];
-    w.q = q;
-    w.v = v;
-    pinocchio::centerOfMass(model, data, ConstVector(w.q), ConstVector(w.v));
-    c.centre.position = data.com[0];
-    c.centre.velocity = data.vcom[0];
-    c.centre.jacobian_y =
-      pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
-    c.com = true;
-  }
-  return c.centre;
+  return velocities(model_index(state.side, state.pivot), q, v).centre;
 }
 
 Eigen::Vector3d ModelKinematics::frame_position(
@@ -279,21 +262,35 @@ Eigen::Vector3d ModelKinematics::joint_velocity(
   const SupportState & state, const Vector18 & q, const Vector18 & v, int joint)
 {
   check_joint(joint);
-  const auto k = model_index(state.side, state.pivot);
+  return velocities(model_index(state.side, state.pivot), q, v)
+    .joint_velocities[static_cast<std::size_t>(joint)];
+}
+
+const StateCache & ModelKinematics::velocities(
+  std::size_t k, const Vector18 & q, const Vector18 & v)
+{
   StateCache & c = at(k, q, v);
-  if (!c.velocities) {
-    const pinocchio::Model & model = models_[k].model.pin();
-    Workspace & w = *work_;
-    w.q = q;
-    w.v = v;
-    pinocchio::forwardKinematics(model, w.data[k], ConstVector(w.q), ConstVector(w.v));
-    for (std::size_t i = 0; i < kCoordinates; ++i) {
-      c.joint_velocities[i] =
-        pinocchio::getVelocity(model, w.data[k], w.joints[k][i], kWorldAligned).linear();
-    }
-    c.velocities = true;
+  if (c.velocities) {
+    return c;
   }
-  return c.joint_velocities[static_cast<std::size_t>(joint)];
+  const pinocchio::Model & model = models_[k].model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[k];
+  w.q = q;
+  w.v = v;
+  // one forward pass for the joint velocities, the centre of mass and its Jacobian (what
+  // centerOfMass(q, v) and jacobianCenterOfMass(q) would each run again at the same state)
+  pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
+  for (std::size_t i = 0; i < kCoordinates; ++i) {
+    c.joint_velocities[i] =
+      pinocchio::getVelocity(model, data, w.joints[k][i], kWorldAligned).linear();
+  }
+  pinocchio::centerOfMass(model, data, pinocchio::VELOCITY);
+  c.centre.position = data.com[0];
+  c.centre.velocity = data.vcom[0];
+  c.centre.jacobian_y = pinocchio::jacobianCenterOfMass(model, data).row(1).transpose();
+  c.velocities = true;
+  return c;
 }
 
 }  // namespace iceskate_native

@@ -53,6 +53,9 @@ private:
   StateCache & at(std::size_t k, const Vector18 & q, const Vector18 & v);
   /// Model k's answers at q with the position-level ones computed (one joint-Jacobian pass).
   const StateCache & positions(std::size_t k, const Vector18 & q);
+  /// Model k's answers at (q, v) with the velocity-level ones computed (the joint velocities,
+  /// the centre of mass and its Jacobian: one forward pass).
+  const StateCache & velocities(std::size_t k, const Vector18 & q, const Vector18 & v);
 
   std::array<SupportModel, 4> models_;
   ModeTable modes_;
