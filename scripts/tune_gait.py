@@ -24,7 +24,13 @@ the gait's speed (v_d = balance.speed). About 2 s ('robust') to 8 s ('phases') a
 ``--jobs 2``. ``--start LOG`` starts from the best point of an earlier
 search's log (``--start-run N``: from its run N), ``--set block.key=value`` from a given value;
 ``--check`` runs the base scene (with ``--start``/``--set``: that point) over ``CHECKS``, cases
-the search did not see, and prints one JSON line per case.
+the search did not see, and prints one JSON line per case. ``--cycle-weight W`` adds the paper's
+ice cycle to the robust objective: W times the nominal case's shortfall of exchanges from a flat
+front sole (``FLAT_SHARE`` of the clean exchanges from the 4th on, from a mode of
+``FLAT_SOLE_MODES``) and of double support (``DOUBLE_SUPPORT`` s per step in
+``DOUBLE_SUPPORT_MODES``), each as a fraction of its goal (``cycle``); the search box then
+matters for ``weight_transfer.heel_share``, the share's bound while the front heel alone
+touches (its top, 2, is no bound, the shipped gaits' value).
 
 The shipped skate values (``skate``, ``skate_no_yaw``) are run 68 of the last of five CMA-ES
 searches, rounded to 4 significant digits, and one value set after them, not searched:
@@ -70,7 +76,8 @@ searched) was chosen by hand among three tries for the arm-swing ratio, with the
 before these (run 374 of a search from commit c9e304c's ``skate_glide.yaml``, seed 2, sigma
 0.08, 400 points, without the feedback bound). Earlier skate values came from searches with
 this script as of commit a282ca0 (its box ``SPACE`` was narrower, so the same seed draws other
-points today).
+points today); the searches above ran before ``weight_transfer.heel_share`` joined the box (a
+dimension more: their seeds, too, draw other points today).
 """
 
 from __future__ import annotations
@@ -113,6 +120,8 @@ SPACE = {
     'balance.com_offset': (-0.05, 0.1),
     'weight_transfer.capture_gain': (0.0, 1.5), 'weight_transfer.share': (0.9, 1.3),
     'weight_transfer.share_min': (0.0, 1.0), 'weight_transfer.ramp_time': (0.1, 1.0),
+    # the share's bound while only the front heel touches (2: none, the shipped gaits' value)
+    'weight_transfer.heel_share': (0.2, 2.0),
 }
 CLEAN_GAP = 0.2  # s: exchanges closer than this to the previous one are chatter
 #: The robust objective's cases: scene edits (floor friction, a chest push [N] at a time [s]).
@@ -159,6 +168,12 @@ CADENCE = (0.8, 1.0)  # s: the step period sought from the 4th exchange (the pap
 STALL = 1.5  # s: a case counts as walking until this long after its last clean exchange
 HEAD_Y_RMS = 0.05  # m: the head y error RMS sought in the nominal case
 HEAD_Z_RMS = 0.0075  # m: the head height error RMS sought (``--height-weight``)
+#: Table 2's modes with the swing sole flat on the floor (Fs, Fp), and those with the swing foot
+#: on the floor at all (a double support).
+FLAT_SOLE_MODES = frozenset(range(13, 21))
+DOUBLE_SUPPORT_MODES = frozenset(range(5, 21))
+FLAT_SHARE = 0.8  # the share of exchanges from a flat front sole sought (``--cycle-weight``)
+DOUBLE_SUPPORT = 0.1  # s: the double support per step sought (``--cycle-weight``)
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
 
@@ -220,15 +235,38 @@ def arm_swing_score(with_yaw: dict, without_yaw: dict, events: list[dict],
     return value + min(ratio, 3.0) + 2.0 * max(-swing['corr_q11_q14'], 0.0)
 
 
-def exchange_times(events: list[dict]) -> list[float]:
-    """Times [s] of the clean support exchanges (see ``score``)."""
-    times, last = [], -np.inf
+def clean_exchanges(events: list[dict]) -> list[dict]:
+    """The events of the clean support exchanges (see ``score``)."""
+    clean, last = [], -np.inf
     for event in events:
         if event['event'] in ('E6', 'E7'):
             if event['t'] - last > CLEAN_GAP:
-                times.append(event['t'])
+                clean.append(event)
             last = event['t']
-    return times
+    return clean
+
+
+def exchange_times(events: list[dict]) -> list[float]:
+    """Times [s] of the clean support exchanges (see ``score``)."""
+    return [event['t'] for event in clean_exchanges(events)]
+
+
+def cycle(events: list[dict]) -> tuple[float, float]:
+    """(share of the clean exchanges from the 4th on made from a flat front sole, mean double
+    support per step [s] from the 4th clean exchange to the last): the nominal ice cycle's
+    measures (nan without two such exchanges)."""
+    clean = clean_exchanges(events)[3:]
+    if len(clean) < 2:
+        return float('nan'), float('nan')
+    share = float(np.mean([e['from_mode'] in FLAT_SOLE_MODES for e in clean]))
+    start, end = clean[0]['t'], clean[-1]['t']
+    double, since = 0.0, start
+    for event in events:
+        if start < event['t'] <= end and event['from_mode'] in DOUBLE_SUPPORT_MODES:
+            double += event['t'] - since
+        if event['t'] > start:
+            since = min(event['t'], end)
+    return share, double / (len(clean) - 1)
 
 
 def scenario(raw: dict, case: dict) -> dict:
@@ -247,15 +285,18 @@ def scenario(raw: dict, case: dict) -> dict:
     return raw
 
 
-def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_weight: float = 0.0
-                 ) -> tuple[float, dict, tuple[dict, list[dict]]]:
+def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_weight: float = 0.0,
+                 cycle_weight: float = 0.0) -> tuple[float, dict, tuple[dict, list[dict]]]:
     """Mean walked fraction and share of cases walked to the end over ``cases`` (x10; the first
     is the nominal case),
     minus, for the nominal case, its mean step period's distance (from the 4th exchange) to
     ``CADENCE`` in tenths of a second, its coefficient of variation (x5) and its head y error
     RMS (the larger of it and its no-yaw twin's, if a case is the nominal one without yaw)
     beyond ``HEAD_Y_RMS`` in units of it (up to 5), and ``height_weight`` times its head height
-    error RMS (the same larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5): (score,
+    error RMS (the same larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5), and
+    ``cycle_weight`` times the nominal case's shortfall of the ice cycle (``cycle``): its share
+    of flat-sole exchanges below ``FLAT_SHARE`` and its double support below
+    ``DOUBLE_SUPPORT``, each as a fraction of the goal (1 each when not measurable): (score,
     details, the nominal case's metrics and events). A case counts as walked up to ``STALL`` s
     after its last clean exchange, so standing still scores nothing; a ``push_before`` case is
     pushed by the nominal case's exchanges, and counts 0 if that case has too few."""
@@ -278,6 +319,7 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
         if k == 0:
             nominal, nominal_exchanges = (metrics, events), exchanges
             periods = np.diff(exchanges[3:])
+            flat, double = cycle(events)
         if k == 0 or case == {**cases[0], 'yaw': False}:  # the nominal case, its no-yaw twin
             errors = metrics.get('head_error_rms') or {}
             head = {axis: max(head[axis], errors.get(axis, float('inf'))) for axis in head}
@@ -289,11 +331,14 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
         mean, miss, spread = float('nan'), 10.0, 1.0
     details['step_period_s'] = {'mean': mean, 'cv': spread}
     details['head_y_rms_m'], details['head_z_rms_m'] = head['y'], head['z']
+    details['flat_sole_share'], details['double_support_s'] = flat, double
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
     beyond = {axis: min(max(head[axis] - goal, 0.0) / goal, 5.0)
               for axis, goal in (('y', HEAD_Y_RMS), ('z', HEAD_Z_RMS))}
+    shortfall = sum(1.0 if np.isnan(value) else max(goal - value, 0.0) / goal
+                    for value, goal in ((flat, FLAT_SHARE), (double, DOUBLE_SUPPORT)))
     return (10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - beyond['y']
-            - height_weight * beyond['z'], details, nominal)
+            - height_weight * beyond['z'] - cycle_weight * shortfall, details, nominal)
 
 
 def check(raw: dict, duration: float) -> list[dict]:
@@ -324,13 +369,13 @@ def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
 
 
 def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases: str,
-             height_weight: float, point: dict[str, float]) -> dict:
+             height_weight: float, cycle_weight: float, point: dict[str, float]) -> dict:
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
     if objective == 'robust':  # the first case is nominal
         robust, robustness, (metrics, events) = robust_score(
-            target_at_gait_speed(raw), duration, SCENARIOS[cases], height_weight)
+            target_at_gait_speed(raw), duration, SCENARIOS[cases], height_weight, cycle_weight)
     else:
         metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
@@ -378,6 +423,9 @@ def main() -> None:
     parser.add_argument('--height-weight', type=float, default=0.0,
                         help='robust objective: weight of the head height error beyond '
                              'HEAD_Z_RMS (in units of it)')
+    parser.add_argument('--cycle-weight', type=float, default=0.0,
+                        help="robust objective: weight of the nominal case's shortfall of the "
+                             'ice cycle (flat-sole exchanges, double support)')
     parser.add_argument('--max-rate', type=float, default=float('inf'),
                         help='cadence bound [exchanges/s]: more are penalised')
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
@@ -424,7 +472,7 @@ def main() -> None:
                 [rng.uniform(size=len(SPACE)) for _ in range(args.jobs)]
             entries = pool.map(functools.partial(evaluate, base, args.duration, args.objective,
                                                  args.max_rate, args.scenarios,
-                                                 args.height_weight),
+                                                 args.height_weight, args.cycle_weight),
                                [point_of(u) for u in units])
             if strategy:
                 strategy.tell(units, [-e['score'] for e in entries])

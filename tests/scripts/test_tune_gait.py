@@ -26,7 +26,7 @@ def skate():
 
 
 def exchanges(times):
-    return [{'event': 'E6', 't': t} for t in times]
+    return [{'event': 'E6', 't': t, 'from_mode': 8, 'to_mode': 4} for t in times]
 
 
 @pytest.mark.parametrize('name', ['robust', 'pushes'])
@@ -102,6 +102,26 @@ def test_head_height_costs_only_with_its_weight(tune, skate, monkeypatch):
                                      abs=1e-9)
 
 
+def test_the_ice_cycle_costs_only_with_its_weight(tune, skate, monkeypatch):
+    """The nominal case's shortfall of the ice cycle costs ``cycle_weight`` per goal missed
+    in full: heel exchanges (none from a flat sole) after 0.01 s of double support miss the
+    share in full and 0.09 of the 0.1 s; with weight 0 (the earlier searches) it costs nothing
+    and is reported."""
+    events = []
+    for t in np.arange(0.5, 12.0, 0.9):
+        events += [{'event': 'E4', 't': t - 0.01, 'from_mode': 4, 'to_mode': 8},
+                   {'event': 'E6', 't': t, 'from_mode': 8, 'to_mode': 4}]
+    monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
+        {'sim_time_s': 12.0, 'fell': False, 'head_error_rms': {'y': 0.03, 'z': 0.005}}, events))
+    cases = tune.SCENARIOS['robust']
+    unweighted, details, _ = tune.robust_score(skate, 12.0, cases)
+    weighted, _, _ = tune.robust_score(skate, 12.0, cases, cycle_weight=10.0)
+    assert details['flat_sole_share'] == 0.0
+    assert details['double_support_s'] == pytest.approx(0.01)
+    assert unweighted == pytest.approx(20.0, abs=1e-9)
+    assert weighted == pytest.approx(20.0 - 10.0 * (1.0 + 0.9), abs=1e-9)
+
+
 def test_phase_cases_push_before_the_nominal_cases_exchanges(tune, skate, monkeypatch):
     """'phases' places each push ``lead`` s before the nominal case's clean exchange number
     ``exchange``; when the nominal case stops short of it the case counts as not walked."""
@@ -134,6 +154,7 @@ def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):
     point = tune.point_of(tune.unit_of(skate))
     assert point['balance.swing_time'] == pytest.approx(balance['swing_time'])
     assert point['balance.glide_time'] == 0.0  # not in the scene: the parameter's default
+    assert point['weight_transfer.heel_share'] == 2.0  # the default, the top of its range
 
 
 def test_set_arguments_name_a_value_or_stop_in_one_sentence(tune):
@@ -151,3 +172,25 @@ def test_check_cases_edit_the_scene(tune, skate):
     pushed = tune.scenario(skate, {'mu': 0.002, 'push': (8.0, -150.0)})
     assert pushed['disturbances'] == [{'start': 8.0, 'duration': 0.1, 'frame': 'chest',
                                        'force': [0.0, -150.0, 0.0]}]
+
+
+def test_the_ice_cycle_is_measured_from_the_fourth_clean_exchange(tune):
+    """The share of flat-sole exchanges and the double support per step count from the 4th
+    clean exchange to the last: a step here lands on the heel (mode 8 -> 16, the sole flat in
+    double support) and hands over from the flat front sole (16 -> 3) every 1 s, 0.3 s of it
+    in double support; the first three are heel exchanges (8 -> 4) without double support."""
+    events = []
+    for k in range(8):
+        t = 1.0 + k
+        if k < 3:
+            events += [{'event': 'E6', 't': t, 'from_mode': 8, 'to_mode': 4}]
+        else:
+            events += [{'event': 'E6', 't': t, 'from_mode': 16, 'to_mode': 3},
+                       {'event': 'E2', 't': t + 0.7, 'from_mode': 3, 'to_mode': 8},
+                       {'event': 'E4', 't': t + 0.8, 'from_mode': 8, 'to_mode': 16}]
+    share, double = tune.cycle(events)
+    assert share == 1.0
+    assert double == pytest.approx(0.3)
+    events[6] = {**events[6], 'from_mode': 8}  # the 5th exchange from the heel
+    assert tune.cycle(events)[0] == pytest.approx(4 / 5)
+    assert np.isnan(tune.cycle(events[:5])).all()  # fewer than two exchanges from the 4th
