@@ -28,9 +28,9 @@ the search did not see, and prints one JSON line per case. ``--cycle-weight W`` 
 ice cycle to the robust objective: W times the nominal case's shortfall of exchanges from a flat
 front sole (``FLAT_SHARE`` of the clean exchanges from the 4th on, from a mode of
 ``FLAT_SOLE_MODES``) and of double support (``DOUBLE_SUPPORT`` s per step in
-``DOUBLE_SUPPORT_MODES``), each as a fraction of its goal (``cycle``); the search box then
-matters for ``weight_transfer.heel_share``, the share's bound while the front heel alone
-touches (its top, 2, is no bound, the shipped gaits' value).
+``DOUBLE_SUPPORT_MODES``), each as a fraction of its goal (``cycle``). Every search also varies
+``weight_transfer.heel_share``, the share's bound while the front heel alone touches, which the
+flat-sole exchange needs (a start from the shipped gaits begins at its top, 2: no bound).
 
 The shipped skate values (``skate``, ``skate_no_yaw``) are run 68 of the last of five CMA-ES
 searches, rounded to 4 significant digits, and one value set after them, not searched:

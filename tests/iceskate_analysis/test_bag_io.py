@@ -60,12 +60,19 @@ def _edited_copy(source: pathlib.Path, target: pathlib.Path, edit) -> pathlib.Pa
 
 def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
     """A sample needs all three required topics (one missing drops it), a repeated stamp keeps
-    its later message, and a head pose missing at a sample leaves nan there alone."""
+    its later message (the sources' order too), and a head pose missing at a sample leaves nan
+    there alone."""
     import copy
 
     def edit(topic, index, msg, typestore):
         if topic == '/joint_dynamics' and index == 7:
             return []
+        if topic == '/joint_dynamics' and index == 0:  # first its sources in reverse order
+            earlier = copy.deepcopy(msg)
+            n = len(msg.name)
+            earlier.source_names = list(reversed(msg.source_names))
+            earlier.source_efforts = msg.source_efforts.reshape(-1, n)[::-1].ravel().copy()
+            return [earlier, msg]
         if topic == '/head_pose' and index == 3:
             return []
         if topic == '/joint_states' and index == 12:
@@ -88,7 +95,7 @@ def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
         np.delete(bag.head_position, 3, axis=0)))
     assert bag.notes == ("1 sample(s) miss one of ['/gait_state', '/joint_dynamics', "
                          "'/joint_states'] and were dropped",
-                         '1 message(s) repeated a header stamp; the later one was kept',
+                         '2 message(s) repeated a header stamp; the later one was kept',
                          'the samples have 1 gap(s) (sampled every 0.001 s); the longest from '
                          't = 0.006000 s to 0.008000 s')
 

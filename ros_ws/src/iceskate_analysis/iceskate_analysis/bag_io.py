@@ -453,7 +453,8 @@ class _Table:
         self.fields = {name: np.zeros((capacity, *shape), dtype=dtype)
                        for name, shape, dtype in _FIELDS[topic]}
         self.efforts: dict[str, np.ndarray] = {}  # /joint_dynamics: source -> (capacity, 18)
-        self.carries: dict[str, np.ndarray] = {}  # source -> whether each row carries it
+        # source -> its place among each row's sources (-1: the row does not carry it)
+        self.places: dict[str, np.ndarray] = {}
 
     def append(self, stamp: int, row: tuple[Any, ...]) -> None:
         """Add a message's row (``_READERS``' output) at header ``stamp`` [ns]."""
@@ -464,21 +465,24 @@ class _Table:
         values, by_source = (row[:-1], row[-1]) if self.by_source else (row, {})
         for array, value in zip(self.fields.values(), values, strict=True):
             array[k] = value
-        for source, tau in by_source.items():
+        for place, (source, tau) in enumerate(by_source.items()):
             if source not in self.efforts:
                 self.efforts[source] = np.zeros((self.stamps.size, N_COORDINATES))
-                self.carries[source] = np.zeros(self.stamps.size, dtype=bool)
+                self.places[source] = np.full(self.stamps.size, -1, dtype=np.int32)
             self.efforts[source][k] = tau
-            self.carries[source][k] = True
+            self.places[source][k] = place
         self.size = k + 1
 
     def _grow(self) -> None:
-        def grown(a: np.ndarray) -> np.ndarray:
-            return np.concatenate([a, np.zeros((max(a.shape[0], 1), *a.shape[1:]), a.dtype)])
+        def grown(a: np.ndarray, fill: float = 0) -> np.ndarray:
+            return np.concatenate([a, np.full((max(a.shape[0], 1), *a.shape[1:]), fill,
+                                              a.dtype)])
         self.stamps = grown(self.stamps)
-        for group in (self.fields, self.efforts, self.carries):
+        for group in (self.fields, self.efforts):
             for name in group:
                 group[name] = grown(group[name])
+        for source in self.places:
+            self.places[source] = grown(self.places[source], -1)
 
     def latest(self) -> tuple[np.ndarray, np.ndarray]:
         """(stamps, row of each): every header stamp once, increasing, with the row of its
@@ -544,9 +548,11 @@ def _assemble(tables: dict[str, _Table], urdf: str, path: pathlib.Path,
         table = tables.pop(topic)
         for name in list(table.fields):
             columns[name] = table.fields.pop(name)[rows]
-        if topic == '/joint_dynamics':  # the sources carried at a kept sample, first seen first
-            carried = {s: table.carries[s][rows] for s in table.efforts}
-            first = {s: int(np.argmax(c)) for s, c in carried.items() if c.any()}
+        if topic == '/joint_dynamics':  # the sources of the kept samples, in the order they
+            # come: by the first kept sample that carries them, then their place in it
+            places = {s: table.places[s][rows] for s in table.efforts}
+            first = {s: (int(np.argmax(p >= 0)), int(p[np.argmax(p >= 0)]))
+                     for s, p in places.items() if np.any(p >= 0)}
             efforts = {s: table.efforts.pop(s)[rows] for s in sorted(first, key=first.get)}
     head = tables.pop('/head_pose')
     known, rows = latest['/head_pose']
