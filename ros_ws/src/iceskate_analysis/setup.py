@@ -17,6 +17,7 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': ['coupling_analysis = iceskate_analysis.coupling_cli:main',
+                                      'mode_coverage = iceskate_analysis.coverage_cli:main',
                                       'replay = iceskate_analysis.replay:main',
                                       'summary = iceskate_analysis.summary:main']},
 )

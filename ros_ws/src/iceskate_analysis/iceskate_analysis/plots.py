@@ -1,5 +1,6 @@
-"""The paper's Figs. 5-8 from analysed runs as PNG (matplotlib, Agg; no pyplot state): shoulder
-angles (Figs. 5/6), the terms of eq. (11) at a joint (Figs. 7/8) and the largest coupling terms.
+"""The paper's Figs. 3 and 5-8 from analysed runs as PNG (matplotlib, Agg; no pyplot state):
+the visited gait-transition diagram (Fig. 3), shoulder angles (Figs. 5/6), the terms of eq. (11)
+at a joint (Figs. 7/8) and the largest coupling terms.
 """
 
 from __future__ import annotations
@@ -15,8 +16,10 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from iceskate_analysis.coupling import CaseResult, JointDecomposition
+    from iceskate_analysis.coverage import Coverage
 
-__all__ = ['plot_compare_shoulders', 'plot_coupling', 'plot_shoulders', 'plot_terms']
+__all__ = ['plot_compare_shoulders', 'plot_coupling', 'plot_mode_coverage', 'plot_shoulders',
+           'plot_terms']
 
 _DPI = 110
 
@@ -197,3 +200,60 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
     ax.grid(True, alpha=0.3)
     legend_above(ax, ncol=4)
     return _save(fig, path)
+
+
+def plot_mode_coverage(coverage: Coverage, path: str | pathlib.Path) -> pathlib.Path:
+    """The gait-transition diagram of what ``coverage`` visited, laid out like the paper's
+    Fig. 3: Table 2's modes as nodes, the support-foot states as rows and the swing-foot states
+    as columns; an entered mode filled (its entries below its number), one never entered grey;
+    each visited transition an arrow, as wide as its count's logarithm, labelled with it (a
+    transition into the same mode, e.g. an exchange, is counted beside the node)."""
+    from matplotlib.patches import Circle, FancyArrowPatch
+
+    from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
+    supports, swings = list(SUPPORT_STATES), list(SWING_STATES)
+    where = {mode: (2.2 * swings.index(swing), -1.6 * supports.index(support))
+             for mode, (support, swing) in TABLE_2.items()}
+    fig, (ax,) = _figure(1, height=5.4, width=10.0)
+    ax.set_aspect('equal')
+    ax.axis('off')
+    pairs: dict[tuple[int, int], int] = {}
+    for (a, b, _), n in coverage.transitions.items():
+        pairs[(a, b)] = pairs.get((a, b), 0) + n
+    radius = 0.42
+    for (a, b), n in sorted(pairs.items()):
+        if a == b:
+            x, y = where[a]
+            ax.text(x + radius, y + radius, f'↻{n}', fontsize=7, color='tab:blue')
+            continue
+        arrow = FancyArrowPatch(where[a], where[b], connectionstyle='arc3,rad=0.18',
+                                arrowstyle='-|>', mutation_scale=9, shrinkA=14, shrinkB=14,
+                                lw=0.6 + 0.5 * np.log10(n), color='tab:blue', alpha=0.75)
+        ax.add_patch(arrow)
+        (xa, ya), (xb, yb) = where[a], where[b]
+        # the label on the arc's side of the chord, near its middle
+        mx, my = (xa + xb) / 2 + 0.18 * (yb - ya), (ya + yb) / 2 - 0.18 * (xb - xa)
+        ax.text(mx, my, str(n), fontsize=6.5, color='tab:blue', ha='center', va='center')
+    most = max(coverage.entries.values(), default=1)
+    for mode, (x, y) in where.items():
+        entries = coverage.entries[mode]
+        shade = 0.25 + 0.75 * np.log1p(entries) / np.log1p(most) if entries else 0.0
+        ax.add_patch(Circle((x, y), radius, facecolor=(0.12, 0.47, 0.71, shade) if entries
+                            else '0.9', edgecolor='k' if entries else '0.6', lw=0.8))
+        ax.text(x, y + 0.08, str(mode), ha='center', va='center', fontsize=11,
+                fontweight='bold', color='k' if entries else '0.55')
+        ax.text(x, y - 0.2, f'{entries}x' if entries else 'never', ha='center', va='center',
+                fontsize=6.5, color='k' if entries else '0.55')
+    for k, swing in enumerate(swings):
+        ax.text(2.2 * k, 0.85, f'{swing}\n{SWING_STATES[swing][2]}', ha='center',
+                va='bottom', fontsize=7.5)
+    for k, support in enumerate(supports):
+        ax.text(-0.8, -1.6 * k, f'{support}\n{SUPPORT_STATES[support][2]}', ha='right',
+                va='center', fontsize=7.5, wrap=True)
+    ax.set_xlim(-3.6, 2.2 * (len(swings) - 1) + 0.9)
+    ax.set_ylim(-1.6 * (len(supports) - 1) - 0.8, 1.6)
+    ax.set_title(f'Modes of Table 2 entered: {len(coverage.visited)} of {len(TABLE_2)} '
+                 f'({len(coverage.runs)} run(s)); columns: swing foot, rows: support foot',
+                 fontsize=9)
+    return _save(fig, path)
+
