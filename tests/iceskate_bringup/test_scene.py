@@ -4,12 +4,12 @@ import copy
 
 import pytest
 
-from iceskate_bringup.scene import load_scene, parse_scene, scene_sources
+from iceskate_bringup.scene import controller_parameters, load_scene, parse_scene, scene_sources
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_files
 from iceskate_sim.run.scene import SCENE_RESOURCE, scene_raw
 
-REQUIRED = {'stand', 'skate', 'skate_no_yaw', 'walk'}
+REQUIRED = {'stand', 'skate', 'skate_literal', 'skate_no_yaw', 'walk'}
 
 
 def _raw(name: str) -> dict:
@@ -36,6 +36,17 @@ def test_skate_and_skate_no_yaw_differ_only_by_the_yaw_input():
         raw['inputs']['gait_manager']['enabled'] = sorted(
             set(raw['inputs']['gait_manager']['enabled']) - {'yaw'})
     assert skate == no_yaw
+
+
+def test_skate_and_skate_literal_differ_only_by_the_reading_of_eq_10():
+    skate, literal = _raw('skate'), _raw('skate_literal')
+    for name, reading in (('skate', 'B'), ('skate_literal', 'A')):
+        block = load_scene(name).inputs['gait_manager']
+        assert controller_parameters('gait_manager', block).yaw.phase == reading
+    for raw in (skate, literal):
+        raw.pop('scene'), raw.pop('description')
+        raw['inputs']['gait_manager'].setdefault('yaw', {}).pop('phase', None)
+    assert skate == literal
 
 
 def test_skate_is_on_ice_and_walk_on_a_normal_floor():
