@@ -28,7 +28,10 @@ the search did not see, and prints one JSON line per case. ``--cycle-weight W`` 
 ice cycle to the robust objective: W times the nominal case's shortfall of exchanges from a flat
 front sole (``FLAT_SHARE`` of the clean exchanges from the 4th on, from a mode of
 ``FLAT_SOLE_MODES``) and of double support (``DOUBLE_SUPPORT`` s per step in
-``DOUBLE_SUPPORT_MODES``), each as a fraction of its goal (``cycle``). Every search also varies
+``DOUBLE_SUPPORT_MODES``), each as a fraction of its goal (``cycle``); ``--arm-weight W`` W
+times the shortfall of the nominal case's arm-swing ratio against its no-yaw twin below
+``ARM_SWING_RATIO``, as a fraction of it; ``--cadence-weight`` scales the step period's
+penalty (default 1). Every search also varies
 ``weight_transfer.heel_share``, the share's bound while the front heel alone touches, which the
 flat-sole exchange needs (a start from the shipped gaits begins at its top, 2: no bound).
 
@@ -173,6 +176,7 @@ HEAD_Z_RMS = 0.0075  # m: the head height error RMS sought (``--height-weight``)
 FLAT_SOLE_MODES = frozenset(range(13, 21))
 DOUBLE_SUPPORT_MODES = frozenset(range(5, 21))
 FLAT_SHARE = 0.8  # the share of exchanges from a flat front sole sought (``--cycle-weight``)
+ARM_SWING_RATIO = 3.0  # the arm-swing ratio sought (``--arm-weight``; the paper's 3x)
 DOUBLE_SUPPORT = 0.1  # s: the double support per step sought (``--cycle-weight``)
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
@@ -286,11 +290,14 @@ def scenario(raw: dict, case: dict) -> dict:
 
 
 def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_weight: float = 0.0,
-                 cycle_weight: float = 0.0) -> tuple[float, dict, tuple[dict, list[dict]]]:
+                 cycle_weight: float = 0.0, arm_weight: float = 0.0, cadence_weight: float = 1.0
+                 ) -> tuple[float, dict, tuple[dict, list[dict]]]:
     """Mean walked fraction and share of cases walked to the end over ``cases`` (x10; the first
     is the nominal case),
-    minus, for the nominal case, its mean step period's distance (from the 4th exchange) to
-    ``CADENCE`` in tenths of a second, its coefficient of variation (x5) and its head y error
+    minus, for the nominal case, ``cadence_weight`` times its mean step period's distance (from
+    the 4th exchange) to ``CADENCE`` in tenths of a second, its coefficient of variation (x5),
+    ``arm_weight`` times its arm-swing ratio's shortfall below ``ARM_SWING_RATIO`` against its
+    no-yaw twin, as a fraction of it (1 without the twin or when either fell), and its head y error
     RMS (the larger of it and its no-yaw twin's, if a case is the nominal one without yaw)
     beyond ``HEAD_Y_RMS`` in units of it (up to 5), and ``height_weight`` times its head height
     error RMS (the same larger one) beyond ``HEAD_Z_RMS`` in units of it (up to 5), and
@@ -300,7 +307,7 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
     details, the nominal case's metrics and events). A case counts as walked up to ``STALL`` s
     after its last clean exchange, so standing still scores nothing; a ``push_before`` case is
     pushed by the nominal case's exchanges, and counts 0 if that case has too few."""
-    walked, details, nominal_exchanges = [], {}, []
+    walked, details, nominal_exchanges, twin = [], {}, [], None
     periods, head = np.zeros(0), {'y': 0.0, 'z': 0.0}
     for k, case in enumerate(cases):
         if 'push_before' in case:  # placed by the nominal case's exchanges (the first case)
@@ -320,6 +327,8 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
             nominal, nominal_exchanges = (metrics, events), exchanges
             periods = np.diff(exchanges[3:])
             flat, double = cycle(events)
+        if case == {**cases[0], 'yaw': False}:
+            twin = metrics
         if k == 0 or case == {**cases[0], 'yaw': False}:  # the nominal case, its no-yaw twin
             errors = metrics.get('head_error_rms') or {}
             head = {axis: max(head[axis], errors.get(axis, float('inf'))) for axis in head}
@@ -332,13 +341,16 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
     details['step_period_s'] = {'mean': mean, 'cv': spread}
     details['head_y_rms_m'], details['head_z_rms_m'] = head['y'], head['z']
     details['flat_sole_share'], details['double_support_s'] = flat, double
+    ratio = (arm_swing_ratio(nominal[0], twin) if twin is not None else None) or 0.0
+    details['arm_swing_ratio'] = ratio
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
     beyond = {axis: min(max(head[axis] - goal, 0.0) / goal, 5.0)
               for axis, goal in (('y', HEAD_Y_RMS), ('z', HEAD_Z_RMS))}
     shortfall = sum(1.0 if np.isnan(value) else max(goal - value, 0.0) / goal
                     for value, goal in ((flat, FLAT_SHARE), (double, DOUBLE_SUPPORT)))
-    return (10.0 * (np.mean(walked) + full) - miss - 5.0 * spread - beyond['y']
-            - height_weight * beyond['z'] - cycle_weight * shortfall, details, nominal)
+    return (10.0 * (np.mean(walked) + full) - cadence_weight * miss - 5.0 * spread - beyond['y']
+            - height_weight * beyond['z'] - cycle_weight * shortfall
+            - arm_weight * max(ARM_SWING_RATIO - ratio, 0.0) / ARM_SWING_RATIO, details, nominal)
 
 
 def check(raw: dict, duration: float) -> list[dict]:
@@ -369,13 +381,13 @@ def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
 
 
 def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases: str,
-             height_weight: float, cycle_weight: float, point: dict[str, float]) -> dict:
+             weights: dict[str, float], point: dict[str, float]) -> dict:
     """Run the base scene at ``point``; the log entry of the run."""
     start = time.perf_counter()
     raw = apply(base, point)
     if objective == 'robust':  # the first case is nominal
         robust, robustness, (metrics, events) = robust_score(
-            target_at_gait_speed(raw), duration, SCENARIOS[cases], height_weight, cycle_weight)
+            target_at_gait_speed(raw), duration, SCENARIOS[cases], **weights)
     else:
         metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
@@ -426,6 +438,11 @@ def main() -> None:
     parser.add_argument('--cycle-weight', type=float, default=0.0,
                         help="robust objective: weight of the nominal case's shortfall of the "
                              'ice cycle (flat-sole exchanges, double support)')
+    parser.add_argument('--arm-weight', type=float, default=0.0,
+                        help="robust objective: weight of the arm-swing ratio's shortfall below "
+                             'ARM_SWING_RATIO (needs the no-yaw twin among the cases)')
+    parser.add_argument('--cadence-weight', type=float, default=1.0,
+                        help="robust objective: weight of the step period's distance to CADENCE")
     parser.add_argument('--max-rate', type=float, default=float('inf'),
                         help='cadence bound [exchanges/s]: more are penalised')
     parser.add_argument('--out', type=pathlib.Path, default=pathlib.Path('runs/tune.jsonl'))
@@ -471,8 +488,11 @@ def main() -> None:
             units = strategy.ask() if strategy else \
                 [rng.uniform(size=len(SPACE)) for _ in range(args.jobs)]
             entries = pool.map(functools.partial(evaluate, base, args.duration, args.objective,
-                                                 args.max_rate, args.scenarios,
-                                                 args.height_weight, args.cycle_weight),
+                                                 args.max_rate, args.scenarios, {
+                                                     'height_weight': args.height_weight,
+                                                     'cycle_weight': args.cycle_weight,
+                                                     'arm_weight': args.arm_weight,
+                                                     'cadence_weight': args.cadence_weight}),
                                [point_of(u) for u in units])
             if strategy:
                 strategy.tell(units, [-e['score'] for e in entries])

@@ -122,6 +122,25 @@ def test_the_ice_cycle_costs_only_with_its_weight(tune, skate, monkeypatch):
     assert weighted == pytest.approx(20.0 - 10.0 * (1.0 + 0.9), abs=1e-9)
 
 
+def test_the_arm_swing_and_the_cadence_cost_with_their_weights(tune, skate, monkeypatch):
+    """With the no-yaw twin among the cases, an arm-swing ratio of 1.5 against it misses half of
+    ARM_SWING_RATIO: ``arm_weight`` / 2; a step every 1.05 s costs ``cadence_weight`` x 0.5."""
+    steady = exchanges(np.arange(0.5, 12.0, 1.05))
+
+    def fake(raw):
+        with_yaw = 'yaw' in raw['inputs']['gait_manager']['enabled']
+        swing = {'mean_peak_to_peak': 0.3 if with_yaw else 0.2}
+        return ({'sim_time_s': 12.0, 'fell': False, 'arm_swing': swing,
+                 'head_error_rms': {'y': 0.03, 'z': 0.005}}, steady)
+    monkeypatch.setattr(tune, 'run_metrics', fake)
+    cases = tune.SCENARIOS['twins']
+    plain, details, _ = tune.robust_score(skate, 12.0, cases)
+    weighted, _, _ = tune.robust_score(skate, 12.0, cases, arm_weight=8.0, cadence_weight=3.0)
+    assert details['arm_swing_ratio'] == pytest.approx(1.5)
+    assert plain == pytest.approx(20.0 - 0.5, abs=1e-9)
+    assert weighted == pytest.approx(20.0 - 3.0 * 0.5 - 8.0 * 0.5, abs=1e-9)
+
+
 def test_phase_cases_push_before_the_nominal_cases_exchanges(tune, skate, monkeypatch):
     """'phases' places each push ``lead`` s before the nominal case's clean exchange number
     ``exchange``; when the nominal case stops short of it the case counts as not walked."""
