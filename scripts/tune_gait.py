@@ -243,7 +243,7 @@ def clean_exchanges(events: list[dict]) -> list[dict]:
     """The events of the clean support exchanges (see ``score``)."""
     clean, last = [], -np.inf
     for event in events:
-        if event['event'] in ('E6', 'E7'):
+        if event['event'] == 'E6':
             if event['t'] - last > CLEAN_GAP:
                 clean.append(event)
             last = event['t']
@@ -341,7 +341,7 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
     details['step_period_s'] = {'mean': mean, 'cv': spread}
     details['head_y_rms_m'], details['head_z_rms_m'] = head['y'], head['z']
     details['flat_sole_share'], details['double_support_s'] = flat, double
-    ratio = (arm_swing_ratio(nominal[0], twin) if twin is not None else None) or 0.0
+    ratio = arm_swing_ratio(nominal[0], twin) if twin is not None else None
     details['arm_swing_ratio'] = ratio
     full = np.mean([w > 1.0 - 1e-6 for w in walked])
     beyond = {axis: min(max(head[axis] - goal, 0.0) / goal, 5.0)
@@ -350,7 +350,8 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
                     for value, goal in ((flat, FLAT_SHARE), (double, DOUBLE_SUPPORT)))
     return (10.0 * (np.mean(walked) + full) - cadence_weight * miss - 5.0 * spread - beyond['y']
             - height_weight * beyond['z'] - cycle_weight * shortfall
-            - arm_weight * max(ARM_SWING_RATIO - ratio, 0.0) / ARM_SWING_RATIO, details, nominal)
+            - arm_weight * max(ARM_SWING_RATIO - (ratio or 0.0), 0.0) / ARM_SWING_RATIO, details,
+            nominal)
 
 
 def check(raw: dict, duration: float) -> list[dict]:
@@ -456,6 +457,11 @@ def main() -> None:
                         help='no search: run the base scene (with --start/--set: that point) '
                              'over CHECKS and print one JSON line per case')
     args = parser.parse_args()
+    cases = SCENARIOS[args.scenarios]
+    if args.arm_weight > 0.0 and {**cases[0], 'yaw': False} not in cases:
+        raise SystemExit(f'--arm-weight: the scenarios {args.scenarios!r} have no no-yaw twin of '
+                         "their nominal case to measure the arm-swing ratio against (use 'twins', "
+                         "'phases' or 'phases_low_mu')")
     try:  # YAML 1.2 numbers, as run_scene reads it
         base = scene_raw(args.scene)
     except SimulationError as exc:

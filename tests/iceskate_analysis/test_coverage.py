@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 import pathlib
 
 import pytest
 
-from iceskate_analysis.coverage import KIND_OF_EVENT, Coverage, coverage_of
+from iceskate_analysis.coverage import KIND_OF_EVENT, Coverage, coverage_of, load_events
 from iceskate_analysis.coverage_cli import main
+from iceskate_bringup.runner import run
+from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.installed import shipped_files
+from iceskate_sim.model.modes import TABLE_2
 from iceskate_sim.physics.hybrid import GUARDS
+from iceskate_sim.run.scene import SCENE_RESOURCE
 
 STAND = pathlib.Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 
@@ -51,15 +57,24 @@ def test_every_guard_has_a_kind():
 def test_an_event_outside_table_2_is_refused_in_one_sentence():
     with pytest.raises(SimulationError, match='not a transition between modes of Table 2'):
         Coverage().add('a', [_event(0.1, 1, 21, 'E1')], 1.0)
+    with pytest.raises(SimulationError, match='not a transition between modes of Table 2'):
+        Coverage().add('a', [_event(0.1, 1, 2, 'E9')], 1.0)
+
+
+def test_a_resolved_cycle_into_the_same_mode_is_a_transition_not_an_entry():
+    """'R' may end in the mode it left (another side or pivot): counted as a transition, with
+    its time, but it enters nothing; a run without transitions spends its time in ``still``."""
+    coverage = Coverage()
+    coverage.add('a', [_event(0.5, 4, 4, 'R')], 1.0)
+    coverage.add('b', [], 2.0, still=17)
+    assert coverage.transitions == {(4, 4, 'R'): 1}
+    assert coverage.entries[4] == 0 and 4 not in coverage.visited_by
+    assert coverage.time_s[4] == pytest.approx(1.0) and coverage.time_s[17] == pytest.approx(2.0)
 
 
 def test_mode_coverage_writes_the_table_and_the_diagram_of_real_runs(tmp_path, capsys):
     """Two runs of the tiny scene (one of them 0.3 s) through the console entry: the table,
     the JSON and the picture; the JSON's counts are the runs' own events."""
-    from dataclasses import replace
-
-    from iceskate_bringup.runner import run
-    from iceskate_bringup.scene import load_scene
     scene = load_scene(str(STAND))
     for name, duration in (('long', 0.6), ('short', 0.3)):
         run(replace(scene, duration=duration), tmp_path / name, progress=False, picture=False)
@@ -83,7 +98,34 @@ def test_mode_coverage_names_a_folder_that_is_not_a_run(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith('mode_coverage: error:') and 'is not a finished run' in err
     assert '\n' not in err
-    (tmp_path / 'events.json').write_text('{"not": "a list"}')
     (tmp_path / 'metrics.json').write_text('{"sim_time_s": 1.0}')
+    for bad in ('{"not": "a list"}', '[{"t": "0.1", "from_mode": 1, "to_mode": 2, "event": "E1"}]',
+                '[{"t": 0.1, "from_mode": [1], "to_mode": 2, "event": "E1"}]'):
+        (tmp_path / 'events.json').write_text(bad)
+        assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 1
+        err = capsys.readouterr().err
+        assert 'events.json: not an event log' in err and 'Traceback' not in err
+    (tmp_path / 'events.json').write_text('[')
     assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 1
-    assert 'not an event log' in capsys.readouterr().err
+    assert f'{tmp_path / "events.json"} is not JSON' in capsys.readouterr().err
+    (tmp_path / 'events.json').write_text('[]')
+    (tmp_path / 'metrics.json').write_text('{"sim_time_s": 1.0, "mode_time_fraction": {"x": 1}}')
+    assert load_events(tmp_path) == ([], 1.0, None)
+
+
+def test_the_shipped_scenes_enter_every_mode_of_table_2(tmp_path):
+    """Each shipped scene run whole (headless, no bag): together they enter all 20 modes by
+    transitions the dynamics took (a run's initial mode does not count), each for some time.
+    ``stand_ice`` and ``walk_slippery`` are there for modes 11, 15, 19 and 14, which no other
+    shipped scene enters."""
+    names = sorted(shipped_files(SCENE_RESOURCE, 'scenes'))
+    assert {'stand_ice', 'walk_slippery'} <= set(names)
+    for name in names:
+        metrics = run(replace(load_scene(name), record_bag=False), tmp_path / name,
+                      progress=False, picture=False)
+        assert not metrics['fell'], (name, metrics['failure'])
+    coverage = coverage_of(tmp_path / name for name in names)
+    assert coverage.missing == [], coverage.table()
+    assert all(coverage.time_s[mode] > 0.0 for mode in TABLE_2), coverage.table()
+    assert coverage.visited_by[14] == ['walk_slippery']
+    assert all(coverage.visited_by[mode] == ['stand_ice'] for mode in (11, 15, 19))

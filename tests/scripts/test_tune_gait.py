@@ -139,6 +139,16 @@ def test_the_arm_swing_and_the_cadence_cost_with_their_weights(tune, skate, monk
     assert details['arm_swing_ratio'] == pytest.approx(1.5)
     assert plain == pytest.approx(20.0 - 0.5, abs=1e-9)
     assert weighted == pytest.approx(20.0 - 3.0 * 0.5 - 8.0 * 0.5, abs=1e-9)
+    # without the twin, or with a twin that fell: no ratio, the whole weight
+    _, details, _ = tune.robust_score(skate, 12.0, tune.SCENARIOS['robust'])
+    assert details['arm_swing_ratio'] is None
+    monkeypatch.setattr(tune, 'run_metrics', lambda raw: (
+        {'sim_time_s': 12.0, 'fell': 'yaw' not in raw['inputs']['gait_manager']['enabled'],
+         'arm_swing': {'mean_peak_to_peak': 0.3}, 'head_error_rms': {'y': 0.03, 'z': 0.005}},
+        steady))
+    fallen, details, _ = tune.robust_score(skate, 12.0, cases, arm_weight=8.0)
+    assert details['arm_swing_ratio'] is None
+    assert fallen == pytest.approx(20.0 - 0.5 - 8.0, abs=1e-9)  # the whole weight
 
 
 def test_phase_cases_push_before_the_nominal_cases_exchanges(tune, skate, monkeypatch):
@@ -174,6 +184,13 @@ def test_the_search_starts_at_the_scene_values_and_the_defaults(tune, skate):
     assert point['balance.swing_time'] == pytest.approx(balance['swing_time'])
     assert point['balance.glide_time'] == 0.0  # not in the scene: the parameter's default
     assert point['weight_transfer.heel_share'] == 2.0  # the default, the top of its range
+
+
+def test_the_arm_weight_needs_the_no_yaw_twin(tune, monkeypatch):
+    monkeypatch.setattr('sys.argv', ['tune_gait.py', '--objective', 'robust', '--scenarios',
+                                     'robust', '--arm-weight', '5'])
+    with pytest.raises(SystemExit, match='no no-yaw twin'):
+        tune.main()
 
 
 def test_set_arguments_name_a_value_or_stop_in_one_sentence(tune):

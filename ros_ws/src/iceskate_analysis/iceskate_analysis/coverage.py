@@ -79,13 +79,15 @@ class Coverage:
                 raise SimulationError(f'{name}: event {k} ({guard}: {mode} -> {to}) is not a '
                                       'transition between modes of Table 2')
             self.time_s[mode] += float(event['t']) - (float(events[k - 1]['t']) if k else 0.0)
-            self.entries[to] += 1
             self.transitions[(mode, to, guard)] += 1
+            if to == mode:  # a resolved switch cycle that changed only the side or pivot
+                continue
+            self.entries[to] += 1
             if name not in self.visited_by.setdefault(to, []):
                 self.visited_by[to].append(name)
         if events:
             self.time_s[events[-1]['to_mode']] += duration - float(events[-1]['t'])
-        elif still is not None:
+        elif still in TABLE_2:
             self.time_s[still] += duration
 
     def as_dict(self) -> dict[str, Any]:
@@ -125,25 +127,32 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
 
     :raises SimulationError: naming the file that is missing or not what a run writes.
     """
-    paths = [run_dir / 'events.json', run_dir / 'metrics.json']
-    try:
-        events, metrics = (json.loads(path.read_text(encoding='utf-8')) for path in paths)
-    except OSError as exc:
-        raise SimulationError(f'{run_dir} is not a finished run: {exc.strerror or exc} '
-                              f'({exc.filename})') from None
-    except ValueError as exc:
-        raise SimulationError(f'{run_dir}: events.json or metrics.json is not JSON '
-                              f'({exc})') from None
-    fields = ('t', 'from_mode', 'to_mode', 'event')
-    if not isinstance(events, list) or not all(
-            isinstance(e, dict) and all(f in e for f in fields) for e in events):
-        raise SimulationError(f'{paths[0]}: not an event log (a list of transitions with '
-                              f'{", ".join(fields)})')
+    loaded = []
+    for path in (run_dir / 'events.json', run_dir / 'metrics.json'):
+        try:
+            loaded.append(json.loads(path.read_text(encoding='utf-8')))
+        except OSError as exc:
+            raise SimulationError(f'{run_dir} is not a finished run: {exc.strerror or exc} '
+                                  f'({path})') from None
+        except ValueError as exc:
+            raise SimulationError(f'{path} is not JSON ({exc})') from None
+    events, metrics = loaded
+
+    def transition(e: Any) -> bool:
+        return (isinstance(e, dict) and isinstance(e.get('t'), (int, float))
+                and all(isinstance(e.get(f), int) for f in ('from_mode', 'to_mode'))
+                and isinstance(e.get('event'), str))
+    if not isinstance(events, list) or not all(map(transition, events)):
+        raise SimulationError(f'{run_dir / "events.json"}: not an event log (a list of '
+                              'transitions, each with a time t [s], integer from_mode and '
+                              'to_mode, and an event name)')
     duration = metrics.get('sim_time_s') if isinstance(metrics, dict) else None
     if not isinstance(duration, (int, float)):
-        raise SimulationError(f'{paths[1]}: no sim_time_s (the run did not start)')
-    modes = metrics.get('mode_time_fraction') or {}
-    return events, float(duration), int(next(iter(modes))) if len(modes) == 1 else None
+        raise SimulationError(f'{run_dir / "metrics.json"}: no sim_time_s (the run did not '
+                              'start)')
+    modes = metrics.get('mode_time_fraction')
+    still = next(iter(modes)) if isinstance(modes, dict) and len(modes) == 1 else None
+    return events, float(duration), int(still) if str(still).isdigit() else None
 
 
 def coverage_of(run_dirs: Iterable[pathlib.Path]) -> Coverage:

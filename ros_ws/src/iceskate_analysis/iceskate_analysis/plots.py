@@ -207,7 +207,8 @@ def plot_mode_coverage(coverage: Coverage, path: str | pathlib.Path) -> pathlib.
     Fig. 3: Table 2's modes as nodes, the support-foot states as rows and the swing-foot states
     as columns; an entered mode filled (its entries below its number), one never entered grey;
     each visited transition an arrow, as wide as its count's logarithm, labelled with it (a
-    transition into the same mode, e.g. an exchange, is counted beside the node)."""
+    transition into the same mode, a resolved switch cycle that changed only the side or pivot,
+    is counted beside the node)."""
     from matplotlib.patches import Circle, FancyArrowPatch
 
     from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
@@ -256,4 +257,3 @@ def plot_mode_coverage(coverage: Coverage, path: str | pathlib.Path) -> pathlib.
                  f'({len(coverage.runs)} run(s)); columns: swing foot, rows: support foot',
                  fontsize=9)
     return _save(fig, path)
-
