@@ -160,3 +160,24 @@ def test_without_the_feedback_bound_a_forward_push_is_a_fall(tmp_path):
     raw['inputs']['gait_manager']['balance']['feedback_limit'] = 0.0
     metrics = run(parse_scene(raw), tmp_path, progress=False)
     assert metrics['fell'], 'survived without the bound'
+
+
+def test_skate_glide_skates_the_papers_ice_cycle(tmp_path):
+    """``skate_glide``: from the 4th exchange on, at least 80 % of the exchanges come from a
+    flat front sole (a mode with the swing sole flat, 13-20) after at least 0.1 s of double
+    support per step, a step every 0.8-1.0 s, 15 s without a fall, the head on its target."""
+    metrics = run(replace(load_scene('skate_glide'), record_bag=False), tmp_path, progress=False,
+                  picture=False)
+    assert not metrics['fell'], metrics['failure']
+    events = json.loads((tmp_path / 'events.json').read_text())
+    exchanges = [e for e in events if e['event'] == 'E6'][3:]
+    assert np.mean([e['from_mode'] >= 13 for e in exchanges]) >= 0.8
+    start, end = exchanges[0]['t'], exchanges[-1]['t']
+    entered = [(e['t'], e['to_mode']) for e in events if start <= e['t'] <= end]
+    double = sum(min(b, end) - a for (a, mode), (b, _) in zip(entered, entered[1:], strict=False)
+                 if mode >= 5)
+    assert double / (len(exchanges) - 1) >= 0.1
+    periods = np.diff([e['t'] for e in exchanges])
+    assert 0.8 <= periods.mean() <= 1.0 and periods.std() / periods.mean() <= 0.1, periods
+    rms = metrics['head_error_rms']
+    assert rms['y'] <= 0.05 and rms['z'] <= 0.007, rms

@@ -9,7 +9,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_files
 from iceskate_sim.run.scene import SCENE_RESOURCE, scene_raw
 
-REQUIRED = {'stand', 'stand_ice', 'skate', 'skate_literal', 'skate_no_yaw', 'walk',
+REQUIRED = {'stand', 'stand_ice', 'skate', 'skate_glide', 'skate_literal', 'skate_no_yaw', 'walk',
             'walk_slippery'}
 
 
