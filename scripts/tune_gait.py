@@ -194,8 +194,8 @@ HEAD_Z_RMS = 0.0075  # m: the head height error RMS sought (``--height-weight``)
 FLAT_SOLE_MODES = frozenset(range(13, 21))
 DOUBLE_SUPPORT_MODES = frozenset(range(5, 21))
 FLAT_SHARE = 0.8  # the share of exchanges from a flat front sole sought (``--cycle-weight``)
-ARM_SWING_RATIO = 3.0  # the arm-swing ratio sought (``--arm-weight``; the paper's 3x)
 DOUBLE_SUPPORT = 0.1  # s: the double support per step sought (``--cycle-weight``)
+ARM_SWING_RATIO = 3.0  # the arm-swing ratio sought (``--arm-weight``; the paper's 3x)
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
 
