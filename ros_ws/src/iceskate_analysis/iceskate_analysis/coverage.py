@@ -19,7 +19,7 @@ from typing import Any
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
-from iceskate_sim.physics.hybrid import GUARDS
+from iceskate_sim.physics.hybrid import CAUSES, RESOLVED
 
 __all__ = ['KIND_OF_EVENT', 'Coverage', 'coverage_of', 'load_events']
 
@@ -34,8 +34,7 @@ KIND_OF_EVENT = {
     'S2': 'swing stick/slip', 'S3': 'swing stick/slip', 'S5': 'swing roll', 'S6': 'release',
     'R': 'switch cycle resolved',
 }
-_CAUSE = {guard.name: guard.cause for guard in GUARDS} | {
-    'R': 'contact-consistent mode after a cycle of single switches'}
+_CAUSE = CAUSES | {'R': RESOLVED}
 
 
 @dataclass

@@ -99,6 +99,10 @@ GUARDS: tuple[Guard, ...] = (
     Guard('S6', 'swing contact force reached zero', lambda m: m.swing != 'A'),
 )
 _GUARDS_OF_MODE = {n: tuple(g for g in GUARDS if g.applies(m)) for n, m in MODES.items()}
+#: The event log's cause of each guard's transition, by guard name.
+CAUSES = {guard.name: guard.cause for guard in GUARDS}
+#: The event log's cause of an 'R' entry, before the guard whose switches it ended.
+RESOLVED = 'contact-consistent mode after a cycle of single switches'
 
 
 def guards_of(mode: GaitMode) -> tuple[Guard, ...]:
@@ -133,4 +137,4 @@ def fall_reason(fall_height: float) -> str:
 
 def resolved_cause(guard: str) -> str:
     """The event log's cause of an 'R' entry: the cycle of ``guard``'s switches it ended."""
-    return f'contact-consistent mode after a cycle of single switches ({guard})'
+    return f'{RESOLVED} ({guard})'

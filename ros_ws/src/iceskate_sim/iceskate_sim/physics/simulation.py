@@ -27,8 +27,8 @@ from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import (
+    CAUSES,
     FLIGHT,
-    GUARDS,
     TOE_FIRST,
     FrictionModel,
     HybridState,
@@ -137,7 +137,6 @@ class StateQueries:
 
 
 #: Guard causes for the event log, by name.
-_CAUSES = {guard.name: guard.cause for guard in GUARDS}
 
 
 def _state_row(state: HybridState) -> tuple:
@@ -305,7 +304,7 @@ class Simulator(StateQueries):
         self.state = _hybrid_state(kernel.state)
         self.events.extend(
             Transition(t, from_mode, to_mode, event,
-                       resolved_cause(guard) if event == 'R' else _CAUSES[event],
+                       resolved_cause(guard) if event == 'R' else CAUSES[event],
                        tuple(impulse), step_index, SIDES[side])
             for t, from_mode, to_mode, event, guard, impulse, step_index, side
             in kernel.events_since(len(self.events)))
