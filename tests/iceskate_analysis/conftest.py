@@ -53,6 +53,7 @@ TINY_SKATE = {
     'integrator': {'method': 'rk4', 'step': 0.0005},
     'inputs': {'visual_lifting': {'desired_y': 'moving', 'v_d': 0.3},
                'gait_manager': {'enabled': ['posture', 'yaw']}},
+    'record': {'bag_rate': None},  # every period in the bag: compared sample by sample
 }
 #: (mode, support side, pivot) of each synthetic step.
 SYNTHETIC_STEPS = ((1, 'right', 'toe'), (2, 'left', 'heel'), (3, 'right', 'toe'),

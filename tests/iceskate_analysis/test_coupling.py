@@ -224,7 +224,8 @@ def test_interval_accelerations_are_the_integrators_velocity_steps(tmp_path):
     from iceskate_bringup.scene import load_scene, parse_scene
     h = 1e-4
     raw = {**load_scene('stand').raw, 'duration': 0.2, 'control_period': h,
-           'integrator': {'method': 'symplectic_euler', 'step': h}}
+           'integrator': {'method': 'symplectic_euler', 'step': h},
+           'record': {'bag_rate': None}}  # every period
     run(parse_scene(raw), tmp_path, progress=False)
     bag = read_bag(tmp_path / 'bag')
     events = np.array([e['t'] for e in json.loads((tmp_path / 'events.json').read_text())])

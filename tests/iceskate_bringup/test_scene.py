@@ -81,6 +81,8 @@ def test_stand_runs_only_what_it_declares():
     (('record', 'rate'), 0.0, r'record\.rate'),
     (('record', 'rate'), 2000.0, r'record\.rate.*does not divide'),
     (('record', 'tf_rate'), 0.0, r'record\.tf_rate'),
+    (('record', 'bag_rate'), -250.0, r'record\.bag_rate'),
+    (('record', 'bag_rate'), [250], r'record\.bag_rate'),
     (('record', 'tf_rate'), 'fast', r'record\.tf_rate'),
 ])
 def test_a_malformed_scene_is_refused_naming_the_key(path, value, match):
@@ -100,19 +102,22 @@ def test_record_rate_is_a_divisor_of_the_control_rate():
     assert parse_scene(raw).record_every == 4
 
 
-@pytest.mark.parametrize('record, tf_every', [
-    ({}, 10),                               # 1 kHz samples, /tf at 100 Hz by default
-    ({'tf_rate': None}, 1),                 # every sample
-    ({'tf_rate': 300}, 3),                  # 333 Hz: the lowest rate of at least 300
-    ({'tf_rate': 1000}, 1),
-    ({'tf_rate': 5000}, 1),                 # no more than the samples
-    ({'rate': 250}, 2),                     # 125 Hz
-    ({'rate': 50}, 1),
+@pytest.mark.parametrize('record, bag_every, tf_every', [
+    ({}, 4, 2),                             # 1 kHz samples: the bag 250 Hz, /tf 125 Hz
+    ({'tf_rate': None}, 4, 1),              # /tf at every sample of the bag
+    ({'bag_rate': None}, 1, 10),            # every sample, /tf at 100 Hz
+    ({'bag_rate': None, 'tf_rate': 300}, 1, 3),  # 333 Hz: the lowest rate of at least 300
+    ({'bag_rate': 300}, 3, 3),              # the bag 333 Hz, /tf 111 Hz
+    ({'bag_rate': None, 'tf_rate': 1000}, 1, 1),
+    ({'bag_rate': 5000, 'tf_rate': 5000}, 1, 1),  # no more than the samples
+    ({'rate': 250}, 1, 2),                  # 250 Hz recorded: all in the bag, /tf 125 Hz
+    ({'rate': 50}, 1, 1),
 ])
-def test_the_bags_tf_rate_is_at_least_the_one_asked(record, tf_every):
+def test_the_bags_rates_are_at_least_the_ones_asked(record, bag_every, tf_every):
     raw = copy.deepcopy(_raw('skate'))
     raw['record'] = record
-    assert parse_scene(raw).tf_every == tf_every
+    scene = parse_scene(raw)
+    assert (scene.bag_every, scene.tf_every) == (bag_every, tf_every)
 
 
 def test_control_period_must_be_a_multiple_of_the_step():

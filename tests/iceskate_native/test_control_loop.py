@@ -263,8 +263,9 @@ def test_the_bag_of_blocks_holds_the_same_messages(tmp_path: pathlib.Path) -> No
             return [(c.topic, t, bytes(data)) for c, t, data in reader.messages()]
 
     stepped, blocks = messages(tmp_path / 'stepped' / 'bag'), messages(tmp_path / 'blocks' / 'bag')
-    assert scene.tf_every == 10  # /tf at 100 Hz by default
-    assert len(blocks) == 1 + 5 * 2150 + 215 and blocks == stepped
+    # by default the bag at 250 Hz (every 4th period, across blocks of 333), /tf at 125 Hz
+    assert (scene.bag_every, scene.tf_every) == (4, 2)
+    assert len(blocks) == 1 + 5 * 538 + 269 and blocks == stepped
 
 
 def test_a_physics_failure_ends_both_paths_alike() -> None:

@@ -146,9 +146,10 @@ def test_a_native_run_that_fails_leaves_a_readable_bag_of_the_periods_before(tmp
         run(scene, tmp_path, progress=False)
     clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
     metrics = json.loads((tmp_path / 'metrics.json').read_text())
-    # every period before the failing one (which ended at sim_time_s) is in the bag
-    assert 0 < len(clock) == round(metrics['sim_time_s'] * 1000) - 1 < 1500
-    assert clock == [k * 1_000_000 for k in range(len(clock))]
+    # every period of the bag's (each 4th) before the failing one (which ended at sim_time_s)
+    periods = range(0, round(metrics['sim_time_s'] * 1000) - 1, scene.bag_every)
+    assert scene.bag_every == 4 and 0 < len(clock) == len(periods) < 1500 / 4
+    assert clock == [k * 1_000_000 for k in periods]
 
 
 def test_the_native_block_holds_what_the_oracle_samples_record(native_blocks):
@@ -227,6 +228,32 @@ def test_a_run_at_a_record_rate_keeps_every_nth_sample_and_analyses(tmp_path):
     assert d.valid.all() and d.residual_rel.max() <= 1e-9
 
 
+def test_the_bag_holds_every_nth_sample_of_the_full_rate_bag(tmp_path):
+    """``record.bag_rate`` (250 Hz by default) thins the bag alone: the trajectory keeps
+    every period, and each message of the bag is the full-rate bag's at the same stamp."""
+    from iceskate_analysis.bag_io import read_bag
+    from iceskate_analysis.coupling import decompose
+    from iceskate_bringup.scene import parse_scene
+    raw = {**load_scene(FAST_SKATE).raw, 'duration': 0.6}
+    thinned, full = tmp_path / 'thinned', tmp_path / 'full'
+    run(parse_scene(raw), thinned, progress=False)
+    run(parse_scene({**raw, 'record': {'bag_rate': None}}), full, progress=False)
+    a, b = np.load(full / 'trajectory.npz'), np.load(thinned / 'trajectory.npz')
+    assert len(b['t']) == 600 and all(np.array_equal(a[k], b[k], equal_nan=True)
+                                      for k in a.files)
+    every = {topic: [(t, data) for name, t, data in _messages(full / 'bag') if name == topic]
+             for topic in ('/clock', '/joint_states', '/head_pose', '/gait_state',
+                           '/joint_dynamics')}
+    got = _messages(thinned / 'bag')
+    assert [(t, data) for topic, t, data in got if topic == '/clock'] == every['/clock'][::4]
+    for topic in ('/joint_states', '/head_pose', '/gait_state', '/joint_dynamics'):
+        assert [(t, d) for name, t, d in got if name == topic] == every[topic][::4], topic
+    tf = [t for topic, t, _ in got if topic == '/tf']
+    assert tf == [k * 1_000_000 for k in range(0, 600, 8)]  # every 2nd: 125 Hz
+    d = decompose(read_bag(thinned / 'bag'), (11,))[11]
+    assert d.valid.all() and d.residual_rel.max() <= 1e-9
+
+
 def _short_session(tmp_path: pathlib.Path, periods: int = 120) -> Session:
     scene = replace(load_scene('stand'), duration=periods * 1e-3)
     session = Session(scene, tmp_path, tmp_path / 'bag')
@@ -247,7 +274,7 @@ def test_the_bag_is_closed_whatever_the_written_hook_does(tmp_path):
     with pytest.raises(RuntimeError, match='drawing failed'):
         session.finish(written=written)
     clock = [t for topic, t, _ in _messages(tmp_path / 'bag') if topic == '/clock']
-    assert clock == [k * 1_000_000 for k in range(120)]
+    assert clock == [k * 1_000_000 for k in range(0, 120, 4)]  # the bag's 250 Hz
 
 
 def test_a_bag_that_fails_to_close_is_the_runs_failure(tmp_path, monkeypatch):

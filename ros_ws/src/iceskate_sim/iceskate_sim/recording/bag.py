@@ -35,7 +35,7 @@ PROJECT_VERSION = '0.1.0'
 QUEUE_BLOCKS = 40  # blocks in flight before ``write_block`` waits for the writer process
 #: What the writer process takes: a block of samples (columns) and its rows' latest events.
 Batch = tuple[dict[str, Any], Events]
-#: The topics with a message at every recorded sample; /tf has one at every ``tf_every``-th.
+#: The topics with a message at every sample of the bag; /tf has one at every ``tf_every``-th.
 EVERY_SAMPLE = tuple(topic for topic in RECORDED_TOPICS if topic != '/tf')
 #: The sample columns /tf messages are made of.
 TF_COLUMNS = ('t', 'stamps_ns', 'tf')

@@ -141,6 +141,14 @@ def release_output(out: pathlib.Path) -> None:
         os.close(fd)
 
 
+def _rows(block: dict[str, Any], kept: np.ndarray) -> dict[str, Any]:
+    """The rows of a native block where ``kept`` (a mask or indices) holds."""
+    rows = {key: value[kept] if isinstance(value, np.ndarray) else value
+            for key, value in block.items()}
+    rows['efforts'] = [e[kept] for e in block['efforts']]
+    return rows
+
+
 def _reason(exc: OSError) -> str:
     """An OSError's reason in words (e.g. 'permission denied')."""
     text = exc.strerror or str(exc)
@@ -297,12 +305,10 @@ class Session:
     def _record_block(self, block: dict[str, Any], first: int) -> None:
         """Append a native block of samples, the first of period ``first``, to the trajectory
         and the bag."""
-        every = self.scene.record_every
-        if every > 1:  # record.rate: every n-th sample only
-            kept = np.flatnonzero((first + np.arange(len(block['t']))) % every == 0)
-            block = {key: value[kept] if isinstance(value, np.ndarray) else value
-                     for key, value in block.items()}
-            block['efforts'] = [e[kept] for e in block['efforts']]
+        periods = first + np.arange(len(block['t']))
+        if self.scene.record_every > 1:  # record.rate: every n-th sample only
+            kept = periods % self.scene.record_every == 0
+            block, periods = _rows(block, kept), periods[kept]
         columns = {key: block[key] for key in _BLOCK_COLUMNS}
         columns['pivot'] = block['pivot_code']
         for key in ('mode', 'side', 'pivot', 'step_index'):  # the saved trajectory's integers
@@ -318,8 +324,13 @@ class Session:
             except OSError as exc:
                 raise SimulationError(f'no room left on disk for {self.out / "events.json"}: '
                                       f'{_reason(exc)}', end='io_error') from None
-        if self.recorder is not None and len(block['t']):
-            self.recorder.write_block(block, Events.of(block['last_event'], self.sim.events))
+        if self.recorder is not None:
+            if self.scene.bag_every > 1:  # record.bag_rate: every n-th recorded sample
+                block = _rows(block, periods % (self.scene.record_every
+                                                * self.scene.bag_every) == 0)
+            if len(block['t']):
+                self.recorder.write_block(block, Events.of(block['last_event'],
+                                                           self.sim.events))
 
     def flush(self, whole: bool = True) -> None:
         """Append the samples held since the last flush to the trajectory and the bag
