@@ -45,6 +45,20 @@ def test_short_skate_run_does_not_fall_and_writes_everything(skate_run):
     assert steady['q11_peak_to_peak'] <= whole['q11_peak_to_peak']
 
 
+@pytest.mark.slow
+def test_a_whole_skate_run_writes_at_most_20_mb_by_default(tmp_path):
+    """The shipped 15 s ``skate`` run, default outputs: every period in trajectory.npz, every
+    4th in the bag, all of it under 20 MB."""
+    assert main(['skate', '--out', str(tmp_path), '--quiet']) == 0
+    written = sum(f.stat().st_size for f in tmp_path.rglob('*') if f.is_file())
+    assert written <= 20e6, f'{written / 1e6:.1f} MB'
+    info = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())
+    counts = {item['topic_metadata']['name']: item['message_count']
+              for item in info['rosbag2_bagfile_information']['topics_with_message_count']}
+    assert len(np.load(tmp_path / 'trajectory.npz')['t']) == 15000
+    assert counts['/joint_dynamics'] == 3750 and counts['/tf'] == 1875
+
+
 def test_short_skate_run_visits_the_expected_modes(skate_run):
     """The scene's single-support start (mode 1; the first sample may already be on the toe,
     2, after the transitions due at t = 0), then the ice cycle of docs/model.md §6.6: support
