@@ -247,3 +247,83 @@ def test_a_run_without_the_picture_writes_the_other_outputs(tmp_path):
     assert not metrics['fell']
     assert {p.name for p in tmp_path.iterdir()} == {'metrics.json', 'events.json',
                                                     'trajectory.npz', 'bag', '.run.lock'}
+
+
+def test_the_summary_process_draws_what_draw_summary_draws(stand_run, tmp_path):
+    """The runner's picture process (forked before the run) draws the in-process picture,
+    run after run, and names a missing column or an unwritable path as draw_summary does."""
+    import errno
+
+    from iceskate_analysis.summary_process import SummaryProcess
+    from iceskate_sim.shutdown import process_alive
+    out, metrics = stand_run
+    columns = list(_trajectory(out, None).columns())
+    expected = draw_summary(columns, metrics, tmp_path / 'here.png')
+    painter = SummaryProcess()
+    pid = painter.pid
+    try:
+        for k in range(2):
+            assert_same_picture(painter.draw(columns, metrics, tmp_path / f'there_{k}.png'),
+                                expected)
+        with pytest.raises(SimulationError) as raised:
+            painter.draw([(k, v) for k, v in columns if k != 'psi'], metrics,
+                         tmp_path / 'summary.png')
+        assert str(raised.value) == f"the trajectory of {tmp_path} lacks the column(s) ['psi']"
+        with pytest.raises(OSError) as failed:
+            painter.draw(columns, metrics, tmp_path / 'missing' / 'summary.png')
+        assert failed.value.errno == errno.ENOENT
+        assert painter.draw(columns, metrics, tmp_path / 'after.png').is_file()
+    finally:
+        painter.close()
+    assert not process_alive(pid)
+
+
+def test_the_summary_process_ignores_stop_signals_and_its_end_is_one_sentence(stand_run,
+                                                                               tmp_path):
+    """SIGINT to the process (a Ctrl-C reaches the whole group) leaves it drawing: the run
+    decides; once it is gone, a draw says so in one sentence instead of waiting."""
+    import os
+    import signal
+
+    from iceskate_analysis.summary_process import SummaryProcess
+    out, metrics = stand_run
+    columns = list(_trajectory(out, None).columns())
+    painter = SummaryProcess()
+    try:
+        os.kill(painter.pid, signal.SIGINT)
+        assert painter.draw(columns, metrics, tmp_path / 'a.png').is_file()
+        os.kill(painter.pid, signal.SIGKILL)
+        with pytest.raises(SimulationError, match=r'^the process drawing .*b\.png ended early'):
+            painter.draw(columns, metrics, tmp_path / 'b.png')
+    finally:
+        painter.close()
+    assert not (tmp_path / 'b.png').exists()
+
+
+def test_the_summary_process_dies_with_its_parent(tmp_path):
+    """A run killed by SIGKILL leaves no picture process behind."""
+    import subprocess
+    import sys
+    import time
+
+    from iceskate_sim.shutdown import process_alive
+    pid_file = tmp_path / 'pid'
+    code = ('import pathlib, sys, time\n'
+            'from iceskate_analysis.summary_process import SummaryProcess\n'
+            f'pathlib.Path({str(pid_file)!r}).write_text(str(SummaryProcess().pid))\n'
+            'time.sleep(60)\n')
+    parent = subprocess.Popen([sys.executable, '-c', code])
+    try:
+        deadline = time.monotonic() + 60.0
+        while not pid_file.is_file() or not pid_file.read_text():
+            assert time.monotonic() < deadline and parent.poll() is None, 'no picture process'
+            time.sleep(0.05)
+        pid = int(pid_file.read_text())
+        assert process_alive(pid)
+    finally:
+        parent.kill()
+        parent.wait(timeout=10.0)
+    deadline = time.monotonic() + 10.0
+    while process_alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not process_alive(pid)

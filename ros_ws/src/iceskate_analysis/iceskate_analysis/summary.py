@@ -26,7 +26,7 @@ from iceskate_sim.shutdown import say
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ['SUMMARY_NAME', 'draw_summary', 'write_summary']
+__all__ = ['SUMMARY_NAME', 'draw_picked', 'draw_summary', 'picked_columns', 'write_summary']
 
 SUMMARY_NAME = 'summary.png'
 MAX_POINTS = 3000  # per drawn series (decimated above)
@@ -49,12 +49,25 @@ def draw_summary(columns: Iterable[tuple[str, np.ndarray]], metrics: Mapping[str
     :return: ``path``.
     :raises SimulationError: when a column is missing or holds no sample.
     """
+    return draw_picked(picked_columns(columns), metrics, path)
+
+
+def picked_columns(columns: Iterable[tuple[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """What the picture is drawn from, copied out of (name, array) pairs as
+    ``Trajectory.columns`` gives them: t, psi, psi_d, mode, side, step_index, and q's
+    shoulders as ``shoulders`` (n, 2)."""
     a: dict[str, np.ndarray] = {}
     for key, column in columns:  # one spilled column mapped at a time
         if key == 'q':
             a['shoulders'] = np.array(column[:, [11, 14]])
         elif key in _COLUMNS:
             a[key] = np.array(column)
+    return a
+
+
+def draw_picked(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pathlib.Path
+                ) -> pathlib.Path:
+    """``draw_summary`` from ``picked_columns``."""
     return _checked_draw(a, metrics, path, f'the trajectory of {path.parent}')
 
 

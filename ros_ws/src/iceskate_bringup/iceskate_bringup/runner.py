@@ -88,7 +88,10 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         bag = out / 'bag' if out is not None and scene.record_bag else None
         session = Session(scene, out, bag)  # forks the bag writer (before any thread starts)
         stack = ControlStack(scene, session.robot, session.observation())
-        picture = picture and out is not None
+        painter = None
+        if picture and out is not None:  # forked too: it imports matplotlib during the run
+            from iceskate_analysis.summary_process import SummaryProcess
+            painter = signals.enter_context(contextlib.closing(SummaryProcess()))
         bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
         ended: SimulationError | None = None
         controller_failed = False
@@ -96,9 +99,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
             error, not after a signal, a bug or a failure to write (a full disk)."""
-            if not picture:
+            if painter is None:
                 return
-            from iceskate_analysis.summary import SUMMARY_NAME, draw_summary
+            from iceskate_analysis.summary import SUMMARY_NAME
             path = out / SUMMARY_NAME
             if session.metrics['end'] == 'io_error':  # drawn before the bag failed
                 path.unlink(missing_ok=True)
@@ -106,11 +109,12 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                     and not crashed):
                 staged = path.with_name(f'.{SUMMARY_NAME}')
                 try:
-                    draw_summary(session.trajectory.columns(), session.metrics, staged)
+                    painter.draw(session.trajectory.columns(), session.metrics, staged)
                     os.replace(staged, path)
-                except OSError as exc:
+                except (OSError, SimulationError) as exc:  # SimulationError: its process
                     staged.unlink(missing_ok=True)
-                    say(f'run_scene: {path} not written: {exc.strerror or exc}')
+                    reason = exc.strerror if isinstance(exc, OSError) else None
+                    say(f'run_scene: {path} not written: {reason or exc}')
 
         crashed = False
         block = FIRST_BLOCK
