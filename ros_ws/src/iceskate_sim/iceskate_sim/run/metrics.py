@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 import contextlib
 import itertools
 import os
@@ -143,23 +143,27 @@ class Trajectory:
         """Number of samples."""
         return self._count
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Every column as a numpy array (first axis: sample); read-only maps of the spill
-        files once samples were spilled."""
-        return dict(self.columns())
+    def arrays(self, keys: Collection[str] | None = None) -> dict[str, np.ndarray]:
+        """Every column (or those of ``keys``) as a numpy array (first axis: sample); read-only
+        maps of the spill files once samples were spilled."""
+        return dict(self.columns(keys))
 
-    def columns(self) -> Iterator[tuple[str, np.ndarray]]:
-        """(name, array) of each column in turn, as ``arrays`` gives them: a spilled column
-        is mapped only while the caller holds it, so reading them one after the other keeps
-        one column resident at a time (on a full disk, the rows not spilled are joined to it
-        in memory)."""
+    def columns(self, keys: Collection[str] | None = None
+                ) -> Iterator[tuple[str, np.ndarray]]:
+        """(name, array) of each column (or of those of ``keys``) in turn, as ``arrays`` gives
+        them: a spilled column is mapped only while the caller holds it, so reading them one
+        after the other keeps one column resident at a time (on a full disk, the rows not
+        spilled are joined to it in memory)."""
         if not self._spilled:
             for key, blocks in self._blocks.items():
-                yield key, np.concatenate(blocks)
+                if keys is None or key in keys:
+                    yield key, np.concatenate(blocks)
             return
         with contextlib.suppress(SimulationError):  # a full disk: the rest stays in memory
             self._spill()
         for key, (dtype, shape) in self._layout.items():
+            if keys is not None and key not in keys:
+                continue
             spilled = np.memmap(self._file(key), dtype=dtype, mode='r',
                                 shape=(self._spilled, *shape))
             yield key, (np.concatenate([spilled, *self._blocks[key]]) if self._blocks[key]
@@ -218,10 +222,14 @@ def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
     return swing['mean_peak_to_peak'] / reference['mean_peak_to_peak']
 
 
+#: The trajectory's columns the metrics are computed from (the others are not joined for them).
+METRIC_COLUMNS = frozenset({'t', 'psi', 'psi_d', 'mode', 'pivot', 'cop_y', 'q', 'step_index'})
+
+
 def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: float,
                     error: SimulationError | None) -> dict[str, Any]:
     """The figures of a run (see the README's metrics table)."""
-    a = trajectory.arrays()
+    a = trajectory.arrays(METRIC_COLUMNS)
     sim_time = float(sim.time)
     failure = str(error) if error is not None else sim.ended
     interrupted = isinstance(error, RunInterrupted)  # stopped from outside: not a fall
