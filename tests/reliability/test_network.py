@@ -1,5 +1,6 @@
 """Nothing listens beyond loopback: every socket of a ``run_scene --ros`` run's processes (the
-launcher and its nodes) and of a node started by hand is bound to 127.0.0.1."""
+launcher and its nodes) and of a node started by hand is bound to 127.0.0.1; a ``--ray local``
+sweep's Ray processes bind every interface of a network namespace that has loopback alone."""
 
 from __future__ import annotations
 
@@ -32,24 +33,27 @@ def _family_tree(pid: int) -> set[int]:
     return tree
 
 
-def _bound(pids: set[int]) -> set[tuple[str, str]]:
+def _bound(pids: set[int], namespaces: bool = False) -> set[tuple]:
     """(protocol, local address:port) of every UDP socket and listening TCP socket of
-    ``pids``."""
-    inodes = set()
+    ``pids``, each read in its process's own network namespace (``namespaces``: with that
+    namespace's interfaces as a third item)."""
+    found = set()
     for pid in pids:
         try:
-            for fd in Path(f'/proc/{pid}/fd').iterdir():
-                link = os.readlink(fd)
-                if link.startswith('socket:['):
-                    inodes.add(link[8:-1])
-        except OSError:
+            inodes = {link[8:-1] for link in (os.readlink(fd) for fd in
+                                              Path(f'/proc/{pid}/fd').iterdir())
+                      if link.startswith('socket:[')}
+            tables = {proto: Path(f'/proc/{pid}/net/{proto}').read_text()
+                      for proto in ('udp', 'udp6', 'tcp', 'tcp6')}
+            interfaces = frozenset(line.split(':')[0].strip() for line in
+                                   Path(f'/proc/{pid}/net/dev').read_text().splitlines()[2:])
+        except OSError:  # gone meanwhile
             continue
-    found = set()
-    for proto in ('udp', 'udp6', 'tcp', 'tcp6'):
-        for line in Path(f'/proc/net/{proto}').read_text().splitlines()[1:]:
-            cols = line.split()
-            if cols[9] in inodes and (proto.startswith('udp') or cols[3] == '0A'):
-                found.add((proto, cols[1]))
+        for proto, table in tables.items():
+            for line in table.splitlines()[1:]:
+                cols = line.split()
+                if cols[9] in inodes and (proto.startswith('udp') or cols[3] == '0A'):
+                    found.add((proto, cols[1], interfaces) if namespaces else (proto, cols[1]))
     return found
 
 
@@ -62,12 +66,13 @@ def _loopback(local: str) -> bool:
     return address == '00000000000000000000000001000000'  # ::1
 
 
-def _sockets_while(process: subprocess.Popen, seconds: float) -> set[tuple[str, str]]:
-    """The sockets of ``process``'s tree, looked at every 0.2 s for ``seconds``."""
-    seen: set[tuple[str, str]] = set()
+def _sockets_while(process: subprocess.Popen, seconds: float, namespaces: bool = False
+                   ) -> set[tuple]:
+    """The sockets of ``process``'s tree, looked at every 0.2 s for ``seconds`` (``_bound``)."""
+    seen: set[tuple] = set()
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline and process.poll() is None:
-        seen |= _bound(_family_tree(process.pid))
+        seen |= _bound(_family_tree(process.pid), namespaces)
         time.sleep(0.2)
     return seen
 
@@ -106,3 +111,28 @@ def test_a_node_started_by_hand_binds_nothing_beyond_loopback(tmp_path, ros_env,
         node.wait(timeout=20)
     assert len(seen) >= 2, seen
     assert {s for s in seen if not _loopback(s[1])} == set()
+
+
+def test_a_local_ray_sweep_binds_nothing_beyond_loopback(tmp_path, ros_env):
+    """Ray's servers bind ``*``; the local instance runs in a network namespace of its own
+    whose one interface is loopback, so each socket is on loopback or in that namespace."""
+    pytest.importorskip('ray')
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text('study: tiny\nscene: stand\noverrides:\n  duration: 4.0\n'
+                    '  record.bag: false\naxes:\n  floor.mu: [0.005, 0.006, 0.007, 0.008]\n')
+    sweep = subprocess.Popen([sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out',
+                              str(tmp_path / 'out'), '--ray', 'local', '--workers', '2',
+                              '--quiet', '--no-maps'], env=ros_env, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        seen = _sockets_while(sweep, 120.0, namespaces=True)
+        assert sweep.wait(timeout=60) == 0
+        stderr = sweep.stderr.read()
+    finally:
+        sweep.kill()
+        sweep.wait(timeout=10)
+    if 'a network of loopback alone was refused' in stderr:
+        pytest.skip(f'no network namespace here (needs root, as in CI): {stderr.strip()}')
+    assert 'Traceback' not in stderr and stderr.count('\n') == 2, stderr  # the summary lines
+    assert len({s for s in seen if s[0].startswith('tcp')}) >= 5, seen  # Ray's servers seen
+    assert {s for s in seen if not _loopback(s[1]) and s[2] != {'lo'}} == set(), seen

@@ -17,7 +17,9 @@ import signal
 import tempfile
 from typing import Any
 
+from iceskate_sim.shutdown import say
 from iceskate_study.errors import StudyError
+from iceskate_study.network import loopback_only
 from iceskate_study.worker import Task, run_marked, run_task, warm_up
 
 #: The row of a run in the results table.
@@ -155,7 +157,8 @@ class LocalExecutor(_Executor):
 
 class RayExecutor(_Executor):
     """Runs as Ray tasks: on a running cluster (``address``) or a local instance
-    (``'local'``, ``workers`` CPUs, bound to 127.0.0.1).
+    (``'local'``, ``workers`` CPUs, node address 127.0.0.1, started inside a network namespace
+    of loopback alone, ``network.loopback_only``, where that is permitted).
 
     :param workers: runs in flight at once (None: the cluster's CPUs).
     """
@@ -166,9 +169,14 @@ class RayExecutor(_Executor):
         self._ray: Any = ray
         sigterm = signal.getsignal(signal.SIGTERM)  # ray.init installs its own handler
         self._home: tempfile.TemporaryDirectory[str] | None = None
+        self._network = contextlib.ExitStack()
         home = os.environ.get('HOME')
         try:
             if address == 'local':  # its home and session files private (0700), removed after
+                refused = self._network.enter_context(loopback_only())
+                if refused is not None:
+                    say('sweep: note: the local Ray instance listens on every interface while '
+                        f'the sweep runs (a network of loopback alone was refused: {refused})')
                 self._home = tempfile.TemporaryDirectory(prefix='iceskate-ray-',
                                                          ignore_cleanup_errors=True)
                 (pathlib.Path(self._home.name) / 'ray_bootstrap_config.yaml').write_text('{}\n')
@@ -178,6 +186,7 @@ class RayExecutor(_Executor):
                         if address == 'local' else {'address': address}),
                      include_dashboard=False, log_to_driver=False, logging_level='ERROR')
         except Exception as exc:  # Ray's errors (a cluster not reached, ...) in one line
+            self._network.close()
             raise StudyError(f'cannot start Ray at {address!r}: '
                              f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
                              ) from None
@@ -238,5 +247,6 @@ class RayExecutor(_Executor):
     def close(self) -> None:
         """Leave the cluster (a local instance is stopped)."""
         self._ray.shutdown()
+        self._network.close()
         if self._home is not None:
             self._home.cleanup()

@@ -10,6 +10,7 @@ import argparse
 from collections import Counter
 import contextlib
 from dataclasses import dataclass, field
+import os
 import pathlib
 import signal
 import sys
@@ -156,6 +157,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             raise StudyError(f'--workers must be >= 1, got {args.workers}')
         from iceskate_study.spec import load_spec
         spec = load_spec(args.spec)
+        if args.ray == 'local':  # one machine: Ray's node address is loopback, not probed
+            os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')  # via 8.8.8.8
         result = run_sweep(spec, args.out, args.workers, args.ray, progress=not args.quiet,
                            stop=stop, maps=not args.no_maps)
     except StudyError as exc:
