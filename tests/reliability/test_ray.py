@@ -1,6 +1,7 @@
 """A Ray node that dies mid-sweep (its raylet killed): the runs it lost are Ray's failure, not
-theirs, so none gets a failed row; the sweep ends in one line saying how many runs are left,
-and the same command (here on the local pool) runs them."""
+theirs, so none gets a failed row; the sweep ends in one line saying how many runs are left
+(Ray's own dump of the raylet's last log lines goes to a file of the output folder, not to the
+terminal), and the same command (here on the local pool) runs them."""
 
 import os
 from pathlib import Path
@@ -30,7 +31,8 @@ def test_a_raylet_killed_mid_sweep_leaves_its_runs_for_the_next_call(tmp_path, p
     command = [sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out', str(out),
                '--quiet']
     sweep = subprocess.Popen([*command, '--ray', 'local', '--workers', '1'],
-                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
     try:
         deadline = time.monotonic() + 180
         while not (out / RESULTS).exists() and sweep.poll() is None:
@@ -40,7 +42,7 @@ def test_a_raylet_killed_mid_sweep_leaves_its_runs_for_the_next_call(tmp_path, p
                    if Path(f'/proc/{pid}/comm').read_text().strip() == 'raylet']
         assert len(raylets) == 1, 'the local Ray instance has one raylet'
         os.kill(raylets[0], signal.SIGKILL)
-        _, err = sweep.communicate(timeout=120)
+        printed, err = sweep.communicate(timeout=120)
     finally:
         if sweep.poll() is None:
             os.killpg(sweep.pid, signal.SIGKILL)
@@ -51,6 +53,8 @@ def test_a_raylet_killed_mid_sweep_leaves_its_runs_for_the_next_call(tmp_path, p
     before = pq.read_table(out / RESULTS).to_pylist()
     assert 1 <= len(before) < RUNS and all(row['status'] == 'ok' for row in before), before
     assert f'{RUNS - len(before)} runs have no row yet' in line
+    assert printed == '' and line.endswith(f"(Ray's messages: {out / 'ray_messages.log'})")
+    assert 'Raylet is terminated' in (out / 'ray_messages.log').read_text()
     done = subprocess.run([*command, '--workers', '1'], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr

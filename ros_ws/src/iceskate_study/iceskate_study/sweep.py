@@ -10,6 +10,7 @@ import argparse
 from collections import Counter
 import contextlib
 from dataclasses import dataclass, field
+import io
 import os
 import pathlib
 import signal
@@ -130,6 +131,40 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
         release_output(out)
 
 
+#: The file of DIR that receives what Ray's driver prints (a sweep on Ray only, if any).
+RAY_MESSAGES = 'ray_messages.log'
+
+
+class _LaterFile(io.TextIOBase):
+    """A text sink that creates ``path`` (appending) at the first write; a write it cannot
+    make is dropped (never the sweep's failure)."""
+
+    def __init__(self, path: pathlib.Path) -> None:
+        self.path = path
+        self.written = False
+        self._file: io.TextIOBase | None = None
+
+    def writable(self) -> bool:
+        """A sink."""
+        return True
+
+    def write(self, text: str) -> int:
+        """Append ``text`` to the file (created now the first time)."""
+        with contextlib.suppress(OSError, ValueError):  # ValueError: closed meanwhile
+            if self._file is None:
+                self._file = self.path.open('a', encoding='utf-8')
+            self._file.write(text)
+            self._file.flush()
+            self.written = True
+        return len(text)
+
+    def close(self) -> None:
+        """Close the file, if it was made."""
+        if self._file is not None:
+            self._file.close()
+        super().close()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: exit 0 (every run of the SPEC has its row, whatever its status),
     1 (refused, one line on stderr), 128 + the signal's number (SIGINT, SIGTERM, SIGHUP)."""
@@ -152,6 +187,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('--no-maps', action='store_true', help="do not draw the SPEC's maps")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     args = parser.parse_args(argv)
+    ray_messages = _LaterFile(args.out / RAY_MESSAGES)
     try:
         if args.workers is not None and args.workers < 1:
             raise StudyError(f'--workers must be >= 1, got {args.workers}')
@@ -159,10 +195,15 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         spec = load_spec(args.spec)
         if args.ray == 'local':  # one machine: Ray's node address is loopback, not probed
             os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')  # via 8.8.8.8
-        result = run_sweep(spec, args.out, args.workers, args.ray, progress=not args.quiet,
-                           stop=stop, maps=not args.no_maps)
+        # Ray's driver prints the cluster's messages (a raylet's death: its last log lines)
+        # on stdout, which the sweep does not use otherwise: into a file of DIR instead
+        with (contextlib.closing(ray_messages), contextlib.redirect_stdout(ray_messages)
+              if args.ray else contextlib.nullcontext()):
+            result = run_sweep(spec, args.out, args.workers, args.ray,
+                               progress=not args.quiet, stop=stop, maps=not args.no_maps)
     except StudyError as exc:
-        say(f'sweep: error: {exc}')
+        say(f'sweep: error: {exc}' + (f" (Ray's messages: {ray_messages.path})"
+                                      if args.ray and ray_messages.written else ''))
         return 1
     if result.signum is not None:
         say(f'sweep: interrupted by {signal.Signals(result.signum).name}: {result.ran} runs '
