@@ -75,6 +75,8 @@ class BagData:
     :ivar multipliers: (f_nz, f_ny, tau_n) per sample (N, 3), 0 where inactive.
     :ivar support_normal: N_s [N] (N,). :ivar support_friction: F_y [N] (N,).
     :ivar zmp_y: world y of the CoP [m] (N,). :ivar heel_anchor_y: y_h* [m] (N,).
+    :ivar last_transition_ns: time of the latest transition at or before each sample [ns]
+        (N,; 0: none yet).
     :ivar head_position: head-top world position [m] (N, 3), nan without /head_pose.
     :ivar urdf: the URDF of /robot_description ('' when absent).
     :ivar custom_data: the bag's custom_data (strings; JSON for the scene parameters).
@@ -98,6 +100,7 @@ class BagData:
     support_friction: np.ndarray
     zmp_y: np.ndarray
     heel_anchor_y: np.ndarray
+    last_transition_ns: np.ndarray
     head_position: np.ndarray
     urdf: str = ''
     custom_data: dict[str, str] = field(default_factory=dict)
@@ -393,9 +396,11 @@ def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
     for name, value in zip(msg.multiplier_names, msg.multipliers, strict=True):
         if name in MULTIPLIER_NAMES:
             multipliers[MULTIPLIER_NAMES.index(name)] = float(value)
+    last = msg.last_transition_stamp
     return (int(msg.mode), int(msg.support_side), int(msg.pivot), int(msg.step_index),
             multipliers, float(msg.support_normal_force), float(msg.support_friction_force),
-            float(msg.zmp.y), float(msg.heel_anchor_y))
+            float(msg.zmp.y), float(msg.heel_anchor_y),
+            int(last.sec) * 1_000_000_000 + int(last.nanosec))
 
 
 def _joint_dynamics(msg: Any, where: str
@@ -436,7 +441,8 @@ _FIELDS = {
                     ('step_index', (), np.int64),
                     ('multipliers', (len(MULTIPLIER_NAMES),), float),
                     ('support_normal', (), float), ('support_friction', (), float),
-                    ('zmp_y', (), float), ('heel_anchor_y', (), float)),
+                    ('zmp_y', (), float), ('heel_anchor_y', (), float),
+                    ('last_transition_ns', (), np.int64)),
     '/joint_dynamics': (('qdd', (N_COORDINATES,), float), ('active', (N_COORDINATES,), bool)),
     '/head_pose': (('head_position', (3,), float),),
 }

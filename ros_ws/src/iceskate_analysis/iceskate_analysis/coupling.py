@@ -208,15 +208,17 @@ def _inertia_terms(mass_row: np.ndarray, accelerations: np.ndarray, valid: np.nd
 def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
     """The accelerations the integrator produced over each sampling interval,
     (v_{k+1} - v_k) / (t_{k+1} - t_k) (N, 18) [m/s², rad/s²], and where they are defined (N,):
-    the next sample is in the same mode, support side, pivot and step (no impact and no
-    re-rooted coordinates in between), never at the last sample."""
+    no transition in (t_k, t_{k+1}] (no impact and no re-rooted coordinates in between, also
+    none that went out and back between two samples of a thinned bag) and the same mode,
+    support side, pivot and step at both ends; never at the last sample."""
     n = bag.n_samples
     out = np.full((n, N_COORDINATES), np.nan)
     defined = np.zeros(n, dtype=bool)
     if n >= 2:
         same = ((bag.mode[1:] == bag.mode[:-1]) & (bag.side[1:] == bag.side[:-1])
                 & (bag.pivot[1:] == bag.pivot[:-1])
-                & (bag.step_index[1:] == bag.step_index[:-1]))
+                & (bag.step_index[1:] == bag.step_index[:-1])
+                & (bag.last_transition_ns[1:] <= bag.t_ns[:-1]))
         dt = np.diff(bag.t)[:, None]
         out[:-1] = np.where(same[:, None], (bag.v[1:] - bag.v[:-1]) / dt, np.nan)
         defined[:-1] = same

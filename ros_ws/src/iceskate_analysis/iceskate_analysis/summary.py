@@ -26,7 +26,8 @@ from iceskate_sim.shutdown import say
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ['SUMMARY_NAME', 'draw_picked', 'draw_summary', 'picked_columns', 'write_summary']
+__all__ = ['DRAWN_COLUMNS', 'SUMMARY_NAME', 'draw_picked', 'draw_summary', 'picked_columns',
+           'write_summary']
 
 SUMMARY_NAME = 'summary.png'
 MAX_POINTS = 3000  # per drawn series (decimated above)
@@ -35,7 +36,8 @@ _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # firs
 #: The swing foot's states of docs/model.md §3.2, in words (the mode panel's key).
 _SWING_KEY = ('swing foot (right): A air · Hs/Hp heel sliding/pinned · '
               'Fs/Fp sole flat sliding/stuck')
-_COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
+#: The trajectory's columns the picture is drawn from (q: its shoulders q11 and q14).
+DRAWN_COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
 #: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
 _DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
 
@@ -60,7 +62,7 @@ def picked_columns(columns: Iterable[tuple[str, np.ndarray]]) -> dict[str, np.nd
     for key, column in columns:  # one spilled column mapped at a time
         if key == 'q':
             a['shoulders'] = np.array(column[:, [11, 14]])
-        elif key in _COLUMNS:
+        elif key in DRAWN_COLUMNS:
             a[key] = np.array(column)
     return a
 
@@ -86,7 +88,7 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     try:
         metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
         with np.load(trajectory) as npz:
-            a = {key: npz[key] for key in _COLUMNS if key in npz.files and key != 'q'}
+            a = {key: npz[key] for key in DRAWN_COLUMNS if key in npz.files and key != 'q'}
             if 'q' in npz.files:
                 a['shoulders'] = _shoulders(trajectory)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # damaged
@@ -122,7 +124,8 @@ if __name__ == '__main__':
 def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pathlib.Path,
                   source: str) -> pathlib.Path:
     """``_draw`` once ``a`` (``shoulders`` for q) has every column and a sample."""
-    absent = [key for key in _COLUMNS if key not in a and (key != 'q' or 'shoulders' not in a)]
+    absent = [key for key in DRAWN_COLUMNS
+              if key not in a and (key != 'q' or 'shoulders' not in a)]
     if absent:
         raise SimulationError(f'{source} lacks the column(s) {absent}')
     if a['t'].size == 0:

@@ -37,9 +37,32 @@ class SummaryProcess:
         self._connection, child = context.Pipe()
         self._process = context.Process(target=_serve, args=(child, self._connection),
                                         name='summary-picture', daemon=True)
-        self._process.start()
+        self._ready = False
+        # the stop signals held until the process ignores them (a Ctrl-C at the fork would
+        # end it with a traceback): it inherits the mask and unblocks them itself
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+        try:
+            self._process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
         child.close()
         self.pid: int = self._process.pid
+
+    def wait_ready(self, deadline: float = DRAW_DEADLINE) -> None:
+        """Wait until the process has imported what it draws with (at most ``deadline`` s).
+
+        :raises SimulationError: when it ended or did not get there in time.
+        """
+        if self._ready:
+            return
+        try:
+            answer = self._connection.recv() if self._connection.poll(deadline) else None
+        except (OSError, EOFError) as exc:
+            raise SimulationError(f'the summary picture process ended early: {exc}') from None
+        if answer != ('ready',):
+            raise SimulationError(f'the summary picture process was not ready within '
+                                  f'{deadline:g} s')
+        self._ready = True
 
     def draw(self, columns: Iterable[tuple[str, np.ndarray]], metrics: Mapping[str, Any],
              path: pathlib.Path) -> pathlib.Path:
@@ -50,6 +73,7 @@ class SummaryProcess:
         :raises OSError: when the picture cannot be written (its errno and message).
         """
         from iceskate_analysis.summary import picked_columns
+        self.wait_ready()  # then it reads what is sent: the send cannot block for good
         try:
             self._connection.send((picked_columns(columns), dict(metrics), str(path)))
             answered = self._connection.poll(DRAW_DEADLINE)
@@ -82,18 +106,23 @@ class SummaryProcess:
 
 
 def _serve(connection: Connection, parent_end: Connection) -> None:
-    """The process: import what the picture needs, then draw each handed-over run until None
-    (or the parent is gone), answering ('ok',), ('os_error', errno, message) or ('error',
-    message)."""
+    """The process: import what the picture needs and say ('ready',), then draw each
+    handed-over run until None (or the parent is gone), answering ('ok',), ('os_error', errno,
+    message) or ('error', message)."""
     parent_end.close()
     for signum in STOP_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     die_with_parent(signal.SIGKILL, multiprocessing.parent_process().pid)  # nothing to save
     with contextlib.suppress(Exception):  # an import that fails fails again, reported, below
         import matplotlib.backends.backend_agg  # noqa: F401
         import matplotlib.figure  # noqa: F401
 
         import iceskate_analysis.summary  # noqa: F401
+    try:
+        connection.send(('ready',))
+    except OSError:
+        return
     while True:
         try:
             item = connection.recv()

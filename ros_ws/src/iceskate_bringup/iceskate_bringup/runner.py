@@ -28,6 +28,7 @@ from iceskate_sim.shutdown import StopRequest, say
 from iceskate_sim.yaml_io import yaml_value
 
 if TYPE_CHECKING:
+    from iceskate_analysis.summary_process import SummaryProcess
     from iceskate_sim.run.scene import Scene
     from iceskate_sim.run.session import Session
 
@@ -55,24 +56,26 @@ class Outcome:
 
 def run(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         stop: StopRequest | None = None, picture: bool = True,
-        watch: Watch | None = None) -> dict[str, Any]:
+        watch: Watch | None = None, aside: bool = False) -> dict[str, Any]:
     """Run ``scene``; write the outputs into ``out`` (if given) and return the metrics.
 
     A signal (``stop``; None: one is installed for the call) ends the run between two control
-    periods, its outputs written (docs/usage.md, "Run a scene"). ``picture``: draw summary.png.
+    periods, its outputs written (docs/usage.md, "Run a scene"). ``picture``: draw summary.png;
+    ``aside``: in a process forked before the run, which imports matplotlib meanwhile (for a
+    process that runs one scene: the picture then costs its drawing only).
 
     :raises RunInterrupted: after a signal (the outputs are written; no summary.png).
     :raises SimulationError: when the physics failed (after the outputs are written).
     """
-    outcome = simulate(scene, out, progress, stop, picture, watch)
+    outcome = simulate(scene, out, progress, stop, picture, watch, aside)
     if outcome.error is not None:
         raise outcome.error
     return outcome.metrics
 
 
 def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
-             stop: StopRequest | None = None, picture: bool = True, watch: Watch | None = None
-             ) -> Outcome:
+             stop: StopRequest | None = None, picture: bool = True, watch: Watch | None = None,
+             aside: bool = False) -> Outcome:
     """``run``, but a failure of the physics, or of a controller written in Python
     (``iceskate_native.ControllerError``: it raised or answered a bad command), is returned
     in the ``Outcome`` beside the metrics (which say where the run stopped) instead of raised.
@@ -88,10 +91,8 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         bag = out / 'bag' if out is not None and scene.record_bag else None
         session = Session(scene, out, bag)  # forks the bag writer (before any thread starts)
         stack = ControlStack(scene, session.robot, session.observation())
-        painter = None
-        if picture and out is not None:  # forked too: it imports matplotlib during the run
-            from iceskate_analysis.summary_process import SummaryProcess
-            painter = signals.enter_context(contextlib.closing(SummaryProcess()))
+        picture = picture and out is not None
+        painter: SummaryProcess | None = None
         bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
         ended: SimulationError | None = None
         controller_failed = False
@@ -99,9 +100,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         def summary() -> None:
             """summary.png, while the bag writer finishes; also after a fall or a physics
             error, not after a signal, a bug or a failure to write (a full disk)."""
-            if painter is None:
+            if not picture:
                 return
-            from iceskate_analysis.summary import SUMMARY_NAME
+            from iceskate_analysis.summary import DRAWN_COLUMNS, SUMMARY_NAME, draw_summary
             path = out / SUMMARY_NAME
             if session.metrics['end'] == 'io_error':  # drawn before the bag failed
                 path.unlink(missing_ok=True)
@@ -109,7 +110,8 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
                     and not crashed):
                 staged = path.with_name(f'.{SUMMARY_NAME}')
                 try:
-                    painter.draw(session.trajectory.columns(), session.metrics, staged)
+                    draw = painter.draw if painter is not None else draw_summary
+                    draw(session.trajectory.columns(DRAWN_COLUMNS), session.metrics, staged)
                     os.replace(staged, path)
                 except (OSError, SimulationError) as exc:  # SimulationError: its process
                     staged.unlink(missing_ok=True)
@@ -120,6 +122,9 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         block = FIRST_BLOCK
         live = None
         try:
+            if picture and aside:  # forked before any thread starts, like the bag writer
+                from iceskate_analysis.summary_process import SummaryProcess
+                painter = signals.enter_context(contextlib.closing(SummaryProcess()))
             live = live_view(watch, session.robot, scene.name, signals)
             while not session.done:
                 if stop.requested:
@@ -250,7 +255,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                                 rt_priority=args.rt_priority, stop=stop, overrides=overrides,
                                 watch=watch)
         else:
-            metrics = run(scene, args.out, progress=not args.quiet, stop=stop, watch=watch)
+            metrics = run(scene, args.out, progress=not args.quiet, stop=stop, watch=watch,
+                          aside=True)
         if args.arm_swing_ratio:
             metrics = _with_arm_swing_ratio(scene, metrics, args.out, stop)
     except RunInterrupted as exc:  # the run was ended cleanly: one line, the shell's code

@@ -246,7 +246,9 @@ class RayExecutor(_Executor):
 
     def close(self) -> None:
         """Leave the cluster (a local instance is stopped)."""
-        self._ray.shutdown()
-        self._network.close()
-        if self._home is not None:
-            self._home.cleanup()
+        try:
+            self._ray.shutdown()
+        finally:
+            self._network.close()  # the sweep's thread back in its network namespace
+            if self._home is not None:
+                self._home.cleanup()

@@ -27,7 +27,8 @@ _IFREQ = struct.Struct('16sh22x')
 def loopback_only() -> Iterator[str | None]:
     """Move the calling thread, and the threads and processes it starts from then on, into a
     new network namespace whose only interface is loopback (brought up); back to the thread's
-    own namespace on exit (what was started inside stays there).
+    own namespace on exit, which must happen on the same thread (what was started inside
+    stays there).
 
     Yields None, or why the namespace could not be made (it needs CAP_SYS_ADMIN: root), in
     which case nothing changed.
@@ -36,18 +37,26 @@ def loopback_only() -> Iterator[str | None]:
     """
     libc = ctypes.CDLL(None, use_errno=True)
     own = os.open('/proc/thread-self/ns/net', os.O_RDONLY | os.O_CLOEXEC)
+
+    def back() -> None:
+        if libc.setns(own, CLONE_NEWNET) != 0:
+            error = ctypes.get_errno()
+            raise OSError(error, f'cannot return to the network namespace: '
+                                 f'{os.strerror(error)}')
     try:
         if libc.unshare(CLONE_NEWNET) != 0:
             yield os.strerror(ctypes.get_errno())
             return
         try:
             _bring_up('lo')
+        except OSError as exc:  # e.g. CAP_SYS_ADMIN without CAP_NET_ADMIN: as if refused
+            back()
+            yield f'loopback cannot be brought up: {exc.strerror or exc}'
+            return
+        try:
             yield None
         finally:
-            if libc.setns(own, CLONE_NEWNET) != 0:
-                error = ctypes.get_errno()
-                raise OSError(error, f'cannot return to the network namespace: '
-                                     f'{os.strerror(error)}')
+            back()
     finally:
         os.close(own)
 
