@@ -187,6 +187,9 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser.add_argument('--no-maps', action='store_true', help="do not draw the SPEC's maps")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     args = parser.parse_args(argv)
+    if argv is None and args.ray == 'local':  # the command itself, without root: started again
+        from iceskate_study.network import run_in_own_namespaces  # where Ray can have a
+        run_in_own_namespaces('iceskate_study.sweep', sys.argv[1:])  # loopback of its own
     ray_messages = _LaterFile(args.out / RAY_MESSAGES)
     try:
         if args.workers is not None and args.workers < 1:
