@@ -93,7 +93,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
         stack = ControlStack(scene, session.robot, session.observation())
         picture = picture and out is not None
         painter: SummaryProcess | None = None
-        bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
+        bar: ProgressBar | None = None
         ended: SimulationError | None = None
         controller_failed = False
 
@@ -125,6 +125,7 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             if picture and aside:  # forked before any thread starts, like the bag writer
                 from iceskate_analysis.summary_process import SummaryProcess
                 painter = signals.enter_context(contextlib.closing(SummaryProcess()))
+            bar = ProgressBar(session.n_periods, f'scene {scene.name}', 'period', progress)
             live = live_view(watch, session.robot, scene.name, signals)
             while not session.done:
                 if stop.requested:
@@ -147,7 +148,8 @@ def simulate(scene: Scene, out: pathlib.Path | None, progress: bool = True,
             crashed = True
             raise
         finally:
-            bar.close()
+            if bar is not None:
+                bar.close()
             metrics = session.finish(ended, written=summary)
     if isinstance(ended, RunInterrupted):
         raise ended
