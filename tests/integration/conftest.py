@@ -107,6 +107,19 @@ class Listener:
                 pytest.fail(f'timed out after {timeout} s waiting for {what}')
             self.executor.spin_once(timeout_sec=0.05)
 
+    def spin_until_quiet(self, quiet: float = 0.3, timeout: float = 10.0) -> None:
+        """Spin until no message came for ``quiet`` s (the callbacks of what the transport
+        already holds are all run, also on a loaded machine), at most ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        count, changed = -1, time.monotonic()
+        while time.monotonic() < deadline:
+            now, seen = time.monotonic(), sum(len(m) for m in self.messages.values())
+            if seen != count:
+                count, changed = seen, now
+            elif now - changed >= quiet:
+                return
+            self.executor.spin_once(timeout_sec=0.02)
+
     def spin_for(self, seconds: float) -> None:
         """Process whatever arrives during ``seconds`` (to see that nothing does)."""
         deadline = time.monotonic() + seconds
@@ -213,7 +226,7 @@ def graph_run(tmp_path_factory: pytest.TempPathFactory) -> GraphRun:
         assert listener.call(Trigger, '/simulator/resume', Trigger.Request()).success
         listener.spin_until(lambda: graph.simulator.poll() is not None, 60.0,
                             'the simulator to finish the run')
-        listener.spin_for(0.2)
+        listener.spin_until_quiet()  # the last instants' callbacks, however slow the machine
         codes = graph.stop()
     finally:
         graph.stop()
