@@ -8,7 +8,8 @@ import shutil
 import numpy as np
 import pytest
 
-from iceskate_analysis.bag_io import read_bag, resolve_bag_path
+from iceskate_analysis.bag_io import BagReading, read_bag, resolve_bag_path
+from iceskate_analysis.rows import join_rows
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
@@ -98,6 +99,27 @@ def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
                          '2 message(s) repeated a header stamp; the later one was kept',
                          'the samples have 1 gap(s) (sampled every 0.001 s); the longest from '
                          't = 0.006000 s to 0.008000 s')
+    for size in (1, 3, 7):  # read in windows, the same samples and notes
+        reading = BagReading(tmp_path / 'edited')
+        windows = list(reading.windows(size))
+        assert max(w.n_samples for w in windows) <= size
+        joined = join_rows(windows)
+        for name in ('t_ns', 'q', 'v', 'qdd', 'mode', 'step_index', 'last_transition_ns'):
+            assert np.array_equal(getattr(joined, name), getattr(bag, name)), (size, name)
+        assert np.array_equal(joined.head_position, bag.head_position, equal_nan=True)
+        assert list(joined.efforts) == list(bag.efforts)
+        assert all(np.array_equal(joined.efforts[s], bag.efforts[s]) for s in bag.efforts)
+        assert tuple(reading.notes) == bag.notes
+
+
+def test_the_stamps_of_a_thinned_bag_rounded_to_the_nanosecond_make_no_gap(sim_bag, tmp_path):
+    """Stamps k * 4 ms written as float seconds are 1 ns apart from a regular grid: no gap."""
+    def edit(topic, index, msg, typestore):
+        if hasattr(msg, 'header'):
+            msg.header.stamp.nanosec += index % 2  # 0.999999 ms and 1.000001 ms spacings
+        return [msg]
+    bag = read_bag(_edited_copy(sim_bag, tmp_path / 'jitter', edit))
+    assert bag.notes == () and bag.n_samples == read_bag(sim_bag).n_samples
 
 
 def test_read_bag_maps_gait_codes(synthetic_bag, spec):

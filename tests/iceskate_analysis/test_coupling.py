@@ -18,7 +18,7 @@ from iceskate_analysis.coupling import (
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
-from iceskate_sim.model.robot import N_COORDINATES
+from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 from oracle.dynamics import GaitDynamics
 
 CLOSURE = 1e-9  # relative closure residual the decomposition must reach
@@ -128,7 +128,7 @@ def test_shoulders_couple_to_torso_yaw_with_opposite_signs(synthetic):
 
 
 def test_arm_swing_measures_anti_phase_from_the_fourth_step(synthetic, spec):
-    swing = arm_swing(synthetic)
+    swing = _swing(synthetic)
     assert swing.window_from_step == 3
     assert swing.samples == spec.samples_per_step
     assert swing.window_start_s == pytest.approx(3 * spec.samples_per_step * spec.dt)
@@ -140,7 +140,7 @@ def test_arm_swing_measures_anti_phase_from_the_fourth_step(synthetic, spec):
 
 
 def test_arm_swing_measures_the_phase_lag_without_yaw(synthetic_no_yaw_bag, spec):
-    swing = arm_swing(read_bag(synthetic_no_yaw_bag))
+    swing = _swing(read_bag(synthetic_no_yaw_bag))
     assert swing.peak_to_peak['q11'] == pytest.approx(2 * spec.no_yaw_amplitude, rel=0.05)
     assert swing.correlation > 0.8
     # q14 leads q11 by NO_YAW_LEAD: the phase of q11 relative to q14 is negative
@@ -148,14 +148,22 @@ def test_arm_swing_measures_the_phase_lag_without_yaw(synthetic_no_yaw_bag, spec
 
 
 def test_a_run_short_of_four_steps_is_measured_over_the_whole_run(sim):
-    swing = arm_swing(sim)
+    swing = _swing(sim)
     assert swing.window_from_step is None
     assert swing.samples == sim.n_samples
 
 
+def _swing(bag):
+    return arm_swing(bag.t, bag.q[:, 11], bag.q[:, 14], bag.step_index)
+
+
 def test_coupling_terms_are_ranked_by_rms(synthetic):
+    ranking = analyse_case(synthetic, 'synthetic', 11).ranking(11)
     d = decompose(synthetic, (11,))[11]
-    ranking = d.ranking()
+    window = synthetic.step_index >= 3
+    for name, value in ranking:  # the RMS over the arm-swing window, summed window by window
+        x = d.coupling[window & d.valid, COORDINATE_NAMES.index(name)]
+        assert value == pytest.approx(np.sqrt(np.mean(x * x)), rel=1e-12)
     values = [value for _, value in ranking]
     assert values == sorted(values, reverse=True)
     assert 'q11' not in dict(ranking)
@@ -267,3 +275,58 @@ def test_write_csv_writes_every_row_exactly_across_its_blocks(tmp_path):
     assert [r[2] for r in rows[1:]] == [str(int(f)) for f in x > 0]
     with pytest.raises(ValueError, match='different lengths'):
         write_csv(tmp_path / 'bad.csv', {'a': np.zeros(3), 'b': np.zeros(4)})
+
+
+def _flat(value, path=''):
+    """(path, leaf) of every leaf of nested dicts and lists."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _flat(item, f'{path}/{key}')
+    elif isinstance(value, list):
+        for k, item in enumerate(value):
+            yield from _flat(item, f'{path}[{k}]')
+    else:
+        yield path, value
+
+
+@pytest.mark.parametrize('size', [1, 5, 37])
+def test_the_analysis_in_windows_equals_the_analysis_of_the_whole_run(synthetic, size):
+    """Windows of any size give the summary of one window of the whole run: the sums of
+    squares, maxima, counts, rankings and the arm swing do not depend on where windows end."""
+    whole = dict(_flat(analyse_case(synthetic, 's', 11, size=synthetic.n_samples).summary()))
+    parts = dict(_flat(analyse_case(synthetic, 's', 11, size=size).summary()))
+    assert parts.keys() == whole.keys()
+    for key, value in whole.items():
+        if isinstance(value, float) and np.isfinite(value):
+            assert parts[key] == pytest.approx(value, rel=1e-12, abs=1e-300), key
+        else:
+            assert parts[key] == value or (value != value and parts[key] != parts[key]), key
+
+
+def test_the_figures_keep_every_sample_of_a_short_run_and_every_2_to_the_k_of_a_long_one(
+        synthetic, monkeypatch):
+    import iceskate_analysis.coupling as coupling
+    n = synthetic.n_samples
+    assert np.array_equal(analyse_case(synthetic, 's', 11).kept.t_ns, synthetic.t_ns)
+    monkeypatch.setattr(coupling, 'FIGURE_ROWS', 16)
+    case = analyse_case(synthetic, 's', 11, size=7)
+    stride = 1 << int(np.ceil(np.log2(n / 16)))
+    assert np.array_equal(case.kept.t_ns, synthetic.t_ns[::stride])
+    exact = decompose(synthetic, (11, 14))
+    for joint, d in case.decompositions.items():
+        assert np.array_equal(d.coriolis, exact[joint].coriolis[::stride], equal_nan=True)
+    a, defined = interval_accelerations(synthetic)
+    averaged = exact[11].period_averaged(a, defined)
+    assert np.array_equal(case.averaged(case.main).own_inertia, averaged.own_inertia[::stride],
+                          equal_nan=True)
+
+
+def test_the_csv_is_the_same_whatever_the_windows(synthetic_bag, tmp_path):
+    from iceskate_analysis.bag_io import BagReading
+    from iceskate_analysis.coupling import analyse_bag
+    texts = []
+    for size in (3, 100_000):
+        path = tmp_path / f'series_{size}.csv'
+        analyse_bag(BagReading(synthetic_bag), 's', 11, csv=path, size=size)
+        texts.append(path.read_text())
+    assert texts[0] == texts[1] and texts[0].count('\n') == read_bag(synthetic_bag).n_samples + 1

@@ -13,6 +13,8 @@ import pytest
 from iceskate_analysis.bag_io import read_bag
 from iceskate_sim.errors import SimulationError
 
+#: What reading one chunk of a bag's file may hold beyond another [B] (1 MB chunks).
+CHUNK = 3_000_000
 TINY = Path(__file__).resolve().parents[1] / 'integration' / 'data' / 'tiny_stand.yaml'
 
 
@@ -122,3 +124,35 @@ def test_replay_reads_a_cut_bag_and_says_how_much(long_bag, tmp_path, ros_env, f
     assert 'Traceback' not in result.stderr
     if code == 0:
         assert 'rebuilt from bag.mcap' in result.stderr
+
+
+@pytest.mark.slow
+def test_the_analysis_holds_a_few_windows_whatever_the_length_of_the_run(tmp_path, monkeypatch):
+    """The peak memory of analysing a 6 s run exceeds that of a 1 s run by the shoulders'
+    angles kept whole (32 B a sample) and what a chunk of the file holds at a time (CHUNK), not
+    by the samples' rows (over 4 kB each when a bag was held whole)."""
+    from dataclasses import replace
+    import tracemalloc
+
+    from iceskate_analysis import coupling
+    from iceskate_analysis.bag_io import BagReading
+    from iceskate_bringup.runner import run
+    from iceskate_bringup.scene import load_scene
+    monkeypatch.setattr(coupling, 'FIGURE_ROWS', 256)
+    bags = {}
+    for seconds in (1.0, 6.0):
+        run(replace(load_scene(TINY), duration=seconds), tmp_path / str(seconds), progress=False)
+        bags[seconds] = tmp_path / str(seconds) / 'bag'
+    coupling.analyse_bag(BagReading(bags[1.0]), 'warm-up', size=256)  # the lazy imports
+    peaks, samples = {}, {}
+    for seconds, bag in bags.items():
+        tracemalloc.start()
+        try:
+            case = coupling.analyse_bag(BagReading(bag), 'run', size=256)
+            peaks[seconds] = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        samples[seconds] = case.summary()['samples']
+    extra = samples[6.0] - samples[1.0]
+    assert extra >= 4500
+    assert peaks[6.0] - peaks[1.0] < CHUNK + 100 * extra, (peaks, samples)

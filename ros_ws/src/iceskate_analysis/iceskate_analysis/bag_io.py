@@ -22,6 +22,7 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 import yaml
 
+from iceskate_analysis.rows import join_rows
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
@@ -35,8 +36,8 @@ if TYPE_CHECKING:
     from mcap.records import McapRecord
     from rosbags.typesys.store import Typestore
 
-__all__ = ['BagData', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS',
-           'open_bag', 'read_bag', 'resolve_bag_path']
+__all__ = ['BagData', 'BagReading', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE',
+           'REQUIRED_TOPICS', 'WINDOW', 'open_bag', 'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -49,6 +50,11 @@ OPTIONAL_TOPICS = {
     '/head_pose': 'geometry_msgs/msg/PoseStamped',
     '/robot_description': 'std_msgs/msg/String',
 }
+#: Samples per window of ``BagReading.windows``.
+WINDOW = 4096
+#: A spacing of samples over this many times the least is a gap (stamps of a thinned bag are
+#: rounded to the nanosecond: their spacings differ by 1 ns).
+GAP = 1.5
 _WHAT = {
     '/joint_states': 'joint positions and velocities',
     '/gait_state': 'gait mode, support side and step index',
@@ -449,14 +455,15 @@ _FIELDS = {
 
 
 class _Table:
-    """The rows of one sampled topic as arrays, filled in place as the messages are read (room
-    for ``capacity`` messages, the channel's count): no Python object per message is kept."""
+    """The rows of one sampled topic not yet joined, as arrays filled in place as the messages
+    are read: no Python object per message is kept."""
 
     def __init__(self, topic: str, capacity: int) -> None:
         self.by_source = topic == '/joint_dynamics'  # its rows end with the efforts by source
         self.size = 0
-        self.stamps = np.zeros(capacity, dtype=np.int64)
-        self.fields = {name: np.zeros((capacity, *shape), dtype=dtype)
+        self.newest = -1  # the latest header stamp read [ns]
+        self.stamps = np.zeros(max(capacity, 1), dtype=np.int64)
+        self.fields = {name: np.zeros((self.stamps.size, *shape), dtype=dtype)
                        for name, shape, dtype in _FIELDS[topic]}
         self.efforts: dict[str, np.ndarray] = {}  # /joint_dynamics: source -> (capacity, 18)
         # source -> its place among each row's sources (-1: the row does not carry it)
@@ -465,12 +472,15 @@ class _Table:
     def append(self, stamp: int, row: tuple[Any, ...]) -> None:
         """Add a message's row (``_READERS``' output) at header ``stamp`` [ns]."""
         k = self.size
-        if k == self.stamps.size:  # a file still being written grew since the scan
+        if k == self.stamps.size:
             self._grow()
         self.stamps[k] = stamp
+        self.newest = max(self.newest, stamp)
         values, by_source = (row[:-1], row[-1]) if self.by_source else (row, {})
         for array, value in zip(self.fields.values(), values, strict=True):
             array[k] = value
+        for places in self.places.values():  # a slot may hold a dropped row's
+            places[k] = -1
         for place, (source, tau) in enumerate(by_source.items()):
             if source not in self.efforts:
                 self.efforts[source] = np.zeros((self.stamps.size, N_COORDINATES))
@@ -479,109 +489,238 @@ class _Table:
             self.places[source][k] = place
         self.size = k + 1
 
-    def _grow(self) -> None:
-        def grown(a: np.ndarray, fill: float = 0) -> np.ndarray:
-            return np.concatenate([a, np.full((max(a.shape[0], 1), *a.shape[1:]), fill,
-                                              a.dtype)])
-        self.stamps = grown(self.stamps)
-        for group in (self.fields, self.efforts):
-            for name in group:
-                group[name] = grown(group[name])
-        for source in self.places:
-            self.places[source] = grown(self.places[source], -1)
+    def _groups(self) -> tuple[tuple[dict[str, np.ndarray], int], ...]:
+        return (self.fields, 0), (self.efforts, 0), (self.places, -1)
 
-    def latest(self) -> tuple[np.ndarray, np.ndarray]:
-        """(stamps, row of each): every header stamp once, increasing, with the row of its
-        last message."""
+    def _grow(self) -> None:
+        def grown(a: np.ndarray, fill: int) -> np.ndarray:
+            return np.concatenate([a, np.full((a.shape[0], *a.shape[1:]), fill, a.dtype)])
+        self.stamps = grown(self.stamps, 0)
+        for group, fill in self._groups():
+            for name in group:
+                group[name] = grown(group[name], fill)
+
+    def latest(self, before: int | None) -> tuple[np.ndarray, np.ndarray, int]:
+        """(stamps, row of each, rows read): every header stamp below ``before`` (None: every
+        one) once, increasing, with the row of its last message; and how many rows have those
+        stamps."""
         reversed_stamps = self.stamps[:self.size][::-1]
         stamps, first = np.unique(reversed_stamps, return_index=True)
-        return stamps, self.size - 1 - first
+        rows = self.size - 1 - first
+        if before is None:
+            return stamps, rows, self.size
+        below = stamps < before
+        return stamps[below], rows[below], int(np.sum(self.stamps[:self.size] < before))
+
+    def drop_before(self, before: int | None) -> int:
+        """Forget the rows stamped below ``before`` (None: all); return how many."""
+        keep = (np.zeros(self.size, dtype=bool) if before is None
+                else self.stamps[:self.size] >= before)
+        dropped = self.size - int(keep.sum())
+        if dropped:
+            arrays = [self.stamps, *(a for group, _ in self._groups() for a in group.values())]
+            for a in arrays:
+                a[:self.size - dropped] = a[:self.size][keep]
+            self.size -= dropped
+        return dropped
 
 
-def _collect(reader: OpenBag, chosen: dict[str, BagTopic], path: pathlib.Path,
-             progress: bool) -> tuple[dict[str, _Table], str]:
-    """The rows of each sampled topic, as read (``_Table``), and the URDF."""
-    tables = {topic: _Table(topic, chosen[topic].count if topic in chosen else 0)
-              for topic in _READERS}
-    urdf = ''
-    total = sum(c.count for c in chosen.values())
-    bar = ProgressBar(total, f'reading {path.name}', 'msg', progress, leave=False)
-    try:
-        for conn, log_ns, raw in reader.messages(chosen.values()):
-            topic = conn.topic
-            where = f'log time {log_ns * 1e-9:.6f} s'
-            try:
-                msg = reader.deserialize(raw, conn.msgtype)
-            except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
-                raise SimulationError(f'bag {path}: cannot decode a {conn.msgtype} message of '
-                                      f'{topic} at {where} ({exc})') from exc
-            try:
-                if topic == '/robot_description':
-                    urdf = str(msg.data)
-                else:
-                    tables[topic].append(_stamp_ns(msg), _READERS[topic](msg, where))
-            except AttributeError as exc:
-                raise SimulationError(f'bag {path}: {topic} message at {where} lacks a field '
-                                      f'the analysis needs ({exc}); the bag was recorded with '
-                                      'an incompatible message definition') from exc
-            bar.update(1)
-    finally:
-        bar.close()
-    return tables, urdf
+class BagReading:
+    """A bag's samples, read as windows of consecutive samples: the sampled topics are joined
+    on their header stamps as the messages come, a stamp once every sampled topic has passed
+    it, so what is held is a few windows of rows whatever the length of the bag. A sample
+    needs all of ``REQUIRED_TOPICS`` (a repeated stamp: each topic's last message of it).
+
+    :ivar path: the bag. :ivar custom_data: its metadata's custom_data.
+    :ivar urdf: the URDF of /robot_description ('' until read; it comes first in a bag).
+    :ivar notes: what was dropped or assumed; complete once ``windows`` is exhausted.
+    """
+
+    def __init__(self, path: str | pathlib.Path, progress: bool = False) -> None:
+        """Open the bag and check its topics.
+
+        :raises SimulationError: as ``read_bag``.
+        """
+        self._reader = open_bag(path)
+        self.path = self._reader.path
+        self.custom_data = self._reader.custom_data
+        self._chosen = _check_connections(self._reader, self.path)
+        self._progress = progress
+        self.urdf = ''
+        self.notes: list[str] = []
+
+    @property
+    def sample_bound(self) -> int:
+        """The most samples the bag can give (its /joint_states messages)."""
+        return self._chosen['/joint_states'].count
+
+    def windows(self, size: int = WINDOW) -> Iterator[BagData]:
+        """The samples in time order, at most ``size`` per window; each window is checked
+        (``_validate``) before it is given.
+
+        :raises SimulationError: as ``read_bag``, when the window it concerns is reached.
+        """
+        sampled = [t for t in _READERS if t in self._chosen and self._chosen[t].count]
+        tables = {t: _Table(t, min(self._chosen[t].count, 2 * size) if t in self._chosen
+                            else 0) for t in _READERS}
+        join = _Join(self.path, self.custom_data)
+        total = sum(c.count for c in self._chosen.values())
+        bar = ProgressBar(total, f'reading {self.path.name}', 'msg', self._progress,
+                          leave=False)
+        try:
+            for conn, log_ns, raw in self._reader.messages(self._chosen.values()):
+                self._take(tables, conn, log_ns, raw)
+                bar.update(1)
+                if tables['/joint_states'].size >= 2 * size:  # join what every topic passed
+                    before = min(tables[t].newest for t in sampled)
+                    yield from join.samples(tables, before, size, self.urdf)
+            yield from join.samples(tables, None, size, self.urdf)
+        finally:
+            bar.close()
+        self.notes = ([self._recovered()] if self._reader.recovered else []) + join.notes(
+            tables, self.urdf)
+
+    def _take(self, tables: dict[str, _Table], conn: BagTopic, log_ns: int, raw: bytes
+              ) -> None:
+        """Decode one message into its table (the URDF kept)."""
+        topic = conn.topic
+        where = f'log time {log_ns * 1e-9:.6f} s'
+        try:
+            msg = self._reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
+            raise SimulationError(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
+                                  f'{topic} at {where} ({exc})') from exc
+        try:
+            if topic == '/robot_description':
+                self.urdf = str(msg.data)
+            else:
+                tables[topic].append(_stamp_ns(msg), _READERS[topic](msg, where))
+        except AttributeError as exc:
+            raise SimulationError(f'bag {self.path}: {topic} message at {where} lacks a field '
+                                  f'the analysis needs ({exc}); the bag was recorded with '
+                                  'an incompatible message definition') from exc
+
+    def _recovered(self) -> str:
+        extra = ('' if self.custom_data
+                 else ' (without metadata: the scene parameters are not known)')
+        return self._reader.recovered + extra
 
 
-def _assemble(tables: dict[str, _Table], urdf: str, path: pathlib.Path,
-              custom: dict[str, str]) -> BagData:
-    """The samples at the header stamps that every required topic has (each topic's last
-    message of a repeated stamp), one field at a time, each table's arrays let go once taken."""
-    latest = {topic: tables[topic].latest() for topic in _READERS}
-    duplicates = sum(tables[t].size - latest[t][0].size for t in REQUIRED_TOPICS)
-    stamps = functools.reduce(functools.partial(np.intersect1d, assume_unique=True),
-                              (latest[t][0] for t in REQUIRED_TOPICS))
-    union = functools.reduce(np.union1d, (latest[t][0] for t in REQUIRED_TOPICS))
-    notes = []
-    if union.size > stamps.size:
-        notes.append(f'{union.size - stamps.size} sample(s) miss one of '
-                     f'{sorted(REQUIRED_TOPICS)} and were dropped')
-    if not stamps.size:
-        counts = {topic: int(latest[topic][0].size) for topic in REQUIRED_TOPICS}
-        raise SimulationError(f'bag {path}: no sample has all of {sorted(REQUIRED_TOPICS)} '
-                              f'at the same header stamp (messages per topic: {counts})')
-    columns: dict[str, np.ndarray] = {}
-    for topic in REQUIRED_TOPICS:
-        known, rows = latest[topic]
-        rows = rows[np.searchsorted(known, stamps)]
-        table = tables.pop(topic)
-        for name in list(table.fields):
-            columns[name] = table.fields.pop(name)[rows]
-        if topic == '/joint_dynamics':  # the sources of the kept samples, in the order they
-            # come: by the first kept sample that carries them, then their place in it
-            places = {s: table.places[s][rows] for s in table.efforts}
-            first = {s: (int(np.argmax(p >= 0)), int(p[np.argmax(p >= 0)]))
-                     for s, p in places.items() if np.any(p >= 0)}
-            efforts = {s: table.efforts.pop(s)[rows] for s in sorted(first, key=first.get)}
-    head = tables.pop('/head_pose')
-    known, rows = latest['/head_pose']
-    at = np.minimum(np.searchsorted(known, stamps), max(known.size - 1, 0))
-    has = known[at] == stamps if known.size else np.zeros(stamps.size, dtype=bool)
-    head_position = np.full((stamps.size, 3), np.nan)
-    head_position[has] = head.fields['head_position'][rows[at[has]]]
-    if duplicates:
-        notes.append(f'{duplicates} message(s) repeated a header stamp; the later one '
-                     'was kept')
-    if not known.size:
-        notes.append('no /head_pose: head positions are nan')
-    if not urdf:
-        notes.append('no /robot_description: the installed URDF is assumed')
-    steps = np.diff(stamps)
-    if steps.size and steps.max() > steps.min():
-        gaps = np.flatnonzero(steps > steps.min())
-        k = int(gaps[np.argmax(steps[gaps])])
-        notes.append(f'the samples have {gaps.size} gap(s) (sampled every {steps.min() * 1e-9:g} '
-                     f's); the longest from t = {stamps[k] * 1e-9:.6f} s to '
-                     f'{stamps[k + 1] * 1e-9:.6f} s')
-    return BagData(path=path, t_ns=stamps, efforts=efforts, head_position=head_position,
-                   urdf=urdf, custom_data=custom, notes=tuple(notes), **columns)
+class _Join:
+    """Joins the rows of the tables into samples, one stretch of stamps at a time, and counts
+    what it drops for the notes."""
+
+    def __init__(self, path: pathlib.Path, custom: dict[str, str]) -> None:
+        self.path, self.custom = path, custom
+        self.sources: list[str] = []  # every source, by the first sample that carries it
+        self.emitted = 0  # samples given
+        self.last = -1  # the last sample's stamp [ns]
+        self.missing = self.duplicates = self.late = self.heads = 0
+        self.stamps = {t: 0 for t in REQUIRED_TOPICS}  # distinct stamps of each
+        self.spacings: dict[int, int] = {}  # spacing of the samples [ns] -> how often
+        self.longest = (0, 0)  # the longest spacing [ns] and the stamp before it
+
+    def samples(self, tables: dict[str, _Table], before: int | None, size: int, urdf: str
+                ) -> Iterator[BagData]:
+        """The samples stamped below ``before`` (None: all left), in windows of ``size``;
+        their rows are then dropped from the tables."""
+        latest = {}
+        for topic, table in tables.items():
+            stamps, rows, read = table.latest(before)
+            late = stamps <= self.last  # came after a later stamp of its topic was joined
+            if topic in REQUIRED_TOPICS:
+                self.late += int(late.sum())
+                self.duplicates += read - stamps.size
+                self.stamps[topic] += int((~late).sum())
+            latest[topic] = stamps[~late], rows[~late]
+        stamps = functools.reduce(functools.partial(np.intersect1d, assume_unique=True),
+                                  (latest[t][0] for t in REQUIRED_TOPICS))
+        union = functools.reduce(np.union1d, (latest[t][0] for t in REQUIRED_TOPICS))
+        self.missing += union.size - stamps.size
+        for start in range(0, stamps.size, size):
+            yield self._window(tables, latest, stamps[start:start + size], urdf)
+        for table in tables.values():
+            table.drop_before(before)
+
+    def _window(self, tables: dict[str, _Table],
+                latest: dict[str, tuple[np.ndarray, np.ndarray]], stamps: np.ndarray, urdf: str
+                ) -> BagData:
+        columns: dict[str, np.ndarray] = {}
+        for topic in REQUIRED_TOPICS:
+            known, rows = latest[topic]
+            rows = rows[np.searchsorted(known, stamps)]
+            table = tables[topic]
+            for name, array in table.fields.items():
+                columns[name] = array[rows]
+            if topic == '/joint_dynamics':  # new sources by the first sample that carries
+                # them, then their place in it
+                places = {s: table.places[s][rows] for s in table.efforts}
+                first = {s: (int(np.argmax(p >= 0)), int(p[np.argmax(p >= 0)]))
+                         for s, p in places.items() if s not in self.sources and np.any(p >= 0)}
+                self.sources += sorted(first, key=first.get)
+                efforts = {s: (table.efforts[s][rows] if s in table.efforts
+                               else np.zeros((stamps.size, N_COORDINATES)))
+                           for s in self.sources}
+                for s, p in places.items():  # a source a row does not carry counts 0 there
+                    efforts[s][p < 0] = 0.0
+        known, rows = latest['/head_pose']
+        at = np.minimum(np.searchsorted(known, stamps), max(known.size - 1, 0))
+        has = known[at] == stamps if known.size else np.zeros(stamps.size, dtype=bool)
+        head_position = np.full((stamps.size, 3), np.nan)
+        head_position[has] = tables['/head_pose'].fields['head_position'][rows[at[has]]]
+        self.heads += int(has.sum())
+        self._space(stamps)
+        data = BagData(path=self.path, t_ns=stamps, efforts=efforts,
+                       head_position=head_position, urdf=urdf, custom_data=self.custom,
+                       **columns)
+        _validate(data)
+        return data
+
+    def _space(self, stamps: np.ndarray) -> None:
+        """Count the spacings of the samples (the gaps note)."""
+        starts = np.concatenate([[self.last], stamps]) if self.emitted else stamps
+        steps = np.diff(starts)
+        self.emitted += stamps.size
+        self.last = int(stamps[-1])
+        if not steps.size:
+            return
+        for step, count in zip(*np.unique(steps, return_counts=True), strict=True):
+            self.spacings[int(step)] = self.spacings.get(int(step), 0) + int(count)
+        k = int(np.argmax(steps))
+        if steps[k] > self.longest[0]:
+            self.longest = (int(steps[k]), int(starts[k]))
+
+    def notes(self, tables: dict[str, _Table], urdf: str) -> list[str]:
+        """What was dropped or assumed, once every sample was given.
+
+        :raises SimulationError: when no sample had every required topic.
+        """
+        if not self.emitted:
+            raise SimulationError(f'bag {self.path}: no sample has all of '
+                                  f'{sorted(REQUIRED_TOPICS)} at the same header stamp '
+                                  f'(messages per topic: {self.stamps})')
+        notes = []
+        if self.missing:
+            notes.append(f'{self.missing} sample(s) miss one of {sorted(REQUIRED_TOPICS)} '
+                         'and were dropped')
+        if self.duplicates:
+            notes.append(f'{self.duplicates} message(s) repeated a header stamp; the later one '
+                         'was kept')
+        if self.late:
+            notes.append(f'{self.late} message(s) came after a later stamp of every topic and '
+                         'were dropped')
+        if not self.heads:
+            notes.append('no /head_pose: head positions are nan')
+        if not urdf:
+            notes.append('no /robot_description: the installed URDF is assumed')
+        least = min(self.spacings, default=0)  # a gap: a sample or more left out
+        gaps = sum(n for step, n in self.spacings.items() if step > GAP * least)
+        if gaps:
+            step, start = self.longest
+            notes.append(f'the samples have {gaps} gap(s) (sampled every {least * 1e-9:g} s); '
+                         f'the longest from t = {start * 1e-9:.6f} s to '
+                         f'{(start + step) * 1e-9:.6f} s')
+        return notes
 
 
 def _validate(data: BagData) -> None:
@@ -601,7 +740,8 @@ def _validate(data: BagData) -> None:
 
 
 def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
-    """Read a recorded run into time-aligned arrays.
+    """Read a recorded run into time-aligned arrays, all of it at once (``BagReading`` gives
+    it in windows).
 
     A bag that was never closed (no metadata.yaml: a killed run) or whose file was cut is
     rebuilt from what reached the disk (``open_bag``); the first note says so.
@@ -613,13 +753,6 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         the wrong or an unknown message type, a file with no complete chunk, or messages that
         lack the fields the analysis needs; the message names what is wrong.
     """
-    reader = open_bag(path)
-    tables, urdf = _collect(reader, _check_connections(reader, reader.path), reader.path,
-                            progress)
-    data = _assemble(tables, urdf, reader.path, reader.custom_data)
-    if reader.recovered:
-        extra = ('' if reader.custom_data
-                 else ' (without metadata: the scene parameters are not known)')
-        data = replace(data, notes=(reader.recovered + extra, *data.notes))
-    _validate(data)
-    return data
+    reading = BagReading(path, progress)
+    windows = list(reading.windows())
+    return replace(join_rows(windows), urdf=reading.urdf, notes=tuple(reading.notes))

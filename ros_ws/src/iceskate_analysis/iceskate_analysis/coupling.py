@@ -5,9 +5,9 @@ docs/model.md §13; the interval-averaged accelerations are described in docs/us
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 import csv
 from dataclasses import dataclass, field, replace
-import functools
 import hashlib
 import pathlib
 import tempfile
@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from iceskate_analysis.bag_io import PASSIVE, BagData
+from iceskate_analysis.bag_io import PASSIVE, WINDOW, BagData, BagReading
+from iceskate_analysis.rows import join_rows, sample_count, take_rows
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
@@ -24,9 +25,9 @@ from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Ro
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
-__all__ = ['ArmSwing', 'CaseResult', 'JointDecomposition', 'RIGHT_SHOULDER', 'LEFT_SHOULDER',
-           'TERMS', 'analyse_case', 'arm_swing', 'decompose', 'dynamics_for_bag',
-           'mirror_joint', 'parse_joint', 'robot_for_bag', 'rms', 'write_csv']
+__all__ = ['ArmSwing', 'CaseResult', 'FIGURE_ROWS', 'JointDecomposition', 'RIGHT_SHOULDER',
+           'LEFT_SHOULDER', 'TERMS', 'analyse_bag', 'analyse_case', 'arm_swing', 'decompose',
+           'dynamics_for_bag', 'mirror_joint', 'parse_joint', 'robot_for_bag', 'write_csv']
 
 RIGHT_SHOULDER = 11
 LEFT_SHOULDER = 14
@@ -64,13 +65,6 @@ def parse_joint(value: str | int) -> int:
 def mirror_joint(joint: int) -> int | None:
     """The other arm's shoulder for a shoulder (11 <-> 14), else None."""
     return {RIGHT_SHOULDER: LEFT_SHOULDER, LEFT_SHOULDER: RIGHT_SHOULDER}.get(joint)
-
-
-def rms(x: np.ndarray) -> float:
-    """Root mean square over the finite entries (nan when there is none)."""
-    x = np.asarray(x, dtype=float)
-    x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x * x))) if x.size else float('nan')
 
 
 # ------------------------------------------------------------------------- the model of a bag
@@ -175,11 +169,6 @@ class JointDecomposition:
         """The terms of eq. (11), keyed as in TERMS."""
         return {name: getattr(self, name) for name in TERMS}
 
-    def coupling_series(self) -> dict[str, np.ndarray]:
-        """M_ij q̈_j per other coordinate j that is active somewhere, keyed by j's name."""
-        return {COORDINATE_NAMES[j]: self.coupling[:, j] for j in range(N_COORDINATES)
-                if j != self.joint and np.any(self.coupling[self.valid, j] != 0.0)}
-
     def period_averaged(self, accelerations: np.ndarray, defined: np.ndarray
                         ) -> JointDecomposition:
         """The row with ``accelerations`` (N, 18), e.g. ``interval_accelerations``, in place of
@@ -187,12 +176,6 @@ class JointDecomposition:
         valid = self.valid & defined
         own, coupling = _inertia_terms(self.mass_row, accelerations, valid, self.joint)
         return replace(self, valid=valid, own_inertia=own, coupling=coupling)
-
-    def ranking(self, mask: np.ndarray | None = None) -> list[tuple[str, float]]:
-        """Coupling terms M_ij q̈_j by decreasing RMS over ``mask`` (default: valid samples)."""
-        mask = self.valid if mask is None else mask & self.valid
-        ranked = [(name, rms(x[mask])) for name, x in self.coupling_series().items()]
-        return sorted(ranked, key=lambda item: -item[1] if np.isfinite(item[1]) else 0.0)
 
 
 def _inertia_terms(mass_row: np.ndarray, accelerations: np.ndarray, valid: np.ndarray,
@@ -205,16 +188,20 @@ def _inertia_terms(mass_row: np.ndarray, accelerations: np.ndarray, valid: np.nd
     return own, terms
 
 
-def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
+def interval_accelerations(bag: BagData, following: BagData | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
     """The accelerations the integrator produced over each sampling interval,
     (v_{k+1} - v_k) / (t_{k+1} - t_k) (N, 18) [m/s², rad/s²], and where they are defined (N,):
     no transition in (t_k, t_{k+1}] (no impact and no re-rooted coordinates in between, also
     none that went out and back between two samples of a thinned bag) and the same mode,
-    support side, pivot and step at both ends; never at the last sample."""
+    support side, pivot and step at both ends; at the last sample only with ``following``, the
+    window of samples after ``bag``."""
     n = bag.n_samples
-    out = np.full((n, N_COORDINATES), np.nan)
-    defined = np.zeros(n, dtype=bool)
-    if n >= 2:
+    if following is not None and following.n_samples:
+        bag = join_rows([bag, take_rows(following, slice(0, 1))])
+    out = np.full((bag.n_samples, N_COORDINATES), np.nan)
+    defined = np.zeros(bag.n_samples, dtype=bool)
+    if bag.n_samples >= 2:
         same = ((bag.mode[1:] == bag.mode[:-1]) & (bag.side[1:] == bag.side[:-1])
                 & (bag.pivot[1:] == bag.pivot[:-1])
                 & (bag.step_index[1:] == bag.step_index[:-1])
@@ -222,7 +209,7 @@ def interval_accelerations(bag: BagData) -> tuple[np.ndarray, np.ndarray]:
         dt = np.diff(bag.t)[:, None]
         out[:-1] = np.where(same[:, None], (bag.v[1:] - bag.v[:-1]) / dt, np.nan)
         defined[:-1] = same
-    return out, defined
+    return out[:n], defined[:n]
 
 
 def _constraint_force(dyn: ModelTerms, contact: ContactState, q: np.ndarray, v: np.ndarray,
@@ -247,13 +234,13 @@ def _constraint_force(dyn: ModelTerms, contact: ContactState, q: np.ndarray, v: 
 
 
 def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
-              dynamics: ModelTerms | None = None, progress: bool = False,
+              dynamics: ModelTerms | None = None, progress: bool | ProgressBar = False,
               ) -> dict[int, JointDecomposition]:
     """Evaluate eq. (11) at each of ``joints`` for every sample of ``bag``.
 
     :param joints: coordinate indices (0 = y0, 1..17 = q1..q17).
     :param dynamics: the model to use (default: :func:`dynamics_for_bag`).
-    :param progress: show a tqdm progress bar.
+    :param progress: show a tqdm progress bar (or advance this one).
     :return: joint -> its decomposition.
     :raises SimulationError: for an unknown joint or a sample the model cannot evaluate.
     """
@@ -267,7 +254,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     constraint = np.zeros((nj, n))
     valid = np.zeros((nj, n), dtype=bool)
     pin_data: dict[tuple[str, str], pin.Data] = {}
-    bar = ProgressBar(n, f'eq. (11) {bag.path.name}', 'sample', progress, leave=False)
+    bar = (progress if isinstance(progress, ProgressBar)
+           else ProgressBar(n, f'eq. (11) {bag.path.name}', 'sample', progress, leave=False))
     try:
         for k in range(n):
             mode = get_mode(int(bag.mode[k]))
@@ -297,7 +285,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
                 valid[a, k] = True
             bar.update(1)
     finally:
-        bar.close()
+        if bar is not progress:
+            bar.close()
     damping_coefficients = dyn.robot.damping if dyn.params.damping else np.zeros(N_COORDINATES)
     passive = bag.efforts.get(PASSIVE, np.zeros((n, N_COORDINATES)))
     out = {}
@@ -374,13 +363,13 @@ class ArmSwing:
                 'phase_difference_deg': self.phase_difference_deg}
 
 
-def analysis_window(bag: BagData) -> tuple[np.ndarray, int | None]:
+def analysis_window(step_index: np.ndarray) -> tuple[np.ndarray, int | None]:
     """Mask of the samples from ``step_index >= ARM_SWING_FROM_STEP`` on (and that step), or
     all (and None) when too few."""
-    mask = bag.step_index >= ARM_SWING_FROM_STEP
+    mask = step_index >= ARM_SWING_FROM_STEP
     if int(mask.sum()) >= MIN_WINDOW:
         return mask, ARM_SWING_FROM_STEP
-    return np.ones(bag.n_samples, dtype=bool), None
+    return np.ones(step_index.size, dtype=bool), None
 
 
 def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
@@ -392,12 +381,13 @@ def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
     return float(freqs[1:][np.argmax(spectrum[1:])]) if freqs.size > 1 else float('nan')
 
 
-def arm_swing(bag: BagData) -> ArmSwing:
-    """Peak-to-peak, frequency, correlation and phase of q11 versus q14 (``analysis_window``)."""
+def arm_swing(t: np.ndarray, right: np.ndarray, left: np.ndarray, step_index: np.ndarray
+              ) -> ArmSwing:
+    """Peak-to-peak, frequency, correlation and phase of q11 (``right`` [rad]) versus q14
+    (``left``) over the samples at times ``t`` [s] of ``analysis_window(step_index)``."""
     from scipy.signal import detrend, hilbert
-    mask, step = analysis_window(bag)
-    t = bag.t[mask]
-    right, left = bag.q[mask, RIGHT_SHOULDER], bag.q[mask, LEFT_SHOULDER]
+    mask, step = analysis_window(step_index)
+    t, right, left = t[mask], right[mask], left[mask]
     p2p = {'q11': float(np.ptp(right)) if right.size else float('nan'),
            'q14': float(np.ptp(left)) if left.size else float('nan')}
     freq = {'q11': _dominant_frequency(t, right), 'q14': _dominant_frequency(t, left)}
@@ -417,121 +407,320 @@ def arm_swing(bag: BagData) -> ArmSwing:
 # ------------------------------------------------------------------------------ one case
 @dataclass
 class CaseResult:
-    """Everything computed for one bag."""
+    """Everything computed for one bag.
+
+    :ivar kept: the samples drawn in the figures and the animation: all of them up to
+        ``FIGURE_ROWS``, else every 2^k-th (a bag is never held whole).
+    :ivar decompositions: eq. (11) at the joint and its mirror, at the kept samples.
+    :ivar averaged_decompositions: the same with the interval-averaged accelerations.
+    """
 
     label: str
-    bag: BagData
     joint: int
+    kept: BagData
     decompositions: dict[int, JointDecomposition]
+    averaged_decompositions: dict[int, JointDecomposition]
     arms: ArmSwing
-    window: np.ndarray = field(repr=False)
+    torso_yaw_input: bool
+    fourth_step_s: float | None
+    rankings: dict[int, list[tuple[str, float]]] = field(repr=False)
+    summary_entry: dict[str, Any] = field(repr=False)
 
     @property
     def main(self) -> JointDecomposition:
         """The decomposition of the chosen joint."""
         return self.decompositions[self.joint]
 
-    @property
-    def torso_yaw_input(self) -> bool:
-        """Whether a 'yaw' source (the τ8 of eq. 10) commanded the torso yaw q8."""
-        yaw = self.bag.efforts.get('yaw')
-        return bool(yaw is not None and np.any(yaw[:, TORSO_YAW] != 0.0))
-
-    @property
-    def fourth_step_s(self) -> float | None:
-        """Start of the paper's 4th step [s] (first sample with step_index >= 3)."""
-        return self.bag.step_start_time(ARM_SWING_FROM_STEP)
-
-    @functools.cached_property
-    def interval(self) -> tuple[np.ndarray, np.ndarray]:
-        """``interval_accelerations`` of the bag."""
-        return interval_accelerations(self.bag)
-
     def averaged(self, d: JointDecomposition) -> JointDecomposition:
-        """``d`` with the accelerations averaged over each sampling interval."""
-        return d.period_averaged(*self.interval)
+        """``d``'s joint with the accelerations averaged over each sampling interval."""
+        return self.averaged_decompositions[d.joint]
 
-    def paper_reading(self, d: JointDecomposition) -> dict[str, float]:
-        """The figures the paper's reading of Figs. 7/8 rests on, over the window, with the
-        recorded (instantaneous) and the interval-averaged accelerations: RMS(M_total - g_i) /
-        RMS(g_i) (small if M_total ~ g_i) and RMS(h_i) (what τ8 changes)."""
-        out = {}
-        for view, x in (('instantaneous', d), ('interval_averaged', self.averaged(d))):
-            mask = self.window & x.valid
-            gravity = rms(x.gravity[mask])
-            out[f'rms_m_total_minus_g_over_rms_g_{view}'] = (
-                rms((x.m_total - x.gravity)[mask]) / gravity if gravity > 0.0
-                else float('nan'))
-            out[f'rms_m_total_{view}'] = rms(x.m_total[mask])
-        out['rms_g'] = rms(d.gravity[self.window & d.valid])
-        out['rms_h'] = rms(d.coriolis[self.window & d.valid])
-        return out
-
-    def joint_summary(self, d: JointDecomposition) -> dict[str, Any]:
-        """Closure, RMS of every term and the coupling ranking of one joint."""
-        mask = self.window & d.valid
-        rel = d.residual_rel[d.valid]
-        terms = d.terms()
-        averaged = self.averaged(d)
-        averaged_mask = self.window & averaged.valid
-        out: dict[str, Any] = {
-            'samples_valid': int(d.valid.sum()),
-            'closure_residual_max_rel': float(rel.max()) if rel.size else float('nan'),
-            'closure_residual_max_abs': float(np.max(np.abs(d.residual[d.valid])))
-            if rel.size else float('nan'),
-            'rms': {name: rms(x[mask]) for name, x in terms.items()},
-            'rms_tau_by_source': {s: rms(x[mask]) for s, x in d.tau_by_source.items()},
-            'rms_m_total_minus_g': rms((d.m_total - d.gravity)[mask]),
-            'rms_sum_minus_g': rms((-d.m_total - d.gravity)[mask]),
-            'coupling_ranking': [{'coordinate': name, 'rms': value}
-                                 for name, value in d.ranking(mask)],
-            'interval_averaged': {
-                'samples_valid': int(averaged.valid.sum()),
-                'rms': {name: rms(x[averaged_mask]) for name, x in averaged.terms().items()
-                        if name != 'residual'},
-                'coupling_ranking': [{'coordinate': name, 'rms': value}
-                                     for name, value in averaged.ranking(averaged_mask)],
-            },
-            'paper_reading': self.paper_reading(d),
-        }
-        if np.any(d.valid):
-            out['mean_M_i8'] = float(np.mean(d.mass_row[d.valid, TORSO_YAW]))
-        else:
-            out['note'] = f'{d.name} is a coordinate of none of the recorded modes'
-        return out
+    def ranking(self, joint: int) -> list[tuple[str, float]]:
+        """Coupling terms M_ij q̈_j at ``joint`` by decreasing RMS over the arm-swing window
+        (every sample of the run)."""
+        return self.rankings[joint]
 
     def summary(self) -> dict[str, Any]:
         """The summary.json entry of this case."""
-        bag = self.bag
-        main = self.joint_summary(self.main)
-        return {
-            'bag': str(bag.path), 'scene': bag.scene_name, 'samples': bag.n_samples,
-            'duration_s': float(bag.t[-1] - bag.t[0]), 'steps': int(bag.step_index.max()),
-            'sources': list(bag.sources), 'torso_yaw_input': self.torso_yaw_input,
-            'fourth_step_s': self.fourth_step_s,
-            'rms_window': {'from_step_index': self.arms.window_from_step,
-                           'start_s': self.arms.window_start_s,
-                           'samples': int(self.window.sum())},
-            'joint': self.main.name,
+        return self.summary_entry
+
+
+#: Most samples a case keeps for its figures and animation (``CaseResult.kept``).
+FIGURE_ROWS = 1 << 14
+#: The masks the sums are kept over: the arm-swing window (from the 4th step) and the whole run
+#: (the window when the run is too short for one, ``analysis_window``).
+_MASKS = ('window', 'whole')
+
+
+class _MeanSquares:
+    """Sums of squares and counts of named series over their finite entries."""
+
+    def __init__(self) -> None:
+        self.sums: dict[tuple[str, ...], float] = {}
+        self.counts: dict[tuple[str, ...], int] = {}
+
+    def add(self, key: tuple[str, ...], x: np.ndarray) -> None:
+        x = x[np.isfinite(x)]
+        self.sums[key] = self.sums.get(key, 0.0) + float(np.dot(x, x))
+        self.counts[key] = self.counts.get(key, 0) + x.size
+
+    def rms(self, *key: str) -> float:
+        n = self.counts.get(key, 0)
+        return float(np.sqrt(self.sums[key] / n)) if n else float('nan')
+
+
+class _Kept:
+    """Every stride-th sample of a stream of windows, at most ``limit``: the stride doubles
+    (every other kept sample let go) whenever more would be kept."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit, self.stride, self.count = limit, 1, 0
+        self.parts: list[tuple[np.ndarray, tuple[Any, ...]]] = []  # (indices, records)
+
+    def add(self, first: int, records: tuple[Any, ...]) -> None:
+        """Keep the samples of ``records`` (of one window, whose first sample is the stream's
+        ``first``) that fall on the stride."""
+        n = sample_count(records[0])
+        rows = np.arange(-first % self.stride, n, self.stride)
+        self.parts.append((first + rows, tuple(take_rows(r, rows) for r in records)))
+        self.count += rows.size
+        while self.count > self.limit:
+            self.stride *= 2
+            parts, self.parts, self.count = self.parts, [], 0
+            for indices, kept in parts:
+                on = indices % self.stride == 0
+                self.parts.append((indices[on], tuple(take_rows(r, on) for r in kept)))
+                self.count += int(on.sum())
+
+    def joined(self) -> list[Any]:
+        """The kept samples of each record, as one record each."""
+        return [join_rows(list(records))
+                for records in zip(*(p[1] for p in self.parts), strict=True)]
+
+
+class _Analysis:
+    """The analysis of one run fed window by window: eq. (11) at the joints, the sums of its
+    summary, the shoulders (whole: their spectrum and phase need them), the kept samples of the
+    figures, and the CSV's rows (spilled to a file until its header is known)."""
+
+    def __init__(self, joint: int, spill: _Spill | None) -> None:
+        self.joint = joint
+        self.joints = (joint,) + ((mirror_joint(joint),) if mirror_joint(joint) is not None
+                                  else ())
+        self.spill = spill
+        self.dyn: ModelTerms | None = None
+        self.sums = {mask: _MeanSquares() for mask in _MASKS}
+        self.shoulders: list[tuple[np.ndarray, ...]] = []  # (t, q11, q14, step_index)
+        self.kept = _Kept(FIGURE_ROWS)
+        self.samples, self.steps, self.in_window, self.yaw = 0, 0, 0, False
+        self.first_t = self.last_t = float('nan')
+        self.fourth_step_s: float | None = None
+        self.valid = {i: 0 for i in self.joints}
+        self.averaged_valid = {i: 0 for i in self.joints}
+        self.closure = {i: (0.0, 0.0) for i in self.joints}  # max relative, max absolute
+        self.mass_i8 = {i: 0.0 for i in self.joints}  # sum of M_i8 over the valid samples
+        self.coupled = {(i, view): np.zeros(N_COORDINATES, dtype=bool)
+                        for i in self.joints for view in ('exact', 'averaged')}
+        self.sources: list[str] = []
+
+    def add(self, bag: BagData, following: BagData | None, progress: ProgressBar) -> None:
+        """Analyse the window ``bag`` (``following``: the window after it, None at the end)."""
+        if self.dyn is None:
+            self.dyn = dynamics_for_bag(bag)
+        exact = decompose(bag, self.joints, self.dyn, progress)
+        interval = interval_accelerations(bag, following)
+        averaged = {i: d.period_averaged(*interval) for i, d in exact.items()}
+        self.sources = list(bag.sources)  # every source so far, in their order
+        in_window = bag.step_index >= ARM_SWING_FROM_STEP
+        masks = {'window': in_window, 'whole': np.ones(bag.n_samples, dtype=bool)}
+        for i in self.joints:
+            self._sum(exact[i], averaged[i], masks)
+        t = bag.t
+        self.shoulders.append((t, bag.q[:, RIGHT_SHOULDER].copy(), bag.q[:, LEFT_SHOULDER].copy(),
+                               bag.step_index.copy()))
+        if self.fourth_step_s is None and np.any(in_window):
+            self.fourth_step_s = float(t[np.argmax(in_window)])
+        if not self.samples:
+            self.first_t = float(t[0])
+        self.last_t = float(t[-1])
+        self.steps = max(self.steps, int(bag.step_index.max()))
+        self.in_window += int(in_window.sum())
+        yaw = bag.efforts.get('yaw')
+        self.yaw = self.yaw or bool(yaw is not None and np.any(yaw[:, TORSO_YAW] != 0.0))
+        self.kept.add(self.samples, (bag, *exact.values(), *averaged.values()))
+        if self.spill is not None:
+            self.spill.add(_columns(bag, exact))
+        self.samples += bag.n_samples
+
+    def _sum(self, d: JointDecomposition, averaged: JointDecomposition,
+             masks: dict[str, np.ndarray]) -> None:
+        i, p = d.joint, d.name
+        self.valid[i] += int(d.valid.sum())
+        self.averaged_valid[i] += int(averaged.valid.sum())
+        if np.any(d.valid):
+            rel, residual = d.residual_rel[d.valid], np.abs(d.residual[d.valid])
+            self.closure[i] = (max(self.closure[i][0], float(rel.max())),
+                               max(self.closure[i][1], float(residual.max())))
+            self.mass_i8[i] += float(np.sum(d.mass_row[d.valid, TORSO_YAW]))
+        for view, x in (('exact', d), ('averaged', averaged)):
+            self.coupled[(i, view)] |= np.any(x.coupling[x.valid] != 0.0, axis=0)
+        terms, averaged_terms = d.terms(), averaged.terms()
+        for mask_name, mask in masks.items():
+            sums = self.sums[mask_name]
+            exact_mask, averaged_mask = mask & d.valid, mask & averaged.valid
+            for name, x in terms.items():
+                sums.add((p, 'exact', name), x[exact_mask])
+            for name, x in averaged_terms.items():
+                sums.add((p, 'averaged', name), x[averaged_mask])
+            for source, x in d.tau_by_source.items():
+                sums.add((p, 'tau', source), x[exact_mask])
+            sums.add((p, 'exact', 'm_total_minus_g'), (d.m_total - d.gravity)[exact_mask])
+            sums.add((p, 'exact', 'sum_minus_g'), (-d.m_total - d.gravity)[exact_mask])
+            sums.add((p, 'averaged', 'm_total_minus_g'),
+                     (averaged.m_total - averaged.gravity)[averaged_mask])
+            for view, x, m in (('exact', d, exact_mask), ('averaged', averaged, averaged_mask)):
+                for j in range(N_COORDINATES):
+                    if j != i:
+                        sums.add((p, f'{view} coupling', COORDINATE_NAMES[j]), x.coupling[m, j])
+
+    def result(self, label: str, notes: list[str], bag_path: pathlib.Path, scene: str
+               ) -> CaseResult:
+        """The case, once every window was added."""
+        t, right, left, step_index = (np.concatenate(x) for x in zip(*self.shoulders, strict=True))
+        arms = arm_swing(t, right, left, step_index)
+        sums = self.sums['window' if arms.window_from_step is not None else 'whole']
+        kept_bag, *kept = self.kept.joined()
+        n = len(self.joints)
+        decompositions = {d.joint: self._with_sources(d) for d in kept[:n]}
+        averaged = {d.joint: self._with_sources(d) for d in kept[n:]}
+        rankings = {i: self._ranking(sums, i, 'exact') for i in self.joints}
+        joints = {COORDINATE_NAMES[i]: self._joint_summary(sums, i) for i in self.joints}
+        main = joints[COORDINATE_NAMES[self.joint]]
+        entry = {
+            'bag': str(bag_path), 'scene': scene, 'samples': self.samples,
+            'duration_s': self.last_t - self.first_t, 'steps': self.steps,
+            'sources': self.sources,
+            'torso_yaw_input': self.yaw, 'fourth_step_s': self.fourth_step_s,
+            'rms_window': {'from_step_index': arms.window_from_step,
+                           'start_s': arms.window_start_s,
+                           'samples': self.in_window if arms.window_from_step is not None
+                           else self.samples},
+            'joint': COORDINATE_NAMES[self.joint],
             'closure_residual_max_rel': main['closure_residual_max_rel'],
             'closure_residual_max_abs': main['closure_residual_max_abs'],
-            'arms': self.arms.as_dict(),
+            'arms': arms.as_dict(),
             **{key: main[key] for key in ('rms', 'rms_tau_by_source', 'rms_m_total_minus_g',
                                           'rms_sum_minus_g', 'coupling_ranking')},
-            'joints': {d.name: self.joint_summary(d) for d in self.decompositions.values()},
-            'notes': list(bag.notes),
+            'joints': joints,
+            'notes': list(notes),
         }
+        return CaseResult(label, self.joint, kept_bag, decompositions, averaged, arms,
+                          self.yaw, self.fourth_step_s, rankings, entry)
+
+    def _with_sources(self, d: JointDecomposition) -> JointDecomposition:
+        """``d`` with an input of every source of the run (one that came later: 0 where valid)."""
+        return replace(d, tau_by_source={
+            s: d.tau_by_source.get(s, _masked(np.zeros(d.t.size), ~d.valid))
+            for s in self.sources})
+
+    def _ranking(self, sums: _MeanSquares, i: int, view: str) -> list[tuple[str, float]]:
+        p = COORDINATE_NAMES[i]
+        ranked = [(COORDINATE_NAMES[j], sums.rms(p, f'{view} coupling', COORDINATE_NAMES[j]))
+                  for j in range(N_COORDINATES) if j != i and self.coupled[(i, view)][j]]
+        return sorted(ranked, key=lambda item: -item[1] if np.isfinite(item[1]) else 0.0)
+
+    def _joint_summary(self, sums: _MeanSquares, i: int) -> dict[str, Any]:
+        """Closure, RMS of every term and the coupling ranking of one joint."""
+        p = COORDINATE_NAMES[i]
+        valid = self.valid[i]
+        paper = {}
+        for view, key in (('instantaneous', 'exact'), ('interval_averaged', 'averaged')):
+            gravity = sums.rms(p, key, 'gravity')
+            paper[f'rms_m_total_minus_g_over_rms_g_{view}'] = (
+                sums.rms(p, key, 'm_total_minus_g') / gravity if gravity > 0.0
+                else float('nan'))
+            paper[f'rms_m_total_{view}'] = sums.rms(p, key, 'm_total')
+        paper['rms_g'] = sums.rms(p, 'exact', 'gravity')
+        paper['rms_h'] = sums.rms(p, 'exact', 'coriolis')
+        out: dict[str, Any] = {
+            'samples_valid': valid,
+            'closure_residual_max_rel': self.closure[i][0] if valid else float('nan'),
+            'closure_residual_max_abs': self.closure[i][1] if valid else float('nan'),
+            'rms': {name: sums.rms(p, 'exact', name) for name in TERMS},
+            'rms_tau_by_source': {s: sums.rms(p, 'tau', s) for s in self.sources},
+            'rms_m_total_minus_g': sums.rms(p, 'exact', 'm_total_minus_g'),
+            'rms_sum_minus_g': sums.rms(p, 'exact', 'sum_minus_g'),
+            'coupling_ranking': [{'coordinate': name, 'rms': value}
+                                 for name, value in self._ranking(sums, i, 'exact')],
+            'interval_averaged': {
+                'samples_valid': self.averaged_valid[i],
+                'rms': {name: sums.rms(p, 'averaged', name) for name in TERMS
+                        if name != 'residual'},
+                'coupling_ranking': [{'coordinate': name, 'rms': value}
+                                     for name, value in self._ranking(sums, i, 'averaged')],
+            },
+            'paper_reading': paper,
+        }
+        if valid:
+            out['mean_M_i8'] = self.mass_i8[i] / valid
+        else:
+            out['note'] = f'{p} is a coordinate of none of the recorded modes'
+        return out
+
+
+def _windows(windows: Iterable[BagData]) -> Iterator[tuple[BagData, BagData | None]]:
+    """Each window with the one after it (None for the last)."""
+    previous = None
+    for window in windows:
+        if previous is not None:
+            yield previous, window
+        previous = window
+    if previous is not None:
+        yield previous, None
+
+
+def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
+                csv: pathlib.Path | None = None, progress: bool = False,
+                size: int = WINDOW) -> CaseResult:
+    """Read and analyse a bag window by window (``size`` samples): eq. (11) at ``joint`` (and
+    at the other shoulder for a shoulder), the arm swing, and ``csv``, the CSV of every series
+    (``case_columns``) when given. What is held is a few windows and the shoulders' angles,
+    whatever the length of the run.
+
+    :raises SimulationError: on a bag that cannot be read or a sample the model cannot
+        evaluate.
+    """
+    joint = parse_joint(joint)
+    spill = _Spill(csv) if csv is not None else None
+    try:
+        analysis = _Analysis(joint, spill)
+        bar = ProgressBar(reading.sample_bound, f'eq. (11) {reading.path.name}', 'sample',
+                          progress, leave=False)
+        try:
+            for window, following in _windows(reading.windows(size)):
+                analysis.add(window, following, bar)
+        finally:
+            bar.close()
+        case = analysis.result(label, reading.notes, reading.path,
+                               reading.custom_data.get('scene', ''))
+        if spill is not None:
+            spill.write(analysis.coupled, analysis.joints)
+        return case
+    finally:
+        if spill is not None:
+            spill.close()
 
 
 def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
-                 progress: bool = False) -> CaseResult:
-    """Decompose eq. (11) at ``joint`` (and at the other shoulder for a shoulder) and measure
-    the arm swing."""
+                 size: int = WINDOW) -> CaseResult:
+    """``analyse_bag`` of a bag read whole (``read_bag``), in windows of ``size`` samples."""
     joint = parse_joint(joint)
-    joints = (joint,) + ((mirror_joint(joint),) if mirror_joint(joint) is not None else ())
-    decompositions = decompose(bag, joints, progress=progress)
-    window, _ = analysis_window(bag)
-    return CaseResult(label, bag, joint, decompositions, arm_swing(bag), window)
+    analysis = _Analysis(joint, None)
+    windows = (take_rows(bag, slice(k, k + size)) for k in range(0, bag.n_samples, size))
+    bar = ProgressBar(bag.n_samples, '', 'sample', False)
+    for window, following in _windows(windows):
+        analysis.add(window, following, bar)
+    return analysis.result(label, list(bag.notes), bag.path, bag.scene_name)
 
 
 # ---------------------------------------------------------------------------------- export
@@ -542,24 +731,74 @@ def write_csv(path: str | pathlib.Path, columns: dict[str, np.ndarray]) -> pathl
     :raises ValueError: when the columns differ in length.
     """
     path = pathlib.Path(path)
+    with path.open('w', newline='', encoding='utf-8') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(columns)
+        _write_rows(writer, columns, path)
+    return path
+
+
+def _write_rows(writer: Any, columns: dict[str, np.ndarray], path: pathlib.Path) -> None:
     arrays = [np.asarray(a) for a in columns.values()]
     lengths = {len(a) for a in arrays}
     if len(lengths) > 1:
         raise ValueError(f'columns of different lengths {sorted(lengths)} for {path}')
-    with path.open('w', newline='', encoding='utf-8') as stream:
-        writer = csv.writer(stream)
-        writer.writerow(columns)
-        for start in range(0, lengths.pop() if lengths else 0, CSV_BLOCK):
-            text = [[str(int(x)) for x in block] if block.dtype.kind in 'biu'
-                    else [repr(float(x)) for x in block]
-                    for block in (a[start:start + CSV_BLOCK] for a in arrays)]
-            writer.writerows(zip(*text, strict=True))
-    return path
+    for start in range(0, lengths.pop() if lengths else 0, CSV_BLOCK):
+        text = [[str(int(x)) for x in block] if block.dtype.kind in 'biu'
+                else [repr(float(x)) for x in block]
+                for block in (a[start:start + CSV_BLOCK] for a in arrays)]
+        writer.writerows(zip(*text, strict=True))
 
 
-def case_columns(case: CaseResult) -> dict[str, np.ndarray]:
-    """Every time series of a case: the state of both arms and the terms of every joint."""
-    bag = case.bag
+class _Spill:
+    """The CSV's columns of each window, in a temporary file beside the CSV until its header
+    (every source, every coupled coordinate of the run) is known; then the CSV, window by
+    window."""
+
+    def __init__(self, path: pathlib.Path) -> None:
+        self.path = pathlib.Path(path)
+        self.file = tempfile.TemporaryFile(dir=self.path.parent, prefix='.spill_')
+        self.names: list[str] = []
+
+    def add(self, columns: dict[str, np.ndarray]) -> None:
+        names = self.names = list(columns)  # the last window's: every source so far
+        np.save(self.file, np.array(names))
+        for array in columns.values():
+            np.save(self.file, np.asarray(array))
+
+    def write(self, coupled: dict[tuple[int, str], np.ndarray], joints: tuple[int, ...]
+              ) -> pathlib.Path:
+        """The CSV: a coupling column of a coordinate that never couples is left out; a column
+        a window lacks (a source that came later) is 0 where its joint is valid, else nan."""
+        never = {_coupling_column(i, j) for i in joints for j in range(N_COORDINATES)
+                 if j != i and not coupled[(i, 'exact')][j]}
+        header = [n for n in self.names if n not in never]
+        end = self.file.tell()
+        self.file.seek(0)
+        with self.path.open('w', newline='', encoding='utf-8') as stream:
+            writer = csv.writer(stream)
+            writer.writerow(header)
+            while self.file.tell() < end:
+                names = [str(n) for n in np.load(self.file)]
+                block = {name: np.load(self.file) for name in names}
+                _write_rows(writer, {name: block[name] if name in block
+                                     else np.where(block[f'{name.split(".")[0]}.valid'],
+                                                   0.0, np.nan) for name in header}, self.path)
+        return self.path
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def _coupling_column(i: int, j: int) -> str:
+    p, c = COORDINATE_NAMES[i], COORDINATE_NAMES[j]
+    return f'{p}.M[{p},{c}]*qdd[{c}]'
+
+
+def _columns(bag: BagData, decompositions: dict[int, JointDecomposition]
+             ) -> dict[str, np.ndarray]:
+    """Every time series of a window: the state of both arms and the terms of every joint
+    (the coupling of every other coordinate)."""
     cols: dict[str, np.ndarray] = {
         't_s': bag.t, 'mode': bag.mode, 'support_side': bag.side, 'pivot': bag.pivot,
         'step_index': bag.step_index,
@@ -567,7 +806,7 @@ def case_columns(case: CaseResult) -> dict[str, np.ndarray]:
         'qd11': bag.v[:, RIGHT_SHOULDER], 'qd14': bag.v[:, LEFT_SHOULDER],
         'qd8': bag.v[:, TORSO_YAW], 'qdd8': bag.qdd[:, TORSO_YAW],
     }
-    for d in case.decompositions.values():
+    for d in decompositions.values():
         p = d.name
         cols[f'{p}.valid'] = d.valid
         for name, x in d.terms().items():
@@ -578,6 +817,7 @@ def case_columns(case: CaseResult) -> dict[str, np.ndarray]:
         for source, x in d.tau_by_source.items():
             cols[f'{p}.tau[{source}]'] = x
         cols[f'{p}.passive'] = d.passive
-        for j, x in d.coupling_series().items():
-            cols[f'{p}.M[{p},{j}]*qdd[{j}]'] = x
+        for j in range(N_COORDINATES):
+            if j != d.joint:
+                cols[_coupling_column(d.joint, j)] = d.coupling[:, j]
     return cols

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from iceskate_sim.model.robot import COORDINATE_NAMES
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -71,7 +73,7 @@ def _index(name: str) -> str:
 
 def _mark_steps(ax: Axes, case: CaseResult, legend: bool = True) -> None:
     """Dotted lines at every support exchange, a bold one at the 4th step."""
-    bag = case.bag
+    bag = case.kept
     changes = np.flatnonzero(np.diff(bag.step_index) != 0) + 1
     for k in changes:
         ax.axvline(bag.t[k], color='0.75', lw=0.6, ls=':', zorder=0)
@@ -83,7 +85,7 @@ def _mark_steps(ax: Axes, case: CaseResult, legend: bool = True) -> None:
 def _shoulder_lines(ax: Axes, case: CaseResult, lw: float, label: str = '') -> None:
     """q11 (right) and q14 (left shoulder) [deg] against time, the steps marked."""
     for joint, colour, side in ((11, 'tab:red', 'right'), (14, 'tab:blue', 'left')):
-        ax.plot(case.bag.t, np.degrees(case.bag.q[:, joint]), color=colour, lw=lw,
+        ax.plot(case.kept.t, np.degrees(case.kept.q[:, joint]), color=colour, lw=lw,
                 label=f'q{joint} {side}{label}')
     _mark_steps(ax, case)
     ax.grid(True, alpha=0.3)
@@ -183,8 +185,8 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
                   joint: int | None = None) -> pathlib.Path:
     """The ``top`` coupling terms M_ij q̈_j by RMS (over the analysis window) and M_total."""
     d = case.decompositions[case.joint if joint is None else joint]
-    series = d.coupling_series()
-    ranking = d.ranking(case.window)[:top]
+    series = {name: d.coupling[:, COORDINATE_NAMES.index(name)] for name in COORDINATE_NAMES}
+    ranking = case.ranking(d.joint)[:top]
     fig, (ax,) = _figure(1, height=3.6)
     i = _index(d.name)
     for name, value in ranking:

@@ -10,15 +10,13 @@ import math
 import pathlib
 from typing import Any
 
-from iceskate_analysis.bag_io import read_bag
+from iceskate_analysis.bag_io import BagReading
 from iceskate_analysis.coupling import (
     RIGHT_SHOULDER,
     CaseResult,
-    analyse_case,
-    case_columns,
+    analyse_bag,
     parse_joint,
     robot_for_bag,
-    write_csv,
 )
 from iceskate_sim.errors import SimulationError
 
@@ -80,9 +78,10 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
     taken: set[str] = set()
     cases = []
     for path in [bag] + ([compare] if compare is not None else []):
-        data = read_bag(path, progress=progress)
-        label = case_label(data.path, data.scene_name, taken)
-        cases.append(analyse_case(data, label, joint, progress=progress))
+        reading = BagReading(path, progress=progress)
+        label = case_label(reading.path, reading.custom_data.get('scene', ''), taken)
+        cases.append(analyse_bag(reading, label, joint, out / f'{label}_series.csv',
+                                 progress=progress))
     name = cases[0].main.name
     files: dict[str, list[str]] = {}
     for case in cases:
@@ -91,14 +90,15 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
             plots.plot_terms(case, out / f'{case.label}_terms_{name}.png', averaged=True),
             plots.plot_terms(case, out / f'{case.label}_terms_{name}_instantaneous.png'),
             plots.plot_coupling(case, out / f'{case.label}_coupling_{name}.png'),
-            write_csv(out / f'{case.label}_series.csv', case_columns(case)),
+            out / f'{case.label}_series.csv',
         ]
         if animate:
             from iceskate_analysis.animation import render_gif, render_keyframes
-            robot = robot_for_bag(case.bag)
-            written.append(render_gif(case.bag, robot, out / f'{case.label}_animation.gif',
+            robot = robot_for_bag(case.kept)
+            written.append(render_gif(case.kept, robot, out / f'{case.label}_animation.gif',
                                       max_frames=frames, progress=progress))
-            written.append(render_keyframes(case.bag, robot, out / f'{case.label}_keyframes.png'))
+            written.append(render_keyframes(case.kept, robot,
+                                            out / f'{case.label}_keyframes.png'))
         files[case.label] = [p.name for p in written]
     summaries = {c.label: c.summary() for c in cases}
     summary: dict[str, Any] = {'joint': name, 'cases': summaries}
