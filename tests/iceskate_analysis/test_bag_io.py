@@ -8,6 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
+from iceskate_analysis import bag_io
 from iceskate_analysis.bag_io import BagReading, read_bag, resolve_bag_path
 from iceskate_analysis.rows import join_rows
 from iceskate_sim.errors import SimulationError
@@ -59,7 +60,7 @@ def _edited_copy(source: pathlib.Path, target: pathlib.Path, edit) -> pathlib.Pa
     return target
 
 
-def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
+def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path, monkeypatch):
     """A sample needs all three required topics (one missing drops it), a repeated stamp keeps
     its later message (the sources' order too), and a head pose missing at a sample leaves nan
     there alone."""
@@ -99,11 +100,12 @@ def test_read_bag_joins_the_topics_on_their_stamps(sim_bag, tmp_path):
                          '2 message(s) repeated a header stamp; the later one was kept',
                          'the samples have 1 gap(s) (sampled every 0.001 s); the longest from '
                          't = 0.006000 s to 0.008000 s')
-    for size in (1, 3, 7):  # read in windows, the same samples and notes
+    monkeypatch.setattr(bag_io, 'LATE', 2)  # joins all along the bag
+    for size in (1, 3, 7):  # read in blocks, the same samples and notes
         reading = BagReading(tmp_path / 'edited')
-        windows = list(reading.windows(size))
-        assert max(w.n_samples for w in windows) <= size
-        joined = join_rows(windows)
+        blocks = list(reading.blocks(size))
+        assert max(b.n_samples for b in blocks) <= size and len(blocks) >= bag.n_samples / size
+        joined = join_rows(blocks)
         for name in ('t_ns', 'q', 'v', 'qdd', 'mode', 'step_index', 'last_transition_ns'):
             assert np.array_equal(getattr(joined, name), getattr(bag, name)), (size, name)
         assert np.array_equal(joined.head_position, bag.head_position, equal_nan=True)
@@ -135,8 +137,8 @@ def test_read_bag_maps_gait_codes(synthetic_bag, spec):
             assert bag.pivot_name(k) == pivot
             assert bag.active[k, 1]
     assert sorted(set(bag.mode.tolist())) == sorted(modes)
-    assert bag.step_start_time(3) == pytest.approx(3 * spec.samples_per_step * spec.dt)
-    assert bag.step_start_time(4) is None
+    assert bag.t[np.argmax(bag.step_index >= 3)] == pytest.approx(
+        3 * spec.samples_per_step * spec.dt)
 
 
 def test_a_run_directory_resolves_to_its_bag(sim_bag):
@@ -315,3 +317,60 @@ def test_reading_a_bag_keeps_its_samples_as_arrays(tmp_path):
     (short_peak, short_arrays), (long_peak, long_arrays) = measured(1.0), measured(4.0)
     assert long_peak - short_peak < 1.5 * (long_arrays - short_arrays), (
         short_peak, long_peak, short_arrays, long_arrays)
+
+
+def test_a_source_that_comes_later_counts_zero_before_in_every_block(sim_bag, tmp_path,
+                                                                    monkeypatch):
+    """A source first carried at the 9th sample (as a push is): the blocks before it hold 0,
+    and the analysis in blocks (its sums, its CSV) equals the analysis of the whole run."""
+    from iceskate_analysis.coupling import analyse_bag, analyse_case
+
+    def edit(topic, index, msg, typestore):
+        if topic == '/joint_dynamics' and index >= 8:
+            n = len(msg.name)
+            msg.source_names = [*msg.source_names, 'later']
+            msg.source_efforts = np.concatenate([msg.source_efforts, np.full(n, 0.5)])
+        return [msg]
+    path = _edited_copy(sim_bag, tmp_path / 'later', edit)
+    whole = read_bag(path)
+    assert list(whole.efforts)[-1] == 'later'
+    assert np.all(whole.efforts['later'][:8] == 0.0) and np.all(whole.efforts['later'][8:] == 0.5)
+    monkeypatch.setattr(bag_io, 'LATE', 2)
+    texts, summaries = [], []
+    for size in (3, whole.n_samples):
+        csv = tmp_path / f'series_{size}.csv'
+        summaries.append(analyse_bag(BagReading(path), 'c', 11, csv=csv, size=size).summary())
+        texts.append(csv.read_text())
+    assert texts[0] == texts[1] and 'q11.tau[later]' in texts[0].splitlines()[0]
+    rms = [s['joints']['q11']['rms_tau_by_source']['later'] for s in summaries]
+    assert rms[0] == pytest.approx(rms[1], rel=1e-12)
+    assert analyse_case(whole, 'c', 11, size=3).summary()['rms_tau_by_source'] == \
+        pytest.approx(summaries[1]['rms_tau_by_source'], rel=1e-12)
+
+
+@pytest.mark.parametrize('late, kept', [(2, 'first'), (256, 'later')])
+def test_a_message_over_late_samples_after_its_stamp_is_dropped_with_a_note(
+        sim_bag, tmp_path, monkeypatch, late, kept):
+    """A /joint_states message sent again 10 samples later: joined as the later message of its
+    stamp while within ``LATE`` samples, else dropped, and the notes say which."""
+    import copy
+    held = {}
+
+    def edit(topic, index, msg, typestore):
+        if topic == '/joint_states' and index == 5:
+            held['again'] = copy.deepcopy(msg)
+            held['again'].position[0] += 1.0
+        if topic == '/joint_states' and index == 15:
+            return [msg, held['again']]
+        return [msg]
+    path = _edited_copy(sim_bag, tmp_path / 'again', edit)
+    original = read_bag(sim_bag)
+    monkeypatch.setattr(bag_io, 'LATE', late)
+    bag = join_rows(list(BagReading(path).blocks(3)))
+    reading = BagReading(path)
+    list(reading.blocks(3))
+    assert bag.q[5, 0] == original.q[5, 0] + (1.0 if kept == 'later' else 0.0)
+    note = ('1 message(s) came over 2 samples after their header stamp and were dropped'
+            if kept == 'first' else
+            '1 message(s) repeated a header stamp; the later one was kept')
+    assert reading.notes == [note]

@@ -266,7 +266,10 @@ def test_write_csv_writes_every_row_exactly_across_its_blocks(tmp_path):
     x = rng.normal(size=n)
     x[CSV_BLOCK] = np.nan
     columns = {'k': np.arange(n), 'x': x, 'flag': x > 0}
-    path = write_csv(tmp_path / 'series.csv', columns)
+    cut = CSV_BLOCK - 7  # two blocks given, the header once, in the order asked
+    blocks = [{name: a[:cut] for name, a in columns.items()},
+              {name: a[cut:] for name, a in columns.items()}]
+    path = write_csv(tmp_path / 'series.csv', blocks, ['k', 'x', 'flag'])
     with path.open(encoding='utf-8') as stream:
         rows = list(csv.reader(stream))
     assert rows[0] == ['k', 'x', 'flag'] and len(rows) == n + 1
@@ -274,7 +277,7 @@ def test_write_csv_writes_every_row_exactly_across_its_blocks(tmp_path):
     np.testing.assert_array_equal(np.array([float(r[1]) for r in rows[1:]]), x)
     assert [r[2] for r in rows[1:]] == [str(int(f)) for f in x > 0]
     with pytest.raises(ValueError, match='different lengths'):
-        write_csv(tmp_path / 'bad.csv', {'a': np.zeros(3), 'b': np.zeros(4)})
+        write_csv(tmp_path / 'bad.csv', [{'a': np.zeros(3), 'b': np.zeros(4)}])
 
 
 def _flat(value, path=''):
@@ -290,9 +293,9 @@ def _flat(value, path=''):
 
 
 @pytest.mark.parametrize('size', [1, 5, 37])
-def test_the_analysis_in_windows_equals_the_analysis_of_the_whole_run(synthetic, size):
-    """Windows of any size give the summary of one window of the whole run: the sums of
-    squares, maxima, counts, rankings and the arm swing do not depend on where windows end."""
+def test_the_analysis_in_blocks_equals_the_analysis_of_the_whole_run(synthetic, size):
+    """Blocks of any size give the summary of one block of the whole run: the sums of squares,
+    maxima, counts, rankings and the arm swing do not depend on where blocks end."""
     whole = dict(_flat(analyse_case(synthetic, 's', 11, size=synthetic.n_samples).summary()))
     parts = dict(_flat(analyse_case(synthetic, 's', 11, size=size).summary()))
     assert parts.keys() == whole.keys()
@@ -321,7 +324,7 @@ def test_the_figures_keep_every_sample_of_a_short_run_and_every_2_to_the_k_of_a_
                           equal_nan=True)
 
 
-def test_the_csv_is_the_same_whatever_the_windows(synthetic_bag, tmp_path):
+def test_the_csv_is_the_same_whatever_the_blocks(synthetic_bag, tmp_path):
     from iceskate_analysis.bag_io import BagReading
     from iceskate_analysis.coupling import analyse_bag
     texts = []

@@ -1,9 +1,10 @@
 """Read a recorded run (a rosbag2 bag, MCAP storage) into time-aligned numpy arrays, without ROS.
 
 ``open_bag`` reads a bag record by record, so a bag never closed or cut short gives every message
-of its complete chunks; ``read_bag`` joins the samples of the topics the analysis needs on their
-header stamps, each message's row written into arrays as it is decoded (no object per message
-is kept). Units: SI; times [ns] as ``t_ns``, [s] as ``t``.
+of its complete chunks; ``BagReading`` joins the samples of the topics the analysis needs on
+their header stamps, in blocks of consecutive samples (each message's row written into arrays
+as it is decoded, no object per message kept), and ``read_bag`` gives them all at once. Units:
+SI; times [ns] as ``t_ns``, [s] as ``t``.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 import yaml
 
-from iceskate_analysis.rows import join_rows
+from iceskate_analysis.rows import collect_rows
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 __all__ = ['BagData', 'BagReading', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE',
-           'REQUIRED_TOPICS', 'WINDOW', 'open_bag', 'read_bag', 'resolve_bag_path']
+           'REQUIRED_TOPICS', 'BLOCK', 'open_bag', 'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -45,13 +46,17 @@ REQUIRED_TOPICS = {
     '/gait_state': 'iceskate_interfaces/msg/GaitState',
     '/joint_dynamics': 'iceskate_interfaces/msg/JointDynamics',
 }
+#: Topics of one state for the whole run, whose last message is kept by ``OpenBag``'s scan.
+LATCHED_TOPICS = ('/robot_description',)
 #: Topics read when present.
 OPTIONAL_TOPICS = {
     '/head_pose': 'geometry_msgs/msg/PoseStamped',
     '/robot_description': 'std_msgs/msg/String',
 }
-#: Samples per window of ``BagReading.windows``.
-WINDOW = 4096
+#: Samples per block of ``BagReading.blocks``.
+BLOCK = 4096
+#: Header stamps a message may come after its own and still be joined (``BagReading``).
+LATE = 256
 #: A spacing of samples over this many times the least is a gap (stamps of a thinned bag are
 #: rounded to the nanosecond: their spacings differ by 1 ns).
 GAP = 1.5
@@ -149,11 +154,6 @@ class BagData:
         """Pivot edge of the support model of sample k ('toe' while the sole is flat)."""
         return PIVOT_OF_CODE[int(self.pivot[k])]
 
-    def step_start_time(self, step: int) -> float | None:
-        """Time [s] of the first sample with ``step_index >= step`` (None: never reached)."""
-        hits = np.flatnonzero(self.step_index >= step)
-        return float(self.t[hits[0]]) if hits.size else None
-
 
 def resolve_bag_path(path: str | pathlib.Path) -> pathlib.Path:
     """Return the bag of ``path``: the path itself (a bag directory, or an .mcap file), or
@@ -198,6 +198,8 @@ class OpenBag:
     :ivar recovered: '' for a closed bag (metadata.yaml, every file complete to its footer);
         else what was wrong with it and how much could be read.
     :ivar incompatible: message types the files define otherwise than our typestore.
+    :ivar last_messages: the CDR bytes of the last message of each channel of a topic of
+        ``LATCHED_TOPICS`` (keyed as ``BagTopic.key``).
     """
 
     def __init__(self, path: pathlib.Path, files: list[pathlib.Path],
@@ -210,6 +212,7 @@ class OpenBag:
         self.path, self._files, self.custom_data = path, files, custom_data
         self._typestore = _typestore()
         self.incompatible: set[str] = set()
+        self.last_messages: dict[tuple[int, int], bytes] = {}
         schemas: dict[tuple[int, int], Schema] = {}
         channels: dict[tuple[int, int], Channel] = {}
         counts: Counter[tuple[int, int]] = Counter()
@@ -221,8 +224,11 @@ class OpenBag:
             elif isinstance(record, Channel):
                 channels[(index, record.id)] = record
             elif isinstance(record, Message):
-                counts[(index, record.channel_id)] += 1
+                key = (index, record.channel_id)
+                counts[key] += 1
                 last = max(last, record.log_time)
+                if key in channels and channels[key].topic in LATCHED_TOPICS:
+                    self.last_messages[key] = record.data
         self.topics: list[BagTopic] = []
         for key, channel in channels.items():
             schema = schemas.get((key[0], channel.schema_id))
@@ -526,14 +532,15 @@ class _Table:
 
 
 class BagReading:
-    """A bag's samples, read as windows of consecutive samples: the sampled topics are joined
-    on their header stamps as the messages come, a stamp once every sampled topic has passed
-    it, so what is held is a few windows of rows whatever the length of the bag. A sample
-    needs all of ``REQUIRED_TOPICS`` (a repeated stamp: each topic's last message of it).
+    """A bag's samples, read in blocks of consecutive samples: the sampled topics are joined on
+    their header stamps as the messages come, a stamp once every required topic is ``LATE``
+    stamps past it, so what is held is a block and ``LATE`` rows of each topic, whatever the
+    length of the bag (while every required topic goes on). A sample needs all of
+    ``REQUIRED_TOPICS`` (a repeated stamp: each topic's last message of it).
 
     :ivar path: the bag. :ivar custom_data: its metadata's custom_data.
-    :ivar urdf: the URDF of /robot_description ('' until read; it comes first in a bag).
-    :ivar notes: what was dropped or assumed; complete once ``windows`` is exhausted.
+    :ivar urdf: the URDF of /robot_description ('' when the bag has none).
+    :ivar notes: what was dropped or assumed; complete once ``blocks`` is exhausted.
     """
 
     def __init__(self, path: str | pathlib.Path, progress: bool = False) -> None:
@@ -547,6 +554,10 @@ class BagReading:
         self._chosen = _check_connections(self._reader, self.path)
         self._progress = progress
         self.urdf = ''
+        description = self._chosen.get('/robot_description')
+        if description is not None and description.key in self._reader.last_messages:
+            raw = self._reader.last_messages[description.key]
+            self.urdf = str(self._decode(description, 0, raw).data)
         self.notes: list[str] = []
 
     @property
@@ -554,51 +565,49 @@ class BagReading:
         """The most samples the bag can give (its /joint_states messages)."""
         return self._chosen['/joint_states'].count
 
-    def windows(self, size: int = WINDOW) -> Iterator[BagData]:
-        """The samples in time order, at most ``size`` per window; each window is checked
+    def blocks(self, size: int = BLOCK) -> Iterator[BagData]:
+        """The samples in time order, at most ``size`` per block; each block is checked
         (``_validate``) before it is given.
 
-        :raises SimulationError: as ``read_bag``, when the window it concerns is reached.
+        :raises SimulationError: as ``read_bag``, when the block it concerns is reached.
         """
-        sampled = [t for t in _READERS if t in self._chosen and self._chosen[t].count]
-        tables = {t: _Table(t, min(self._chosen[t].count, 2 * size) if t in self._chosen
-                            else 0) for t in _READERS}
-        join = _Join(self.path, self.custom_data)
-        total = sum(c.count for c in self._chosen.values())
+        sampled = [t for t in _READERS if t in self._chosen and t != '/robot_description']
+        tables = {t: _Table(t, min(self._chosen[t].count, size + 2 * LATE)
+                            if t in self._chosen else 0) for t in _READERS}
+        join = _Join(self.path, self.custom_data, self.urdf)
+        total = sum(c.count for t, c in self._chosen.items() if t in sampled)
         bar = ProgressBar(total, f'reading {self.path.name}', 'msg', self._progress,
                           leave=False)
+        due = size + LATE  # rows of /joint_states that call for a join
         try:
-            for conn, log_ns, raw in self._reader.messages(self._chosen.values()):
-                self._take(tables, conn, log_ns, raw)
+            for conn, log_ns, raw in self._reader.messages(self._chosen[t] for t in sampled):
+                msg = self._decode(conn, log_ns, raw)
+                where = f'log time {log_ns * 1e-9:.6f} s'
+                try:
+                    tables[conn.topic].append(_stamp_ns(msg), _READERS[conn.topic](msg, where))
+                except AttributeError as exc:
+                    raise SimulationError(
+                        f'bag {self.path}: {conn.topic} message at {where} lacks a field the '
+                        'analysis needs ({exc}); the bag was recorded with an incompatible '
+                        'message definition') from exc
                 bar.update(1)
-                if tables['/joint_states'].size >= 2 * size:  # join what every topic passed
-                    before = min(tables[t].newest for t in sampled)
-                    yield from join.samples(tables, before, size, self.urdf)
-            yield from join.samples(tables, None, size, self.urdf)
+                if tables['/joint_states'].size >= due:
+                    yield from join.samples(tables, _final(tables), size)
+                    # a topic that stalls holds the others back: wait for twice as much
+                    due = max(size + LATE, 2 * tables['/joint_states'].size)
+            yield from join.samples(tables, None, size)
         finally:
             bar.close()
         self.notes = ([self._recovered()] if self._reader.recovered else []) + join.notes(
-            tables, self.urdf)
+            bool(self._chosen.get('/head_pose') and self._chosen['/head_pose'].count))
 
-    def _take(self, tables: dict[str, _Table], conn: BagTopic, log_ns: int, raw: bytes
-              ) -> None:
-        """Decode one message into its table (the URDF kept)."""
-        topic = conn.topic
-        where = f'log time {log_ns * 1e-9:.6f} s'
+    def _decode(self, conn: BagTopic, log_ns: int, raw: bytes) -> Any:
         try:
-            msg = self._reader.deserialize(raw, conn.msgtype)
+            return self._reader.deserialize(raw, conn.msgtype)
         except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
             raise SimulationError(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
-                                  f'{topic} at {where} ({exc})') from exc
-        try:
-            if topic == '/robot_description':
-                self.urdf = str(msg.data)
-            else:
-                tables[topic].append(_stamp_ns(msg), _READERS[topic](msg, where))
-        except AttributeError as exc:
-            raise SimulationError(f'bag {self.path}: {topic} message at {where} lacks a field '
-                                  f'the analysis needs ({exc}); the bag was recorded with '
-                                  'an incompatible message definition') from exc
+                                  f'{conn.topic} at log time {log_ns * 1e-9:.6f} s ({exc})'
+                                  ) from exc
 
     def _recovered(self) -> str:
         extra = ('' if self.custom_data
@@ -606,28 +615,40 @@ class BagReading:
         return self._reader.recovered + extra
 
 
+def _final(tables: dict[str, _Table]) -> int:
+    """The stamp below which every sample is final: ``LATE`` stamps behind the newest of the
+    required topic that lags most (a message later than that is dropped, with a note)."""
+    def lagging(table: _Table) -> int:
+        stamps = np.unique(table.stamps[:table.size])
+        return int(stamps[-LATE]) if stamps.size >= LATE else int(stamps[0]) if stamps.size \
+            else -1
+    return min(lagging(tables[t]) for t in REQUIRED_TOPICS)
+
+
 class _Join:
     """Joins the rows of the tables into samples, one stretch of stamps at a time, and counts
     what it drops for the notes."""
 
-    def __init__(self, path: pathlib.Path, custom: dict[str, str]) -> None:
-        self.path, self.custom = path, custom
+    def __init__(self, path: pathlib.Path, custom: dict[str, str], urdf: str) -> None:
+        self.path, self.custom, self.urdf = path, custom, urdf
         self.sources: list[str] = []  # every source, by the first sample that carries it
+        self.final = -1  # every stamp below it was joined [ns]
         self.emitted = 0  # samples given
         self.last = -1  # the last sample's stamp [ns]
-        self.missing = self.duplicates = self.late = self.heads = 0
+        self.missing = self.duplicates = self.late = 0
         self.stamps = {t: 0 for t in REQUIRED_TOPICS}  # distinct stamps of each
-        self.spacings: dict[int, int] = {}  # spacing of the samples [ns] -> how often
+        self.least = 0  # the least spacing of two samples [ns]
+        self.spacings: dict[int, int] = {}  # spacing bin (``_bin``) -> how many
         self.longest = (0, 0)  # the longest spacing [ns] and the stamp before it
 
-    def samples(self, tables: dict[str, _Table], before: int | None, size: int, urdf: str
+    def samples(self, tables: dict[str, _Table], before: int | None, size: int
                 ) -> Iterator[BagData]:
-        """The samples stamped below ``before`` (None: all left), in windows of ``size``;
+        """The samples stamped below ``before`` (None: all left), in blocks of ``size``;
         their rows are then dropped from the tables."""
         latest = {}
         for topic, table in tables.items():
             stamps, rows, read = table.latest(before)
-            late = stamps <= self.last  # came after a later stamp of its topic was joined
+            late = stamps < self.final  # came after its stamp was joined
             if topic in REQUIRED_TOPICS:
                 self.late += int(late.sum())
                 self.duplicates += read - stamps.size
@@ -638,13 +659,13 @@ class _Join:
         union = functools.reduce(np.union1d, (latest[t][0] for t in REQUIRED_TOPICS))
         self.missing += union.size - stamps.size
         for start in range(0, stamps.size, size):
-            yield self._window(tables, latest, stamps[start:start + size], urdf)
+            yield self._block(tables, latest, stamps[start:start + size])
         for table in tables.values():
             table.drop_before(before)
-
-    def _window(self, tables: dict[str, _Table],
-                latest: dict[str, tuple[np.ndarray, np.ndarray]], stamps: np.ndarray, urdf: str
-                ) -> BagData:
+        self.final = np.iinfo(np.int64).max if before is None else max(self.final, before)
+    def _block(self, tables: dict[str, _Table],
+               latest: dict[str, tuple[np.ndarray, np.ndarray]], stamps: np.ndarray
+               ) -> BagData:
         columns: dict[str, np.ndarray] = {}
         for topic in REQUIRED_TOPICS:
             known, rows = latest[topic]
@@ -661,44 +682,46 @@ class _Join:
                 efforts = {s: (table.efforts[s][rows] if s in table.efforts
                                else np.zeros((stamps.size, N_COORDINATES)))
                            for s in self.sources}
-                for s, p in places.items():  # a source a row does not carry counts 0 there
-                    efforts[s][p < 0] = 0.0
+                for s in self.sources:  # a source a row does not carry counts 0 there
+                    if s in places:
+                        efforts[s][places[s] < 0] = 0.0
         known, rows = latest['/head_pose']
         at = np.minimum(np.searchsorted(known, stamps), max(known.size - 1, 0))
         has = known[at] == stamps if known.size else np.zeros(stamps.size, dtype=bool)
         head_position = np.full((stamps.size, 3), np.nan)
         head_position[has] = tables['/head_pose'].fields['head_position'][rows[at[has]]]
-        self.heads += int(has.sum())
         self._space(stamps)
         data = BagData(path=self.path, t_ns=stamps, efforts=efforts,
-                       head_position=head_position, urdf=urdf, custom_data=self.custom,
+                       head_position=head_position, urdf=self.urdf, custom_data=self.custom,
                        **columns)
         _validate(data)
         return data
 
     def _space(self, stamps: np.ndarray) -> None:
-        """Count the spacings of the samples (the gaps note)."""
+        """Count the spacings of the samples (the gaps note), in bins of 1/64 octave."""
         starts = np.concatenate([[self.last], stamps]) if self.emitted else stamps
         steps = np.diff(starts)
         self.emitted += stamps.size
         self.last = int(stamps[-1])
         if not steps.size:
             return
-        for step, count in zip(*np.unique(steps, return_counts=True), strict=True):
-            self.spacings[int(step)] = self.spacings.get(int(step), 0) + int(count)
+        self.least = int(steps.min()) if not self.least else min(self.least, int(steps.min()))
+        for spacing, count in zip(*np.unique(_bin(steps), return_counts=True), strict=True):
+            self.spacings[int(spacing)] = self.spacings.get(int(spacing), 0) + int(count)
         k = int(np.argmax(steps))
         if steps[k] > self.longest[0]:
             self.longest = (int(steps[k]), int(starts[k]))
 
-    def notes(self, tables: dict[str, _Table], urdf: str) -> list[str]:
-        """What was dropped or assumed, once every sample was given.
+    def notes(self, head_pose: bool) -> list[str]:
+        """What was dropped or assumed, once every sample was given (``head_pose``: whether
+        the bag has /head_pose messages).
 
         :raises SimulationError: when no sample had every required topic.
         """
         if not self.emitted:
             raise SimulationError(f'bag {self.path}: no sample has all of '
                                   f'{sorted(REQUIRED_TOPICS)} at the same header stamp '
-                                  f'(messages per topic: {self.stamps})')
+                                  f'(header stamps per topic: {self.stamps})')
         notes = []
         if self.missing:
             notes.append(f'{self.missing} sample(s) miss one of {sorted(REQUIRED_TOPICS)} '
@@ -707,20 +730,26 @@ class _Join:
             notes.append(f'{self.duplicates} message(s) repeated a header stamp; the later one '
                          'was kept')
         if self.late:
-            notes.append(f'{self.late} message(s) came after a later stamp of every topic and '
-                         'were dropped')
-        if not self.heads:
+            notes.append(f'{self.late} message(s) came over {LATE} samples after their header '
+                         'stamp and were dropped')
+        if not head_pose:
             notes.append('no /head_pose: head positions are nan')
-        if not urdf:
+        if not self.urdf:
             notes.append('no /robot_description: the installed URDF is assumed')
-        least = min(self.spacings, default=0)  # a gap: a sample or more left out
-        gaps = sum(n for step, n in self.spacings.items() if step > GAP * least)
+        gaps = sum(n for spacing, n in self.spacings.items()
+                   if spacing > _bin(np.array([GAP * self.least]))[0])
         if gaps:
             step, start = self.longest
-            notes.append(f'the samples have {gaps} gap(s) (sampled every {least * 1e-9:g} s); '
-                         f'the longest from t = {start * 1e-9:.6f} s to '
-                         f'{(start + step) * 1e-9:.6f} s')
+            notes.append(f'the samples have {gaps} gap(s) (sampled every '
+                         f'{self.least * 1e-9:g} s); the longest from t = {start * 1e-9:.6f} s '
+                         f'to {(start + step) * 1e-9:.6f} s')
         return notes
+
+
+def _bin(spacings: np.ndarray) -> np.ndarray:
+    """Bins of 1/64 octave of spacings [ns] (a count of every distinct spacing of jittered
+    stamps would grow with the bag)."""
+    return np.round(64.0 * np.log2(np.maximum(spacings, 1))).astype(np.int64)
 
 
 def _validate(data: BagData) -> None:
@@ -741,7 +770,7 @@ def _validate(data: BagData) -> None:
 
 def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
     """Read a recorded run into time-aligned arrays, all of it at once (``BagReading`` gives
-    it in windows).
+    it in blocks).
 
     A bag that was never closed (no metadata.yaml: a killed run) or whose file was cut is
     rebuilt from what reached the disk (``open_bag``); the first note says so.
@@ -754,5 +783,5 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         lack the fields the analysis needs; the message names what is wrong.
     """
     reading = BagReading(path, progress)
-    windows = list(reading.windows())
-    return replace(join_rows(windows), urdf=reading.urdf, notes=tuple(reading.notes))
+    whole = collect_rows(reading.blocks(LATE), reading.sample_bound)  # few rows beside it
+    return replace(whole, notes=tuple(reading.notes))

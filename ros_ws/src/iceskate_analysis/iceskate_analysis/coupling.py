@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from iceskate_analysis.bag_io import PASSIVE, WINDOW, BagData, BagReading
+from iceskate_analysis.bag_io import BLOCK, PASSIVE, BagData, BagReading
 from iceskate_analysis.rows import join_rows, sample_count, take_rows
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
@@ -195,7 +195,7 @@ def interval_accelerations(bag: BagData, following: BagData | None = None
     no transition in (t_k, t_{k+1}] (no impact and no re-rooted coordinates in between, also
     none that went out and back between two samples of a thinned bag) and the same mode,
     support side, pivot and step at both ends; at the last sample only with ``following``, the
-    window of samples after ``bag``."""
+    block of samples after ``bag``."""
     n = bag.n_samples
     if following is not None and following.n_samples:
         bag = join_rows([bag, take_rows(following, slice(0, 1))])
@@ -270,9 +270,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
                 force = (_constraint_force(dyn, contact, q, v, bag.multipliers[k], pin_data)
                          if mode.constraints else np.zeros(N_COORDINATES))
             except SimulationError as exc:
-                raise SimulationError(f'{bag.path}: cannot evaluate the model at sample {k} '
-                                      f'(t = {bag.t[k]:.6f} s, mode {mode.number}): {exc}'
-                                      ) from exc
+                raise SimulationError(f'{bag.path}: cannot evaluate the model at t = '
+                                      f'{bag.t[k]:.6f} s (mode {mode.number}): {exc}') from exc
             for a, i in enumerate(joints):
                 where = np.flatnonzero(act == i)
                 if not where.size:
@@ -437,7 +436,7 @@ class CaseResult:
 
     def ranking(self, joint: int) -> list[tuple[str, float]]:
         """Coupling terms M_ij q̈_j at ``joint`` by decreasing RMS over the arm-swing window
-        (every sample of the run)."""
+        (every sample when the run is too short for one)."""
         return self.rankings[joint]
 
     def summary(self) -> dict[str, Any]:
@@ -446,9 +445,9 @@ class CaseResult:
 
 
 #: Most samples a case keeps for its figures and animation (``CaseResult.kept``).
-FIGURE_ROWS = 1 << 14
+FIGURE_ROWS = 1 << 13
 #: The masks the sums are kept over: the arm-swing window (from the 4th step) and the whole run
-#: (the window when the run is too short for one, ``analysis_window``).
+#: (in place of the window when the run is too short for one, ``analysis_window``).
 _MASKS = ('window', 'whole')
 
 
@@ -470,7 +469,7 @@ class _MeanSquares:
 
 
 class _Kept:
-    """Every stride-th sample of a stream of windows, at most ``limit``: the stride doubles
+    """Every stride-th sample of a stream of blocks, at most ``limit``: the stride doubles
     (every other kept sample let go) whenever more would be kept."""
 
     def __init__(self, limit: int) -> None:
@@ -478,28 +477,39 @@ class _Kept:
         self.parts: list[tuple[np.ndarray, tuple[Any, ...]]] = []  # (indices, records)
 
     def add(self, first: int, records: tuple[Any, ...]) -> None:
-        """Keep the samples of ``records`` (of one window, whose first sample is the stream's
+        """Keep the samples of ``records`` (of one block, whose first sample is the stream's
         ``first``) that fall on the stride."""
-        n = sample_count(records[0])
-        rows = np.arange(-first % self.stride, n, self.stride)
+        rows = np.arange(-first % self.stride, sample_count(records[0]), self.stride)
+        if not rows.size:
+            return
         self.parts.append((first + rows, tuple(take_rows(r, rows) for r in records)))
         self.count += rows.size
-        while self.count > self.limit:
+        while self.count > self.limit:  # every other kept sample, as one part
             self.stride *= 2
-            parts, self.parts, self.count = self.parts, [], 0
-            for indices, kept in parts:
-                on = indices % self.stride == 0
-                self.parts.append((indices[on], tuple(take_rows(r, on) for r in kept)))
-                self.count += int(on.sum())
+            halves = [(indices[on], tuple(take_rows(r, on) for r in kept))
+                      for indices, kept in self.parts
+                      for on in [indices % self.stride == 0] if np.any(on)]
+            self.parts = [(np.concatenate([h[0] for h in halves]),
+                           tuple(join_rows(list(records), _missing)
+                                 for records in zip(*(h[1] for h in halves), strict=True)))]
+            self.count = self.parts[0][0].size
 
     def joined(self) -> list[Any]:
         """The kept samples of each record, as one record each."""
-        return [join_rows(list(records))
-                for records in zip(*(p[1] for p in self.parts), strict=True)]
+        return [join_rows(list(records), _missing)
+                for records in zip(*(part[1] for part in self.parts), strict=True)]
+
+
+def _missing(record: Any, key: str, n: int) -> np.ndarray:
+    """An input of a source a block of a decomposition does not have (it came later): 0 where
+    the joint is valid, else nan; an effort of a block of a bag: 0."""
+    if isinstance(record, JointDecomposition):
+        return _masked(np.zeros(n), ~record.valid)
+    return np.zeros((n, N_COORDINATES))
 
 
 class _Analysis:
-    """The analysis of one run fed window by window: eq. (11) at the joints, the sums of its
+    """The analysis of one run fed block by block: eq. (11) at the joints, the sums of its
     summary, the shoulders (whole: their spectrum and phase need them), the kept samples of the
     figures, and the CSV's rows (spilled to a file until its header is known)."""
 
@@ -524,7 +534,7 @@ class _Analysis:
         self.sources: list[str] = []
 
     def add(self, bag: BagData, following: BagData | None, progress: ProgressBar) -> None:
-        """Analyse the window ``bag`` (``following``: the window after it, None at the end)."""
+        """Analyse the block ``bag`` (``following``: the block after it, None at the end)."""
         if self.dyn is None:
             self.dyn = dynamics_for_bag(bag)
         exact = decompose(bag, self.joints, self.dyn, progress)
@@ -559,8 +569,8 @@ class _Analysis:
         self.averaged_valid[i] += int(averaged.valid.sum())
         if np.any(d.valid):
             rel, residual = d.residual_rel[d.valid], np.abs(d.residual[d.valid])
-            self.closure[i] = (max(self.closure[i][0], float(rel.max())),
-                               max(self.closure[i][1], float(residual.max())))
+            self.closure[i] = (float(np.maximum(self.closure[i][0], rel.max())),
+                               float(np.maximum(self.closure[i][1], residual.max())))
             self.mass_i8[i] += float(np.sum(d.mass_row[d.valid, TORSO_YAW]))
         for view, x in (('exact', d), ('averaged', averaged)):
             self.coupled[(i, view)] |= np.any(x.coupling[x.valid] != 0.0, axis=0)
@@ -568,12 +578,16 @@ class _Analysis:
         for mask_name, mask in masks.items():
             sums = self.sums[mask_name]
             exact_mask, averaged_mask = mask & d.valid, mask & averaged.valid
+            for source, x in d.tau_by_source.items():  # before the total input's sums
+                if (p, 'tau', source) not in sums.counts:  # from the blocks before, if it
+                    # came later: 0 at their valid samples (where the total input is finite)
+                    sums.counts[(p, 'tau', source)] = sums.counts.get((p, 'exact', 'tau'), 0)
+                    sums.sums[(p, 'tau', source)] = 0.0
+                sums.add((p, 'tau', source), x[exact_mask])
             for name, x in terms.items():
                 sums.add((p, 'exact', name), x[exact_mask])
             for name, x in averaged_terms.items():
                 sums.add((p, 'averaged', name), x[averaged_mask])
-            for source, x in d.tau_by_source.items():
-                sums.add((p, 'tau', source), x[exact_mask])
             sums.add((p, 'exact', 'm_total_minus_g'), (d.m_total - d.gravity)[exact_mask])
             sums.add((p, 'exact', 'sum_minus_g'), (-d.m_total - d.gravity)[exact_mask])
             sums.add((p, 'averaged', 'm_total_minus_g'),
@@ -591,8 +605,8 @@ class _Analysis:
         sums = self.sums['window' if arms.window_from_step is not None else 'whole']
         kept_bag, *kept = self.kept.joined()
         n = len(self.joints)
-        decompositions = {d.joint: self._with_sources(d) for d in kept[:n]}
-        averaged = {d.joint: self._with_sources(d) for d in kept[n:]}
+        decompositions = {d.joint: d for d in kept[:n]}
+        averaged = {d.joint: d for d in kept[n:]}
         rankings = {i: self._ranking(sums, i, 'exact') for i in self.joints}
         joints = {COORDINATE_NAMES[i]: self._joint_summary(sums, i) for i in self.joints}
         main = joints[COORDINATE_NAMES[self.joint]]
@@ -616,12 +630,6 @@ class _Analysis:
         }
         return CaseResult(label, self.joint, kept_bag, decompositions, averaged, arms,
                           self.yaw, self.fourth_step_s, rankings, entry)
-
-    def _with_sources(self, d: JointDecomposition) -> JointDecomposition:
-        """``d`` with an input of every source of the run (one that came later: 0 where valid)."""
-        return replace(d, tau_by_source={
-            s: d.tau_by_source.get(s, _masked(np.zeros(d.t.size), ~d.valid))
-            for s in self.sources})
 
     def _ranking(self, sums: _MeanSquares, i: int, view: str) -> list[tuple[str, float]]:
         p = COORDINATE_NAMES[i]
@@ -668,24 +676,24 @@ class _Analysis:
         return out
 
 
-def _windows(windows: Iterable[BagData]) -> Iterator[tuple[BagData, BagData | None]]:
-    """Each window with the one after it (None for the last)."""
+def _with_next(blocks: Iterable[BagData]) -> Iterator[tuple[BagData, BagData | None]]:
+    """Each block with the one after it (None for the last)."""
     previous = None
-    for window in windows:
+    for block in blocks:
         if previous is not None:
-            yield previous, window
-        previous = window
+            yield previous, block
+        previous = block
     if previous is not None:
         yield previous, None
 
 
 def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
                 csv: pathlib.Path | None = None, progress: bool = False,
-                size: int = WINDOW) -> CaseResult:
-    """Read and analyse a bag window by window (``size`` samples): eq. (11) at ``joint`` (and
-    at the other shoulder for a shoulder), the arm swing, and ``csv``, the CSV of every series
-    (``case_columns``) when given. What is held is a few windows and the shoulders' angles,
-    whatever the length of the run.
+                size: int = BLOCK) -> CaseResult:
+    """Read and analyse a bag block by block (``size`` samples): eq. (11) at ``joint`` (and at
+    the other shoulder for a shoulder), the arm swing, and ``csv``, the CSV of every series
+    (``_columns``) when given. What is held is a few blocks, the figures' samples and the
+    shoulders' angles, whatever the length of the run.
 
     :raises SimulationError: on a bag that cannot be read or a sample the model cannot
         evaluate.
@@ -697,8 +705,8 @@ def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
         bar = ProgressBar(reading.sample_bound, f'eq. (11) {reading.path.name}', 'sample',
                           progress, leave=False)
         try:
-            for window, following in _windows(reading.windows(size)):
-                analysis.add(window, following, bar)
+            for block, following in _with_next(reading.blocks(size)):
+                analysis.add(block, following, bar)
         finally:
             bar.close()
         case = analysis.result(label, reading.notes, reading.path,
@@ -712,48 +720,49 @@ def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
 
 
 def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
-                 size: int = WINDOW) -> CaseResult:
-    """``analyse_bag`` of a bag read whole (``read_bag``), in windows of ``size`` samples."""
+                 size: int = BLOCK) -> CaseResult:
+    """``analyse_bag`` of a bag read whole (``read_bag``), in blocks of ``size`` samples."""
     joint = parse_joint(joint)
     analysis = _Analysis(joint, None)
-    windows = (take_rows(bag, slice(k, k + size)) for k in range(0, bag.n_samples, size))
+    blocks = (take_rows(bag, slice(k, k + size)) for k in range(0, bag.n_samples, size))
     bar = ProgressBar(bag.n_samples, '', 'sample', False)
-    for window, following in _windows(windows):
-        analysis.add(window, following, bar)
+    for block, following in _with_next(blocks):
+        analysis.add(block, following, bar)
     return analysis.result(label, list(bag.notes), bag.path, bag.scene_name)
 
 
 # ---------------------------------------------------------------------------------- export
-def write_csv(path: str | pathlib.Path, columns: dict[str, np.ndarray]) -> pathlib.Path:
-    """Write equal-length columns to a CSV file with a header row (nan written as 'nan'), in
-    blocks of ``CSV_BLOCK`` rows, so that the text in memory is bounded whatever the length.
+def write_csv(path: str | pathlib.Path, blocks: Iterable[dict[str, np.ndarray]],
+              header: list[str] | None = None) -> pathlib.Path:
+    """Write blocks of equal-length columns one after the other to a CSV file under a header
+    row (default: the first block's names; nan written as 'nan'), turned into text
+    ``CSV_BLOCK`` rows at a time, so that the text in memory is bounded whatever the length.
 
-    :raises ValueError: when the columns differ in length.
+    :raises ValueError: when a block's columns differ in length.
     """
     path = pathlib.Path(path)
     with path.open('w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
-        writer.writerow(columns)
-        _write_rows(writer, columns, path)
+        for number, columns in enumerate(blocks):
+            if not number:
+                header = list(columns) if header is None else header
+                writer.writerow(header)
+            arrays = [np.asarray(columns[name]) for name in header]
+            lengths = {len(a) for a in arrays}
+            if len(lengths) > 1:
+                raise ValueError(f'columns of different lengths {sorted(lengths)} for {path}')
+            for start in range(0, lengths.pop() if lengths else 0, CSV_BLOCK):
+                text = [[str(int(x)) for x in part] if part.dtype.kind in 'biu'
+                        else [repr(float(x)) for x in part]
+                        for part in (a[start:start + CSV_BLOCK] for a in arrays)]
+                writer.writerows(zip(*text, strict=True))
     return path
 
 
-def _write_rows(writer: Any, columns: dict[str, np.ndarray], path: pathlib.Path) -> None:
-    arrays = [np.asarray(a) for a in columns.values()]
-    lengths = {len(a) for a in arrays}
-    if len(lengths) > 1:
-        raise ValueError(f'columns of different lengths {sorted(lengths)} for {path}')
-    for start in range(0, lengths.pop() if lengths else 0, CSV_BLOCK):
-        text = [[str(int(x)) for x in block] if block.dtype.kind in 'biu'
-                else [repr(float(x)) for x in block]
-                for block in (a[start:start + CSV_BLOCK] for a in arrays)]
-        writer.writerows(zip(*text, strict=True))
-
-
 class _Spill:
-    """The CSV's columns of each window, in a temporary file beside the CSV until its header
-    (every source, every coupled coordinate of the run) is known; then the CSV, window by
-    window."""
+    """The CSV's columns of each block, in a temporary file beside the CSV until its header
+    (every source, every coupled coordinate of the run) is known; then the CSV, block by
+    block."""
 
     def __init__(self, path: pathlib.Path) -> None:
         self.path = pathlib.Path(path)
@@ -761,7 +770,7 @@ class _Spill:
         self.names: list[str] = []
 
     def add(self, columns: dict[str, np.ndarray]) -> None:
-        names = self.names = list(columns)  # the last window's: every source so far
+        names = self.names = list(columns)  # the last block's: every source so far
         np.save(self.file, np.array(names))
         for array in columns.values():
             np.save(self.file, np.asarray(array))
@@ -769,22 +778,21 @@ class _Spill:
     def write(self, coupled: dict[tuple[int, str], np.ndarray], joints: tuple[int, ...]
               ) -> pathlib.Path:
         """The CSV: a coupling column of a coordinate that never couples is left out; a column
-        a window lacks (a source that came later) is 0 where its joint is valid, else nan."""
+        a block lacks (a source that came later) is 0 where its joint is valid, else nan."""
         never = {_coupling_column(i, j) for i in joints for j in range(N_COORDINATES)
                  if j != i and not coupled[(i, 'exact')][j]}
         header = [n for n in self.names if n not in never]
         end = self.file.tell()
         self.file.seek(0)
-        with self.path.open('w', newline='', encoding='utf-8') as stream:
-            writer = csv.writer(stream)
-            writer.writerow(header)
+
+        def blocks() -> Iterator[dict[str, np.ndarray]]:
             while self.file.tell() < end:
                 names = [str(n) for n in np.load(self.file)]
                 block = {name: np.load(self.file) for name in names}
-                _write_rows(writer, {name: block[name] if name in block
-                                     else np.where(block[f'{name.split(".")[0]}.valid'],
-                                                   0.0, np.nan) for name in header}, self.path)
-        return self.path
+                yield {name: block[name] if name in block
+                       else np.where(block[f'{name.split(".")[0]}.valid'], 0.0, np.nan)
+                       for name in header}
+        return write_csv(self.path, blocks(), header)
 
     def close(self) -> None:
         self.file.close()
@@ -797,7 +805,7 @@ def _coupling_column(i: int, j: int) -> str:
 
 def _columns(bag: BagData, decompositions: dict[int, JointDecomposition]
              ) -> dict[str, np.ndarray]:
-    """Every time series of a window: the state of both arms and the terms of every joint
+    """Every time series of a block: the state of both arms and the terms of every joint
     (the coupling of every other coordinate)."""
     cols: dict[str, np.ndarray] = {
         't_s': bag.t, 'mode': bag.mode, 'support_side': bag.side, 'pivot': bag.pivot,

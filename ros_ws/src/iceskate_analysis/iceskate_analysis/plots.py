@@ -185,8 +185,8 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
                   joint: int | None = None) -> pathlib.Path:
     """The ``top`` coupling terms M_ij q̈_j by RMS (over the analysis window) and M_total."""
     d = case.decompositions[case.joint if joint is None else joint]
-    series = {name: d.coupling[:, COORDINATE_NAMES.index(name)] for name in COORDINATE_NAMES}
     ranking = case.ranking(d.joint)[:top]
+    series = {name: d.coupling[:, COORDINATE_NAMES.index(name)] for name, _ in ranking}
     fig, (ax,) = _figure(1, height=3.6)
     i = _index(d.name)
     for name, value in ranking:
