@@ -127,7 +127,7 @@ def test_replay_reads_a_cut_bag_and_says_how_much(long_bag, tmp_path, ros_env, f
 
 
 @pytest.mark.slow
-def test_the_analysis_holds_a_few_windows_whatever_the_length_of_the_run(tmp_path, monkeypatch):
+def test_the_analysis_holds_a_few_blocks_whatever_the_length_of_the_run(tmp_path, monkeypatch):
     """The peak memory of analysing a 6 s run exceeds that of a 1 s run by the shoulders'
     angles kept whole (32 B a sample) and what a chunk of the file holds at a time (CHUNK), not
     by the samples' rows (over 4 kB each when a bag was held whole)."""

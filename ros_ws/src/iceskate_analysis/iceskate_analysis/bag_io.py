@@ -9,6 +9,7 @@ SI; times [ns] as ``t_ns``, [s] as ``t``.
 
 from __future__ import annotations
 
+import bisect
 from collections import Counter
 from dataclasses import dataclass, field, replace
 import functools
@@ -37,8 +38,9 @@ if TYPE_CHECKING:
     from mcap.records import McapRecord
     from rosbags.typesys.store import Typestore
 
-__all__ = ['BagData', 'BagReading', 'BagTopic', 'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE',
-           'REQUIRED_TOPICS', 'BLOCK', 'open_bag', 'read_bag', 'resolve_bag_path']
+__all__ = ['BLOCK', 'BagData', 'BagReading', 'BagTopic', 'LATCHED_TOPICS', 'LATE',
+           'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS', 'open_bag', 'read_bag',
+           'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -55,7 +57,8 @@ OPTIONAL_TOPICS = {
 }
 #: Samples per block of ``BagReading.blocks``.
 BLOCK = 4096
-#: Header stamps a message may come after its own and still be joined (``BagReading``).
+#: Header stamps a message may come after its own, at most, and still be joined
+#: (``BagReading``).
 LATE = 256
 #: A spacing of samples over this many times the least is a gap (stamps of a thinned bag are
 #: rounded to the nanosecond: their spacings differ by 1 ns).
@@ -467,7 +470,6 @@ class _Table:
     def __init__(self, topic: str, capacity: int) -> None:
         self.by_source = topic == '/joint_dynamics'  # its rows end with the efforts by source
         self.size = 0
-        self.newest = -1  # the latest header stamp read [ns]
         self.stamps = np.zeros(max(capacity, 1), dtype=np.int64)
         self.fields = {name: np.zeros((self.stamps.size, *shape), dtype=dtype)
                        for name, shape, dtype in _FIELDS[topic]}
@@ -481,7 +483,6 @@ class _Table:
         if k == self.stamps.size:
             self._grow()
         self.stamps[k] = stamp
-        self.newest = max(self.newest, stamp)
         values, by_source = (row[:-1], row[-1]) if self.by_source else (row, {})
         for array, value in zip(self.fields.values(), values, strict=True):
             array[k] = value
@@ -518,8 +519,8 @@ class _Table:
         below = stamps < before
         return stamps[below], rows[below], int(np.sum(self.stamps[:self.size] < before))
 
-    def drop_before(self, before: int | None) -> int:
-        """Forget the rows stamped below ``before`` (None: all); return how many."""
+    def drop_before(self, before: int | None) -> None:
+        """Forget the rows stamped below ``before`` (None: all)."""
         keep = (np.zeros(self.size, dtype=bool) if before is None
                 else self.stamps[:self.size] >= before)
         dropped = self.size - int(keep.sum())
@@ -528,14 +529,13 @@ class _Table:
             for a in arrays:
                 a[:self.size - dropped] = a[:self.size][keep]
             self.size -= dropped
-        return dropped
 
 
 class BagReading:
     """A bag's samples, read in blocks of consecutive samples: the sampled topics are joined on
-    their header stamps as the messages come, a stamp once every required topic is ``LATE``
-    stamps past it, so what is held is a block and ``LATE`` rows of each topic, whatever the
-    length of the bag (while every required topic goes on). A sample needs all of
+    their header stamps as the messages come, a stamp once every sampled topic still to come is
+    ``LATE`` stamps past it (``_Cut``), so what is held is a block and ``LATE`` rows of each
+    topic, whatever the length of the bag (while no topic stalls). A sample needs all of
     ``REQUIRED_TOPICS`` (a repeated stamp: each topic's last message of it).
 
     :ivar path: the bag. :ivar custom_data: its metadata's custom_data.
@@ -557,7 +557,7 @@ class BagReading:
         description = self._chosen.get('/robot_description')
         if description is not None and description.key in self._reader.last_messages:
             raw = self._reader.last_messages[description.key]
-            self.urdf = str(self._decode(description, 0, raw).data)
+            self.urdf = str(self._decode(description, 'its last message', raw).data)
         self.notes: list[str] = []
 
     @property
@@ -571,43 +571,45 @@ class BagReading:
 
         :raises SimulationError: as ``read_bag``, when the block it concerns is reached.
         """
-        sampled = [t for t in _READERS if t in self._chosen and t != '/robot_description']
+        sampled = [t for t in _READERS if t in self._chosen and self._chosen[t].count]
         tables = {t: _Table(t, min(self._chosen[t].count, size + 2 * LATE)
                             if t in self._chosen else 0) for t in _READERS}
         join = _Join(self.path, self.custom_data, self.urdf)
-        total = sum(c.count for t, c in self._chosen.items() if t in sampled)
-        bar = ProgressBar(total, f'reading {self.path.name}', 'msg', self._progress,
-                          leave=False)
+        cut = _Cut({t: self._chosen[t].count for t in sampled})
+        bar = ProgressBar(sum(self._chosen[t].count for t in sampled),
+                          f'reading {self.path.name}', 'msg', self._progress, leave=False)
         due = size + LATE  # rows of /joint_states that call for a join
         try:
             for conn, log_ns, raw in self._reader.messages(self._chosen[t] for t in sampled):
-                msg = self._decode(conn, log_ns, raw)
+                bar.update(1)
+                msg = self._decode(conn, f'log time {log_ns * 1e-9:.6f} s', raw)
+                stamp = _stamp_ns(msg)
+                if not cut.admit(conn.topic, stamp):
+                    join.late += 1
+                    continue
                 where = f'log time {log_ns * 1e-9:.6f} s'
                 try:
-                    tables[conn.topic].append(_stamp_ns(msg), _READERS[conn.topic](msg, where))
+                    tables[conn.topic].append(stamp, _READERS[conn.topic](msg, where))
                 except AttributeError as exc:
                     raise SimulationError(
                         f'bag {self.path}: {conn.topic} message at {where} lacks a field the '
-                        'analysis needs ({exc}); the bag was recorded with an incompatible '
+                        f'analysis needs ({exc}); the bag was recorded with an incompatible '
                         'message definition') from exc
-                bar.update(1)
                 if tables['/joint_states'].size >= due:
-                    yield from join.samples(tables, _final(tables), size)
+                    yield from join.samples(tables, cut.stamp, size)
                     # a topic that stalls holds the others back: wait for twice as much
                     due = max(size + LATE, 2 * tables['/joint_states'].size)
             yield from join.samples(tables, None, size)
         finally:
             bar.close()
-        self.notes = ([self._recovered()] if self._reader.recovered else []) + join.notes(
-            bool(self._chosen.get('/head_pose') and self._chosen['/head_pose'].count))
+        self.notes = ([self._recovered()] if self._reader.recovered else []) + join.notes()
 
-    def _decode(self, conn: BagTopic, log_ns: int, raw: bytes) -> Any:
+    def _decode(self, conn: BagTopic, where: str, raw: bytes) -> Any:
         try:
             return self._reader.deserialize(raw, conn.msgtype)
         except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
             raise SimulationError(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
-                                  f'{conn.topic} at log time {log_ns * 1e-9:.6f} s ({exc})'
-                                  ) from exc
+                                  f'{conn.topic} at {where} ({exc})') from exc
 
     def _recovered(self) -> str:
         extra = ('' if self.custom_data
@@ -615,14 +617,32 @@ class BagReading:
         return self._reader.recovered + extra
 
 
-def _final(tables: dict[str, _Table]) -> int:
-    """The stamp below which every sample is final: ``LATE`` stamps behind the newest of the
-    required topic that lags most (a message later than that is dropped, with a note)."""
-    def lagging(table: _Table) -> int:
-        stamps = np.unique(table.stamps[:table.size])
-        return int(stamps[-LATE]) if stamps.size >= LATE else int(stamps[0]) if stamps.size \
-            else -1
-    return min(lagging(tables[t]) for t in REQUIRED_TOPICS)
+class _Cut:
+    """The header stamp below which every sample is final: ``LATE`` distinct stamps behind the
+    newest of the sampled topic that lags most (a topic whose messages were all read holds
+    nothing back). It only rises, and a message stamped below it comes too late to be joined,
+    so the samples do not depend on when they are joined."""
+
+    def __init__(self, counts: dict[str, int]) -> None:
+        """``counts``: the messages of each sampled topic."""
+        self.left = dict(counts)  # messages still to come
+        self.newest: dict[str, list[int]] = {t: [] for t in counts}  # at most LATE, increasing
+        self.stamp = -1  # [ns]
+
+    def admit(self, topic: str, stamp: int) -> bool:
+        """Whether a message of ``topic`` stamped ``stamp`` [ns] can still be joined."""
+        self.left[topic] -= 1
+        admitted = stamp >= self.stamp
+        newest = self.newest[topic]
+        k = bisect.bisect_left(newest, stamp)
+        if admitted and (k == len(newest) or newest[k] != stamp):
+            newest.insert(k, stamp)
+            if len(newest) > LATE:
+                del newest[0]
+        self.stamp = max(self.stamp, min(
+            np.iinfo(np.int64).max if self.left[t] <= 0 else
+            self.newest[t][0] if len(self.newest[t]) == LATE else -1 for t in self.newest))
+        return admitted
 
 
 class _Join:
@@ -632,10 +652,9 @@ class _Join:
     def __init__(self, path: pathlib.Path, custom: dict[str, str], urdf: str) -> None:
         self.path, self.custom, self.urdf = path, custom, urdf
         self.sources: list[str] = []  # every source, by the first sample that carries it
-        self.final = -1  # every stamp below it was joined [ns]
         self.emitted = 0  # samples given
         self.last = -1  # the last sample's stamp [ns]
-        self.missing = self.duplicates = self.late = 0
+        self.missing = self.duplicates = self.late = self.heads = 0
         self.stamps = {t: 0 for t in REQUIRED_TOPICS}  # distinct stamps of each
         self.least = 0  # the least spacing of two samples [ns]
         self.spacings: dict[int, int] = {}  # spacing bin (``_bin``) -> how many
@@ -648,12 +667,10 @@ class _Join:
         latest = {}
         for topic, table in tables.items():
             stamps, rows, read = table.latest(before)
-            late = stamps < self.final  # came after its stamp was joined
             if topic in REQUIRED_TOPICS:
-                self.late += int(late.sum())
                 self.duplicates += read - stamps.size
-                self.stamps[topic] += int((~late).sum())
-            latest[topic] = stamps[~late], rows[~late]
+                self.stamps[topic] += stamps.size
+            latest[topic] = stamps, rows
         stamps = functools.reduce(functools.partial(np.intersect1d, assume_unique=True),
                                   (latest[t][0] for t in REQUIRED_TOPICS))
         union = functools.reduce(np.union1d, (latest[t][0] for t in REQUIRED_TOPICS))
@@ -662,7 +679,7 @@ class _Join:
             yield self._block(tables, latest, stamps[start:start + size])
         for table in tables.values():
             table.drop_before(before)
-        self.final = np.iinfo(np.int64).max if before is None else max(self.final, before)
+
     def _block(self, tables: dict[str, _Table],
                latest: dict[str, tuple[np.ndarray, np.ndarray]], stamps: np.ndarray
                ) -> BagData:
@@ -679,17 +696,15 @@ class _Join:
                 first = {s: (int(np.argmax(p >= 0)), int(p[np.argmax(p >= 0)]))
                          for s, p in places.items() if s not in self.sources and np.any(p >= 0)}
                 self.sources += sorted(first, key=first.get)
-                efforts = {s: (table.efforts[s][rows] if s in table.efforts
-                               else np.zeros((stamps.size, N_COORDINATES)))
-                           for s in self.sources}
+                efforts = {s: table.efforts[s][rows] for s in self.sources}
                 for s in self.sources:  # a source a row does not carry counts 0 there
-                    if s in places:
-                        efforts[s][places[s] < 0] = 0.0
+                    efforts[s][places[s] < 0] = 0.0
         known, rows = latest['/head_pose']
         at = np.minimum(np.searchsorted(known, stamps), max(known.size - 1, 0))
         has = known[at] == stamps if known.size else np.zeros(stamps.size, dtype=bool)
         head_position = np.full((stamps.size, 3), np.nan)
         head_position[has] = tables['/head_pose'].fields['head_position'][rows[at[has]]]
+        self.heads += int(has.sum())
         self._space(stamps)
         data = BagData(path=self.path, t_ns=stamps, efforts=efforts,
                        head_position=head_position, urdf=self.urdf, custom_data=self.custom,
@@ -712,9 +727,8 @@ class _Join:
         if steps[k] > self.longest[0]:
             self.longest = (int(steps[k]), int(starts[k]))
 
-    def notes(self, head_pose: bool) -> list[str]:
-        """What was dropped or assumed, once every sample was given (``head_pose``: whether
-        the bag has /head_pose messages).
+    def notes(self) -> list[str]:
+        """What was dropped or assumed, once every sample was given.
 
         :raises SimulationError: when no sample had every required topic.
         """
@@ -730,10 +744,10 @@ class _Join:
             notes.append(f'{self.duplicates} message(s) repeated a header stamp; the later one '
                          'was kept')
         if self.late:
-            notes.append(f'{self.late} message(s) came over {LATE} samples after their header '
-                         'stamp and were dropped')
-        if not head_pose:
-            notes.append('no /head_pose: head positions are nan')
+            notes.append(f'{self.late} message(s) came {LATE} samples or more after their '
+                         'header stamp and were dropped')
+        if not self.heads:
+            notes.append('no /head_pose at any sample: head positions are nan')
         if not self.urdf:
             notes.append('no /robot_description: the installed URDF is assumed')
         gaps = sum(n for spacing, n in self.spacings.items()
@@ -783,5 +797,6 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
         lack the fields the analysis needs; the message names what is wrong.
     """
     reading = BagReading(path, progress)
-    whole = collect_rows(reading.blocks(LATE), reading.sample_bound)  # few rows beside it
+    # small blocks: little is held beside the arrays
+    whole = collect_rows(reading.blocks(LATE), reading.sample_bound)
     return replace(whole, notes=tuple(reading.notes))

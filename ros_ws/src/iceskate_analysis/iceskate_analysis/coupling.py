@@ -578,12 +578,13 @@ class _Analysis:
         for mask_name, mask in masks.items():
             sums = self.sums[mask_name]
             exact_mask, averaged_mask = mask & d.valid, mask & averaged.valid
-            for source, x in d.tau_by_source.items():  # before the total input's sums
-                if (p, 'tau', source) not in sums.counts:  # from the blocks before, if it
-                    # came later: 0 at their valid samples (where the total input is finite)
-                    sums.counts[(p, 'tau', source)] = sums.counts.get((p, 'exact', 'tau'), 0)
+            for source, x in d.tau_by_source.items():
+                if (p, 'tau', source) not in sums.counts:  # it came later: 0 at the valid
+                    # samples of the blocks before
+                    sums.counts[(p, 'tau', source)] = sums.counts.get((p, 'valid'), 0)
                     sums.sums[(p, 'tau', source)] = 0.0
                 sums.add((p, 'tau', source), x[exact_mask])
+            sums.counts[(p, 'valid')] = sums.counts.get((p, 'valid'), 0) + int(exact_mask.sum())
             for name, x in terms.items():
                 sums.add((p, 'exact', name), x[exact_mask])
             for name, x in averaged_terms.items():
@@ -599,7 +600,7 @@ class _Analysis:
 
     def result(self, label: str, notes: list[str], bag_path: pathlib.Path, scene: str
                ) -> CaseResult:
-        """The case, once every window was added."""
+        """The case, once every block was added."""
         t, right, left, step_index = (np.concatenate(x) for x in zip(*self.shoulders, strict=True))
         arms = arm_swing(t, right, left, step_index)
         sums = self.sums['window' if arms.window_from_step is not None else 'whole']
@@ -743,9 +744,11 @@ def write_csv(path: str | pathlib.Path, blocks: Iterable[dict[str, np.ndarray]],
     path = pathlib.Path(path)
     with path.open('w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
-        for number, columns in enumerate(blocks):
-            if not number:
-                header = list(columns) if header is None else header
+        if header is not None:
+            writer.writerow(header)
+        for columns in blocks:
+            if header is None:
+                header = list(columns)
                 writer.writerow(header)
             arrays = [np.asarray(columns[name]) for name in header]
             lengths = {len(a) for a in arrays}

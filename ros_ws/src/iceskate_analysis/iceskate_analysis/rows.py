@@ -92,12 +92,15 @@ def collect_rows(records: Iterable[Record], capacity: int) -> Record:
         for f in dataclasses.fields(record):
             value = getattr(record, f.name)
             if _per_sample(value, n):
-                target = arrays.setdefault(f.name, _empty(value, capacity))
-                target[size:size + n] = value
+                if f.name not in arrays:
+                    arrays[f.name] = _empty(value, capacity)
+                arrays[f.name][size:size + n] = value
             elif isinstance(value, dict) and all(_per_sample(v, n) for v in value.values()):
                 group = arrays.setdefault(f.name, {})
                 for key, v in value.items():
-                    group.setdefault(key, _empty(v, capacity))[size:size + n] = v
+                    if key not in group:
+                        group[key] = _empty(v, capacity)
+                    group[key][size:size + n] = v
         last, size = record, size + n
     if last is None:
         raise ValueError('no record to join')
