@@ -326,6 +326,28 @@ def test_the_com_rule_bounds_the_share_while_only_the_front_heel_touches(make_ob
         np.testing.assert_allclose(tau(flat_mode, heel_share=0.3), tau(flat_mode), rtol=1e-12)
 
 
+def test_the_heel_share_bound_rises_to_the_share_from_heel_time_on(make_obs, torque):
+    """heel_time: the bound holds for heel_time s after the heel strike, then rises linearly
+    to the share over ramp_time, so a front sole that stays up takes the load on its heel."""
+    q, pivot = standing_posture('staggered', 0.0, 0.7)
+    q[2:8] = -q[2:8]
+    block = {'rule': 'com', 'share': 1.0, 'share_min': 0.8, 'ramp_time': 0.2,
+             'heel_share': 0.3}
+
+    def tau(since, **changes):
+        obs = make_obs(t=0.5 + since, q=q, mode=9, pivot=pivot, t_exchange=0.0,
+                       t_touchdown=0.5)
+        return torque('weight_transfer', obs, weight_transfer={**block, **changes})
+
+    assert np.any(tau(0.1))
+    np.testing.assert_array_equal(tau(0.1, heel_time=0.2), tau(0.1))  # the bound holds
+    np.testing.assert_allclose(tau(0.3, heel_time=0.2), tau(0.3, heel_share=0.65),
+                               rtol=1e-12)  # half-way up: 0.3 + (1 - 0.3) / 2
+    np.testing.assert_allclose(tau(0.5, heel_time=0.2), tau(0.5, heel_share=2.0),
+                               rtol=1e-12)  # risen: the share's own rule
+    assert np.linalg.norm(tau(0.5, heel_time=0.2)) > np.linalg.norm(tau(0.5)) * 2.0
+
+
 def test_the_walk_scene_walks(tmp_path):
     """The shipped walk scene: several clean support exchanges in 3 s, moving forward."""
     scene = replace(load_scene('walk'), duration=3.0, record_bag=False)

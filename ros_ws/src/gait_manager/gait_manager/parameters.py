@@ -219,6 +219,10 @@ class WeightTransferParameters(_Block, prefix='weight_transfer.'):
                                'over ramp_time after the heel strike', low=0.0, high=2.0)
     heel_share: float = setting(2.0, "'com' rule: upper bound of the share while only the "
                                 'front heel touches (2: none)', low=0.0, high=2.0)
+    heel_time: float = setting(0.0, "'com' rule: time after the heel strike from which "
+                               'the heel_share bound rises to share over ramp_time, so a '
+                               'front sole that does not come flat takes the load on its heel '
+                               '(0: the bound holds)', unit='s', low=0.0)
 
 
 @dataclass(frozen=True)

@@ -102,7 +102,13 @@ double capture_split_force(
     params.share_min * (params.ramp_time > 0.0 ? std::min(since / params.ramp_time, 1.0) : 1.0);
   double fraction = std::max(share, floor);
   if (iceskate_native::swing_contact(kinematics.mode(obs.mode)) == SwingContact::kHeel) {
-    fraction = std::min(fraction, params.heel_share);  // only the front heel touches
+    double bound = params.heel_share;  // only the front heel touches
+    if (params.heel_time > 0.0 && since > params.heel_time) {
+      const double rise =
+        params.ramp_time > 0.0 ? std::min((since - params.heel_time) / params.ramp_time, 1.0) : 1.0;
+      bound += rise * std::max(params.share - params.heel_share, 0.0);
+    }
+    fraction = std::min(fraction, bound);
   }
   return fraction * kinematics.total_mass() * kGravity;
 }
