@@ -75,7 +75,7 @@ macro(iceskate_controller_package)
   set_target_properties(${PROJECT_NAME}_law PROPERTIES
     POSITION_INDEPENDENT_CODE ON CXX_VISIBILITY_PRESET hidden VISIBILITY_INLINES_HIDDEN ON)
 
-  nanobind_add_module(_law NOMINSIZE src/bindings.cpp)
+  nanobind_add_module(_law NOMINSIZE NOSTRIP src/bindings.cpp)  # NOSTRIP: named in profiles
   target_link_libraries(_law PRIVATE ${PROJECT_NAME}_law)
   target_compile_options(_law PRIVATE ${_controller_warnings})
 

@@ -5,6 +5,7 @@ See docs/architecture.md, 'Bags'.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import contextlib
 import gc
 import json
@@ -76,9 +77,15 @@ class _BagFile:
         self._bag.close()
 
 
+def _sample_messages(typestore: Typestore | None, tf_frames: Sequence[tuple[str, str]]
+                     ) -> SampleMessages:
+    """The encoder of the recorded messages (``typestore`` None: ``make_typestore()``)."""
+    return SampleMessages(typestore or make_typestore(), tf_frames)
+
+
 def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
-                    messages: SampleMessages, tf_every: int, batches: multiprocessing.Queue,
-                    status: Connection) -> None:
+                    encoder: tuple[Typestore | None, Sequence[tuple[str, str]]], tf_every: int,
+                    batches: multiprocessing.Queue, status: Connection) -> None:
     """Body of the writer process: write the ``Batch``es of ``batches`` until None, then close
     the bag and send ('ok', samples) or ('error', message) on ``status``. Stop signals are
     left to the parent; once the parent is gone (SIGUSR1, then SIGALRM a second later), the
@@ -106,7 +113,7 @@ def _writer_process(path: pathlib.Path, metadata: dict[str, Any], urdf: str,
     die_with_parent(signal.SIGUSR1, parent.pid if parent is not None else None)
     count = 0
     try:
-        bag = _BagFile(path, metadata, urdf, messages, tf_every)
+        bag = _BagFile(path, metadata, urdf, _sample_messages(*encoder), tf_every)
         try:
             while True:
                 if orphaned:
@@ -164,8 +171,9 @@ class BagRecorder:
         if self.path.exists():
             raise SimulationError(f'bag {self.path} already exists; choose another output '
                                   'directory')
-        self.messages = SampleMessages(typestore or make_typestore(),
-                                       (robot or load_robot()).tf_frames)
+        self._typestore = typestore
+        self._tf_frames = (robot or load_robot()).tf_frames
+        self._messages: SampleMessages | None = None
         self.count = 0
         self._bag: _BagFile | None = None
         self._process: multiprocessing.process.BaseProcess | None = None
@@ -177,13 +185,22 @@ class BagRecorder:
         self._status, child_status = context.Pipe(duplex=False)
         self._process = context.Process(
             target=_writer_process, name='bag-writer', daemon=True,
-            args=(self.path, metadata, urdf, self.messages, tf_every, self._batches,
-                  child_status))
+            args=(self.path, metadata, urdf, (self._typestore, self._tf_frames), tf_every,
+                  self._batches, child_status))
         self._process.start()
         # the lowest priority: the writer never delays the run or a lockstep node (its queue
         # is bounded: a parent that gets ahead waits, and the writer then has the CPU)
         os.sched_setscheduler(self._process.pid, os.SCHED_IDLE, os.sched_param(0))
         child_status.close()
+
+    @property
+    def messages(self) -> SampleMessages:
+        """The messages' encoder, made on first use (rosbags' Jazzy typestore takes about
+        0.2 s to import): a background writer makes its own, so a headless run's process never
+        imports it."""
+        if self._messages is None:
+            self._messages = _sample_messages(self._typestore, self._tf_frames)
+        return self._messages
 
     def write_block(self, block: dict[str, Any], events: Events) -> None:
         """Record consecutive control instants (after those written before): a block of the
