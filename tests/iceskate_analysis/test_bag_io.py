@@ -173,6 +173,38 @@ def test_the_mcap_file_of_a_closed_bag_reads_as_the_bag(sim_bag):
     assert bag.path == sim_bag and bag.notes == () and bag.scene_name == 'tiny_skate'
 
 
+def test_a_bag_split_over_two_files_reads_as_the_whole(tmp_path, sim_bag):
+    """A bag split over several .mcap files (as ``ros2 bag record --max-bag-size`` leaves it),
+    each file with its own channel of a topic, gives the samples of the whole bag."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    with AnyReader([sim_bag]) as reader:
+        stamps = sorted(stamp for _, stamp, _ in reader.messages())
+        middle = stamps[len(stamps) // 2]
+        parts = []
+        for k, keep in enumerate((lambda s: s < middle, lambda s: s >= middle)):
+            writer = Writer(tmp_path / f'part{k}', version=9, storage_plugin=StoragePlugin.MCAP)
+            writer.open()
+            try:
+                out = {c.id: writer.add_connection(c.topic, c.msgtype,
+                                                   typestore=reader.typestore)
+                       for c in reader.connections}
+                for conn, stamp, raw in reader.messages():
+                    if keep(stamp):
+                        writer.write(out[conn.id], stamp, raw)
+            finally:
+                writer.close()
+            parts.append(tmp_path / f'part{k}')
+    shutil.move(next(parts[1].glob('*.mcap')), parts[0] / 'part0_1.mcap')
+    assert len(list(parts[0].glob('*.mcap'))) == 2
+    whole, split = read_bag(sim_bag), read_bag(parts[0])
+    assert split.n_samples == whole.n_samples and split.notes == whole.notes
+    np.testing.assert_array_equal(split.t_ns, whole.t_ns)
+    for name in ('q', 'v', 'qdd', 'effort_total', 'multipliers', 'head_position'):
+        np.testing.assert_array_equal(getattr(split, name), getattr(whole, name))
+    assert split.urdf == whole.urdf
+
+
 def test_read_bag_rebuilds_a_bag_without_metadata_from_its_mcap_file(tmp_path, sim_bag):
     """A recording never closed (a killed run) has no metadata.yaml: every message of the
     .mcap file's complete chunks is read, and the notes say so."""

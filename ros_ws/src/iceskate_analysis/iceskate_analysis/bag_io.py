@@ -182,12 +182,14 @@ def _is_bag_dir(p: pathlib.Path) -> bool:
 
 @dataclass(frozen=True)
 class BagTopic:
-    """One channel of a bag: topic, message type, message count (``key``: (file, channel id))."""
+    """A topic's channels of one message type: topic, message type, message count (``keys``:
+    the channels' (file, channel id), in file order: a bag split over several files has one
+    channel of the topic in each)."""
 
     topic: str
     msgtype: str
     count: int
-    key: tuple[int, int] = field(compare=False, repr=False)
+    keys: tuple[tuple[int, int], ...] = field(compare=False, repr=False)
 
 
 class OpenBag:
@@ -202,7 +204,7 @@ class OpenBag:
         else what was wrong with it and how much could be read.
     :ivar incompatible: message types the files define otherwise than our typestore.
     :ivar last_messages: the CDR bytes of the last message of each channel of a topic of
-        ``LATCHED_TOPICS`` (keyed as ``BagTopic.key``).
+        ``LATCHED_TOPICS`` (keyed as ``BagTopic.keys``).
     """
 
     def __init__(self, path: pathlib.Path, files: list[pathlib.Path],
@@ -238,7 +240,7 @@ class OpenBag:
             if schema is not None and schema.encoding == 'ros2msg':
                 self._register(schema)
             self.topics.append(BagTopic(channel.topic, schema.name if schema else '',
-                                        counts[key], key))
+                                        counts[key], (key,)))
         why = missing or ('its index cannot be read' if problems else '')
         total = sum(counts.values())
         if why and not total:
@@ -280,7 +282,7 @@ class OpenBag:
 
     def messages(self, topics: Iterable[BagTopic]) -> Iterator[tuple[BagTopic, int, bytes]]:
         """(topic, log time [ns], CDR bytes) of every message of ``topics``, in file order."""
-        wanted = {t.key: t for t in topics}
+        wanted = {key: t for t in topics for key in t.keys}
         for index, record in self._records([]):
             if isinstance(record, Message) and (index, record.channel_id) in wanted:
                 yield wanted[(index, record.channel_id)], record.log_time, record.data
@@ -374,10 +376,10 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
                     f'bag {path} has no topic {topic} ({expected}): the {_WHAT[topic]} are '
                     f'needed for the coupling analysis; topics present: {sorted(by_topic)}')
             continue
-        conn = conns[0]
-        if conn.msgtype != expected:
+        other = next((c.msgtype for c in conns if c.msgtype != expected), None)
+        if other is not None:
             raise SimulationError(f'bag {path}: topic {topic} has message type '
-                                  f'{conn.msgtype}, expected {expected}')
+                                  f'{other}, expected {expected}')
         if expected in reader.incompatible:
             raise SimulationError(f'bag {path}: topic {topic} was recorded with an incompatible '
                                   f'message definition: the bag defines {expected} otherwise '
@@ -387,7 +389,9 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
                 f'bag {path}: message type {expected} of topic {topic} is unknown: the bag '
                 'carries no definition of it and the iceskate_interfaces .msg files were not '
                 'found (build ros_ws or run from the source tree)')
-        if topic in REQUIRED_TOPICS and sum(c.count for c in conns) == 0:
+        conn = BagTopic(topic, expected, sum(c.count for c in conns),
+                        tuple(sorted(key for c in conns for key in c.keys)))
+        if topic in REQUIRED_TOPICS and conn.count == 0:
             raise SimulationError(f'bag {path}: topic {topic} has no messages: no '
                                   f'{_WHAT[topic]} were recorded')
         chosen[topic] = conn
@@ -555,8 +559,10 @@ class BagReading:
         self._progress = progress
         self.urdf = ''
         description = self._chosen.get('/robot_description')
-        if description is not None and description.key in self._reader.last_messages:
-            raw = self._reader.last_messages[description.key]
+        latched = [key for key in description.keys if key in self._reader.last_messages] \
+            if description is not None else []
+        if latched:  # the last file's
+            raw = self._reader.last_messages[latched[-1]]
             self.urdf = str(self._decode(description, 'its last message', raw).data)
         self.notes: list[str] = []
 
