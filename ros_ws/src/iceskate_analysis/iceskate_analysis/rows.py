@@ -45,40 +45,23 @@ def take_rows(record: Record, index: np.ndarray | slice) -> Record:
 def join_rows(records: Sequence[Record],
               missing: Callable[[Any, str, int], np.ndarray] | None = None) -> Record:
     """The samples of ``records`` one after the other, as one record (its other fields those of
-    the last). A dict of arrays has every key of any record, in the order they first come; a
-    record without one holds ``missing(record, key, its sample count)`` there (default: zeros).
+    the last): ``collect_rows`` into arrays of their total length.
 
     :raises ValueError: for no record.
     """
-    if not records:
-        raise ValueError('no record to join')
-    last = records[-1]
     if len(records) == 1:
-        return last
-    counts = [sample_count(r) for r in records]
-    changes = {}
-    for f in dataclasses.fields(last):
-        values = [getattr(r, f.name) for r in records]
-        if all(_per_sample(v, n) for v, n in zip(values, counts, strict=True)):
-            changes[f.name] = np.concatenate(values)
-        elif all(isinstance(v, dict) and all(_per_sample(x, n) for x in v.values())
-                 for v, n in zip(values, counts, strict=True)):
-            keys = list(dict.fromkeys(key for v in values for key in v))
-            shapes = {key: next(v[key] for v in values if key in v) for key in keys}
-            changes[f.name] = {
-                key: np.concatenate([
-                    v[key] if key in v else
-                    missing(r, key, n) if missing is not None else
-                    np.zeros((n, *shapes[key].shape[1:]), shapes[key].dtype)
-                    for r, v, n in zip(records, values, counts, strict=True)])
-                for key in keys}
-    return dataclasses.replace(last, **changes)
+        return records[0]
+    return collect_rows(records, sum(sample_count(r) for r in records), missing)
 
 
-def collect_rows(records: Iterable[Record], capacity: int) -> Record:
-    """``join_rows`` of ``records`` as they come, each copied into arrays of ``capacity`` rows
-    made once (doubled when more come), so that only one record is held beside them; a key of
-    a dict of arrays that a record lacks holds zeros there.
+def collect_rows(records: Iterable[Record], capacity: int,
+                 missing: Callable[[Any, str, int], np.ndarray] | None = None) -> Record:
+    """The samples of ``records`` one after the other, as one record (its other fields those of
+    the last), copied as they come into arrays of ``capacity`` rows made once (doubled when
+    more come), so that only one record is held beside them. A dict of arrays has every key
+    of any record, in the order they first come; the rows of a record without one hold
+    ``missing(record, key, its sample count)`` there (default: zeros; for the records before
+    the key came, ``record`` is a record of their rows).
 
     :raises ValueError: for no record.
     """
@@ -100,10 +83,20 @@ def collect_rows(records: Iterable[Record], capacity: int) -> Record:
                 for key, v in value.items():
                     if key not in group:
                         group[key] = _empty(v, capacity)
+                        if size and missing is not None:  # the records before it came
+                            group[key][:size] = missing(_filled(last, arrays, size), key, size)
                     group[key][size:size + n] = v
+                if missing is not None:
+                    for key in group.keys() - value.keys():
+                        group[key][size:size + n] = missing(record, key, n)
         last, size = record, size + n
     if last is None:
         raise ValueError('no record to join')
+    return _filled(last, arrays, size)
+
+
+def _filled(last: Record, arrays: dict[str, Any], size: int) -> Record:
+    """``last`` with the first ``size`` rows of ``arrays`` as its per-sample fields."""
     return dataclasses.replace(last, **{
         name: ({key: v[:size] for key, v in value.items()} if isinstance(value, dict)
                else value[:size]) for name, value in arrays.items()})
