@@ -85,6 +85,21 @@ struct Dynamics::Workspace
   Eigen::Vector3d heel;
   Eigen::Vector3d heel_velocity;
   double toe_z = 0.0;
+  // the q at which data[k].oMi were last computed: CRBA in the world convention and the
+  // kinematics passes compute the joint placements alike (a local-convention CRBA does not)
+  std::array<Vector18, 4> placed_q;
+  std::array<bool, 4> placed{};
+
+  void placed_at(int k, const Vector18 & at)
+  {
+    placed_q[static_cast<std::size_t>(k)] = at;
+    placed[static_cast<std::size_t>(k)] = true;
+  }
+
+  bool is_placed_at(int k, const Vector18 & at) const
+  {
+    return placed[static_cast<std::size_t>(k)] && placed_q[static_cast<std::size_t>(k)] == at;
+  }
 };
 
 int SupportModel::frame(const std::string & name) const
@@ -209,6 +224,7 @@ void Dynamics::assemble(
   if (terms.model != w.model || terms.q != q || terms.v != v) {
     pinocchio::crba(model, data, ConstVector(w.q), pinocchio::Convention::WORLD);
     pinocchio::nonLinearEffects(model, data, ConstVector(w.q), ConstVector(w.v));
+    w.placed_at(w.model, q);
     const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
     const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
     terms.model = w.model;
@@ -408,6 +424,7 @@ Eigen::MatrixXd Dynamics::mass_matrix(const Contact & contact, const Vector18 & 
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::crba(model, data, ConstVector(w.q));
+  w.placed[static_cast<std::size_t>(contact.side * 2 + contact.pivot)] = false;
   const Eigen::MatrixXd mass = data.M.selfadjointView<Eigen::Upper>();  // from its upper triangle
   return mass(act, act);
 }
@@ -426,6 +443,7 @@ ConstraintRows Dynamics::constraints(const Contact & contact, const Vector18 & q
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  w.placed_at(contact.side * 2 + contact.pivot, q);
   const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
   w.jacobian.setZero();
   pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
@@ -461,9 +479,13 @@ void Dynamics::frame_placements(
   const SupportModel & support = support_model(contact.side, contact.pivot);
   const pinocchio::Model & model = support.model.pin();
   Workspace & w = *work_;
-  pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
-  w.q = q;
-  pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+  const int k = contact.side * 2 + contact.pivot;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
+  if (!w.is_placed_at(k, q)) {  // e.g. the state the last eq. (7) terms were computed at
+    w.q = q;
+    pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+    w.placed_at(k, q);
+  }
   placements.resize(ids.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {
     const pinocchio::SE3 & placement =
@@ -483,6 +505,7 @@ Vector18 Dynamics::push_force(
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  w.placed_at(contact.side * 2 + contact.pivot, q);
   w.jacobian.setZero();
   pinocchio::getFrameJacobian(
     model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned,
@@ -502,6 +525,7 @@ Eigen::Vector3d Dynamics::frame_velocity(
   w.q = q;
   w.v = v;
   pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
+  w.placed_at(contact.side * 2 + contact.pivot, q);
   return pinocchio::getFrameVelocity(
            model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned)
     .linear();
