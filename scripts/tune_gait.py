@@ -78,8 +78,9 @@ values fell at the 3rd step), and ``weight_transfer.heel_time`` 0.2 s, set by ha
 falls at 3 s on the highest frictions). The first starts from the shipped skate values with
 the front heel's share bounded at 0.35, the second from the first's best run, with the arm
 swing and the cadence weighed, the third from the second's run 177 with the no-yaw twin on
-two low frictions; a fourth, on the third's cases and the no-yaw twin on the two highest
-frictions, from the shipped ``skate_glide``, found nothing better in 14 points:
+two low frictions; a fourth (the no-yaw twin on the two highest frictions too) and a fifth
+(also forward pushes in the glide on one foot), from the shipped ``skate_glide``, found
+nothing better:
 
     python scripts/tune_gait.py --scene skate --method cma --objective robust \
         --scenarios phases --height-weight 3 --cycle-weight 10 --duration 13.5 --runs 154 \
@@ -96,13 +97,17 @@ frictions, from the shipped ``skate_glide``, found nothing better in 14 points:
         --out runs/glide_low_mu.jsonl
     python scripts/tune_gait.py --scene skate_glide --method cma --objective robust \
         --scenarios ice_range --height-weight 3 --cycle-weight 10 --arm-weight 10 \
-        --cadence-weight 5 --duration 13.5 --runs 400 --jobs 1 --sigma 0.02 --seed 53 \
+        --cadence-weight 5 --duration 13.5 --jobs 2 --sigma 0.02 --seed 53 \
         --out runs/glide_range.jsonl
+    python scripts/tune_gait.py --scene skate_glide --method cma --objective robust \
+        --scenarios glide_pushes --height-weight 3 --cycle-weight 10 --arm-weight 10 \
+        --cadence-weight 5 --duration 13.5 --jobs 2 --sigma 0.03 --seed 59 \
+        --out runs/glide_pushes.jsonl
 
 (the first two stopped by hand at these counts, the third by a one-hour timeout at 308 points,
-the fourth after 14; the first ran with the objective before the arm and cadence weights
-existed, which at their defaults score the same; the first three before ``heel_time`` joined
-the box: their seeds draw other points today).
+the fourth and the fifth by hand at 28 and 42; the first ran with the objective before the
+arm and cadence weights existed, which at their defaults score the same; the first three
+before ``heel_time`` joined the box: their seeds draw other points today).
 
 The scenes' initial knee bend (``initial.knee_bend`` 0.11 rad, not searched) was chosen after
 the third search among 0.05-0.15 rad by the head height error and the same checks (0.13 makes
@@ -196,6 +201,13 @@ SCENARIOS['phases_low_mu'] = (*SCENARIOS['phases'], {'mu': 0.0027, 'yaw': False}
 #: 'phases_low_mu' and the no-yaw twin on the two highest frictions of ``sweep endurance``
 SCENARIOS['ice_range'] = (*SCENARIOS['phases_low_mu'], {'mu': 0.0173, 'yaw': False},
                           {'mu': 0.02, 'yaw': False})
+#: 'ice_range' and forward pushes in the middle of the glide on one foot (0.5 and 0.6 s before
+#: an exchange, where ``sweep push_robustness`` found the ice cycle's falls)
+SCENARIOS['glide_pushes'] = (
+    *SCENARIOS['ice_range'],
+    *({'mu': 0.005, 'push_before': (exchange, lead, 150.0)} for exchange in range(5, 10)
+      for lead in (0.5, 0.6)),
+)
 #: Cases outside ``SCENARIOS`` the chosen values are checked on (``--check``): other frictions,
 #: pushes at other times and both directions, and a run of 60 s.
 CHECKS = (
