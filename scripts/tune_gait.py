@@ -33,7 +33,11 @@ times the shortfall of the nominal case's arm-swing ratio against its no-yaw twi
 ``ARM_SWING_RATIO``, as a fraction of it; ``--cadence-weight`` scales the step period's
 penalty (default 1). Every search also varies
 ``weight_transfer.heel_share``, the share's bound while the front heel alone touches, which the
-flat-sole exchange needs (a start from the shipped gaits begins at its top, 2: no bound).
+flat-sole exchange needs (a start from the shipped gaits begins at its top, 2: no bound), and
+``weight_transfer.heel_time``, from when that bound rises (0: never; with no bound it does
+nothing). The ``ice_range`` cases add the no-yaw twin on the two highest frictions of ``sweep
+endurance`` to ``phases_low_mu``, and ``glide_pushes`` forward pushes in the glide on one
+foot.
 
 The shipped skate values (``skate``, ``skate_no_yaw``) are run 68 of the last of five CMA-ES
 searches, rounded to 4 significant digits, and one value set after them, not searched:

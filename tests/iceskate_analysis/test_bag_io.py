@@ -205,6 +205,13 @@ def test_a_bag_split_over_two_files_reads_as_the_whole(tmp_path, sim_bag):
     assert split.urdf == whole.urdf
 
 
+def test_a_split_bag_s_files_are_read_in_the_order_they_were_recorded():
+    """rosbag2 numbers a split bag's files without zero padding: _10 comes after _9."""
+    names = [f'run_{k}.mcap' for k in (10, 2, 0, 11, 1, 9)]
+    ordered = sorted((pathlib.Path(n) for n in names), key=bag_io._recording_order)
+    assert [p.name for p in ordered] == [f'run_{k}.mcap' for k in (0, 1, 2, 9, 10, 11)]
+
+
 def test_read_bag_rebuilds_a_bag_without_metadata_from_its_mcap_file(tmp_path, sim_bag):
     """A recording never closed (a killed run) has no metadata.yaml: every message of the
     .mcap file's complete chunks is read, and the notes say so."""

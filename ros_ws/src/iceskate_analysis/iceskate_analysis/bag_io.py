@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 import functools
 import json
 import pathlib
+import re
 from typing import TYPE_CHECKING, Any
 
 from mcap.exceptions import EndOfFile
@@ -308,7 +309,7 @@ def open_bag(path: str | pathlib.Path) -> OpenBag:
         bag = bag.parent
     if bag.is_file():
         return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it')
-    files = sorted(bag.glob('*.mcap'))
+    files = sorted(bag.glob('*.mcap'), key=_recording_order)
     metadata = bag / 'metadata.yaml'
     if not metadata.is_file():
         return OpenBag(bag, files, {}, 'it has no metadata.yaml (the recording was not '
@@ -317,6 +318,14 @@ def open_bag(path: str | pathlib.Path) -> OpenBag:
         raise SimulationError(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
                               'are read)')
     return OpenBag(bag, files, _metadata_custom_data(metadata), '')
+
+
+def _recording_order(path: pathlib.Path) -> tuple[tuple[int, int | str], ...]:
+    """Sort key of a bag's files in the order they were recorded: their names with the
+    numbers compared as numbers (rosbag2 names a split bag's files ``<bag>_0.mcap``,
+    ``<bag>_1.mcap``, ... ``<bag>_10.mcap``)."""
+    return tuple((0, int(part)) if part.isdigit() else (1, part)
+                 for part in re.split(r'(\d+)', path.name) if part)
 
 
 def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:

@@ -270,6 +270,9 @@ void Dynamics::assemble(
       model, data, ConstVector(w.q),
       static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
       w.jacobian);
+    if (!w.is_placed_at(w.model, q)) {  // the placements of the push frame's chain only
+      w.placed[static_cast<std::size_t>(w.model)] = false;
+    }
     w.applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
   }
 
@@ -563,6 +566,7 @@ Wrench Dynamics::support_wrench(
   if (!inputs.push_frame.empty()) {  // (other queries may have moved data since the terms)
     w.q = q;
     pinocchio::forwardKinematics(model, data, ConstVector(w.q));
+    w.placed_at(w.model, q);
     const auto frame = static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame));
     const Eigen::Vector3d at = pinocchio::updateFramePlacement(model, data, frame).translation();
     minus_force_at(at - origin, inputs.push_force);

@@ -21,8 +21,9 @@ import numpy as np
 from rosbags.typesys.store import Typestore
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.installed import share_path
 from iceskate_sim.model.robot import Robot, load_robot
-from iceskate_sim.recording.bag_types import OFFERED_QOS, make_typestore
+from iceskate_sim.recording.bag_types import INTERFACES_PACKAGE, OFFERED_QOS, make_typestore
 from iceskate_sim.recording.mcap_bag import Bag
 from iceskate_sim.recording.messages import (
     RECORDED_TOPICS,
@@ -158,10 +159,11 @@ class BagRecorder:
     :param tf_every: /tf at every n-th sample, from the first (the other topics at every one).
     :param background: encode and write the messages in a writer process, forked here (a few
         ms, no re-import of ``__main__``; the writer touches neither ROS nor the simulation, so
-        threads of the parent do not matter) and run under SCHED_IDLE: it takes only the CPU
-        time the run and the ROS nodes leave. ``write_block`` hands a block over, waiting while
-        ``QUEUE_BLOCKS`` are in flight, and raises SimulationError once the writer has failed.
-        ``close`` waits until everything is written.
+        threads of the parent do not matter; it imports rosbags' typestore itself, which
+        CPython's fork makes safe with its import lock) and run under SCHED_IDLE: it takes only
+        the CPU time the run and the ROS nodes leave. ``write_block`` hands a block over,
+        waiting while ``QUEUE_BLOCKS`` are in flight, and raises SimulationError once the
+        writer has failed. ``close`` waits until everything is written.
     """
 
     def __init__(self, path: str | pathlib.Path, metadata: dict[str, Any], urdf: str,
@@ -171,6 +173,8 @@ class BagRecorder:
         if self.path.exists():
             raise SimulationError(f'bag {self.path} already exists; choose another output '
                                   'directory')
+        if typestore is None:  # no iceskate_interfaces: said here, not by the writer later
+            share_path(INTERFACES_PACKAGE, 'msg')
         self._typestore = typestore
         self._tf_frames = (robot or load_robot()).tf_frames
         self._messages: SampleMessages | None = None
