@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "iceskate_native/checks.hpp"
+#include "iceskate_native/model_kinematics.hpp"
 
 namespace iceskate_native
 {
@@ -87,6 +88,7 @@ ControlLoop::ControlLoop(
   const std::vector<std::pair<std::string, std::string>> & tf_pairs)
 : simulator_(simulator),
   kinematics_(kinematics),
+  model_kinematics_(dynamic_cast<ModelKinematics *>(kinematics)),
   controllers_(std::move(controllers)),
   pushes_(std::move(pushes)),
   head_origin_(head_origin),
@@ -193,6 +195,10 @@ void ControlLoop::step(SampleBlock & block)
 {
   const HybridState & now = simulator_.state();
   const Observation obs = observation_of(now, simulator_.dynamics().mode(now.contact.mode));
+  if (model_kinematics_ != nullptr) {  // the state's passes, which the period's physics needs
+    model_kinematics_->adopt(now.contact.side, now.contact.pivot, now.q, now.v,
+                             simulator_.dynamics().state_passes(now.contact, now.q, now.v));
+  }
   commands_.resize(controllers_.size());
   for (std::size_t k = 0; k < controllers_.size(); ++k) {  // what each node would send
     ControllerOutput & out = outputs_[k];

@@ -89,11 +89,27 @@ struct Dynamics::Workspace
   // kinematics passes compute the joint placements alike (a local-convention CRBA does not)
   std::array<Vector18, 4> placed_q;
   std::array<bool, 4> placed{};
+  // data[terms.model] still holds the joint placements, Jacobians and velocities of the terms'
+  // passes (state_passes): no pass at another state has run on it since
+  bool passes_intact = false;
 
-  void placed_at(int k, const Vector18 & at)
+  /// A kinematics pass at q (and v, for one with velocities) has run on data[k].
+  void placed_at(int k, const Vector18 & at, const Vector18 * velocity = nullptr)
   {
     placed_q[static_cast<std::size_t>(k)] = at;
     placed[static_cast<std::size_t>(k)] = true;
+    if (k == terms.model && (at != terms.q || (velocity != nullptr && *velocity != terms.v))) {
+      passes_intact = false;
+    }
+  }
+
+  /// Another kind of pass (a local-convention CRBA) has run on data[k].
+  void unplaced(int k)
+  {
+    placed[static_cast<std::size_t>(k)] = false;
+    if (k == terms.model) {
+      passes_intact = false;
+    }
   }
 
   bool is_placed_at(int k, const Vector18 & at) const
@@ -194,6 +210,61 @@ Vector18 Dynamics::passive_forces(const Vector18 & q, const Vector18 & v) const
   return force;
 }
 
+const StateTerms & Dynamics::update_terms(int k, const Vector18 & q, const Vector18 & v)
+{
+  Workspace & w = *work_;
+  StateTerms & terms = w.terms;
+  if (terms.model == k && terms.q == q && terms.v == v) {
+    return terms;
+  }
+  const SupportModel & support = models_[static_cast<std::size_t>(k)];
+  const pinocchio::Model & model = support.model.pin();
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
+  w.q = q;
+  w.v = v;
+  pinocchio::crba(model, data, ConstVector(w.q), pinocchio::Convention::WORLD);
+  pinocchio::nonLinearEffects(model, data, ConstVector(w.q), ConstVector(w.v));
+  w.placed_at(k, q);
+  const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
+  const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
+  terms.model = k;
+  terms.q = q;
+  terms.v = v;
+  terms.mass = data.M.selfadjointView<Eigen::Upper>();  // Pinocchio fills the upper triangle
+  terms.nle = data.nle;
+  terms.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
+  w.jacobian.setZero();
+  pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
+  terms.heel_jacobian = w.jacobian;
+  terms.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
+  // the heel joint's acceleration of the velocity products: the non-linear effects' one less
+  // the (uniform) gravity acceleration they start from at the root
+  const pinocchio::JointIndex joint = model.frames[heel].parentJoint;
+  data.a[joint] = data.a_gf[joint] - data.oMi[joint].actInv(data.a_gf[0]);
+  terms.heel_acceleration =
+    pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
+  terms.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
+  terms.bias = data.f[1];
+  terms.momentum = data.Ag;
+  terms.com = data.com[0];
+  terms.root = data.oMi[1];
+  terms.vertical_bias = terms.root.act(terms.bias).linear()[2];
+  w.passes_intact = true;
+  return terms;
+}
+
+const pinocchio::Data & Dynamics::state_passes(
+  const Contact & contact, const Vector18 & q, const Vector18 & v)
+{
+  const int k = contact.side * 2 + contact.pivot;
+  Workspace & w = *work_;
+  if (!w.passes_intact) {  // the terms may be kept, but other passes have moved their data
+    w.terms.model = -1;
+  }
+  update_terms(k, q, v);
+  return w.data[static_cast<std::size_t>(k)];
+}
+
 void Dynamics::assemble(
   const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs)
 {
@@ -220,36 +291,7 @@ void Dynamics::assemble(
   w.q = q;
   w.v = v;
 
-  StateTerms & terms = w.terms;
-  if (terms.model != w.model || terms.q != q || terms.v != v) {
-    pinocchio::crba(model, data, ConstVector(w.q), pinocchio::Convention::WORLD);
-    pinocchio::nonLinearEffects(model, data, ConstVector(w.q), ConstVector(w.v));
-    w.placed_at(w.model, q);
-    const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
-    const auto toe = static_cast<pinocchio::FrameIndex>(support.frame("swing_toe"));
-    terms.model = w.model;
-    terms.q = q;
-    terms.v = v;
-    terms.mass = data.M.selfadjointView<Eigen::Upper>();  // Pinocchio fills the upper triangle
-    terms.nle = data.nle;
-    terms.heel = pinocchio::updateFramePlacement(model, data, heel).translation();
-    w.jacobian.setZero();
-    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
-    terms.heel_jacobian = w.jacobian;
-    terms.heel_velocity = pinocchio::getFrameVelocity(model, data, heel, kWorldAligned).linear();
-    // the heel joint's acceleration of the velocity products: the non-linear effects' one less
-    // the (uniform) gravity acceleration they start from at the root
-    const pinocchio::JointIndex joint = model.frames[heel].parentJoint;
-    data.a[joint] = data.a_gf[joint] - data.oMi[joint].actInv(data.a_gf[0]);
-    terms.heel_acceleration =
-      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
-    terms.toe_z = pinocchio::updateFramePlacement(model, data, toe).translation()[2];
-    terms.bias = data.f[1];
-    terms.momentum = data.Ag;
-    terms.com = data.com[0];
-    terms.root = data.oMi[1];
-    terms.vertical_bias = terms.root.act(terms.bias).linear()[2];
-  }
+  const StateTerms & terms = update_terms(w.model, q, v);
   w.heel = terms.heel;
   w.heel_velocity = terms.heel_velocity;
   w.toe_z = terms.toe_z;
@@ -427,7 +469,7 @@ Eigen::MatrixXd Dynamics::mass_matrix(const Contact & contact, const Vector18 & 
   pinocchio::Data & data = w.data[static_cast<std::size_t>(contact.side * 2 + contact.pivot)];
   w.q = q;
   pinocchio::crba(model, data, ConstVector(w.q));
-  w.placed[static_cast<std::size_t>(contact.side * 2 + contact.pivot)] = false;
+  w.unplaced(contact.side * 2 + contact.pivot);
   const Eigen::MatrixXd mass = data.M.selfadjointView<Eigen::Upper>();  // from its upper triangle
   return mass(act, act);
 }
@@ -528,7 +570,7 @@ Eigen::Vector3d Dynamics::frame_velocity(
   w.q = q;
   w.v = v;
   pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
-  w.placed_at(contact.side * 2 + contact.pivot, q);
+  w.placed_at(contact.side * 2 + contact.pivot, q, &v);
   return pinocchio::getFrameVelocity(
            model, data, static_cast<pinocchio::FrameIndex>(support.frame(frame)), kWorldAligned)
     .linear();

@@ -46,6 +46,8 @@ struct StateCache
   Vector18 v = Vector18::Zero();
   bool has_q = false;  // q holds the posture of the answers below
   bool has_v = false;  // v holds the velocity of the velocity-level answers
+  bool placed = false;  // the data holds the joint placements and Jacobians at q (adopted)
+  bool moving = false;  // the data holds the joint velocities at (q, v) (adopted)
   bool positions = false;  // joints, frames, head, heel_z_row
   std::array<Eigen::Vector3d, kCoordinates> joints;  // world positions [m]
   std::array<Eigen::Vector3d, kFrames> frames;       // world positions [m], Frame's order
@@ -162,6 +164,7 @@ StateCache & ModelKinematics::at(std::size_t k, const Vector18 & q, const Vector
     c.v = v;
     c.has_v = true;
     c.velocities = false;
+    c.moving = false;
   }
   return c;
 }
@@ -175,8 +178,11 @@ const StateCache & ModelKinematics::positions(std::size_t k, const Vector18 & q)
   const pinocchio::Model & model = models_[k].model.pin();
   Workspace & w = *work_;
   pinocchio::Data & data = w.data[k];
-  w.q = q;
-  pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+  if (!c.placed) {
+    w.q = q;
+    pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+    c.placed = true;
+  }
   for (std::size_t i = 0; i < kCoordinates; ++i) {
     c.joints[i] = data.oMi[w.joints[k][i]].translation();
   }
@@ -202,6 +208,23 @@ const StateCache & ModelKinematics::positions(std::size_t k, const Vector18 & q)
   c.heel_z_row = w.jacobian.row(2).transpose();
   c.positions = true;
   return c;
+}
+
+void ModelKinematics::adopt(
+  int side, int pivot, const Vector18 & q, const Vector18 & v, const pinocchio::Data & passes)
+{
+  const auto k = model_index(side, pivot);
+  StateCache & c = at(k, q, v);
+  if (c.placed && c.moving) {
+    return;
+  }
+  pinocchio::Data & data = work_->data[k];
+  data.liMi = passes.liMi;
+  data.oMi = passes.oMi;
+  data.J = passes.J;
+  data.v = passes.v;
+  c.placed = true;
+  c.moving = true;
 }
 
 HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)
@@ -276,11 +299,14 @@ const StateCache & ModelKinematics::velocities(
   const pinocchio::Model & model = models_[k].model.pin();
   Workspace & w = *work_;
   pinocchio::Data & data = w.data[k];
-  w.q = q;
-  w.v = v;
-  // one forward pass for the joint velocities, the centre of mass and its Jacobian (what
-  // centerOfMass(q, v) and jacobianCenterOfMass(q) would each run again at the same state)
-  pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
+  if (!c.moving) {
+    w.q = q;
+    w.v = v;
+    // one forward pass for the joint velocities, the centre of mass and its Jacobian (what
+    // centerOfMass(q, v) and jacobianCenterOfMass(q) would each run again at the same state)
+    pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
+    c.moving = true;
+  }
   for (std::size_t i = 0; i < kCoordinates; ++i) {
     c.joint_velocities[i] =
       pinocchio::getVelocity(model, data, w.joints[k][i], kWorldAligned).linear();

@@ -24,6 +24,8 @@
 namespace iceskate_native
 {
 
+class ModelKinematics;
+
 /// An external force held over [start, start + duration) [s] at a frame's origin (a scene's
 /// push): world force [N].
 struct Push
@@ -191,6 +193,7 @@ private:
 
   HybridSimulator & simulator_;
   Kinematics * kinematics_;
+  ModelKinematics * model_kinematics_;  // kinematics_ if it can adopt the dynamics' passes
   std::vector<Controller *> controllers_;
   std::vector<Push> pushes_;
   Eigen::Vector3d head_origin_;

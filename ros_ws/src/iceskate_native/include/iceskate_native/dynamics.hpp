@@ -111,6 +111,8 @@ struct ConstraintRows
   Eigen::VectorXd position;  ///< C(q) [m, rad]
 };
 
+struct StateTerms;  // the input-free terms of one state (in dynamics.cpp)
+
 /// Eq. (7) of every mode on the four support models; keeps one Pinocchio workspace per model,
 /// so an instance is not thread-safe (make one per thread).
 class Dynamics
@@ -165,6 +167,14 @@ public:
   Eigen::Vector3d frame_velocity(const Contact & contact, const Vector18 & q, const Vector18 & v,
                                  const std::string & frame);
 
+  /// The Pinocchio data of the support model of `contact` holding the passes of eq. (7)'s
+  /// terms at (q, v), made again unless they are the last ones and no other pass has run on
+  /// that data since: the joint placements (liMi, oMi), the joint Jacobians (J, world) and the
+  /// joint velocities (v) of a CRBA in the world convention and the non-linear effects. For
+  /// ModelKinematics::adopt; valid until the next call on this object.
+  const pinocchio::Data & state_passes(const Contact & contact, const Vector18 & q,
+                                       const Vector18 & v);
+
   const SupportModel & support_model(int side, int pivot) const;
   const Mode & mode(int number) const;
   const ModeTable & modes() const noexcept { return modes_; }
@@ -173,6 +183,8 @@ public:
 private:
   struct Workspace;  // Pinocchio data and the assembled system (in dynamics.cpp)
 
+  /// The input-free terms of (q, v) on support model k (two Pinocchio passes unless kept).
+  const StateTerms & update_terms(int k, const Vector18 & q, const Vector18 & v);
   void assemble(
     const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs);
   void solve(const Contact & contact, const Vector18 & q, const Vector18 & v);

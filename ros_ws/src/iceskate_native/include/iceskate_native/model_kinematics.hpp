@@ -28,6 +28,13 @@ public:
   ModelKinematics(const ModelKinematics &) = delete;
   ModelKinematics & operator=(const ModelKinematics &) = delete;
 
+  /// Take the joint placements, Jacobians and velocities of support model (side, pivot) at
+  /// (q, v) from `passes` (Dynamics::state_passes at the same state, whose passes compute them
+  /// alike) instead of running the two passes that make them: the answers stay the same to
+  /// the bit. They serve the queries at that state until another state is asked.
+  void adopt(int side, int pivot, const Vector18 & q, const Vector18 & v,
+             const pinocchio::Data & passes);
+
   const Mode & mode(int number) const override;
   double total_mass() const override { return mass_; }
   Eigen::Vector3d joint_placement(int side, int pivot, int joint) const override;
