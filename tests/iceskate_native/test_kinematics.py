@@ -11,6 +11,7 @@ import iceskate_native
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import PIVOTS, SIDES, load_robot
+from iceskate_sim.physics.native import MODE_ROWS, NativeGaitDynamics, native_robot
 from iceskate_sim.physics.native_control import native_kinematics
 from oracle.dynamics import GaitDynamics
 
@@ -110,6 +111,26 @@ def test_the_four_models_and_a_known_mass_are_needed(robot):
     del frames['pelvis_centre']
     with pytest.raises(ValueError, match="unknown frame 'pelvis_centre'"):
         iceskate_native.ModelKinematics([model] * 4, [frames] * 4, modes, 30.0)
+
+
+def test_the_kinematics_adopt_the_passes_of_the_same_models_only(robot, kinematics):
+    """A control loop hands the laws' kinematics the dynamics' passes only over equal models
+    (the runs that adopt them equal the nodes' runs bit for bit: test_control_loop.py)."""
+    models, frames = native_robot(robot)
+    dynamics = NativeGaitDynamics(robot).kernel
+    assert kinematics.can_adopt_from(dynamics)
+    heavier = []
+    for side in SIDES:
+        for pivot in PIVOTS:
+            model = pin.Model(robot.support_model(side, pivot).model)
+            inertia = model.inertias[model.getJointId('q8')]
+            model.inertias[model.getJointId('q8')] = pin.Inertia(
+                inertia.mass * 1.1, inertia.lever, inertia.inertia)
+            heavier.append(iceskate_native.load_model(model))
+    other = iceskate_native.ModelKinematics(heavier, frames, MODE_ROWS, robot.total_mass)
+    assert not other.can_adopt_from(dynamics)
+    assert iceskate_native.ModelKinematics(models, frames, MODE_ROWS,
+                                           robot.total_mass).can_adopt_from(dynamics)
 
 
 def _observation(**changes):

@@ -254,7 +254,11 @@ void bind_controller(nb::module_ & m)
     m, "ModelKinematics",
     "Kinematics on Pinocchio over the four support models (index side * 2 + pivot, as "
     "Dynamics takes them), with its own workspaces: one instance per thread.")
-    .def("__init__", &construct_kinematics, "models"_a, "frames"_a, "modes"_a, "total_mass"_a);
+    .def("__init__", &construct_kinematics, "models"_a, "frames"_a, "modes"_a, "total_mass"_a)
+    .def("can_adopt_from", &ModelKinematics::can_adopt_from, "dynamics"_a,
+         "Whether a ControlLoop over `dynamics` hands these kinematics the joint placements, "
+         "Jacobians and velocities of its passes at each period's state: the same four support "
+         "models, every joint revolute or prismatic.");
 
   nb::class_<Observation>(
     m, "Observation",

@@ -36,6 +36,13 @@ Observation observation_of(const HybridState & s, const Mode & mode)
           std::isfinite(s.t_touchdown) ? stamp_time(s.t_touchdown) : s.t_touchdown};
 }
 
+/// `kinematics` if it is a ModelKinematics that can adopt the passes of `dynamics`, else null.
+ModelKinematics * adopting(Kinematics * kinematics, const Dynamics & dynamics)
+{
+  auto * model = dynamic_cast<ModelKinematics *>(kinematics);
+  return model != nullptr && model->can_adopt_from(dynamics) ? model : nullptr;
+}
+
 /// Index in `events` of the latest transition at or before t [s] (-1: none).
 long last_event_at(const std::vector<TransitionRecord> & events, double t)
 {
@@ -88,7 +95,7 @@ ControlLoop::ControlLoop(
   const std::vector<std::pair<std::string, std::string>> & tf_pairs)
 : simulator_(simulator),
   kinematics_(kinematics),
-  model_kinematics_(dynamic_cast<ModelKinematics *>(kinematics)),
+  model_kinematics_(adopting(kinematics, simulator.dynamics())),
   controllers_(std::move(controllers)),
   pushes_(std::move(pushes)),
   head_origin_(head_origin),
@@ -195,7 +202,9 @@ void ControlLoop::step(SampleBlock & block)
 {
   const HybridState & now = simulator_.state();
   const Observation obs = observation_of(now, simulator_.dynamics().mode(now.contact.mode));
-  if (model_kinematics_ != nullptr) {  // the state's passes, which the period's physics needs
+  // the passes of the state, which the period's physics needs, unless the laws read the other
+  // pivot's model (a flat sole: the toe's)
+  if (model_kinematics_ != nullptr && obs.pivot == now.contact.pivot) {
     model_kinematics_->adopt(now.contact.side, now.contact.pivot, now.q, now.v,
                              simulator_.dynamics().state_passes(now.contact, now.q, now.v));
   }

@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -225,6 +226,27 @@ void ModelKinematics::adopt(
   data.v = passes.v;
   c.placed = true;
   c.moving = true;
+}
+
+bool ModelKinematics::can_adopt_from(const Dynamics & dynamics) const
+{
+  static const std::set<std::string> kConstantSubspace = {
+    "JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
+    "JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"};
+  for (std::size_t k = 0; k < models_.size(); ++k) {
+    const pinocchio::Model & own = models_[k].model.pin();
+    const pinocchio::Model & theirs =
+      dynamics.support_model(static_cast<int>(k) / 2, static_cast<int>(k) % 2).model.pin();
+    if (!(own == theirs)) {
+      return false;
+    }
+    for (pinocchio::JointIndex i = 1; i < own.joints.size(); ++i) {
+      if (kConstantSubspace.count(own.joints[i].shortname()) == 0) {
+        return false;
+      }
+    }
+  }
+  return true;
 }
 
 HeadPose ModelKinematics::head_pose(const SupportState & state, const Vector18 & q)

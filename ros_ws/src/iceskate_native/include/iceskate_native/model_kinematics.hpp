@@ -35,6 +35,11 @@ public:
   void adopt(int side, int pivot, const Vector18 & q, const Vector18 & v,
              const pinocchio::Data & passes);
 
+  /// Whether adopt() may take the passes of `dynamics`: its four support models equal these
+  /// (pinocchio::Model equality), and every joint is revolute or prismatic, whose motion
+  /// subspace does not depend on q (adopt() does not copy the joints' data).
+  bool can_adopt_from(const Dynamics & dynamics) const;
+
   const Mode & mode(int number) const override;
   double total_mass() const override { return mass_; }
   Eigen::Vector3d joint_placement(int side, int pivot, int joint) const override;
