@@ -15,8 +15,8 @@ are compared:
   1 worker, ``sweep time / runs - mean loop time``; it comes apart into the part inside the
   worker (scene validation, session set-up, metrics: each run's ``worker_time_s`` less its
   loop), a lower bound of the overhead of a sweep of any length, and the rest, the sweep's
-  time outside its one worker's runs (the pool's start-up, the hand-over of each run and the
-  table), shown in seconds a sweep, which a longer sweep spreads over more runs;
+  time outside its one worker's runs, shown in seconds a sweep: the pool's start-up, which a
+  longer sweep spreads over more runs, and each run's hand-over and table row;
 * **10,000 runs**: the time 10,000 such runs take at the 2-worker rate (goal <= 10 min for
   15 s runs of ``skate``).
 
