@@ -47,8 +47,8 @@ struct StateCache
   Vector18 v = Vector18::Zero();
   bool has_q = false;  // q holds the posture of the answers below
   bool has_v = false;  // v holds the velocity of the velocity-level answers
-  bool placed = false;  // the data holds the joint placements and Jacobians at q (adopted)
-  bool moving = false;  // the data holds the joint velocities at (q, v) (adopted)
+  bool placed = false;  // the data holds the joint placements and Jacobians at q
+  bool moving = false;  // the data holds the joint placements and velocities at (q, v)
   bool positions = false;  // joints, frames, head, heel_z_row
   std::array<Eigen::Vector3d, kCoordinates> joints;  // world positions [m]
   std::array<Eigen::Vector3d, kFrames> frames;       // world positions [m], Frame's order
