@@ -103,7 +103,8 @@ struct Dynamics::Workspace
     }
   }
 
-  /// Another kind of pass (a local-convention CRBA) has run on data[k].
+  /// A pass that leaves data[k]'s joint placements at no one state has run on it (a
+  /// local-convention CRBA, a Jacobian of one chain at another state).
   void unplaced(int k)
   {
     placed[static_cast<std::size_t>(k)] = false;
@@ -313,7 +314,7 @@ void Dynamics::assemble(
       static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
       w.jacobian);
     if (!w.is_placed_at(w.model, q)) {  // the placements of the push frame's chain only
-      w.placed[static_cast<std::size_t>(w.model)] = false;
+      w.unplaced(w.model);
     }
     w.applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
   }
