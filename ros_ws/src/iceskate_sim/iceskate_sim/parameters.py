@@ -60,9 +60,11 @@ def block(factory: Any, description: str) -> Any:
     return field(default_factory=factory, metadata={'rules': Rules(description)})
 
 
-def rules_of(cls: type) -> dict[str, Rules]:
+@functools.cache
+def rules_of(cls: type) -> types.MappingProxyType[str, Rules]:
     """The rules of every field of a parameter class (a description-only rule if none)."""
-    return {f.name: f.metadata.get('rules', Rules(f.name)) for f in fields(cls)}
+    return types.MappingProxyType({f.name: f.metadata.get('rules', Rules(f.name))
+                                   for f in fields(cls)})
 
 
 @functools.cache
@@ -71,6 +73,7 @@ def field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
+@functools.cache
 def optional_inner(tp: Any) -> Any:
     """``X`` of an ``X | None`` annotation (``tp`` itself otherwise)."""
     args = typing.get_args(tp)
@@ -80,13 +83,20 @@ def optional_inner(tp: Any) -> Any:
     return tp
 
 
+@functools.cache
+def _generic(tp: Any) -> tuple[Any, tuple[Any, ...]]:
+    """The origin and arguments of annotation ``tp`` (``typing.get_origin``, ``get_args``)."""
+    return typing.get_origin(tp), typing.get_args(tp)
+
+
 def _number(name: str, value: Any, r: Rules, error: type[Exception], kind: type) -> Any:
     if kind is int:
         if isinstance(value, bool) or not isinstance(value, numbers.Integral):
             raise error(f'{name} must be an integer, got {value!r}')
         x: float = int(value)
-    else:
-        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    else:  # a float skips the slower ABC checks
+        if type(value) is not float and (isinstance(value, bool)
+                                         or not isinstance(value, numbers.Real)):
             raise error(f'{name} must be a number, got {value!r}')
         x = float(value)
         if not math.isfinite(x):
@@ -108,7 +118,7 @@ def check_value(name: str, value: Any, tp: Any, r: Rules, error: type[Exception]
             return None
         raise error(f'{name} must be set, got None')
     tp = optional_inner(tp)
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    origin, args = _generic(tp)
     if tp is bool:
         if not isinstance(value, bool):
             raise error(f'{name} must be true or false, got {value!r}')

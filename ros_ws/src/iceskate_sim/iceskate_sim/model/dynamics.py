@@ -101,14 +101,18 @@ class ModelTerms:
     def __init__(self, robot: Robot, params: DynamicsParameters | None = None) -> None:
         self.robot = robot
         self.params = params or DynamicsParameters()
-        self._data = {key: sm.new_data() for key, sm in robot.models.items()}
+        self._data: dict[tuple[str, str], pin.Data] = {}  # made at a model's first use
         self._zeros = np.zeros(N_COORDINATES)
         self._lower = np.tril_indices(N_COORDINATES, -1)
 
     # ----------------------------------------------------------------- helpers
     def _model(self, contact: ContactState) -> tuple[pin.Model, pin.Data, dict[str, int]]:
         sm = self.robot.support_model(contact.side, contact.pivot)
-        return sm.model, self._data[(sm.side, sm.pivot)], sm.frame_ids
+        key = (sm.side, sm.pivot)
+        data = self._data.get(key)
+        if data is None:
+            data = self._data[key] = sm.new_data()
+        return sm.model, data, sm.frame_ids
 
     def _constraint_rows(self, contact: ContactState, data: pin.Data, model: pin.Model,
                          frames: dict[str, int], q: np.ndarray,

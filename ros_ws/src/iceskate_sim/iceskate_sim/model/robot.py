@@ -99,9 +99,10 @@ class SupportModel:
         return self.model.createData()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Robot:
-    """The humanoid: the four support-rooted models and the per-coordinate constants."""
+    """The humanoid: the four support-rooted models and the per-coordinate constants (equal
+    and hashed by identity: a key of the caches made from it)."""
 
     urdf_path: pathlib.Path
     urdf_model: pin.Model

@@ -4,6 +4,8 @@ run in ``simulation.Simulator``. Errors come back as ``SimulationError``.
 
 from __future__ import annotations
 
+import functools
+
 import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import DynamicsParameters, ModelTerms
@@ -19,12 +21,21 @@ MODE_ROWS = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i
               list(m.constraints)) for m in MODES.values()]
 
 
+#: The support models' keys in the kernels' order (side * 2 + pivot).
+MODEL_KEYS = tuple((side, pivot) for side in SIDES for pivot in PIVOTS)
+
+
+@functools.lru_cache(maxsize=4)
+def _native_models(robot: Robot) -> tuple[iceskate_native.RobotModel, ...]:
+    """The C++ copies of ``robot``'s four support models, made once per robot (they are
+    immutable, so every kernel made from ``robot`` shares them)."""
+    return tuple(iceskate_native.load_model(robot.models[key].model) for key in MODEL_KEYS)
+
+
 def native_robot(robot: Robot) -> tuple[list, list[dict[str, int]]]:
     """The four support models in the kernels' order (side * 2 + pivot) and their frames."""
-    keys = [(side, pivot) for side in SIDES for pivot in PIVOTS]
-    models = [iceskate_native.load_model(robot.models[key].model) for key in keys]
-    frames = [dict(robot.models[key].frame_ids) for key in keys]
-    return models, frames
+    return (list(_native_models(robot)),
+            [dict(robot.models[key].frame_ids) for key in MODEL_KEYS])
 
 
 class NativeGaitDynamics(ModelTerms):

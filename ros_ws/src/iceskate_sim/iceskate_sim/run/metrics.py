@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterator, Mapping
 import contextlib
-import itertools
 import os
 import pathlib
 import shutil
@@ -192,21 +191,25 @@ def _rms(x: np.ndarray) -> float:
 
 def _runs(values: np.ndarray) -> list[int]:
     """Collapse consecutive repeats: [1, 1, 2, 2, 10] -> [1, 2, 10]."""
-    return [int(value) for value, _ in itertools.groupby(values.tolist())]
+    first = np.ones(values.shape, dtype=bool)  # where a run starts
+    np.not_equal(values[1:], values[:-1], out=first[1:])
+    return values[first].tolist()
 
 
-def _arm_swing(q: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:
-    """Peak-to-peak [rad] of the shoulders q11 and q14, their mean (the arm swing of
-    ``arm_swing_ratio``) and their correlation over the samples of ``mask`` (None for fewer
-    than 3)."""
-    if np.count_nonzero(mask) <= 2:
+def _arm_swing(shoulders: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:
+    """Peak-to-peak [rad] of the shoulders q11 and q14 (``shoulders``: their two rows), their
+    mean (the arm swing of ``arm_swing_ratio``) and their correlation over the samples of
+    ``mask`` (None for fewer than 3)."""
+    samples = np.count_nonzero(mask)
+    if samples <= 2:
         return None
-    q11, q14 = q[mask, 11], q[mask, 14]
+    q11, q14 = shoulders[0, mask], shoulders[1, mask]
     corr = (float(np.corrcoef(q11, q14)[0, 1])
             if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
-    return {'q11_peak_to_peak': float(np.ptp(q11)), 'q14_peak_to_peak': float(np.ptp(q14)),
-            'mean_peak_to_peak': float((np.ptp(q11) + np.ptp(q14)) / 2.0),
-            'corr_q11_q14': corr, 'samples': int(np.count_nonzero(mask))}
+    swing11, swing14 = np.ptp(q11), np.ptp(q14)
+    return {'q11_peak_to_peak': float(swing11), 'q14_peak_to_peak': float(swing14),
+            'mean_peak_to_peak': float((swing11 + swing14) / 2.0),
+            'corr_q11_q14': corr, 'samples': int(samples)}
 
 
 def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
@@ -265,8 +268,10 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
             'y': float(np.max(np.abs(err[after, 0]))), 'z': float(np.max(np.abs(err[after, 1]))),
             'pitch': float(np.max(np.abs(err[after, 2])))}
     modes = a['mode']
+    entered, counts = np.unique(modes, return_counts=True)
     metrics['mode_time_fraction'] = {
-        str(m): float(np.mean(modes == m)) for m in sorted(set(modes.tolist()))}
+        str(m): count / modes.size for m, count in zip(entered.tolist(), counts.tolist(),
+                                                       strict=True)}
     flat = a['pivot'] == 0
     cop = a['cop_y']
     y0 = a['q'][:, 0]
@@ -281,9 +286,10 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     metrics['mode_sequence_per_step'] = {str(k): _runs(modes[start:end]) for k, (start, end)
                                          in enumerate(zip(bounds[:-1], bounds[1:], strict=True))}
     late = steps >= ARM_SWING_FROM_STEP
-    metrics['arm_swing'] = _arm_swing(a['q'], late)
+    shoulders = a['q'][:, [11, 14]].T.copy()  # q11 and q14, each contiguous
+    metrics['arm_swing'] = _arm_swing(shoulders, late)
     # the second half (in time) of that window: the swing once the transients have decayed
     t_half = (t[late][0] + t[-1]) / 2.0 if np.any(late) else np.inf
-    metrics['arm_swing_steady'] = _arm_swing(a['q'], late & (t >= t_half))
+    metrics['arm_swing_steady'] = _arm_swing(shoulders, late & (t >= t_half))
     metrics['yaw_range_rad'] = [float(a['q'][:, 8].min()), float(a['q'][:, 8].max())]
     return metrics
