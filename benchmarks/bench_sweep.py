@@ -12,9 +12,9 @@ are compared:
   2-core machine);
 * **overhead**: per run, what the sweep's time holds beyond the simulation loop (each run's
   ``wall_time_s`` in metrics.json), over that loop's time (goal <= 2 % for 15 s runs). With
-  1 worker, from a sweep of ``--runs`` and one of twice as many: the time beyond the runs' loops
-  grows by ``--runs`` runs' overhead from one to the other (the pool's start-up, once a sweep,
-  cancels). That comes apart into the part inside the worker (scene validation, session
+  1 worker, from a sweep of ``--runs`` and one of three times as many: the time beyond the runs'
+  loops grows by twice ``--runs`` runs' overhead from one to the other (the pool's start-up,
+  once a sweep, cancels; it varies by about 0.1 s from sweep to sweep). That comes apart into the part inside the worker (scene validation, session
   set-up, metrics: each run's ``worker_time_s`` less its loop) and the rest (each run's
   hand-over and table row); the pool's start-up is shown in seconds a sweep;
 * **10,000 runs**: the time 10,000 such runs take at the 2-worker rate (goal <= 10 min for
@@ -41,6 +41,7 @@ from iceskate_study.sweep import run_sweep
 GOAL_RATIO = 1.9  # runs per minute, 2 workers over 1
 GOAL_OVERHEAD = 0.02  # per-run overhead over the simulation loop (15 s runs)
 GOAL_10K_MIN = 10.0  # minutes for 10,000 runs of the 15 s skate scene
+LONGER = 3  # the longer 1-worker sweep's runs, in --runs
 
 
 def sweep_once(spec_raw: dict, workers: int, runs: int) -> tuple[float, list[dict]]:
@@ -76,11 +77,11 @@ def main() -> int:
             loop = statistics.fmean(r['wall_time_s'] for r in rows)
             if workers == 1:
                 longer_spec = {**spec_raw, 'axes': {'floor.mu': {
-                    'linspace': [0.004, 0.006, 2 * args.runs]}}}
-                longer, longer_rows = sweep_once(longer_spec, 1, 2 * args.runs)
+                    'linspace': [0.004, 0.006, LONGER * args.runs]}}}
+                longer, longer_rows = sweep_once(longer_spec, 1, LONGER * args.runs)
                 beyond = elapsed - sum(r['wall_time_s'] for r in rows)
                 per_run = (longer - sum(r['wall_time_s'] for r in longer_rows)
-                           - beyond) / args.runs
+                           - beyond) / ((LONGER - 1) * args.runs)
                 overhead.append(per_run / loop)
                 inside.append(statistics.fmean(r['worker_time_s'] - r['wall_time_s']
                                                for r in rows + longer_rows) / loop)
@@ -92,7 +93,7 @@ def main() -> int:
     print(f'runs/min: 1 worker {one:.1f}, 2 workers {two:.1f}; ratio {two / one:.2f} '
           f'(goal >= {GOAL_RATIO:g})')
     print(f'per-run overhead beyond the simulation ({args.duration:g} s runs, 1 worker, '
-          f'sweeps of {args.runs} and {2 * args.runs} runs): '
+          f'sweeps of {args.runs} and {LONGER * args.runs} runs): '
           f'{100 * statistics.median(overhead):.1f} % of the loop (goal <= '
           f'{100 * GOAL_OVERHEAD:g} %), {100 * statistics.median(inside):.1f} % of it in the '
           f"worker; and once a sweep (the pool's start-up, the last table write): "
