@@ -2,9 +2,11 @@
 
 ``oracle.dynamics.GaitDynamics`` is the readable reference; ``NativeGaitDynamics`` (called
 through ``oracle.native_probes``) solves the same system in C++ (``iceskate_native.Dynamics``).
-The two factorise the same matrix with LU of partial pivoting in different operation orders, so
-they agree to rounding: each quantity to 1e-11 of its scale (the dynamics matrix has condition
-numbers up to ~1e4 here, and most entries agree to ~1e-13).
+The reference factorises the whole matrix by LU of partial pivoting; the kernel solves it as a
+saddle point (the mass matrix's Cholesky factor, a rank-one update, the constraints' Schur
+complement), and by LU only when the mass block is not positive definite. They agree to
+rounding: each quantity to 1e-11 of its scale (the dynamics matrix has condition numbers up to
+~1e4 here, and most entries agree to ~1e-13).
 """
 
 import itertools
@@ -119,6 +121,24 @@ def test_implicit_acceleration_agrees(engines, number, side, pivot):
     contact = ContactState(mode, side, pivot, heel_anchor_y=0.02)
     tau = rng.normal(0.0, 5.0, 18)
     stiffness, damping = rng.uniform(0.0, 800.0, 18), rng.uniform(0.0, 16.0, 18)
+    x = reference.implicit_acceleration(contact, q, v, tau, None, stiffness, damping, 1e-3)
+    y = native.implicit_acceleration(contact, q, v, tau, None, stiffness, damping, 1e-3)
+    assert np.max(np.abs(x - y)) <= TOLERANCE * max(1.0, float(np.max(np.abs(x))))
+
+
+@pytest.mark.parametrize('number', [1, 4, 8, 16, 20])
+def test_an_implicit_step_whose_mass_block_is_indefinite_agrees(engines, number):
+    """A negative impedance damping (a controller may send one) can leave M + h D without a
+    Cholesky factor: the kernel then solves the system by LU, and still agrees."""
+    reference, native = engines
+    mode = get_mode(number)
+    rng = np.random.default_rng([SEED, number, 13])
+    q, v = state(mode, rng)
+    contact = ContactState(mode, 'right', 'toe', heel_anchor_y=0.02)
+    tau = rng.normal(0.0, 5.0, 18)
+    damping = np.zeros(18)
+    damping[9] = -1e5  # h d = -100 N m s^2/rad: far below the mass matrix's own scale
+    stiffness = np.zeros(18)
     x = reference.implicit_acceleration(contact, q, v, tau, None, stiffness, damping, 1e-3)
     y = native.implicit_acceleration(contact, q, v, tau, None, stiffness, damping, 1e-3)
     assert np.max(np.abs(x - y)) <= TOLERANCE * max(1.0, float(np.max(np.abs(x))))

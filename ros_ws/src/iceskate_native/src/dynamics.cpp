@@ -15,6 +15,7 @@
 #include <pinocchio/multibody.hpp>
 
 #include "iceskate_native/errors.hpp"
+#include "iceskate_native/saddle_point.hpp"
 
 namespace iceskate_native
 {
@@ -23,12 +24,9 @@ namespace
 {
 
 constexpr double kRankTolerance = 1e-10;  // Hadamard ratio below which the constraints are singular
-constexpr int kMaxSize = kCoordinates + 3;
 constexpr auto kWorldAligned = pinocchio::LOCAL_WORLD_ALIGNED;
 
 using ConstVector = Eigen::Ref<const Eigen::VectorXd>;  // selects Pinocchio's compiled algorithms
-using SystemMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxSize, kMaxSize>;
-using SystemVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxSize, 1>;
 
 // Row of the world-aligned heel Jacobian and acceleration a constraint uses.
 int row_of(Constraint c) { return c == Constraint::kHeelZ ? 2 : 1; }
@@ -75,7 +73,10 @@ struct Dynamics::Workspace
   int n = 0;      // active coordinates
   int nc = 0;     // active constraints
   SystemMatrix A;
-  SystemMatrix factored;  // the matrix `lu` holds the factors of (none: empty)
+  ActiveVector row_change;  // a of A's first row, M + e0 a^T (empty: none)
+  SystemMatrix factored;  // the matrix whose factors `saddle` (or `lu`) holds (none: empty)
+  bool structured = false;  // factored as a saddle point (else by `lu`)
+  SaddlePoint saddle;
   SystemVector b;
   SystemVector x;
   Eigen::PartialPivLU<SystemMatrix> lu;
@@ -357,10 +358,12 @@ void Dynamics::assemble(
         (mu * contact.heel_slide_dir * jacobian(1, act) - w.A.row(n).head(n)).transpose();
     }
   }
+  w.row_change.resize(0);
   if (mode.y0_active) {  // Q_sup = -mu s0 N_s, N_s = m (g + zdd_com) - f_nz
     const double k = mu * contact.support_slide_dir;
     // m zdd_com = row z of A_g qdd + its velocity products
-    w.A.row(0).head(n) += k * terms.momentum(2, act);
+    w.row_change = k * terms.momentum(2, act).transpose();
+    w.A.row(0).head(n) += w.row_change.transpose();
     w.b[0] -= k * terms.vertical_bias;
     if (nc > 0) {
       w.A(0, n) -= k;
@@ -386,16 +389,20 @@ void Dynamics::solve(const Contact & contact, const Vector18 & q, const Vector18
 {
   Workspace & w = *work_;
   if (w.factored.rows() != w.A.rows() || w.factored != w.A) {  // e.g. the same state again
-    w.lu.compute(w.A);
+    w.structured = w.saddle.factor(w.A, w.n, w.nc, w.row_change);
+    if (!w.structured) {  // e.g. an impedance with negative damping in an implicit step
+      w.lu.compute(w.A);
+    }
     w.factored = w.A;
   }
-  const auto & lu = w.lu.matrixLU();
-  for (Eigen::Index i = 0; i < lu.rows(); ++i) {
-    if (lu(i, i) == 0.0) {
+  if (w.structured) {
+    w.saddle.solve(w.b, w.x);
+  } else {
+    if ((w.lu.matrixLU().diagonal().array() == 0.0).any()) {
       throw NativeError("mode " + std::to_string(contact.mode) + ": singular dynamics matrix");
     }
+    w.x = w.lu.solve(w.b);
   }
-  w.x = w.lu.solve(w.b);
   if (!w.x.allFinite()) {
     std::ostringstream message;
     message << "mode " << contact.mode << " dynamics: the solution is not finite (|v|max "
