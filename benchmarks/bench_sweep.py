@@ -14,9 +14,10 @@ are compared:
   ``wall_time_s`` in metrics.json), over that loop's time (goal <= 2 % for 15 s runs). With
   1 worker, from a sweep of ``--runs`` and one of three times as many: the time beyond the runs'
   loops grows by twice ``--runs`` runs' overhead from one to the other (the pool's start-up,
-  once a sweep, cancels; it varies by about 0.1 s from sweep to sweep). That comes apart into the part inside the worker (scene validation, session
-  set-up, metrics: each run's ``worker_time_s`` less its loop) and the rest (each run's
-  hand-over and table row); the pool's start-up is shown in seconds a sweep;
+  once a sweep, cancels; it varies by about 0.1 s from sweep to sweep). That comes apart into
+  the part inside the worker (scene validation, session set-up, metrics: each run's
+  ``worker_time_s`` less its loop) and the rest (each run's hand-over and table row); the
+  pool's start-up is shown in seconds a sweep;
 * **10,000 runs**: the time 10,000 such runs take at the 2-worker rate (goal <= 10 min for
   15 s runs of ``skate``).
 

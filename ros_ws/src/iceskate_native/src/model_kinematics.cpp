@@ -12,7 +12,6 @@
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
-#include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/multibody.hpp>
 
 namespace iceskate_native
@@ -60,6 +59,19 @@ struct StateCache
   CentreOfMass centre;
   std::array<Eigen::Vector3d, kCoordinates> joint_velocities;  // world-aligned [m/s]
 };
+
+namespace
+{
+
+/// The generalized gravity g(q) = -m J_com^T g0 from the centre of mass's Jacobian in `data`
+/// (what a gravity pass computes, in one product: the laws need that Jacobian anyway).
+void keep_gravity(const pinocchio::Model & model, const pinocchio::Data & data, StateCache & c)
+{
+  c.g = -data.mass[0] * (data.Jcom.transpose() * model.gravity.linear());
+  c.gravity = true;
+}
+
+}  // namespace
 
 struct ModelKinematics::Workspace
 {
@@ -263,11 +275,15 @@ Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q
   const auto k = model_index(state.side, state.pivot);
   StateCache & c = at(k, q);
   if (!c.gravity) {
+    const pinocchio::Model & model = models_[k].model.pin();
     Workspace & w = *work_;
-    w.q = q;
-    c.g = pinocchio::computeGeneralizedGravity(models_[k].model.pin(), w.data[k],
-                                               ConstVector(w.q));
-    c.gravity = true;
+    if (c.placed || c.moving) {  // the joint placements at q are in the data
+      pinocchio::jacobianCenterOfMass(model, w.data[k]);
+    } else {
+      w.q = q;
+      pinocchio::jacobianCenterOfMass(model, w.data[k], ConstVector(w.q));
+    }
+    keep_gravity(model, w.data[k], c);
   }
   Vector18 out = Vector18::Zero();
   out(m.active) = c.g(m.active);
@@ -337,6 +353,9 @@ const StateCache & ModelKinematics::velocities(
   c.centre.position = data.com[0];
   c.centre.velocity = data.vcom[0];
   c.centre.jacobian_y = pinocchio::jacobianCenterOfMass(model, data).row(1).transpose();
+  if (!c.gravity) {
+    keep_gravity(model, data, c);
+  }
   c.velocities = true;
   return c;
 }

@@ -73,7 +73,6 @@ def field_types(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-@functools.cache
 def optional_inner(tp: Any) -> Any:
     """``X`` of an ``X | None`` annotation (``tp`` itself otherwise)."""
     args = typing.get_args(tp)
@@ -84,9 +83,11 @@ def optional_inner(tp: Any) -> Any:
 
 
 @functools.cache
-def _generic(tp: Any) -> tuple[Any, tuple[Any, ...]]:
-    """The origin and arguments of annotation ``tp`` (``typing.get_origin``, ``get_args``)."""
-    return typing.get_origin(tp), typing.get_args(tp)
+def _shape(tp: Any) -> tuple[bool, Any, Any, tuple[Any, ...]]:
+    """Of annotation ``tp``: whether it is ``X | None``, then ``X`` and ``X``'s origin and
+    arguments (``typing.get_origin``, ``get_args``); cached by the annotation's equality."""
+    inner = optional_inner(tp)
+    return inner is not tp, inner, typing.get_origin(inner), typing.get_args(inner)
 
 
 def _number(name: str, value: Any, r: Rules, error: type[Exception], kind: type) -> Any:
@@ -113,12 +114,11 @@ def check_value(name: str, value: Any, tp: Any, r: Rules, error: type[Exception]
     frozensets); raises ``error`` with a message starting with ``name``."""
     if tp is Any:  # taken as given (checked by whoever reads it)
         return value
+    optional, tp, origin, args = _shape(tp)
     if value is None:
-        if optional_inner(tp) is not tp:
+        if optional:
             return None
         raise error(f'{name} must be set, got None')
-    tp = optional_inner(tp)
-    origin, args = _generic(tp)
     if tp is bool:
         if not isinstance(value, bool):
             raise error(f'{name} must be true or false, got {value!r}')
