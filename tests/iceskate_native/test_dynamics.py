@@ -5,8 +5,8 @@ through ``oracle.native_probes``) solves the same system in C++ (``iceskate_nati
 The reference factorises the whole matrix by LU of partial pivoting; the kernel solves it as a
 saddle point (the mass matrix's Cholesky factor, a rank-one update, the constraints' Schur
 complement), and by LU only when one of those steps fails (e.g. an indefinite mass block).
-They agree to rounding: each quantity to 1e-11 of its scale (the dynamics matrix has condition numbers up to
-~1e4 here, and most entries agree to ~1e-13).
+They agree to rounding: each quantity to 1e-11 of its scale (the dynamics matrix has
+condition numbers up to ~1e4 here, and most entries agree to ~1e-13).
 """
 
 import itertools
