@@ -348,6 +348,10 @@ NB_MODULE(_kernel, m)
             ? integrate_adaptive(
                 self, contact, inputs, {rtol, atol, step}, event_tolerance, set, t0, x, t_end,
                 start, first_step)
+          : kind == Method::kRos34pw2
+            ? integrate_rosenbrock(
+                self, contact, inputs, {rtol, atol, step}, event_tolerance, set, t0, x, t_end,
+                start, first_step)
             : integrate_fixed(
                 self, contact, inputs, kind, step, event_tolerance, set, t0, x, t_end, start);
         return std::make_tuple(
@@ -359,14 +363,14 @@ NB_MODULE(_kernel, m)
       "method"_a, "step"_a, "rtol"_a, "atol"_a, "event_tolerance"_a, "guards"_a,
       "rested_until"_a, "mu"_a, "ice"_a, "constants"_a, "margin"_a, "t0"_a, "x0"_a, "t_end"_a,
       "Integrate from (t0, x0) to t_end or the first crossing of one of the named guards "
-      "(located to event_tolerance [s]) with a fixed-step method (step [s]) or rk45 (rtol, "
-      "atol; step: its first and largest step [s]): (t, x, dynamics tuple as evaluate's, index "
+      "(located to event_tolerance [s]) with a fixed-step method (step [s]) or an adaptive one, "
+      "rk45 or ros34pw2 (rtol, atol; step: its first and largest step [s]): (t, x, dynamics tuple as evaluate's, index "
       "of the guard that fired or -1, steps, evaluations).");
 
   nb::class_<HybridSimulator>(
     m, "HybridSimulator",
     "Whole control periods of the hybrid simulation on a Dynamics kernel (kept alive by it): "
-    "integration (fixed-step or rk45) with event location, transitions, projection and health "
+    "integration (fixed-step, rk45 or ros34pw2) with event location, transitions, projection and health "
     "checks. States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
     "heel_slide_dir, step_index, t_exchange, t_touchdown).")
     .def(

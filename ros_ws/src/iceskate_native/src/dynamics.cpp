@@ -67,7 +67,8 @@ struct Dynamics::Workspace
 {
   StateTerms terms;
   std::vector<pinocchio::Data> data;  // one per support model
-  Eigen::VectorXd q, v;               // Pinocchio's argument type
+  Eigen::VectorXd q, v, a;            // Pinocchio's argument type
+  LinearizedSystem linearized;
   pinocchio::Data::Matrix6x jacobian;
   int model = 0;  // side * 2 + pivot of the system assembled
   int n = 0;      // active coordinates
@@ -165,6 +166,7 @@ Dynamics::Dynamics(
   }
   work_->q.resize(kCoordinates);
   work_->v.resize(kCoordinates);
+  work_->a.resize(kCoordinates);
   work_->jacobian.setZero(6, kCoordinates);
 }
 
@@ -271,7 +273,7 @@ void Dynamics::assemble(
   const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs)
 {
   const Mode & mode = this->mode(contact.mode);
-  const SupportModel & support = support_model(contact.side, contact.pivot);
+  support_model(contact.side, contact.pivot);  // std::invalid_argument for a bad side or pivot
   for (int i : {kY0, kQ1}) {
     const bool locked = i == kY0 ? !mode.y0_active : !mode.q1_active;
     if (locked && v[i] != 0.0) {
@@ -283,8 +285,6 @@ void Dynamics::assemble(
   }
   Workspace & w = *work_;
   w.model = contact.side * 2 + contact.pivot;
-  const pinocchio::Model & model = support.model.pin();
-  pinocchio::Data & data = w.data[static_cast<std::size_t>(w.model)];
   const auto & act = mode.active;
   const int n = static_cast<int>(act.size());
   const int nc = static_cast<int>(mode.constraints.size());
@@ -297,28 +297,7 @@ void Dynamics::assemble(
   w.heel = terms.heel;
   w.heel_velocity = terms.heel_velocity;
   w.toe_z = terms.toe_z;
-  w.engaged = params_.joint_limits && limits_engaged(q);
-  w.passive = w.engaged ? passive_forces(q, v) : Vector18(-damping_.cwiseProduct(v));
-
-  w.applied = w.passive + inputs.tau;
-  if (inputs.has_impedance) {
-    w.applied -= inputs.stiffness.cwiseProduct(q) + inputs.damping.cwiseProduct(v);
-  }
-  if (!mode.q1_active) {
-    w.applied[kQ1] = 0.0;
-  }
-  w.applied[kY0] = 0.0;
-  if (!inputs.push_frame.empty()) {  // J^T f of the push, at this state
-    w.jacobian.setZero();
-    pinocchio::computeFrameJacobian(
-      model, data, ConstVector(w.q),
-      static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
-      w.jacobian);
-    if (!w.is_placed_at(w.model, q)) {  // the placements of the push frame's chain only
-      w.unplaced(w.model);
-    }
-    w.applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
-  }
+  w.applied = applied_forces(mode, w.model, q, v, inputs);
 
   const int size = n + nc;
   w.A.setZero(size, size);
@@ -382,6 +361,146 @@ void Dynamics::assemble(
               << "posture is singular (docs/model.md §4.5)";
       throw NativeError(message.str());
     }
+  }
+}
+
+Vector18 Dynamics::applied_forces(
+  const Mode & mode, int k, const Vector18 & q, const Vector18 & v, const Inputs & inputs)
+{
+  Workspace & w = *work_;
+  w.engaged = params_.joint_limits && limits_engaged(q);
+  w.passive = w.engaged ? passive_forces(q, v) : Vector18(-damping_.cwiseProduct(v));
+  Vector18 applied = w.passive + inputs.tau;
+  if (inputs.has_impedance) {
+    applied -= inputs.stiffness.cwiseProduct(q) + inputs.damping.cwiseProduct(v);
+  }
+  if (!mode.q1_active) {
+    applied[kQ1] = 0.0;
+  }
+  applied[kY0] = 0.0;
+  if (!inputs.push_frame.empty()) {  // J^T f of the push, at this state
+    const SupportModel & support = models_[static_cast<std::size_t>(k)];
+    pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
+    w.q = q;
+    w.jacobian.setZero();
+    pinocchio::computeFrameJacobian(
+      support.model.pin(), data, ConstVector(w.q),
+      static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
+      w.jacobian);
+    if (!w.is_placed_at(k, q)) {  // the placements of the push frame's chain only
+      w.unplaced(k);
+    }
+    applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
+  }
+  return applied;
+}
+
+const LinearizedSystem & Dynamics::linearize(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+  double lookahead)
+{
+  assemble(contact, q, v, inputs);
+  Workspace & w = *work_;
+  LinearizedSystem & out = w.linearized;
+  out.matrix = w.A;
+  out.row_change = w.row_change;
+  out.n = w.n;
+  out.nc = w.nc;
+  out.damping = damping_;
+  out.stiffness.setZero();
+  if (params_.joint_limits) {
+    for (const auto & limit : limits_) {
+      const double now = q[limit.index];
+      const double ahead = now + lookahead * v[limit.index];
+      if (now < limit.lower || now > limit.upper || ahead < limit.lower || ahead > limit.upper) {
+        out.damping[limit.index] += params_.limit_damping;
+        out.stiffness[limit.index] += params_.limit_stiffness;
+      }
+    }
+  }
+  if (inputs.has_impedance) {
+    out.damping += inputs.damping;
+    out.stiffness += inputs.stiffness;
+  }
+  out.damping[kY0] = 0.0;
+  out.stiffness[kY0] = 0.0;
+  return out;
+}
+
+void Dynamics::residual(
+  const Contact & contact, const Vector18 & q, const Vector18 & v, const Vector18 & qdd,
+  const Eigen::Vector3d & multipliers, const Inputs & inputs, SystemVector & out)
+{
+  const Mode & mode = this->mode(contact.mode);
+  const int k = contact.side * 2 + contact.pivot;
+  const SupportModel & support = models_[static_cast<std::size_t>(k)];
+  const pinocchio::Model & model = support.model.pin();
+  Workspace & w = *work_;
+  pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
+  const auto & act = mode.active;
+  const int n = static_cast<int>(act.size());
+  const int nc = static_cast<int>(mode.constraints.size());
+  const Vector18 applied = applied_forces(mode, k, q, v, inputs);
+  w.q = q;
+  w.v = v;
+  w.a = qdd;
+  pinocchio::rnea(model, data, ConstVector(w.q), ConstVector(w.v), ConstVector(w.a));
+  w.unplaced(k);  // the joint placements of rnea's pass are relative ones only
+  Vector18 tau = data.tau - applied;  // M qdd + h - applied
+  double lambda_z = 0.0;
+  out.resize(n + nc);
+  if (nc > 0) {
+    const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
+    pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
+    w.placed_at(k, q);
+    const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(model, data, heel);
+    w.jacobian.setZero();
+    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
+    const pinocchio::JointIndex joint = model.frames[heel].parentJoint;
+    data.a[joint] = data.a_gf[joint] - data.oMi[joint].actInv(data.a_gf[0]);
+    const Eigen::Vector3d acc =
+      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
+    lambda_z = multipliers[0];
+    const double friction =
+      mode.swing_sliding ? -params_.mu * contact.heel_slide_dir * lambda_z : 0.0;
+    tau -= w.jacobian.row(2).transpose() * lambda_z
+           + w.jacobian.row(1).transpose() * (multipliers[1] + friction);
+    tau.segment<7>(1).array() -= multipliers[2];
+    double chain = 0.0;
+    for (int i = 1; i <= 7; ++i) {
+      chain += q[i];
+    }
+    for (int c = 0; c < nc; ++c) {
+      const Constraint constraint = mode.constraints[static_cast<std::size_t>(c)];
+      double value = 0.0;
+      double rate = 0.0;
+      double position = 0.0;
+      if (constraint == Constraint::kSoleFlat) {
+        value = qdd.segment<7>(1).sum();
+        rate = v.segment<7>(1).sum();
+        position = chain;
+      } else {
+        const int row = row_of(constraint);
+        value = acc[row];
+        rate = w.jacobian.row(row) * v;
+        position = constraint == Constraint::kHeelZ ? placement.translation()[2]
+                                                    : placement.translation()[1]
+                                                        - contact.heel_anchor_y;
+      }
+      if (params_.baumgarte != 0.0) {
+        const double alpha = params_.baumgarte;
+        value += 2.0 * alpha * rate + alpha * alpha * position;
+      }
+      out[n + c] = value;
+    }
+  }
+  if (mode.y0_active) {  // the support's friction mu s0 N_s, N_s = m (g + zdd_com) - f_nz
+    // the root joint's force at qdd, in the world (its parent is the world: liMi = oMi)
+    const double vertical = data.liMi[1].act(data.f[1]).linear()[2];
+    tau[kY0] += params_.mu * contact.support_slide_dir * (vertical - lambda_z);
+  }
+  for (int i = 0; i < n; ++i) {
+    out[i] = tau[act[static_cast<std::size_t>(i)]];
   }
 }
 

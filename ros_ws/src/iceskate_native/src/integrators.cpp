@@ -113,8 +113,11 @@ Method method_named(const std::string & name)
   if (name == "rk45") {
     return Method::kRk45;
   }
+  if (name == "ros34pw2") {
+    return Method::kRos34pw2;
+  }
   throw std::invalid_argument(
-    "no native method '" + name + "' (symplectic_euler, implicit_euler, rk4, rk45)");
+    "no native method '" + name + "' (symplectic_euler, implicit_euler, rk4, rk45, ros34pw2)");
 }
 
 Eigen::VectorXd guard_values(
@@ -143,8 +146,8 @@ Segment integrate_fixed(
   if (!(step > 0.0) || !(event_tolerance > 0.0) || !std::isfinite(t0) || !std::isfinite(t_end)) {
     throw std::invalid_argument("a segment needs step > 0, event_tolerance > 0 and finite times");
   }
-  if (method == Method::kRk45) {
-    throw std::invalid_argument("rk45 is adaptive: it has no fixed-step segment");
+  if (method == Method::kRk45 || method == Method::kRos34pw2) {
+    throw std::invalid_argument("rk45 and ros34pw2 are adaptive: they have no fixed-step segment");
   }
   Segment segment;
   double t = t0;

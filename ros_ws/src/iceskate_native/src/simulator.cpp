@@ -39,7 +39,7 @@ HybridSimulator::HybridSimulator(
     throw std::invalid_argument("step, control_period and event_tolerance must be > 0 s");
   }
   const double ratio = s.control_period / s.step;
-  if (s.method != Method::kRk45
+  if (s.method != Method::kRk45 && s.method != Method::kRos34pw2
       && (std::abs(ratio - std::round(ratio)) > 1e-9 * ratio || std::round(ratio) < 1.0))
   {
     throw std::invalid_argument("control_period must be an integer multiple of the step");
@@ -139,6 +139,11 @@ void HybridSimulator::advance(const Inputs & inputs)
       const Segment seg =
         settings_.method == Method::kRk45
           ? integrate_adaptive(
+              dynamics_, state_.contact, inputs_,
+              {settings_.rtol, settings_.atol, settings_.step}, settings_.event_tolerance,
+              guards, state_.t, x0, t_end, result_, adaptive_step_)
+        : settings_.method == Method::kRos34pw2
+          ? integrate_rosenbrock(
               dynamics_, state_.contact, inputs_,
               {settings_.rtol, settings_.atol, settings_.step}, settings_.event_tolerance,
               guards, state_.t, x0, t_end, result_, adaptive_step_)

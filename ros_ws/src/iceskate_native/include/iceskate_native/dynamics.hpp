@@ -20,6 +20,7 @@
 
 #include "iceskate_native/model.hpp"
 #include "iceskate_native/modes.hpp"
+#include "iceskate_native/saddle_point.hpp"
 
 namespace iceskate_native
 {
@@ -111,6 +112,19 @@ struct ConstraintRows
   Eigen::VectorXd position;  ///< C(q) [m, rad]
 };
 
+/// Eq. (7) at one state as a linear system in (qdd_a, lambda), and the held stiffness and damping
+/// of the applied forces there (their derivatives by q and v are -stiffness, -damping): what a
+/// linearly implicit step linearizes about.
+struct LinearizedSystem
+{
+  SystemMatrix matrix;     ///< [[M + e0 a^T, C], [G, 0]], n + nc unknowns
+  ActiveVector row_change;  ///< a (empty: the support does not glide)
+  int n = 0;               ///< active coordinates
+  int nc = 0;              ///< active constraints
+  Vector18 stiffness = Vector18::Zero();  ///< impedance and engaged soft stops [N m/rad, N/m]
+  Vector18 damping = Vector18::Zero();    ///< Table 1, impedance and engaged stops [N m s/rad]
+};
+
 struct StateTerms;  // the input-free terms of one state (in dynamics.cpp)
 
 /// Eq. (7) of every mode on the four support models; keeps one Pinocchio workspace per model,
@@ -137,6 +151,19 @@ public:
   Vector18 implicit_acceleration(
     const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
     double h);
+
+  /// The system of eq. (7) at (q, v) under the inputs (LinearizedSystem).
+  /// A soft stop counts in the stiffness and damping where q or q + lookahead v [s] is past it.
+  const LinearizedSystem & linearize(
+    const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+    double lookahead);
+
+  /// The residual of eq. (7) at (q, v) for accelerations qdd (18, locked 0) and multipliers
+  /// (f_nz, f_ny, tau_n; inactive 0): its n active rows [N m, N] then its nc constraint rows
+  /// [m/s^2, rad/s^2], in the order of the system; zero at the solution.
+  void residual(
+    const Contact & contact, const Vector18 & q, const Vector18 & v, const Vector18 & qdd,
+    const Eigen::Vector3d & multipliers, const Inputs & inputs, SystemVector & out);
 
   /// Joint damping and soft-stop torques of all coordinates [N m].
   Vector18 passive_forces(const Vector18 & q, const Vector18 & v) const;
@@ -179,6 +206,8 @@ public:
   const Mode & mode(int number) const;
   const ModeTable & modes() const noexcept { return modes_; }
   const DynamicsParameters & parameters() const noexcept { return params_; }
+  /// The soft stops (empty or unused when parameters().joint_limits is false).
+  const std::vector<JointLimit> & limits() const noexcept { return limits_; }
 
 private:
   struct Workspace;  // Pinocchio data and the assembled system (in dynamics.cpp)
@@ -192,6 +221,10 @@ private:
     const Contact & contact, const Vector18 & q, const Inputs & inputs,
     const DynamicsResult & result);
   bool limits_engaged(const Vector18 & q) const;
+  /// The applied generalized forces at (q, v): passive, inputs, push (sets work's passive and
+  /// engaged).
+  Vector18 applied_forces(
+    const Mode & mode, int k, const Vector18 & q, const Vector18 & v, const Inputs & inputs);
 
   std::array<SupportModel, 4> models_;
   ModeTable modes_;

@@ -3,7 +3,8 @@
 // crosses zero from below, located to the event tolerance by TOMS 748 (Boost.Math): for the
 // fixed-step methods by re-taking the step with a shorter size, for the adaptive Dormand-Prince
 // 5(4) pair (Boost.Odeint's runge_kutta_dopri5 under its step-size control,
-// integrators_adaptive.cpp) on the step's dense output. Tested against the test oracle's
+// integrators_adaptive.cpp) and the Rosenbrock-W method ROS34PW2 (integrators_rosenbrock.cpp) on
+// the step's dense output. Tested against the test oracle's
 // Integrator.integrate_segment (tests/oracle/integrators.py).
 #pragma once
 
@@ -21,16 +22,18 @@ namespace iceskate_native
 using State = Eigen::Matrix<double, 2 * kCoordinates, 1>;
 
 /// The methods: fixed-step semi-implicit (symplectic) Euler, implicit Euler (semi-implicit
-/// Euler with the damping taken implicitly), classic RK4; adaptive Dormand-Prince 5(4).
+/// Euler with the damping taken implicitly), classic RK4; adaptive Dormand-Prince 5(4) and the
+/// linearly implicit Rosenbrock-W method ROS34PW2 (order 3(2), L-stable).
 enum class Method
 {
   kSymplecticEuler,
   kImplicitEuler,
   kRk4,
-  kRk45
+  kRk45,
+  kRos34pw2
 };
 
-/// The method called `name` (symplectic_euler, implicit_euler, rk4, rk45);
+/// The method called `name` (symplectic_euler, implicit_euler, rk4, rk45, ros34pw2);
 /// std::invalid_argument otherwise.
 Method method_named(const std::string & name);
 
@@ -77,6 +80,15 @@ Segment integrate_fixed(
 /// output. `step` holds the step size to try first and, after the call, the last one accepted
 /// [s] (a run keeps it from segment to segment). NativeError if the step size underflows.
 Segment integrate_adaptive(
+  Dynamics & dynamics, const Contact & contact, const Inputs & inputs,
+  const Tolerances & tolerances, double event_tolerance, const GuardSet & guards, double t0,
+  const State & x0, double t_end, const DynamicsResult & start, double & step);
+
+/// The same with ROS34PW2 under step-size control on its embedded estimate
+/// (integrators_rosenbrock.cpp): eq. (7) as an index-1 DAE, each stage one residual and one solve
+/// with the step's matrix, events located on its dense output of order 3, and a step that crosses
+/// a soft stop's engagement or release taken again up to it. `step` as in integrate_adaptive.
+Segment integrate_rosenbrock(
   Dynamics & dynamics, const Contact & contact, const Inputs & inputs,
   const Tolerances & tolerances, double event_tolerance, const GuardSet & guards, double t0,
   const State & x0, double t_end, const DynamicsResult & start, double & step);

@@ -10,7 +10,8 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.parameters import checked, setting
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
-METHODS = (*FIXED_STEP, 'rk45')
+ADAPTIVE = ('rk45', 'ros34pw2')
+METHODS = (*FIXED_STEP, *ADAPTIVE)
 GUARD_MARGIN = 1.0e-9  # a guard at most this positive right after a transition is not due
 
 
