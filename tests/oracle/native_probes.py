@@ -21,7 +21,8 @@ from oracle.integrators import Segment
 
 class NativeProbes(NativeGaitDynamics):
     """``NativeGaitDynamics`` with its kernel's single calls: ``evaluate``,
-    ``implicit_acceleration``, ``guard_values``, ``integrate_segment``."""
+    ``implicit_acceleration``, ``linearize``, ``guard_values``,
+    ``integrate_segment``."""
 
     @classmethod
     def of(cls, dynamics: NativeGaitDynamics) -> NativeProbes:
@@ -79,6 +80,15 @@ class NativeProbes(NativeGaitDynamics):
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
 
+    def linearize(self, contact: ContactState, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
+                  stiffness: np.ndarray | None = None, damping: np.ndarray | None = None,
+                  lookahead: float = 0.0) -> tuple[np.ndarray, int, int, np.ndarray,
+                                                   np.ndarray]:
+        """Eq. (7) at (q, v) as the linear system ``ros34pw2`` steps with: (matrix, n, nc,
+        stiffness, damping), natively."""
+        return self.kernel.linearize(
+            *self._arguments(contact, q, v, tau, None, stiffness, damping), lookahead)
+
     def _guard_arguments(self, mode_number: int, t: float, suppressed: dict[str, float],
                          friction: FrictionModel) -> tuple:
         names = [g.name for g in guards_of(MODES[mode_number])]
@@ -107,8 +117,9 @@ class NativeProbes(NativeGaitDynamics):
                           friction: FrictionModel, suppressed: dict[str, float],
                           t_end: float) -> Segment:
         """Integrate ``state`` to ``t_end`` or the first guard crossing with a fixed-step
-        method or rk45 (``Integrator.integrate_segment``'s counterpart, natively; rk45 starts
-        with ``integrator.step`` and keeps no step history between calls).
+        method, rk45 or ros34pw2 (``Integrator.integrate_segment``'s counterpart, natively; the
+        adaptive methods start with ``integrator.step`` and keep no step history between
+        calls).
 
         The periods run inside ``HybridSimulator`` (``Simulator.kernel``), which integrates its
         segments without this call."""

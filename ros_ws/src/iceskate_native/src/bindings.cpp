@@ -286,6 +286,29 @@ NB_MODULE(_kernel, m)
       "swing_toe_z, passive). ValueError for bad input, NativeError for a rank-deficient or "
       "singular system.")
     .def(
+      "linearize",
+      [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
+         double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,
+         const Vector & tau, const Optional & stiffness, const Optional & damping,
+         const std::string & push_frame, const Optional & push_force, double lookahead) {
+        if (!(lookahead >= 0.0) || !std::isfinite(lookahead)) {
+          throw std::invalid_argument("lookahead must be a finite time >= 0 s");
+        }
+        const LinearizedSystem & system = self.linearize(
+          contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir),
+          vector18(q, "q"), vector18(v, "v"),
+          inputs_of(tau, stiffness, damping, push_frame, push_force), lookahead);
+        return std::make_tuple(Eigen::MatrixXd(system.matrix), system.n, system.nc,
+                               Eigen::VectorXd(system.stiffness), Eigen::VectorXd(system.damping));
+      },
+      "mode"_a, "side"_a, "pivot"_a, "heel_anchor_y"_a, "support_slide_dir"_a,
+      "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a = nb::none(),
+      "damping"_a = nb::none(), "push_frame"_a = "", "push_force"_a = nb::none(),
+      "lookahead"_a = 0.0,
+      "Eq. (7) at (q, v) as a linear system in (qdd over the n active coordinates, the nc "
+      "multipliers): (matrix (n + nc square), n, nc, stiffness, damping), the held stiffness "
+      "and damping per coordinate (soft stops past which q or q + lookahead v is).")
+    .def(
       "implicit_acceleration",
       [](Dynamics & self, int mode, int side, int pivot, double heel_anchor_y,
          double support_slide_dir, double heel_slide_dir, const Vector & q, const Vector & v,

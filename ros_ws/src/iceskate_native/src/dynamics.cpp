@@ -67,7 +67,7 @@ struct Dynamics::Workspace
 {
   StateTerms terms;
   std::vector<pinocchio::Data> data;  // one per support model
-  Eigen::VectorXd q, v, a;            // Pinocchio's argument type
+  Eigen::VectorXd q, v;               // Pinocchio's argument type
   LinearizedSystem linearized;
   pinocchio::Data::Matrix6x jacobian;
   int model = 0;  // side * 2 + pivot of the system assembled
@@ -166,7 +166,6 @@ Dynamics::Dynamics(
   }
   work_->q.resize(kCoordinates);
   work_->v.resize(kCoordinates);
-  work_->a.resize(kCoordinates);
   work_->jacobian.setZero(6, kCoordinates);
 }
 
@@ -425,83 +424,6 @@ const LinearizedSystem & Dynamics::linearize(
   out.damping[kY0] = 0.0;
   out.stiffness[kY0] = 0.0;
   return out;
-}
-
-void Dynamics::residual(
-  const Contact & contact, const Vector18 & q, const Vector18 & v, const Vector18 & qdd,
-  const Eigen::Vector3d & multipliers, const Inputs & inputs, SystemVector & out)
-{
-  const Mode & mode = this->mode(contact.mode);
-  const int k = contact.side * 2 + contact.pivot;
-  const SupportModel & support = models_[static_cast<std::size_t>(k)];
-  const pinocchio::Model & model = support.model.pin();
-  Workspace & w = *work_;
-  pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
-  const auto & act = mode.active;
-  const int n = static_cast<int>(act.size());
-  const int nc = static_cast<int>(mode.constraints.size());
-  const Vector18 applied = applied_forces(mode, k, q, v, inputs);
-  w.q = q;
-  w.v = v;
-  w.a = qdd;
-  pinocchio::rnea(model, data, ConstVector(w.q), ConstVector(w.v), ConstVector(w.a));
-  w.unplaced(k);  // the joint placements of rnea's pass are relative ones only
-  Vector18 tau = data.tau - applied;  // M qdd + h - applied
-  double lambda_z = 0.0;
-  out.resize(n + nc);
-  if (nc > 0) {
-    const auto heel = static_cast<pinocchio::FrameIndex>(support.frame("swing_heel"));
-    pinocchio::computeJointJacobians(model, data, ConstVector(w.q));
-    w.placed_at(k, q);
-    const pinocchio::SE3 & placement = pinocchio::updateFramePlacement(model, data, heel);
-    w.jacobian.setZero();
-    pinocchio::getFrameJacobian(model, data, heel, kWorldAligned, w.jacobian);
-    const pinocchio::JointIndex joint = model.frames[heel].parentJoint;
-    data.a[joint] = data.a_gf[joint] - data.oMi[joint].actInv(data.a_gf[0]);
-    const Eigen::Vector3d acc =
-      pinocchio::getFrameClassicalAcceleration(model, data, heel, kWorldAligned).linear();
-    lambda_z = multipliers[0];
-    const double friction =
-      mode.swing_sliding ? -params_.mu * contact.heel_slide_dir * lambda_z : 0.0;
-    tau -= w.jacobian.row(2).transpose() * lambda_z
-           + w.jacobian.row(1).transpose() * (multipliers[1] + friction);
-    tau.segment<7>(1).array() -= multipliers[2];
-    double chain = 0.0;
-    for (int i = 1; i <= 7; ++i) {
-      chain += q[i];
-    }
-    for (int c = 0; c < nc; ++c) {
-      const Constraint constraint = mode.constraints[static_cast<std::size_t>(c)];
-      double value = 0.0;
-      double rate = 0.0;
-      double position = 0.0;
-      if (constraint == Constraint::kSoleFlat) {
-        value = qdd.segment<7>(1).sum();
-        rate = v.segment<7>(1).sum();
-        position = chain;
-      } else {
-        const int row = row_of(constraint);
-        value = acc[row];
-        rate = w.jacobian.row(row) * v;
-        position = constraint == Constraint::kHeelZ ? placement.translation()[2]
-                                                    : placement.translation()[1]
-                                                        - contact.heel_anchor_y;
-      }
-      if (params_.baumgarte != 0.0) {
-        const double alpha = params_.baumgarte;
-        value += 2.0 * alpha * rate + alpha * alpha * position;
-      }
-      out[n + c] = value;
-    }
-  }
-  if (mode.y0_active) {  // the support's friction mu s0 N_s, N_s = m (g + zdd_com) - f_nz
-    // the root joint's force at qdd, in the world (its parent is the world: liMi = oMi)
-    const double vertical = data.liMi[1].act(data.f[1]).linear()[2];
-    tau[kY0] += params_.mu * contact.support_slide_dir * (vertical - lambda_z);
-  }
-  for (int i = 0; i < n; ++i) {
-    out[i] = tau[act[static_cast<std::size_t>(i)]];
-  }
 }
 
 void Dynamics::solve(const Contact & contact, const Vector18 & q, const Vector18 & v)

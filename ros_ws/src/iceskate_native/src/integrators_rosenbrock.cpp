@@ -1,15 +1,15 @@
 // The linearly implicit method of integrators.hpp: ROS34PW2 (Rang and Angermann, BIT 45, 2005),
 // a four-stage Rosenbrock-W method of order 3 with an embedded method of order 2 and a dense
-// output of order 3, L-stable and stiffly accurate, on eq. (7) read as an index-1 DAE
-// (docs/model.md §8.1):
+// output of order 3, L-stable and stiffly accurate (docs/model.md §8.1). Its matrix is
+// I / (h gamma) - J with J the derivative of x' = (v, qdd) through the held stiffness K and
+// damping D alone (the stiff part of eq. (7): joint damping, the commanded impedance, engaged soft
+// stops), taken over eq. (7)'s system at the step's start (Dynamics::linearize):
 //
-//   q' = v,   v' = a,   0 = g(q, v, a, lambda) = eq. (7)'s residual (Dynamics::residual).
+//   J [dq; dv] = [dv; ddq],   [[M + e0 a^T, C], [G, 0]] [ddq; dlambda] = [-K dq - D dv; 0].
 //
-// Its matrix is eq. (7)'s system at the step's start with the held stiffness K and damping D
-// added (Dynamics::linearize): W = [[M + e0 a^T + c D + c^2 K, C], [G, 0]], c = h gamma. It is
-// exact in the accelerations and multipliers and approximate in q and v (a W-method keeps its
-// order for any such approximation), so each stage costs one inverse-dynamics residual and one
-// solve with W's factors: no mass matrix or factorization of its own.
+// A W-method keeps its order for any such approximation of the Jacobian; each of the stages
+// evaluates eq. (7) once and solves with the step's factored matrix
+// W = [[M + e0 a^T + c D + c^2 K, C], [G, 0]], c = h gamma.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -105,13 +105,11 @@ const Scheme & scheme()
   return ros;
 }
 
-/// One stage's increment u: of q, v, the accelerations and the multipliers (f_nz, f_ny, tau_n).
+/// One stage's increment u of q and v.
 struct Increment
 {
   Vector18 q = Vector18::Zero();
   Vector18 v = Vector18::Zero();
-  Vector18 a = Vector18::Zero();
-  Eigen::Vector3d lambda = Eigen::Vector3d::Zero();
 };
 
 /// The linear system of one step: W of the mode's n active coordinates and nc constraints,
@@ -120,13 +118,8 @@ class StepMatrix
 {
 public:
   StepMatrix(const Mode & mode, const LinearizedSystem & system, double c)
-  : mode_(mode),
-    mass_(system.matrix.topLeftCorner(system.n, system.n)),
-    rows_(system.matrix.bottomLeftCorner(system.nc, system.n)),
-    stiffness_(system.stiffness),
-    c_(c),
-    n_(system.n),
-    nc_(system.nc)
+  : mode_(mode), stiffness_(system.stiffness), damping_(system.damping), c_(c),
+    n_(system.n), nc_(system.nc)
   {
     SystemMatrix w = system.matrix;
     for (int k = 0; k < n_; ++k) {
@@ -141,38 +134,19 @@ public:
                           + std::to_string(mode.number));
       }
     }
-    for (int k = 0; k < 3; ++k) {
-      const int at = mode.multiplier_index(static_cast<Constraint>(k));
-      if (at >= 0) {
-        slot_[at] = k;
-      }
-    }
   }
 
-  /// The stage's increment u from rq = v_i + sum c_ij/h uq_j, rv = a_i + sum c_ij/h uv_j and
-  /// the residual of eq. (7) at the stage (n + nc rows):
-  /// [W] [uv; c u_lambda] = [c (M rv - g) - c^2 K rq; c (G rv - g_c)], uq = c (rq + uv),
-  /// ua = uv / c - rv.
-  void solve(const Vector18 & rq, const Vector18 & rv, const SystemVector & residual,
-             Increment & u)
+  /// The stage's increment u from r = (rq, rv) = f(x_i) + sum_j c_ij / h u_j:
+  /// (I / c - J) u = r, i.e. uq = c (rq + uv) and uv = c rv + w with
+  /// W [w; mu] = [-(c (c D + c^2 K) rv + c^2 K rq); 0] over the active coordinates.
+  void solve(const Vector18 & rq, const Vector18 & rv, Increment & u)
   {
     const auto & act = mode_.active;
-    rv_active_.resize(n_);
-    for (int k = 0; k < n_; ++k) {
-      rv_active_[k] = rv[act[static_cast<std::size_t>(k)]];
-    }
-    rhs_.resize(n_ + nc_);
-    rhs_.head(n_).noalias() = mass_ * rv_active_;
-    rhs_.head(n_) -= residual.head(n_);
-    rhs_.head(n_) *= c_;
+    rhs_.setZero(n_ + nc_);
     for (int k = 0; k < n_; ++k) {
       const int j = act[static_cast<std::size_t>(k)];
-      rhs_[k] -= c_ * c_ * stiffness_[j] * rq[j];
-    }
-    if (nc_ > 0) {
-      rhs_.tail(nc_).noalias() = rows_ * rv_active_;
-      rhs_.tail(nc_) -= residual.tail(nc_);
-      rhs_.tail(nc_) *= c_;
+      const double added = c_ * damping_[j] + c_ * c_ * stiffness_[j];
+      rhs_[k] = -(c_ * added * rv[j] + c_ * c_ * stiffness_[j] * rq[j]);
     }
     if (structured_) {
       saddle_.solve(rhs_, unknowns_);
@@ -182,32 +156,21 @@ public:
     u = Increment{};
     for (int k = 0; k < n_; ++k) {
       const int j = act[static_cast<std::size_t>(k)];
-      u.v[j] = unknowns_[k];
+      u.v[j] = c_ * rv[j] + unknowns_[k];
       u.q[j] = c_ * (rq[j] + u.v[j]);
-      u.a[j] = u.v[j] / c_ - rv[j];
-    }
-    for (int k = 0; k < nc_; ++k) {
-      u.lambda[slot_[k]] = unknowns_[n_ + k] / c_;
     }
   }
 
 private:
-  using Mass = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kCoordinates, kCoordinates>;
-  using Rows =
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kCoordinates>;
-
   const Mode & mode_;
-  Mass mass_;    // M + e0 a^T at the step's start
-  Rows rows_;    // G
   Vector18 stiffness_;
+  Vector18 damping_;
   double c_;
   int n_;
   int nc_;
-  int slot_[kMaxConstraints] = {0, 0, 0};  // the multiplier of each constraint row
   bool structured_ = false;
   SaddlePoint saddle_;
   Eigen::PartialPivLU<SystemMatrix> lu_;
-  ActiveVector rv_active_;
   SystemVector rhs_;
   SystemVector unknowns_;
 };
@@ -276,7 +239,6 @@ Segment integrate_rosenbrock(
   }
   const Scheme & s = scheme();
   const Mode & mode = dynamics.mode(contact.mode);
-  const int rows = static_cast<int>(mode.active.size() + mode.constraints.size());
   Segment segment;
   double t = t0;
   State x = x0;
@@ -285,7 +247,6 @@ Segment integrate_rosenbrock(
   double h = std::min(step > 0.0 ? step : tol.max_step, tol.max_step);
   const double end_gap = 1e-12 * std::max(1.0, std::abs(t_end));
   std::array<Increment, kStages> u;
-  SystemVector residual;
   while (t_end - t > end_gap) {
     const bool last_step = h >= t_end - t;
     const double h_try = last_step ? t_end - t : h;
@@ -296,31 +257,20 @@ Segment integrate_rosenbrock(
     for (int i = 0; i < kStages; ++i) {
       Vector18 q = q0;
       Vector18 v = v0;
-      Vector18 a = r0.qdd;
-      Eigen::Vector3d lambda = r0.multipliers;
       bool moved = false;
       for (int j = 0; j < i; ++j) {
-        const double weight = s.a[i][j];
-        const Increment & uj = u[static_cast<std::size_t>(j)];
-        q += weight * uj.q;
-        v += weight * uj.v;
-        a += weight * uj.a;
-        lambda += weight * uj.lambda;
-        moved = moved || weight != 0.0;
-      }
-      if (moved) {
-        dynamics.residual(contact, q, v, a, lambda, inputs, residual);
-        ++segment.evaluations;
-      } else {  // the step's start, where (a, lambda) solve eq. (7)
-        residual.setZero(rows);
+        q += s.a[i][j] * u[static_cast<std::size_t>(j)].q;
+        v += s.a[i][j] * u[static_cast<std::size_t>(j)].v;
+        moved = moved || s.a[i][j] != 0.0;
       }
       Vector18 rq = v;
-      Vector18 rv = a;
+      Vector18 rv = moved ? dynamics.evaluate(contact, q, v, inputs).qdd : r0.qdd;
+      segment.evaluations += moved ? 1 : 0;
       for (int j = 0; j < i; ++j) {
         rq += (s.c[i][j] / h_try) * u[static_cast<std::size_t>(j)].q;
         rv += (s.c[i][j] / h_try) * u[static_cast<std::size_t>(j)].v;
       }
-      matrix.solve(rq, rv, residual, u[static_cast<std::size_t>(i)]);
+      matrix.solve(rq, rv, u[static_cast<std::size_t>(i)]);
     }
     State x1 = x;
     State error = State::Zero();

@@ -158,13 +158,6 @@ public:
     const Contact & contact, const Vector18 & q, const Vector18 & v, const Inputs & inputs,
     double lookahead);
 
-  /// The residual of eq. (7) at (q, v) for accelerations qdd (18, locked 0) and multipliers
-  /// (f_nz, f_ny, tau_n; inactive 0): its n active rows [N m, N] then its nc constraint rows
-  /// [m/s^2, rad/s^2], in the order of the system; zero at the solution.
-  void residual(
-    const Contact & contact, const Vector18 & q, const Vector18 & v, const Vector18 & qdd,
-    const Eigen::Vector3d & multipliers, const Inputs & inputs, SystemVector & out);
-
   /// Joint damping and soft-stop torques of all coordinates [N m].
   Vector18 passive_forces(const Vector18 & q, const Vector18 & v) const;
 
