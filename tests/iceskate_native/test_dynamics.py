@@ -126,6 +126,56 @@ def test_implicit_acceleration_agrees(engines, number, side, pivot):
     assert np.max(np.abs(x - y)) <= TOLERANCE * max(1.0, float(np.max(np.abs(x))))
 
 
+@pytest.mark.parametrize(('number', 'side', 'pivot'), CASES[1::3])
+def test_the_linearized_system_is_the_one_evaluate_solves(engines, number, side, pivot):
+    """``linearize``'s matrix (what ros34pw2 builds its steps on) is eq. (7)'s system: eq. (7)
+    is affine in the input, so two inputs that differ by dtau at one state give accelerations
+    and multipliers that differ by the system's solution for [dtau over the active joints; 0]
+    (y0's row takes no joint input)."""
+    _, native = engines
+    mode = get_mode(number)
+    rng = np.random.default_rng([SEED, number, SIDES.index(side), PIVOTS.index(pivot), 3])
+    q, v = state(mode, rng)
+    contact = ContactState(mode, side, pivot, heel_anchor_y=0.1, support_slide_dir=1.0,
+                           heel_slide_dir=-1.0)
+    tau = rng.normal(0.0, 5.0, 18)
+    dtau = rng.normal(0.0, 5.0, 18)
+    dtau[0] = 0.0
+    a = native.evaluate(contact, q, v, tau)
+    b = native.evaluate(contact, q, v, tau + dtau)
+    matrix, n, nc, _, _ = native.linearize(contact, q, v, tau)
+    slots = [('hz', 'hy', 'fr').index(c) for c in mode.constraints]
+    assert (n, nc) == (mode.active.size, len(slots))
+    unknowns = np.concatenate([(b.qdd - a.qdd)[mode.active],
+                               (b.multipliers - a.multipliers)[slots]])
+    expected = np.concatenate([dtau[mode.active], np.zeros(nc)])
+    scale = max(1.0, float(np.max(np.abs(matrix)) * np.max(np.abs(unknowns))))
+    assert np.max(np.abs(matrix @ unknowns - expected)) <= TOLERANCE * scale
+
+
+def test_the_linearized_system_holds_the_stiff_terms(robot, engines):
+    """Its stiffness and damping per coordinate: Table 1's damping and the commanded impedance,
+    and a soft stop's where q is past it or q + lookahead v will be; none on y0."""
+    _, native = engines
+    mode = get_mode(3)  # y0 active: the support glides
+    contact = ContactState(mode, 'right', 'toe')
+    rng = np.random.default_rng([SEED, 5])
+    q, v = state(mode, rng)
+    q[17] = JOINT_LIMITS[17][1] + 0.05  # past its upper stop
+    q[3], v[3] = JOINT_LIMITS[3][0] + 0.01, -1.0  # 10 ms before its lower stop
+    stiffness, damping = rng.uniform(0.0, 800.0, 18), rng.uniform(0.0, 16.0, 18)
+    tau = np.zeros(18)
+    params = native.params
+    for lookahead, stops in ((0.0, [17]), (0.02, [3, 17])):
+        _, _, _, k, d = native.linearize(contact, q, v, tau, stiffness, damping, lookahead)
+        expected_k, expected_d = stiffness.copy(), robot.damping + damping
+        expected_k[stops] += params.limit_stiffness
+        expected_d[stops] += params.limit_damping
+        expected_k[0] = expected_d[0] = 0.0
+        np.testing.assert_array_equal(k, expected_k)
+        np.testing.assert_allclose(d, expected_d, rtol=0.0, atol=1e-12)
+
+
 @pytest.mark.parametrize('number', [1, 4, 8, 16, 20])
 def test_an_implicit_step_whose_mass_block_is_indefinite_agrees(engines, number):
     """A negative impedance damping (a controller may send one) can leave M + h D without a

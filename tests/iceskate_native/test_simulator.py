@@ -27,6 +27,7 @@ from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
 from oracle.automaton import rerooted_command
 from oracle.commands import held_of_controllers, stack_commands
+from oracle.integrators import ReferenceIntegratorConfig
 from oracle.simulator import ReferenceRun, run_reference
 
 #: a fast-stepping skate gait (test data): many events in a short window
@@ -135,6 +136,42 @@ def test_native_periods_with_rk45_follow_the_python_rk45() -> None:
     _assert_same_run(*runs, tolerance=2e-7, same_steps=False)
 
 
+def test_native_ros34pw2_periods_converge_to_a_tight_reference() -> None:
+    """The Rosenbrock-W method ros34pw2 (native only) against the oracle's DOP853 at rtol 1e-11
+    on the fast gait: the same event log, and event times and states to what the tolerance
+    lets it stray."""
+    scene = load_scene(FAST_SKATE)
+    integrator = replace(scene.simulator.integrator, method='ros34pw2', step=1e-3, rtol=1e-7,
+                         atol=1e-9)
+    native = _run(_scene(FAST_SKATE, 0.6, integrator=integrator))
+    reference = _reference(_scene(FAST_SKATE, 0.6), ReferenceIntegratorConfig(
+        'dop853', step=1e-3, rtol=1e-11, atol=1e-13))
+    events = [(e.event, e.from_mode, e.to_mode, e.side) for e in native.sim.events]
+    assert events == [(e.event, e.from_mode, e.to_mode, e.side) for e in reference.sim.events]
+    assert len(events) > 20
+    times = np.array([e.t for e in native.sim.events])
+    assert np.max(np.abs(times - [e.t for e in reference.sim.events])) < 1e-6
+    y = native.trajectory.arrays()
+    assert np.array_equal(reference.mode, y['mode'])
+    assert np.max(np.abs(reference.q - y['q'])) < 1e-6
+
+
+def test_a_one_millisecond_ros34pw2_step_comes_to_rest_on_a_soft_stop() -> None:
+    """With its error control off (rtol = atol = 1: one 1 ms step a period) ros34pw2 meets the
+    right elbow's stop at q12 = 0 about 0.175 s into skate: the stop's stiffness (1e4 N m/rad)
+    and damping are in the matrix of every step that would cross it, so the elbow comes to rest
+    on it as with rk45 at rtol 1e-11 (with a matrix of the stops already engaged only, the
+    elbow rebounds: 1.8e-2 rad)."""
+    loose = replace(load_scene('skate').simulator.integrator, method='ros34pw2', step=1e-3,
+                    rtol=1.0, atol=1.0)
+    tight = replace(loose, method='rk45', rtol=1e-11, atol=1e-13)
+    runs = [_run(_scene('skate', 0.3, integrator=i)).trajectory.arrays() for i in (loose, tight)]
+    elbow = runs[1]['q'][:, 12]
+    assert np.any(elbow[:150] > 1e-3) and np.all(elbow[180:] < 0.0)  # it lands and stays
+    assert np.max(np.abs(runs[0]['q'] - runs[1]['q'])) < 1e-3
+    assert np.max(np.abs(runs[0]['q'][180:, 12] - elbow[180:])) < 1e-4
+
+
 def test_native_periods_under_coulomb_friction_and_a_push() -> None:
     """Symmetric friction (slide directions from the reactions) and an external force."""
     push = Push(start=0.3, duration=0.1, frame='chest', force=(0.0, -60.0, 0.0))
@@ -144,7 +181,7 @@ def test_native_periods_under_coulomb_friction_and_a_push() -> None:
     _assert_same_run(*runs, tolerance=1e-7)
 
 
-@pytest.mark.parametrize('method', ['implicit_euler', 'rk45'])
+@pytest.mark.parametrize('method', ['implicit_euler', 'rk45', 'ros34pw2'])
 def test_native_reset_starts_the_same_run_again(method: str) -> None:
     """Bit for bit, the adaptive method's step-size history included."""
     integrator = replace(load_scene('skate').simulator.integrator, method=method)

@@ -1,5 +1,6 @@
 """The integrators: convergence order, one step, event location, and the determinism of whole
-runs on the shipped simulator.
+runs on the shipped simulator; the Rosenbrock-W method ros34pw2 (native only) against the same
+references: its order, its error against its tolerance, its event time.
 
 Each order, step and event test runs on two engines: 'oracle', the oracle's ``Integrator`` on
 the mode-1 dynamics (support flat and stuck, swing foot in the air) of
@@ -91,19 +92,25 @@ def _max_damping_rate(problem: Problem, q: np.ndarray) -> float:
 
 
 # ------------------------------------------------------------------- convergence order
+def _smooth_segment(robot, rng) -> tuple[Problem, Problem, np.ndarray, float]:
+    """The smooth segment of the order tests: (oracle problem, native problem, x0, duration).
+    The input holds the initial posture (gravity) up to small offsets, so it moves smoothly."""
+    q = _swing_lifted()
+    tau = _gravity(robot, q)
+    tau[2:] += rng.uniform(-5.0, 5.0, N - 2)
+    v = np.zeros(N)
+    v[2:] = rng.uniform(-0.3, 0.3, N - 2)
+    return (Problem(robot, q, tau), Problem(robot, q, tau, engine='native'),
+            np.concatenate([q, v]), 0.2)
+
+
 @pytest.mark.parametrize('engine', ENGINES)
 @pytest.mark.parametrize(('method', 'order'), [('rk4', 4), ('symplectic_euler', 1),
                                                ('implicit_euler', 1)])
 def test_convergence_order_on_a_smooth_segment(robot, rng, method, order, engine):
-    q = _swing_lifted()
-    tau = _gravity(robot, q)  # holds the initial posture ...
-    tau[2:] += rng.uniform(-5.0, 5.0, N - 2)  # ... up to small offsets, so it moves smoothly
-    problem = Problem(robot, q, tau)  # the reference: the oracle's DOP853
-    engine_problem = Problem(robot, q, tau, engine=engine)
-    v = np.zeros(N)
-    v[2:] = rng.uniform(-0.3, 0.3, N - 2)
-    x0 = np.concatenate([q, v])
-    duration = 0.2
+    problem, _, x0, duration = _smooth_segment(robot, rng)  # the reference: the oracle's DOP853
+    engine_problem = _on(problem, engine)
+    q = x0[:N]
 
     ref = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-13,
                                                 atol=1e-13), x0, duration)
@@ -131,6 +138,49 @@ def test_convergence_order_on_a_smooth_segment(robot, rng, method, order, engine
     assert abs(slope - order) <= 0.3, (
         f'{engine} {method}: log-log slope {slope:.3f}, expected {order} (steps {steps}, errors '
         f'{errors})')
+
+
+def test_ros34pw2_converges_at_third_order(robot, rng):
+    """The Rosenbrock-W method with its error control off (rtol = atol = 1: every step its
+    largest) is of order 3 although its matrix holds only the stiffness and damping of the
+    Jacobian (a W-method keeps its order for any matrix); its steps are not bound by the
+    stiffest mode (h lambda = 0.35 to 1.4 here, where explicit RK4 needs h lambda < 2.79)."""
+    problem, native, x0, duration = _smooth_segment(robot, rng)
+    ref = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-13,
+                                                atol=1e-13), x0, duration)
+    check = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-12,
+                                                  atol=1e-12), x0, duration)
+    ref_error = np.max(np.abs(ref.x - check.x))
+    steps = [duration / n for n in (200, 400, 800)]
+    errors = []
+    for h in steps:
+        seg = native.run(IntegratorConfig('ros34pw2', step=h, rtol=1.0, atol=1.0), x0,
+                         duration)
+        assert seg.fired is None and seg.steps == round(duration / h)
+        errors.append(float(np.max(np.abs(seg.x - ref.x))))
+    assert errors[-1] > 10.0 * ref_error, (errors, ref_error)
+    slope = float(np.polyfit(np.log(steps), np.log(errors), 1)[0])
+    assert abs(slope - 3.0) <= 0.3, (slope, errors)
+
+
+def test_ros34pw2_error_follows_its_tolerance(robot, rng):
+    """Under step-size control on its embedded order-2 estimate the global error falls about
+    in proportion to the tolerance and the step count grows as tol^(-1/3)."""
+    problem, native, x0, duration = _smooth_segment(robot, rng)
+    ref = problem.run(ReferenceIntegratorConfig('dop853', step=duration, rtol=1e-13,
+                                                atol=1e-13), x0, duration)
+    tolerances = np.array([1e-5, 1e-6, 1e-7, 1e-8])
+    errors, steps = [], []
+    for rtol in tolerances:
+        seg = native.run(IntegratorConfig('ros34pw2', step=1.0, rtol=rtol, atol=rtol), x0,
+                         duration)
+        errors.append(float(np.max(np.abs(seg.x - ref.x))))
+        steps.append(seg.steps)
+    error_slope = np.polyfit(np.log(tolerances), np.log(errors), 1)[0]
+    step_slope = np.polyfit(np.log(tolerances), np.log(steps), 1)[0]
+    assert 0.65 <= error_slope <= 1.1, (errors, error_slope)
+    assert -0.42 <= step_slope <= -0.25, (steps, step_slope)
+    assert errors[-1] <= 1e-6
 
 
 @pytest.mark.parametrize('engine', ENGINES)
@@ -222,7 +272,7 @@ def test_event_reference_locates_the_heel_on_the_floor(falling_heel):
 
 
 @pytest.mark.parametrize(('method', 'engine'), [('rk45', 'oracle'), ('rk45', 'native'),
-                                               ('dop853', 'oracle')])
+                                               ('dop853', 'oracle'), ('ros34pw2', 'native')])
 def test_adaptive_event_time_agrees_with_the_reference(falling_heel, method, engine):
     problem, x0, ref = falling_heel
     problem = _on(problem, engine)
@@ -283,7 +333,7 @@ def _assert_identical(a: Simulator, b: Simulator) -> None:
     assert a.stats == b.stats
 
 
-@pytest.mark.parametrize(('method', 'step'), [('rk4', 1e-4), ('rk45', 1e-2)])
+@pytest.mark.parametrize(('method', 'step'), [('rk4', 1e-4), ('rk45', 1e-2), ('ros34pw2', 1e-2)])
 def test_runs_are_bit_identical(robot, method, step):
     first = _drive(_simulator(robot, method, step))
     second = _drive(_simulator(robot, method, step))

@@ -13,10 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdint>
 #include <string>
-
-#include <boost/math/tools/toms748_solve.hpp>
 
 #include "iceskate_native/errors.hpp"
 #include "iceskate_native/integrators.hpp"
@@ -193,37 +190,6 @@ State dense_state(const Scheme & s, const State & x, const std::array<Increment,
   return out;
 }
 
-/// The fraction of the step from x to x1 at which the first soft stop engages or releases (its
-/// force has a kink there and its damping a jump), located on the dense output; 1 if none. A
-/// stop the step starts on (within 1e-12) does not count: the step has started at its switch.
-double first_stop_switch(const Dynamics & dynamics, const Scheme & s, const State & x,
-                         const State & x1, const std::array<Increment, kStages> & u,
-                         double tolerance)
-{
-  double first = 1.0;
-  if (!dynamics.parameters().joint_limits) {
-    return first;
-  }
-  for (const JointLimit & limit : dynamics.limits()) {
-    for (const double bound : {limit.lower, limit.upper}) {
-      const double from = x[limit.index] - bound;
-      const double to = x1[limit.index] - bound;
-      if (std::abs(from) < 1e-12 || (from < 0.0) == (to < 0.0)) {
-        continue;
-      }
-      const auto side = [&](double theta) {
-        return dense_state(s, x, u, theta)[limit.index] - bound;
-      };
-      std::uintmax_t iterations = 100;
-      const auto close = [tolerance](double lo, double hi) { return hi - lo <= tolerance; };
-      const auto bracket =
-        boost::math::tools::toms748_solve(side, 0.0, 1.0, from, to, close, iterations);
-      first = std::min(first, bracket.second);  // the switched side of the final bracket
-    }
-  }
-  return first;
-}
-
 }  // namespace
 
 Segment integrate_rosenbrock(
@@ -297,14 +263,6 @@ Segment integrate_rosenbrock(
         throw NativeError("ros34pw2: the step size fell below 1e-14 s at t = " + std::to_string(t)
                           + " s (the error control cannot be met)");
       }
-      continue;
-    }
-    // a soft stop switched inside the step: take the step again up to the switch
-    const double switched = first_stop_switch(dynamics, s, x, x1, u, event_tolerance / h_try);
-    if (switched < 1.0 && switched * h_try > event_tolerance
-        && (1.0 - switched) * h_try > event_tolerance)
-    {
-      h = switched * h_try;
       continue;
     }
     segment.steps += 1;

@@ -199,8 +199,6 @@ public:
   const Mode & mode(int number) const;
   const ModeTable & modes() const noexcept { return modes_; }
   const DynamicsParameters & parameters() const noexcept { return params_; }
-  /// The soft stops (empty or unused when parameters().joint_limits is false).
-  const std::vector<JointLimit> & limits() const noexcept { return limits_; }
 
 private:
   struct Workspace;  // Pinocchio data and the assembled system (in dynamics.cpp)

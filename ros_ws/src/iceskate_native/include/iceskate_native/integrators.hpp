@@ -85,9 +85,9 @@ Segment integrate_adaptive(
   const State & x0, double t_end, const DynamicsResult & start, double & step);
 
 /// The same with ROS34PW2 under step-size control on its embedded estimate
-/// (integrators_rosenbrock.cpp): eq. (7) as an index-1 DAE, each stage one residual and one solve
-/// with the step's matrix, events located on its dense output of order 3, and a step that crosses
-/// a soft stop's engagement or release taken again up to it. `step` as in integrate_adaptive.
+/// (integrators_rosenbrock.cpp): each stage one eq. (7) evaluation and one solve with the step's
+/// matrix (the held stiffness and damping, a soft stop's too from a step that would cross it),
+/// events located on its dense output of order 3. `step` as in integrate_adaptive.
 Segment integrate_rosenbrock(
   Dynamics & dynamics, const Contact & contact, const Inputs & inputs,
   const Tolerances & tolerances, double event_tolerance, const GuardSet & guards, double t0,
