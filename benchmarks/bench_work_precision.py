@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Work-precision benchmark of the integrators: wall time against error.
 
-For every integrator of the simulator (symplectic_euler, implicit_euler, rk4, rk45) and a sweep
-of fixed steps or tolerances, one closed-loop run (the scene's controllers at every control
+For every integrator of the simulator (symplectic_euler, implicit_euler, rk4; the adaptive rk45
+and ros34pw2) and a sweep of fixed steps or tolerances, one closed-loop run (the scene's controllers at every control
 instant in the native blocks of periods, as ``run_scene`` does, without recording) is timed and
 compared with a reference run of the same case at the tightest setting: rk45 (Dormand-Prince
 5(4)) at rtol 1e-12, atol 1e-2 rtol, or at the case's own tolerance where the kernel's step-size
@@ -24,7 +24,7 @@ printed (it must be well below the errors being compared). Cases:
   off, 0.3 s: a conservative system, so the energy drift is the integrator's;
 * ``skate``: the shipped ``skate`` scene, the whole 15 s (``--quick``: 2 s), with its events:
   the goal figure below (the shipped implicit Euler and the cheap accurate settings of rk4,
-  rk45).
+  rk45, ros34pw2).
 
 Figures per run, against the reference interpolated onto the run's samples (one per control
 period): ``head_err_max`` = max over the samples of |p_head - p_ref| (head-top y, z) [m];
@@ -135,8 +135,8 @@ class Run:
 
 
 def integrator_config(method: str, setting: float, period: float) -> IntegratorConfig:
-    """Fixed-step methods: ``setting`` is the step [s]; adaptive ones: the rtol (atol = 1e-2
-    rtol, max step = the control period)."""
+    """Fixed-step methods: ``setting`` is the step [s]; adaptive ones (rk45, ros34pw2): the rtol
+    (atol = 1e-2 rtol, max step = the control period)."""
     if method in FIXED:
         return IntegratorConfig(method=method, step=setting)
     return IntegratorConfig(method=method, step=period, rtol=setting, atol=setting * 1e-2)
@@ -273,37 +273,42 @@ def make_cases(quick: bool) -> list[Case]:
         return [
             Case('smooth', 'stand, soft stops off, mode 17, 0.1 s (no events)', smooth, 0.1, {
                 'symplectic_euler': (5e-5, 2.5e-5), 'implicit_euler': (1e-3, 2.5e-4),
-                'rk4': (1e-4, 5e-5), 'rk45': (1e-4, 1e-8)}),
+                'rk4': (1e-4, 5e-5), 'rk45': (1e-4, 1e-8), 'ros34pw2': (1e-3, 1e-6)}),
             Case('events', 'walk as shipped, 0.6 s (with events)', walk, 0.6, {
-                'implicit_euler': (1e-3, 2.5e-4), 'rk4': (1e-4,), 'rk45': (1e-4,)},
-                 reference_rtol=WALK_REFERENCE_RTOL),
+                'implicit_euler': (1e-3, 2.5e-4), 'rk4': (1e-4,), 'rk45': (1e-4,),
+                'ros34pw2': (1e-2, 1e-4)}, reference_rtol=WALK_REFERENCE_RTOL),
             Case('passive', 'mode 17, no inputs, no damping/stops, 0.2 s', passive, 0.2, {
                 'symplectic_euler': (1e-3, 2.5e-4), 'implicit_euler': (1e-3,),
-                'rk4': (1e-3, 2.5e-4), 'rk45': (1e-6,)}, energy=True),
+                'rk4': (1e-3, 2.5e-4), 'rk45': (1e-6,), 'ros34pw2': (1e-4,)}, energy=True),
             Case('skate', 'skate as shipped, 2 s (with events)', skate, 2.0, {
-                'implicit_euler': (1e-3,), 'rk4': (2e-4,), 'rk45': (1e-4,)},
-                 reference_rtol=SKATE_REFERENCE_RTOL),
+                'implicit_euler': (1e-3,), 'rk4': (2e-4,), 'rk45': (1e-4,),
+                'ros34pw2': (1e-2, 1e-4)}, reference_rtol=SKATE_REFERENCE_RTOL),
         ]
     return [
         Case('smooth', 'stand, soft stops off, mode 17, 0.4 s (no events)', smooth, 0.4, {
             'symplectic_euler': (1e-4, 5e-5, 2.5e-5, 1e-5),
             'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5),
             'rk4': (1e-4, 5e-5, 2.5e-5),
-            'rk45': (1e-3, 1e-5, 1e-7, 1e-9)}),
+            'rk45': (1e-3, 1e-5, 1e-7, 1e-9),
+            'ros34pw2': (1e-3, 1e-5, 1e-7, 1e-9)}),
         Case('events', 'walk as shipped, 1.28 s (first step, with events)', walk, 1.28, {
                  'symplectic_euler': (5e-5, 2.5e-5),
                  'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
                  'rk4': (1e-4, 5e-5, 2.5e-5),
-                 'rk45': (1e-4, 1e-6, 1e-8)}, reference_rtol=WALK_REFERENCE_RTOL),
+                 'rk45': (1e-4, 1e-6, 1e-8),
+                 'ros34pw2': (1e-2, 1e-3, 1e-4, 1e-5)}, reference_rtol=WALK_REFERENCE_RTOL),
         Case('passive', 'mode 17, no inputs, joint damping and stops off, 0.3 s', passive, 0.3,
              {'symplectic_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
               'implicit_euler': (1e-3, 5e-4, 2.5e-4, 1e-4),
               'rk4': (1e-3, 5e-4, 2.5e-4),
-              'rk45': (1e-4, 1e-6, 1e-8)}, energy=True),
+              'rk45': (1e-4, 1e-6, 1e-8),
+              'ros34pw2': (1e-3, 1e-5, 1e-7)}, energy=True),
         Case('skate', f'skate as shipped, the whole {skate.duration:g} s (with events)', skate,
              skate.duration,
              {'implicit_euler': (1e-3, 2.5e-4, 1e-4), 'rk4': (2e-4, 1e-4, 5e-5),
-              'rk45': (1e-2, 1e-3, 1e-4, 1e-6)}, reference_rtol=SKATE_REFERENCE_RTOL),
+              'rk45': (1e-2, 1e-3, 1e-4, 1e-6),
+              'ros34pw2': (1e-1, 3e-2, 1e-2, 1e-3, 1e-4, 1e-5)},
+             reference_rtol=SKATE_REFERENCE_RTOL),
     ]
 
 

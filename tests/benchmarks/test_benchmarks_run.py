@@ -23,6 +23,8 @@ CASES = {
     'bench_command': (['stand', '--rounds', '1', '--duration', '0.1'], 'whole command [s]'),
     'bench_view': (['stand', '--rounds', '1', '--duration', '0.1'], 'view / no view'),
     'bench_dynamics': (['--repeat', '1', '--number', '2'], '18-coordinate modes: worst evaluate'),
+    'bench_figures': (['stand', '--duration', '0.2', '--repeat', '1', '--settings',
+                       'implicit_euler:1e-3,ros34pw2:1e-2'], 'goals: every figure within'),
     'bench_period': (['stand', '--duration', '0.05', '--no-picture'],
                      "the run's own / the native loop's"),
     'bench_physics': (['--states', '2', '--spacing', '2', '--repeat', '1', '--number', '2',
