@@ -196,6 +196,26 @@ def test_native_reset_starts_the_same_run_again(method: str) -> None:
     assert np.array_equal(session.trajectory.arrays()['q'], first['q'])
 
 
+def test_an_end_only_the_method_reaches_is_a_divergence() -> None:
+    """rk4 at 1 ms is unstable on skate's light damped links: its state runs away into a
+    'flight' 0.7 ms into the run, which rk45 at rtol 1e-8 from that period's start does not
+    reach: a divergence with its advice, never a fall; rk4 at 0.1 ms walks on."""
+    integrator = replace(load_scene('skate').simulator.integrator, method='rk4', step=1e-3)
+    scene = _scene('skate', 0.05, integrator=integrator)
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    while not session.done:
+        session.run_periods(stack, 1000)
+    session.finish()
+    assert session.sim.ended is None and session.sim.time < 1e-3
+    assert session.error is not None and session.error.end == 'diverged', session.error
+    assert "a flight that rk45 at rtol 1e-8 does not reach from the period's start" in str(
+        session.error)
+    assert 'take a smaller integrator.step, or an implicit method' in str(session.error)
+    fine = replace(integrator, step=1e-4)
+    assert _run(_scene('skate', 0.05, integrator=fine)).sim.ended is None
+
+
 def test_native_period_errors_cross_as_simulation_errors() -> None:
     """Input the kernel refuses comes back as one SimulationError sentence, not a crash."""
     sim = Session(_scene('stand', 0.1)).sim

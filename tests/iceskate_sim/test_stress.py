@@ -28,12 +28,11 @@ def _load_stress():
 
 stress = _load_stress()
 CASE_WALL_LIMIT = 20.0  # s, alarm per case (the slowest takes ~3 s on the 2-core machine)
-# Known gap: explicit methods beyond their stability limit, a 20 ms implicit step and an impact
-# at a near-singular posture can run the state away (1e7..1e61 J within a few ms) without
-# NaN, and the run then stops as a physical end (toe-first touchdown, flight) instead of a
-# SimulationError: Simulator._check_health has no bound on energy or speed yet. These cases
-# still have to keep the contract above; the runaway check is an expected failure for them
-# (not strict: which of them run away depends on the event handling of the day).
+# The cases that used to run away: explicit methods beyond their stability limit, a 20 ms
+# implicit step and an impact at a near-singular posture. Their state grows without NaN, and the
+# run used to stop as a physical end (toe-first touchdown, flight); now the speed bound and the
+# check of every physical end (rk45 at rtol 1e-8 from the period's start must reach an end too)
+# report each as a divergence, which this test holds them to.
 RUNAWAY = ('step_large_implicit', 'step_large_rk4', 'step_large_symplectic',
                       'near_straight_double', 'stiff_damping_explicit')
 
@@ -60,6 +59,7 @@ def test_case_behaves_or_stops_with_a_reason(name, robot):
 def test_runaway_state_is_reported_as_divergence(name, robot):
     _, result = _run(name, robot)
     assert result.plausible, result.line()
+    assert result.outcome == 'error' and 'diverged' in result.reason, result.line()
 
 
 def test_the_contract_can_fail():

@@ -1,5 +1,6 @@
 #include "iceskate_native/simulator.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -128,10 +129,13 @@ void HybridSimulator::advance(const Inputs & inputs)
   const double t_end = state_.t + settings_.control_period;
   double instant = state_.t;
   int at_instant = 0;
+  const HybridState period_start = state_;
+  bool integrating = false;  // past the transitions due at the period's start
   try {
     settle();  // a guard the new input makes due fires at the period start
     start_state_ = state_;
     start_result_ = result_;
+    integrating = true;
     while (t_end - state_.t > 1e-12) {
       const GuardSet guards = guard_set(state_);
       State x0;
@@ -186,10 +190,59 @@ void HybridSimulator::advance(const Inputs & inputs)
     check_health(known ? &residual : nullptr);
   } catch (const Ended & end) {
     check_speed(end.state);  // a blow-up is not a physical end
+    if (integrating) {
+      confirm_end(period_start, inputs, end.reason, end.state);
+    }
     ended_ = end.reason;
     state_ = end.state;
   }
   stats_.control_periods += 1;
+}
+
+void HybridSimulator::confirm_end(
+  const HybridState & start, const Inputs & inputs, RunEnd end, const HybridState & at)
+{
+  SimulatorSettings check = settings_;
+  check.method = Method::kRk45;
+  check.rtol = 1.0e-8;
+  check.atol = 1.0e-10;
+  check.step = settings_.control_period;
+  if (settings_.method == check.method && settings_.rtol <= check.rtol
+      && settings_.atol <= check.atol)
+  {
+    return;  // as accurate as the check already
+  }
+  try {
+    HybridSimulator again(dynamics_, check, start);
+    again.set_state(start);
+    again.suppressed_ = suppressed_;
+    const int periods = std::max(1, static_cast<int>(kEndCheckTime / settings_.control_period));
+    for (int k = 0; k < periods && again.ended() == RunEnd::kNone; ++k) {
+      again.advance(inputs);
+    }
+    if (again.ended() != RunEnd::kNone) {
+      return;
+    }
+  } catch (const std::exception &) {
+    return;  // the check itself failed: the end stands as the run's method found it
+  }
+  static const char * const kEnds[] = {"none", "flight", "toe-first touchdown", "fall"};
+  const char * advice = "take a smaller integrator.rtol and atol";
+  if (settings_.method == Method::kImplicitEuler) {
+    advice = "take a smaller integrator.step, or the ros34pw2 method";
+  } else if (settings_.method == Method::kRk4 || settings_.method == Method::kSymplecticEuler) {
+    advice = "take a smaller integrator.step, or an implicit method (implicit_euler, ros34pw2)";
+  }
+  const bool fixed = settings_.method != Method::kRk45 && settings_.method != Method::kRos34pw2;
+  char what[320];
+  std::snprintf(
+    what, sizeof(what),
+    "the integration ended the run in a %s that rk45 at rtol 1e-8 does not reach from the "
+    "period's start under the same command: %s; %s",
+    kEnds[static_cast<int>(end)],
+    fixed ? "its step is too large for this method here" : "its tolerance is too loose here",
+    advice);
+  diverged(what, at);
 }
 
 void HybridSimulator::settle()

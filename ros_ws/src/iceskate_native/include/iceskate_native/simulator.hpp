@@ -88,6 +88,10 @@ struct RunStatistics
 class HybridSimulator
 {
 public:
+  /// How long the check of a physical end may take to reach one [s] (an end near a period's
+  /// end may come a little later in the check's more accurate trajectory).
+  static constexpr double kEndCheckTime = 0.02;
+
   /// A simulation from `initial` on `dynamics` (kept by reference: it must outlive this).
   HybridSimulator(Dynamics & dynamics, SimulatorSettings settings, HybridState initial);
 
@@ -99,7 +103,10 @@ public:
   void set_state(const HybridState & s);
 
   /// Integrate one control period holding `inputs`. Throws DivergenceError, ChatteringError or
-  /// NativeError; a physical end (fall, flight, toe-first touchdown) sets ended() instead.
+  /// NativeError; a physical end (fall, flight, toe-first touchdown) sets ended() instead, once
+  /// rk45 at rtol 1e-8 from the period's start under the same inputs reaches an end too within
+  /// kEndCheckTime (whole periods, at least one): an end it does not reach is the method's
+  /// (e.g. rk4 with too large a step), a DivergenceError with advice.
   void advance(const Inputs & inputs);
 
   const HybridState & state() const noexcept { return state_; }
@@ -129,6 +136,8 @@ private:
   void rest(Guard guard);
   bool project(Eigen::VectorXd & residual);
   void check_speed(const HybridState & s);
+  void confirm_end(const HybridState & start, const Inputs & inputs, RunEnd end,
+                   const HybridState & at);
   void check_health(const Eigen::VectorXd * residual);
   [[noreturn]] void diverged(const std::string & what, HybridState s);
 
