@@ -25,6 +25,7 @@ from typing import Any
 
 from iceskate_bringup.api import run
 from iceskate_bringup.scene import load_scene
+from iceskate_sim.physics.integrators import FIXED_STEP
 
 GOAL_RTF = 30.0  # the run's own real-time factor at the shipped setting
 GOAL_RELATIVE = 1e-3  # every figure within 0.1 % of the reference's ...
@@ -74,10 +75,10 @@ def compare(got: dict[str, float], reference: dict[str, float]) -> dict[str, Any
 def setting_overrides(method: str, setting: float) -> dict[str, Any]:
     """A scene's integrator keys for ``method`` at ``setting`` (a fixed step [s], or an
     adaptive method's rtol with atol 1e-2 rtol and the control period as the largest step)."""
-    if method in ('rk45', 'ros34pw2'):
-        return {'integrator.method': method, 'integrator.rtol': setting,
-                'integrator.atol': setting * 1e-2, 'integrator.step': 1e-3}
-    return {'integrator.method': method, 'integrator.step': setting}
+    if method in FIXED_STEP:
+        return {'integrator.method': method, 'integrator.step': setting}
+    return {'integrator.method': method, 'integrator.rtol': setting,
+            'integrator.atol': setting * 1e-2, 'integrator.step': 1e-3}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,6 @@
 """The integrator settings of a run: ``IntegratorConfig`` (step and tolerances in s) and the
-methods ``FIXED_STEP``, ``METHODS``; the integrators run in C++. See docs/model.md §8.1 and §6.4.
+methods ``FIXED_STEP``, ``ADAPTIVE`` (Dormand-Prince 5(4) ``rk45``, the Rosenbrock-W method
+``ros34pw2``), ``METHODS``; the integrators run in C++. See docs/model.md §8.1 and §6.4.
 """
 
 from __future__ import annotations
@@ -20,11 +21,14 @@ class IntegratorConfig:
     """Choice and settings of the integrator, and the drift projection (a scene's
     ``integrator``)."""
 
-    method: str = setting('rk4', 'integration method: fixed step or rk45 (adaptive)',
-                          choices=METHODS)
-    step: float = setting(1e-4, 'fixed step (largest step of rk45)', unit='s', low=1e-6)
-    rtol: float = setting(1e-8, 'relative tolerance (rk45)', low=0.0, open_low=True, high=1.0)
-    atol: float = setting(1e-10, 'absolute tolerance (rk45)', low=0.0, open_low=True, high=1.0)
+    method: str = setting('rk4', 'integration method: fixed step, or rk45 or ros34pw2 '
+                          '(adaptive)', choices=METHODS)
+    step: float = setting(1e-4, 'fixed step (largest step of an adaptive method)', unit='s',
+                          low=1e-6)
+    rtol: float = setting(1e-8, 'relative tolerance (adaptive methods)', low=0.0, open_low=True,
+                          high=1.0)
+    atol: float = setting(1e-10, 'absolute tolerance (adaptive methods)', low=0.0,
+                          open_low=True, high=1.0)
     event_tolerance: float = setting(1e-10, 'tolerance of an event time', unit='s', low=0.0,
                                      open_low=True, high=1e-3)
     projection: bool = setting(True, 'project positions and velocities onto the active swing '
