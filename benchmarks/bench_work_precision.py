@@ -2,8 +2,9 @@
 """Work-precision benchmark of the integrators: wall time against error.
 
 For every integrator of the simulator (symplectic_euler, implicit_euler, rk4; the adaptive rk45
-and ros34pw2) and a sweep of fixed steps or tolerances, one closed-loop run (the scene's controllers at every control
-instant in the native blocks of periods, as ``run_scene`` does, without recording) is timed and
+and ros34pw2) and a sweep of fixed steps or tolerances, one closed-loop run (the scene's
+controllers at every control instant in the native blocks of periods, as ``run_scene`` does,
+without recording) is timed and
 compared with a reference run of the same case at the tightest setting: rk45 (Dormand-Prince
 5(4)) at rtol 1e-12, atol 1e-2 rtol, or at the case's own tolerance where the kernel's step-size
 control cannot hold 1e-12 over the whole run: it stops with "the step size fell below 1e-14 s"

@@ -99,6 +99,17 @@ bool first_crossing(
   return segment.fired >= 0;
 }
 
+void require_adaptive_settings(const Tolerances & tol, double event_tolerance, double t0,
+                               double t_end, const char * method)
+{
+  if (!(tol.rtol > 0.0) || !(tol.atol > 0.0) || !(tol.max_step > 0.0) || !(event_tolerance > 0.0)
+      || !std::isfinite(t0) || !std::isfinite(t_end))
+  {
+    throw std::invalid_argument(std::string("a ") + method + " segment needs rtol, atol, "
+                                "max_step and event_tolerance > 0 and finite times");
+  }
+}
+
 Method method_named(const std::string & name)
 {
   if (name == "symplectic_euler") {
@@ -178,10 +189,7 @@ Segment integrate_fixed(
     r0 = std::move(r1);
     g0 = g1;
   }
-  segment.t = t_end;
-  segment.x = x;
-  segment.result = r0;
-  return segment;
+  return segment.reached(t_end, x, std::move(r0));
 }
 
 }  // namespace iceskate_native

@@ -68,12 +68,7 @@ Segment integrate_adaptive(
   const State & x0, double t_end, const DynamicsResult & start, double & step)
 {
   const Tolerances & tol = tolerances;
-  if (!(tol.rtol > 0.0) || !(tol.atol > 0.0) || !(tol.max_step > 0.0) || !(event_tolerance > 0.0)
-      || !std::isfinite(t0) || !std::isfinite(t_end))
-  {
-    throw std::invalid_argument(
-      "an adaptive segment needs rtol, atol, max_step and event_tolerance > 0 and finite times");
-  }
+  require_adaptive_settings(tol, event_tolerance, t0, t_end, "rk45");
   Segment segment;
   Rate rate{dynamics, contact, inputs, segment.evaluations};
   // Odeint's default control: error <= atol + rtol (|x| + h |xdot|) per entry, step bounded
@@ -135,10 +130,7 @@ Segment integrate_adaptive(
     r0 = std::move(r1);
     g0 = g1;
   }
-  segment.t = t_end;
-  segment.x = x;
-  segment.result = r0;
-  return segment;
+  return segment.reached(t_end, x, std::move(r0));
 }
 
 }  // namespace iceskate_native

@@ -197,12 +197,7 @@ Segment integrate_rosenbrock(
   const Tolerances & tol, double event_tolerance, const GuardSet & guards, double t0,
   const State & x0, double t_end, const DynamicsResult & start, double & step)
 {
-  if (!(tol.rtol > 0.0) || !(tol.atol > 0.0) || !(tol.max_step > 0.0) || !(event_tolerance > 0.0)
-      || !std::isfinite(t0) || !std::isfinite(t_end))
-  {
-    throw std::invalid_argument(
-      "a ros34pw2 segment needs rtol, atol, max_step and event_tolerance > 0 and finite times");
-  }
+  require_adaptive_settings(tol, event_tolerance, t0, t_end, "ros34pw2");
   const Scheme & s = scheme();
   const Mode & mode = dynamics.mode(contact.mode);
   Segment segment;
@@ -289,10 +284,7 @@ Segment integrate_rosenbrock(
     r0 = std::move(r1);
     g0 = g1;
   }
-  segment.t = t_end;
-  segment.x = x;
-  segment.result = r0;
-  return segment;
+  return segment.reached(t_end, x, std::move(r0));
 }
 
 }  // namespace iceskate_native

@@ -58,6 +58,15 @@ struct Segment
   int fired = -1;
   int steps = 0;
   int evaluations = 0;
+
+  /// This segment as one that reached t_end at `at` (dynamics `there`) without an event.
+  Segment & reached(double t_end, const State & at, DynamicsResult there)
+  {
+    t = t_end;
+    x = at;
+    result = std::move(there);
+    return *this;
+  }
 };
 
 /// The error control of an adaptive method: per state entry, the error estimate must stay
@@ -68,6 +77,11 @@ struct Tolerances
   double atol = 1e-10;
   double max_step = 1e-3;
 };
+
+/// std::invalid_argument unless an adaptive segment's tolerances, event tolerance and largest
+/// step are > 0 and its times finite (`method` names it in the message).
+void require_adaptive_settings(const Tolerances & tolerances, double event_tolerance, double t0,
+                               double t_end, const char * method);
 
 /// Advance from (t0, x0), whose dynamics are `start`, to t_end or the first guard crossing.
 /// `method` is a fixed-step one.
