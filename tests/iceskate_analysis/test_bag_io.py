@@ -8,6 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
+from hostile import alias_bomb
 from iceskate_analysis import bag_io
 from iceskate_analysis.bag_io import BagReading, read_bag, resolve_bag_path
 from iceskate_analysis.rows import join_rows
@@ -223,6 +224,20 @@ def test_read_bag_rebuilds_a_bag_without_metadata_from_its_mcap_file(tmp_path, s
     assert np.array_equal(bag.efforts['passive'], whole.efforts['passive'])
     assert 'no metadata.yaml' in bag.notes[0] and 'rebuilt from' in bag.notes[0]
     assert bag.urdf == whole.urdf and bag.custom_data == {}
+
+
+@pytest.mark.timeout(30)
+def test_an_alias_bomb_in_a_bag_s_metadata_is_not_expanded(tmp_path, sim_bag):
+    """A bag's metadata.yaml is read within the bounds of every YAML read: a crafted one (an
+    alias bomb in its custom data) loses its custom data, and the samples read as before."""
+    target = tmp_path / 'bomb'
+    shutil.copytree(sim_bag, target)
+    metadata = target / 'metadata.yaml'
+    metadata.write_text(metadata.read_text().replace(
+        'custom_data:', f'custom_data:\n    bomb: {alias_bomb()}', 1))
+    bag, whole = read_bag(target), read_bag(sim_bag)
+    assert whole.custom_data and bag.custom_data == {}
+    assert np.array_equal(bag.q, whole.q)
 
 
 def test_read_bag_refuses_a_missing_path(tmp_path):

@@ -5,6 +5,7 @@ import copy
 import numpy as np
 import pytest
 
+from hostile import alias_bomb
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.installed import shipped_files
@@ -63,6 +64,15 @@ def test_a_bad_key_is_refused_naming_it(make, axes, message):
 def test_a_bad_range_is_refused_naming_the_axis(make, axis, message):
     with pytest.raises(StudyError, match=message):
         make(axes={'floor.mu': axis})
+
+
+def test_an_alias_bomb_in_a_spec_is_refused_before_anything_is_built(tmp_path):
+    """In a study's overrides (or an axis): one sentence, fast (the bound of every YAML read)."""
+    spec = tmp_path / 'bomb.yaml'
+    spec.write_text(f'scene: skate\noverrides:\n  description: {alias_bomb()}\n'
+                    'axes:\n  floor.mu: [0.01]\n')
+    with pytest.raises(StudyError, match=f'SPEC {spec} expands to more than 100000 values'):
+        load_spec(spec)
 
 
 def test_a_spec_of_too_many_runs_is_refused_before_any_scene_is_made(make):

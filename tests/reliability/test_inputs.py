@@ -11,6 +11,7 @@ import sys
 import pytest
 import yaml
 
+from hostile import alias_bomb, deep
 from iceskate_bringup.runner import main
 from iceskate_bringup.scene import load_scene
 from iceskate_sim.errors import SimulationError
@@ -160,6 +161,35 @@ def test_a_scene_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, ca
     assert f'scene {scene} is {scene.stat().st_size} bytes, more than the {MAX_YAML_BYTES}' in line
 
 
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize(('value', 'problem'), [
+    (alias_bomb(), 'expands to more than 100000 values (its aliases counted as what they stand '
+                   'for)'),
+    (deep(), 'nests mappings and sequences deeper than 64 levels')])
+def test_an_alias_bomb_or_a_deep_nest_in_a_scene_is_refused_small_and_fast(
+        tmp_path, capsys, value, problem):
+    """In a known key of a scene file (description) or of --set (floor.mu): one line, in well
+    under a second, no RecursionError, the memory of the text only."""
+    import resource
+    import time
+    scene = _scene(tmp_path)
+    scene.write_text(scene.read_text().replace('description:', f'description: {value}\nx_:', 1))
+    start, memory = time.monotonic(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
+    assert line == f'run_scene: error: scene {scene} {problem}'
+    line = _refused(capsys, [str(TINY), '--out', str(tmp_path / 'out'), '--set',
+                             f'floor.mu={value}'])
+    assert line == f'run_scene: error: --set floor.mu {problem}'
+    assert time.monotonic() - start < 5.0
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - memory < 200_000  # kB
+    assert not (tmp_path / 'out').exists()
+
+
+def test_aliases_within_the_bounds_still_read(tmp_path):
+    (tmp_path / 'ok.yaml').write_text('a: &x [1, 2]\nb: *x\nc: ' + deep(60) + '\n')
+    assert read_yaml(tmp_path / 'ok.yaml', 'scene')['b'] == [1, 2]
+
+
 def test_a_binary_scene_is_refused(tmp_path, capsys):
     scene = tmp_path / 'binary.yaml'
     scene.write_bytes(bytes(range(256)) * 4)
@@ -221,6 +251,10 @@ def test_an_impossible_initial_posture_is_one_sentence(tmp_path, capsys, ros):
 @pytest.mark.parametrize('content, expected', [
     (bytes(range(256)), 'is not UTF-8 text'),
     (b'simulator:\n  ros__parameters: {control_timeout: [1.0\n', 'malformed YAML'),
+    (f'simulator:\n  ros__parameters: {{x: {deep()}}}\n'.encode(),
+     'nests mappings and sequences deeper than 64 levels'),
+    (f'simulator:\n  ros__parameters: {{x: {alias_bomb()}}}\n'.encode(),
+     'expands to more than 100000 values'),
 ])
 def test_a_bad_node_parameter_file_is_refused_in_one_line(tmp_path, ros_env, content, expected):
     pytest.importorskip('rclpy')

@@ -23,7 +23,6 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
-import yaml
 
 from iceskate_analysis.rows import collect_rows
 from iceskate_sim.errors import SimulationError
@@ -32,6 +31,7 @@ from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
 from iceskate_sim.ros.conversions import PIVOT_OF_CODE
+from iceskate_sim.yaml_io import read_yaml
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
@@ -331,9 +331,9 @@ def _recording_order(path: pathlib.Path) -> tuple[tuple[int, int | str], ...]:
 def _metadata_custom_data(metadata: pathlib.Path) -> dict[str, str]:
     """custom_data of a rosbag2 metadata.yaml ({} if it cannot be read)."""
     try:
-        info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+        info = read_yaml(metadata, 'bag metadata')['rosbag2_bagfile_information']
         return {str(k): str(v) for k, v in (info.get('custom_data') or {}).items()}
-    except (OSError, ValueError, TypeError, KeyError, AttributeError, yaml.YAMLError):
+    except (SimulationError, TypeError, KeyError, AttributeError):
         return {}
 
 

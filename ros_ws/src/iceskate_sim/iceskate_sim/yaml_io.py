@@ -1,6 +1,7 @@
-"""Reading the YAML files users write (scenes, node parameter files): YAML 1.2 numbers, and one
-sentence naming the file for anything unreadable. Light to import (the nodes check their
-parameter files with it before anything else)."""
+"""Reading the YAML files users write (scenes, node parameter files, SPECs, ``--set`` values, a
+bag's metadata): YAML 1.2 numbers, bounds on size, nesting and alias expansion, and one sentence
+naming the file for anything unreadable. Light to import (the nodes check their parameter files
+with it before anything else)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,11 @@ from iceskate_sim.errors import SimulationError
 
 #: The largest YAML file read [bytes] (a scene or a SPEC is a few kB).
 MAX_YAML_BYTES = 1 << 20
+#: The deepest nesting of mappings and sequences a YAML text may have (a scene: 5 levels).
+MAX_YAML_DEPTH = 64
+#: The most values a YAML text may hold, an alias counted as the values it stands for: a few
+#: hundred bytes of aliases of aliases expand to billions (an "alias bomb").
+MAX_YAML_VALUES = 100_000
 
 
 class _Yaml12Loader(yaml.SafeLoader):
@@ -40,11 +46,55 @@ _Yaml12Loader.add_implicit_resolver(
     list('-+0123456789'))
 
 
+def _check_bounds(text: str, what: str) -> None:
+    """SimulationError naming ``what`` when ``text`` nests deeper than ``MAX_YAML_DEPTH`` or holds
+    more than ``MAX_YAML_VALUES`` values, each alias counted as the values its anchor stands
+    for. One pass over the parser's events, before anything is built (yaml.YAMLError where the
+    text is malformed)."""
+    open_sizes: list[int] = []  # values in each open mapping or sequence so far (itself: 1)
+    open_anchors: list[str | None] = []
+    anchored: dict[str, int] = {}  # anchor -> values it stands for
+    total = 0
+    for event in yaml.parse(text, Loader=_Yaml12Loader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(open_sizes) >= MAX_YAML_DEPTH:
+                raise SimulationError(f'{what} nests mappings and sequences deeper than '
+                                      f'{MAX_YAML_DEPTH} levels')
+            open_sizes.append(1)
+            open_anchors.append(event.anchor)
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            size, anchor = open_sizes.pop(), open_anchors.pop()
+        elif isinstance(event, yaml.ScalarEvent):
+            size, anchor = 1, event.anchor
+        elif isinstance(event, yaml.AliasEvent):
+            size, anchor = anchored.get(event.anchor, 1), None
+        else:
+            continue
+        if anchor is not None:
+            anchored[anchor] = size
+        if open_sizes:
+            open_sizes[-1] += size
+            count = open_sizes[-1]
+        else:
+            total += size
+            count = total
+        if count > MAX_YAML_VALUES:
+            raise SimulationError(f'{what} expands to more than {MAX_YAML_VALUES} values (its '
+                                  'aliases counted as what they stand for)')
+
+
+def _load(text: str, what: str) -> Any:
+    """``text`` as YAML 1.2 within the bounds (``_check_bounds``); yaml.YAMLError if malformed."""
+    _check_bounds(text, what)
+    return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
+
+
 def yaml_value(text: str, what: str) -> Any:
     """The value a YAML text gives (YAML 1.2 numbers: ``1e-3``, ``[30, 290, 1100]``, ``ice``),
-    or SimulationError naming ``what``."""
+    or SimulationError naming ``what`` (malformed, too deep, too many values)."""
     try:
-        return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
+        return _load(text, what)
     except yaml.YAMLError as exc:
         problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
         raise SimulationError(f'{what}: {text!r} is no YAML value ({problem})') from None
@@ -53,7 +103,8 @@ def yaml_value(text: str, what: str) -> Any:
 def read_yaml(path: str | pathlib.Path, what: str) -> Any:
     """The YAML document at ``path`` (YAML 1.2 numbers), or SimulationError naming ``what``,
     the path and the problem (unreadable, not a regular file, larger than ``MAX_YAML_BYTES``,
-    not UTF-8 text, malformed)."""
+    not UTF-8 text, malformed, nested deeper than ``MAX_YAML_DEPTH``, more than
+    ``MAX_YAML_VALUES`` values)."""
     path = pathlib.Path(path)
     try:
         info = path.stat()
@@ -68,7 +119,7 @@ def read_yaml(path: str | pathlib.Path, what: str) -> Any:
     except UnicodeDecodeError:
         raise SimulationError(f'{what} {path} is not UTF-8 text (a binary file?)') from None
     try:
-        return yaml.load(text, Loader=_Yaml12Loader)  # noqa: S506 (a SafeLoader subclass)
+        return _load(text, f'{what} {path}')
     except yaml.YAMLError as exc:  # one line: where, and what the parser expected
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
