@@ -112,6 +112,18 @@ def test_a_host_it_cannot_serve_on_is_one_sentence(host):
         serve(host, 0)
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize('port', ['70000', '65536', '-5'])
+def test_a_port_out_of_range_is_one_sentence_and_no_hang(skate_run, capsys, port):
+    """`view --port 70000` used to leave a traceback in viser's thread and hang: refused in one
+    line before anything is served, exit 2."""
+    assert main([str(skate_run), '--port', port]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == f'view: --port must be 0..65535 (0: any free port), got {port}'
+    with pytest.raises(SimulationError, match='port must be 0..65535'):
+        serve('127.0.0.1', 70000)
+
+
 def test_columns_are_those_trajectory_npz_writes(skate_run):
     with np.load(skate_run / 'trajectory.npz') as data:
         assert set(COLUMNS) <= set(data.files)

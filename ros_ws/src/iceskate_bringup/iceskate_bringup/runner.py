@@ -287,7 +287,7 @@ def _watch(args: argparse.Namespace) -> Watch | None:
         if given:
             raise SimulationError(f'--{given[0].replace("_", "-")} needs --view')
         return None
-    from iceskate_viewer.page import check_host
+    from iceskate_viewer.page import check_host, check_port
     check_host(args.view_host or '127.0.0.1')  # refused before anything starts
     pace = 1.0 if args.pace is None else args.pace
     from iceskate_sim.run.pace import MAX_PACE
@@ -295,8 +295,7 @@ def _watch(args: argparse.Namespace) -> Watch | None:
         raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs) and <= '
                               f'{MAX_PACE:g}, got {pace:g}')
     port = 8080 if args.view_port is None else args.view_port
-    if not 0 <= port <= 65535:
-        raise SimulationError(f'--view-port must be 0..65535, got {port}')
+    check_port(port, '--view-port')
     return Watch(pace, args.view_host or '127.0.0.1', port)
 
 

@@ -45,6 +45,7 @@ def serve(host: str, port: int) -> viser.ViserServer:
     with a warning when ``host`` is not a loopback address. The page has no share link (it
     would tunnel the page through a server outside this machine): the button is hidden and a
     request is refused."""
+    check_port(port)
     check_host(host)
     if not _loopback(host):
         say(f'warning: the view is served on {host}, reachable from other machines '
@@ -54,6 +55,13 @@ def serve(host: str, port: int) -> viser.ViserServer:
     server.request_share_url = _no_share_url
     server.gui.configure_theme(show_share_button=False, dark_mode=False)
     return server
+
+
+def check_port(port: int, what: str = 'port') -> None:
+    """Refuse, in one sentence naming ``what``, a port outside 0..65535 (viser's server thread
+    would fail on it, and its caller wait for it)."""
+    if not 0 <= port <= 65535:
+        raise SimulationError(f'{what} must be 0..65535 (0: any free port), got {port}')
 
 
 def check_host(host: str) -> None:

@@ -141,15 +141,24 @@ def main(argv: list[str] | None = None) -> int:
                         help='port (default 8080; a busy one: the next free one)')
     args = parser.parse_args(argv)
     with StopRequest() as stop:
+        from iceskate_viewer.page import (
+            RunPage,
+            check_host,
+            check_port,
+            serve,
+            stop_server,
+            url_of,
+        )
         try:
+            check_port(args.port, '--port')  # before the runs are read: a second at most
+            check_host(args.host)
             runs = [load_run(path) for path in args.runs]
+            server = serve(args.host, args.port)
         except SimulationError as exc:
             say(f'view: {exc}')
             return 2
         from iceskate_sim.model.robot import load_robot
-        from iceskate_viewer.page import RunPage, serve, stop_server, url_of
         from iceskate_viewer.pose import BodyPose
-        server = serve(args.host, args.port)
         try:
             replay = Replay(RunPage(server, BodyPose(load_robot()),
                                     [run.name for run in runs]), runs)
