@@ -125,3 +125,17 @@ def test_undecodable_gait_state_bytes_get_no_answer_and_the_next_state_does(gait
     assert sent == []
     node.on_gait_state(data)
     assert [ns for ns, _ in sent] == [0]
+
+
+def test_a_legal_step_index_beyond_a_run_gets_no_answer_and_no_crash(gait_manager):
+    """A GaitState's step_index is a uint32: 2^32 - 1 is a legal message that no run sends; the
+    node answers it with nothing (one error line), not a TypeError, and goes on."""
+    node, sent = gait_manager
+    data = _state_bytes(skate_session())
+    typestore = make_typestore()
+    msg = typestore.deserialize_cdr(data, 'iceskate_interfaces/msg/GaitState')
+    msg.step_index = 2**32 - 1
+    node.on_gait_state(bytes(typestore.serialize_cdr(msg, 'iceskate_interfaces/msg/GaitState')))
+    assert sent == []
+    node.on_gait_state(data)
+    assert [ns for ns, _ in sent] == [0]

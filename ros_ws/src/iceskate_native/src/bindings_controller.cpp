@@ -6,6 +6,8 @@
 // Controller is subclassable in Python (its trampoline PythonController, python_controller.hpp):
 // a controller written in Python runs inside the native ControlLoop.
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -55,8 +57,9 @@ void construct_kinematics(
 }
 
 void construct_observation(
-  Observation * self, double t, const Vector & q, const Vector & v, int mode, int side,
-  int pivot, int step_index, double t_exchange, double heel_anchor_y, double t_touchdown)
+  Observation * self, double t, const Vector & q, const Vector & v, std::int64_t mode,
+  std::int64_t side, std::int64_t pivot, std::int64_t step_index, double t_exchange,
+  double heel_anchor_y, double t_touchdown)
 {
   if (!std::isfinite(t) || !std::isfinite(t_exchange) || !std::isfinite(heel_anchor_y)) {
     throw std::invalid_argument("the observation's t, t_exchange and heel_anchor_y must be "
@@ -73,9 +76,16 @@ void construct_observation(
     throw std::invalid_argument(
       "observation side and pivot must be 0 or 1, and step_index >= 0");
   }
+  constexpr std::int64_t kMostSteps = std::numeric_limits<int>::max();
+  if (step_index > kMostSteps) {  // a legal uint32 of a GaitState
+    throw std::invalid_argument("observation step_index " + std::to_string(step_index)
+                                + " is beyond the " + std::to_string(kMostSteps)
+                                + " steps a run can take");
+  }
   new (self) Observation{
-    t, vector18(q, "q"), vector18(v, "v"), mode, side, pivot, step_index, t_exchange,
-    heel_anchor_y, t_touchdown};
+    t, vector18(q, "q"), vector18(v, "v"), static_cast<int>(mode), static_cast<int>(side),
+    static_cast<int>(pivot), static_cast<int>(step_index), t_exchange, heel_anchor_y,
+    t_touchdown};
 }
 
 /// A controller's answer at obs as an EffortCommand carries it (see kCommandDoc).
