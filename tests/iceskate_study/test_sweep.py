@@ -92,6 +92,26 @@ def test_sigint_mid_sweep_keeps_the_finished_rows_and_the_same_command_resumes(
     assert [r for r in after if r['key'] in {b['key'] for b in before}] == before
 
 
+def test_a_table_without_a_run_column_is_refused_before_anything_runs(tmp_path, grid,
+                                                                       write_spec, capsys):
+    """Resuming into a table that lost its status column (edited) used to run every point
+    again and then fail on a KeyError: one line, nothing run, the table untouched."""
+    grid['overrides']['duration'] = 0.05
+    grid['axes'] = {'floor.mu': [0.005]}
+    spec = write_spec(grid)
+    assert main([str(spec), '--out', str(tmp_path / 'out'), '--quiet']) == 0
+    capsys.readouterr()
+    path = tmp_path / 'out' / RESULTS
+    table = pq.read_table(path)
+    pq.write_table(table.drop_columns(['status']), path)
+    before = path.read_bytes()
+    assert main([str(spec), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    err = capsys.readouterr().err
+    assert err == (f"sweep: error: {path} lacks the column 'status' of a sweep's results table "
+                   '(edited?); restore it or choose a new --out\n')
+    assert path.read_bytes() == before
+
+
 def test_a_bad_spec_or_another_sweeps_folder_is_refused_in_one_line(tmp_path, grid, write_spec,
                                                                       capsys):
     grid['axes']['floor.mu'] = []

@@ -58,7 +58,13 @@ class ResultTable:
         self.spec = spec
         self._points = {p.key: p for p in points}  # in the order of the rows
         self.rows: dict[str, dict[str, Any]] = {}
-        for row in read_table(self.path)[0].to_pylist() if self.path.exists() else []:
+        table = read_table(self.path)[0] if self.path.exists() else None
+        missing = [] if table is None else [
+            name for name in RUN_COLUMNS[:4] if name not in table.column_names]
+        if missing:  # e.g. edited by hand: its rows cannot say which runs are done
+            raise StudyError(f"{self.path} lacks the column {missing[0]!r} of a sweep's results "
+                             'table (edited?); restore it or choose a new --out')
+        for row in table.to_pylist() if table is not None else []:
             if row.get('key') not in self._points:
                 raise StudyError(f'{self.path} holds runs this SPEC does not make (another '
                                  'SPEC, or the base scene changed); choose a new --out')
