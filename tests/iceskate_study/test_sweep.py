@@ -112,6 +112,19 @@ def test_a_table_without_a_run_column_is_refused_before_anything_runs(tmp_path, 
     assert path.read_bytes() == before
 
 
+def test_a_folder_of_other_files_is_refused_and_left_alone(tmp_path, grid, write_spec, capsys):
+    """A sweep goes on with its own folder (its results table) but never writes into one of
+    other files."""
+    out = tmp_path / 'mine'
+    out.mkdir()
+    (out / 'notes.txt').write_text('mine')
+    assert main([str(write_spec(grid)), '--out', str(out), '--quiet']) == 1
+    assert capsys.readouterr().err == (f"sweep: error: output directory {out} is not empty (it "
+                                       "holds 'notes.txt'): a run writes only into a new or "
+                                       'empty directory; choose another output directory\n')
+    assert [p.name for p in out.iterdir()] == ['notes.txt']  # not even a lock file
+
+
 def test_a_bad_spec_or_another_sweeps_folder_is_refused_in_one_line(tmp_path, grid, write_spec,
                                                                       capsys):
     grid['axes']['floor.mu'] = []

@@ -56,6 +56,34 @@ def test_a_bad_out_is_refused_naming_it(tmp_path, capsys, case, ros):
     assert blocker.read_text() == 'not a folder'
 
 
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+@pytest.mark.parametrize('content', ['user files', 'a link out'])
+def test_an_out_holding_files_the_run_did_not_make_is_refused(tmp_path, capsys, ros, content):
+    """A run writes only files it makes: a folder holding the user's events.json and
+    trajectory.npz, or a link named like an output that points outside, is refused in one line
+    and nothing in it, or behind the link, is written."""
+    out = tmp_path / 'out'
+    out.mkdir()
+    outside = tmp_path / 'outside.npz'
+    outside.write_bytes(b'the user data')
+    if content == 'user files':
+        (out / 'events.json').write_text('mine')
+        (out / 'trajectory.npz').write_bytes(b'mine too')
+        held = 'events.json'
+    else:
+        (out / 'trajectory.npz').symlink_to(outside)
+        held = 'trajectory.npz'
+    line = _refused(capsys, [str(TINY), '--out', str(out), *(['--ros'] if ros else [])])
+    assert line == (f"run_scene: error: output directory {out} is not empty (it holds "
+                    f"{held!r}{' and more' if content == 'user files' else ''}): a run writes "
+                    'only into a new or empty directory; choose another output directory')
+    assert outside.read_bytes() == b'the user data'
+    assert sorted(p.name for p in out.iterdir()) == sorted(  # not even a lock file
+        ['events.json', 'trajectory.npz'] if content == 'user files' else ['trajectory.npz'])
+    if content == 'user files':
+        assert (out / 'events.json').read_text() == 'mine'
+
+
 def test_an_out_that_is_not_writable_is_refused(tmp_path, capsys):
     if os.geteuid() == 0:
         pytest.skip('root writes into a read-only folder (the /sys case covers it)')

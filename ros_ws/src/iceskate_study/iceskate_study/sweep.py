@@ -67,11 +67,11 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
     """
     from iceskate_sim.run.session import prepare_output, release_output
     from iceskate_study.spec import expand
-    from iceskate_study.table import ResultTable
+    from iceskate_study.table import RESULTS, ResultTable
     from iceskate_study.worker import Task
     points = expand(spec)
     try:
-        prepare_output(out)
+        prepare_output(out, resumes=RESULTS)
     except SimulationError as exc:
         raise StudyError(str(exc)) from None
     try:

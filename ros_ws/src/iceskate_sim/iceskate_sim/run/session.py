@@ -67,16 +67,19 @@ LOCK_FD_ENV = 'ICESKATE_OUTPUT_LOCK_FD'
 _HELD: dict[pathlib.Path, int] = {}
 
 
-def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> int:
+def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
+                   resumes: str | None = None) -> int:
     """Create the output directory ``out`` (with its parents), check that a run can write into
     it, take it for this run (an exclusive lock on ``out/.run.lock``, kept until
     ``release_output`` or the end of the process; a lock this process or its launcher holds
-    already is taken as it is) and check that it holds no finished run and that the bag path
-    ``bag`` (if any) is free. Returns the lock's descriptor.
+    already is taken as it is) and check that it holds no finished run, that the bag path
+    ``bag`` (if any) is free and that it holds nothing else: a run writes only files it makes.
+    ``resumes``: the file that marks an earlier run of the caller's own kind, which it goes on
+    with (a sweep's table): a folder holding it need not be empty. Returns the lock's descriptor.
 
     :raises SimulationError: one sentence naming the path and the problem (a file in the way,
         no permission, a read-only file system, another run writing there, an earlier run's
-        bag or metrics).
+        bag or metrics, files the run did not make).
     """
     out = pathlib.Path(out)
     for path in (out, *out.parents):
@@ -97,13 +100,39 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None) -> int:
     except OSError as exc:
         raise SimulationError(f'output directory {out} is not writable: {_reason(exc)}') \
             from None
-    fd = _lock(out)
-    for earlier in ([bag] if bag is not None else []) + [out / 'metrics.json']:
-        if earlier.exists() or earlier.is_symlink():
-            release_output(out)
-            raise SimulationError(f'output directory {out} already holds a recorded run: '
-                                  f'{earlier} already exists; choose another output directory')
-    return fd
+    taken = out.resolve() in _HELD or _launcher_lock(out) is not None  # its files: this run's
+    # a folder of a run of ours (its lock file) is locked first: "in use" if it runs still;
+    # any other is checked before a lock file is made in it
+    fd = _lock(out) if taken or (out / LOCK_NAME).exists() else None
+    try:
+        for earlier in ([bag] if bag is not None else []) + [out / 'metrics.json']:
+            if earlier.exists() or earlier.is_symlink():
+                raise SimulationError(f'output directory {out} already holds a recorded run: '
+                                      f'{earlier} already exists; choose another output '
+                                      'directory')
+        earlier_kind = resumes is not None and (out / resumes).is_file()
+        others = ([] if taken or earlier_kind else
+                  sorted(name for name in os.listdir(out) if name != LOCK_NAME))
+        if others:  # a run writes only files it makes: never over (or through) the user's
+            raise SimulationError(f'output directory {out} is not empty (it holds '
+                                  f'{others[0]!r}{" and more" if len(others) > 1 else ""}): a '
+                                  'run writes only into a new or empty directory; choose '
+                                  'another output directory')
+    except SimulationError:
+        release_output(out)
+        raise
+    return fd if fd is not None else _lock(out)
+
+
+def _launcher_lock(out: pathlib.Path) -> int | None:
+    """The descriptor of the lock on ``out`` this process inherited from its launcher (None:
+    none)."""
+    try:
+        fd = int(os.environ.get(LOCK_FD_ENV, ''))
+        held, there = os.fstat(fd), os.stat(out / LOCK_NAME)
+    except (ValueError, OSError):
+        return None
+    return fd if (held.st_dev, held.st_ino) == (there.st_dev, there.st_ino) else None
 
 
 def _lock(out: pathlib.Path) -> int:
@@ -111,14 +140,10 @@ def _lock(out: pathlib.Path) -> int:
     path, key = out / LOCK_NAME, out.resolve()
     if key in _HELD:
         return _HELD[key]
-    try:
-        fd = int(os.environ.get(LOCK_FD_ENV, ''))
-        held, there = os.fstat(fd), os.stat(path)
-        if (held.st_dev, held.st_ino) == (there.st_dev, there.st_ino):
-            _HELD[key] = fd  # the launcher's, inherited
-            return fd
-    except (ValueError, OSError):
-        pass
+    fd = _launcher_lock(out)
+    if fd is not None:
+        _HELD[key] = fd  # the launcher's, inherited
+        return fd
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError as exc:
