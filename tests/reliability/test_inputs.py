@@ -84,6 +84,21 @@ def test_an_out_holding_files_the_run_did_not_make_is_refused(tmp_path, capsys, 
         assert (out / 'events.json').read_text() == 'mine'
 
 
+@pytest.mark.parametrize('where', ['base', 'argument'])
+def test_a_file_that_is_no_yaml_is_never_read_as_a_scene(tmp_path, capsys, where):
+    """`base:` (or the scene argument) naming a file that is not a .yaml, here one of secrets
+    whose lines would read as keys, is refused without a word of its content."""
+    secret = tmp_path / 'shadow'
+    secret.write_text('root:$6$s3cr3t$hash:19000:0:99999:7:::\n')
+    scene = tmp_path / 'scene.yaml'
+    scene.write_text(f'base: {secret}\n')
+    line = _refused(capsys, [str(scene if where == 'base' else secret), '--out',
+                             str(tmp_path / 'out')])
+    assert line == (f"run_scene: error: scene '{secret}' is neither a shipped scene name nor "
+                    'the path of a .yaml file')
+    assert 's3cr3t' not in line and not (tmp_path / 'out').exists()
+
+
 def test_an_out_that_is_not_writable_is_refused(tmp_path, capsys):
     if os.geteuid() == 0:
         pytest.skip('root writes into a read-only folder (the /sys case covers it)')

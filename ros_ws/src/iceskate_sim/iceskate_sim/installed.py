@@ -37,12 +37,17 @@ def shipped_files(resource: str, folder: str) -> dict[str, pathlib.Path]:
 def shipped_or_path(name_or_path: str | pathlib.Path, resource: str, folder: str,
                     what: str) -> pathlib.Path:
     """The shipped YAML file of a name (``shipped_files``), or the path itself (one with a
-    suffix or a folder).
+    suffix or a folder), which must name a .yaml or .yml file: no other file is read as one
+    (nor its content quoted in an error).
 
-    :raises SimulationError: for a name none ships, listing those shipped.
+    :raises SimulationError: for a name none ships, listing those shipped; a path of another
+        kind of file.
     """
     path = pathlib.Path(name_or_path)
     if path.suffix or len(path.parts) > 1:
+        if path.suffix.lower() not in ('.yaml', '.yml'):
+            raise SimulationError(f'{what} {str(name_or_path)!r} is neither a shipped {what} '
+                                  'name nor the path of a .yaml file')
         return path
     shipped = shipped_files(resource, folder)
     if path.name in shipped:
