@@ -74,7 +74,8 @@ def compare(got: dict[str, float], reference: dict[str, float]) -> dict[str, Any
 
 def setting_overrides(method: str, setting: float) -> dict[str, Any]:
     """A scene's integrator keys for ``method`` at ``setting`` (a fixed step [s], or an
-    adaptive method's rtol with atol 1e-2 rtol and the control period as the largest step)."""
+    adaptive method's rtol with atol 1e-2 rtol and a largest step of 1 ms, the shipped scenes'
+    control period)."""
     if method in FIXED_STEP:
         return {'integrator.method': method, 'integrator.step': setting}
     return {'integrator.method': method, 'integrator.rtol': setting,

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "iceskate_native/errors.hpp"
@@ -213,8 +214,9 @@ Segment integrate_rosenbrock(
     const double h_try = last_step ? t_end - t : h;
     const Vector18 q0 = x.head<kCoordinates>();
     const Vector18 v0 = x.tail<kCoordinates>();
-    const double c = h_try * s.gamma;
-    StepMatrix matrix(mode, dynamics.linearize(contact, q0, v0, inputs, h_try), c);
+    const double gamma_h = h_try * s.gamma;
+    StepMatrix matrix(mode, dynamics.linearize(contact, q0, v0, inputs, h_try), gamma_h);
+    bool finite = true;
     for (int i = 0; i < kStages; ++i) {
       Vector18 q = q0;
       Vector18 v = v0;
@@ -223,6 +225,10 @@ Segment integrate_rosenbrock(
         q += s.a[i][j] * u[static_cast<std::size_t>(j)].q;
         v += s.a[i][j] * u[static_cast<std::size_t>(j)].v;
         moved = moved || s.a[i][j] != 0.0;
+      }
+      if (!q.allFinite() || !v.allFinite()) {  // a step too large: rejected below
+        finite = false;
+        break;
       }
       Vector18 rq = v;
       Vector18 rv = moved ? dynamics.evaluate(contact, q, v, inputs).qdd : r0.qdd;
@@ -235,6 +241,9 @@ Segment integrate_rosenbrock(
     }
     State x1 = x;
     State error = State::Zero();
+    if (!finite) {
+      x1.setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
     for (int i = 0; i < kStages; ++i) {
       const Increment & ui = u[static_cast<std::size_t>(i)];
       x1.head<kCoordinates>() += s.m[i] * ui.q;
@@ -246,6 +255,9 @@ Segment integrate_rosenbrock(
     for (int i = 0; i < 2 * kCoordinates; ++i) {
       const double scale = tol.atol + tol.rtol * std::max(std::abs(x[i]), std::abs(x1[i]));
       norm = std::max(norm, std::abs(error[i]) / scale);
+    }
+    if (!x1.allFinite() || !error.allFinite()) {  // a step too large: rejected below
+      norm = std::numeric_limits<double>::quiet_NaN();
     }
     const auto resized = [&](double factor) {
       return h_try * std::min(5.0, std::max(0.2, factor));

@@ -130,6 +130,7 @@ void HybridSimulator::advance(const Inputs & inputs)
   double instant = state_.t;
   int at_instant = 0;
   const HybridState period_start = state_;
+  const std::map<Guard, double> rested_at_start = suppressed_;
   bool integrating = false;  // past the transitions due at the period's start
   try {
     settle();  // a guard the new input makes due fires at the period start
@@ -191,7 +192,7 @@ void HybridSimulator::advance(const Inputs & inputs)
   } catch (const Ended & end) {
     check_speed(end.state);  // a blow-up is not a physical end
     if (integrating) {
-      confirm_end(period_start, inputs, end.reason, end.state);
+      confirm_end(period_start, rested_at_start, inputs, end.reason, end.state);
     }
     ended_ = end.reason;
     state_ = end.state;
@@ -200,23 +201,28 @@ void HybridSimulator::advance(const Inputs & inputs)
 }
 
 void HybridSimulator::confirm_end(
-  const HybridState & start, const Inputs & inputs, RunEnd end, const HybridState & at)
+  const HybridState & start, const std::map<Guard, double> & rested, const Inputs & inputs,
+  RunEnd end, const HybridState & at)
 {
   SimulatorSettings check = settings_;
   check.method = Method::kRk45;
-  check.rtol = 1.0e-8;
-  check.atol = 1.0e-10;
+  check.rtol = std::min(settings_.rtol, 1.0e-8);
+  check.atol = std::min(settings_.atol, 1.0e-10);
   check.step = settings_.control_period;
-  if (settings_.method == check.method && settings_.rtol <= check.rtol
-      && settings_.atol <= check.atol)
+  if (settings_.method == check.method && settings_.rtol <= 1.0e-8
+      && settings_.atol <= 1.0e-10)
   {
     return;  // as accurate as the check already
   }
-  try {
+  try {  // the period again from its start as it was: its state, rested guards, no instant yet
     HybridSimulator again(dynamics_, check, start);
     again.set_state(start);
-    again.suppressed_ = suppressed_;
-    const int periods = std::max(1, static_cast<int>(kEndCheckTime / settings_.control_period));
+    again.suppressed_ = rested;
+    again.events_.clear();
+    again.instant_time_ = std::numeric_limits<double>::quiet_NaN();
+    again.instant_modes_.clear();
+    const int periods =
+      std::max(1, static_cast<int>(std::ceil(kEndCheckTime / settings_.control_period - 1e-9)));
     for (int k = 0; k < periods && again.ended() == RunEnd::kNone; ++k) {
       again.advance(inputs);
     }
@@ -224,7 +230,7 @@ void HybridSimulator::confirm_end(
       return;
     }
   } catch (const std::exception &) {
-    return;  // the check itself failed: the end stands as the run's method found it
+    return;  // the check failed (diverged, chattered): the end stands as the method found it
   }
   static const char * const kEnds[] = {"none", "flight", "toe-first touchdown", "fall"};
   const char * advice = "take a smaller integrator.rtol and atol";

@@ -47,37 +47,47 @@ _Yaml12Loader.add_implicit_resolver(
 
 
 def _check_bounds(text: str, what: str) -> None:
-    """SimulationError naming ``what`` when ``text`` nests deeper than ``MAX_YAML_DEPTH`` or holds
+    """SimulationError naming ``what`` when ``text`` nests deeper than ``MAX_YAML_DEPTH``, holds
     more than ``MAX_YAML_VALUES`` values, each alias counted as the values its anchor stands
-    for. One pass over the parser's events, before anything is built (yaml.YAMLError where the
-    text is malformed)."""
-    open_sizes: list[int] = []  # values in each open mapping or sequence so far (itself: 1)
+    for and as deep as they nest, or holds a value with an alias of itself inside. One pass over
+    the parser's events, before anything is built (yaml.YAMLError where the text is malformed).
+    """
+    open_values: list[int] = []  # values in each open mapping or sequence so far (itself: 1)
+    open_depths: list[int] = []  # the deepest nesting below each so far
     open_anchors: list[str | None] = []
-    anchored: dict[str, int] = {}  # anchor -> values it stands for
+    anchored: dict[str, tuple[int, int]] = {}  # anchor -> (values, nesting) it stands for
     total = 0
     for event in yaml.parse(text, Loader=_Yaml12Loader):
         if isinstance(event, yaml.CollectionStartEvent):
-            if len(open_sizes) >= MAX_YAML_DEPTH:
+            if len(open_values) >= MAX_YAML_DEPTH:  # at once: the scanner slows with depth
                 raise SimulationError(f'{what} nests mappings and sequences deeper than '
                                       f'{MAX_YAML_DEPTH} levels')
-            open_sizes.append(1)
+            open_values.append(1)
+            open_depths.append(0)
             open_anchors.append(event.anchor)
             continue
         if isinstance(event, yaml.CollectionEndEvent):
-            size, anchor = open_sizes.pop(), open_anchors.pop()
+            values, depth, anchor = open_values.pop(), open_depths.pop() + 1, open_anchors.pop()
         elif isinstance(event, yaml.ScalarEvent):
-            size, anchor = 1, event.anchor
+            values, depth, anchor = 1, 0, event.anchor
         elif isinstance(event, yaml.AliasEvent):
-            size, anchor = anchored.get(event.anchor, 1), None
+            if event.anchor in open_anchors:
+                raise SimulationError(f'{what} holds a value with an alias of itself inside '
+                                      f'(*{event.anchor})')
+            (values, depth), anchor = anchored.get(event.anchor, (1, 0)), None
         else:
             continue
+        if len(open_values) + depth > MAX_YAML_DEPTH:
+            raise SimulationError(f'{what} nests mappings and sequences deeper than '
+                                  f'{MAX_YAML_DEPTH} levels')
         if anchor is not None:
-            anchored[anchor] = size
-        if open_sizes:
-            open_sizes[-1] += size
-            count = open_sizes[-1]
+            anchored[anchor] = (values, depth)
+        if open_values:
+            open_values[-1] += values
+            open_depths[-1] = max(open_depths[-1], depth)
+            count = open_values[-1]
         else:
-            total += size
+            total += values
             count = total
         if count > MAX_YAML_VALUES:
             raise SimulationError(f'{what} expands to more than {MAX_YAML_VALUES} values (its '

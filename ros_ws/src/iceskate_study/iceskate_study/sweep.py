@@ -71,7 +71,9 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
     from iceskate_study.worker import Task
     points = expand(spec)
     try:
-        prepare_output(out, resumes=RESULTS)
+        # the entries a sweep of its own makes before its table (a first sweep cut short)
+        prepare_output(out, resumes=RESULTS,
+                       made=('runs', RAY_MESSAGES, f'.{RESULTS}.partial'))
     except SimulationError as exc:
         raise StudyError(str(exc)) from None
     try:

@@ -104,9 +104,10 @@ public:
 
   /// Integrate one control period holding `inputs`. Throws DivergenceError, ChatteringError or
   /// NativeError; a physical end (fall, flight, toe-first touchdown) sets ended() instead, once
-  /// rk45 at rtol 1e-8 from the period's start under the same inputs reaches an end too within
-  /// kEndCheckTime (whole periods, at least one): an end it does not reach is the method's
-  /// (e.g. rk4 with too large a step), a DivergenceError with advice.
+  /// rk45 at rtol 1e-8 (or the run's, if tighter) from the period's start under the same
+  /// inputs reaches an end too within kEndCheckTime (whole periods, at least one): an end it
+  /// does not reach is the method's (e.g. rk4 with too large a step), a DivergenceError with
+  /// advice. An end the check cannot reach for an error of its own stands.
   void advance(const Inputs & inputs);
 
   const HybridState & state() const noexcept { return state_; }
@@ -136,8 +137,8 @@ private:
   void rest(Guard guard);
   bool project(Eigen::VectorXd & residual);
   void check_speed(const HybridState & s);
-  void confirm_end(const HybridState & start, const Inputs & inputs, RunEnd end,
-                   const HybridState & at);
+  void confirm_end(const HybridState & start, const std::map<Guard, double> & rested,
+                   const Inputs & inputs, RunEnd end, const HybridState & at);
   void check_health(const Eigen::VectorXd * residual);
   [[noreturn]] void diverged(const std::string & what, HybridState s);
 

@@ -88,8 +88,13 @@ class SimulatorNode(Node):
         try:
             scene = load_scene(c.scene)
             scene = replace(scene, duration=c.duration) if c.duration > 0 else scene
-            session = Session(scene, pathlib.Path(c.out_dir) if c.out_dir else None,
-                              pathlib.Path(c.record_bag) if c.record_bag else None)
+            out = pathlib.Path(c.out_dir) if c.out_dir else None
+            # the parameter files and scene a graph's launcher writes into out/params for it
+            made = (('params',) if out is not None
+                    and pathlib.Path(c.scene).resolve().parent == (out / 'params').resolve()
+                    else ())
+            session = Session(scene, out, pathlib.Path(c.record_bag) if c.record_bag else None,
+                              made=made)
         except SimulationError as exc:  # its message names the scene, bag or folder
             raise ConfigError(str(exc)) from None
         controllers = self._controllers(scene)

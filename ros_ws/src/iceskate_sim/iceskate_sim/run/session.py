@@ -68,14 +68,16 @@ _HELD: dict[pathlib.Path, int] = {}
 
 
 def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
-                   resumes: str | None = None) -> int:
+                   resumes: str | None = None, made: tuple[str, ...] = ()) -> int:
     """Create the output directory ``out`` (with its parents), check that a run can write into
     it, take it for this run (an exclusive lock on ``out/.run.lock``, kept until
     ``release_output`` or the end of the process; a lock this process or its launcher holds
     already is taken as it is) and check that it holds no finished run, that the bag path
     ``bag`` (if any) is free and that it holds nothing else: a run writes only files it makes.
     ``resumes``: the file that marks an earlier run of the caller's own kind, which it goes on
-    with (a sweep's table): a folder holding it need not be empty. Returns the lock's descriptor.
+    with (a sweep's table): a folder holding it need not be empty. ``made``: entries the run's
+    launcher made in it for this run (the nodes' ``params`` of a graph). Returns the lock's
+    descriptor.
 
     :raises SimulationError: one sentence naming the path and the problem (a file in the way,
         no permission, a read-only file system, another run writing there, an earlier run's
@@ -101,9 +103,13 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
         raise SimulationError(f'output directory {out} is not writable: {_reason(exc)}') \
             from None
     taken = out.resolve() in _HELD or _launcher_lock(out) is not None  # its files: this run's
+    lock = out / LOCK_NAME
+    if lock.is_symlink() or (lock.exists() and not lock.is_file()):
+        raise SimulationError(f'output directory {out} holds {LOCK_NAME!r}, which is not a '
+                              "run's lock file; choose another output directory")
     # a folder of a run of ours (its lock file) is locked first: "in use" if it runs still;
     # any other is checked before a lock file is made in it
-    fd = _lock(out) if taken or (out / LOCK_NAME).exists() else None
+    fd = _lock(out) if taken or lock.exists() else None
     try:
         for earlier in ([bag] if bag is not None else []) + [out / 'metrics.json']:
             if earlier.exists() or earlier.is_symlink():
@@ -112,7 +118,7 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
                                       'directory')
         earlier_kind = resumes is not None and (out / resumes).is_file()
         others = ([] if taken or earlier_kind else
-                  sorted(name for name in os.listdir(out) if name != LOCK_NAME))
+                  sorted(name for name in os.listdir(out) if name not in (LOCK_NAME, *made)))
         if others:  # a run writes only files it makes: never over (or through) the user's
             raise SimulationError(f'output directory {out} is not empty (it holds '
                                   f'{others[0]!r}{" and more" if len(others) > 1 else ""}): a '
@@ -145,7 +151,7 @@ def _lock(out: pathlib.Path) -> int:
         _HELD[key] = fd  # the launcher's, inherited
         return fd
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
     except OSError as exc:
         raise SimulationError(f'output directory {out} cannot be locked: {_reason(exc)}') \
             from None
@@ -202,17 +208,19 @@ class Session:
     :param out: directory for metrics.json, events.json and trajectory.npz (None: none).
     :param bag: path of the MCAP bag to record (None: none).
     :param robot: the robot model (loaded if None).
+    :param made: entries of ``out`` the run's launcher made for it (``prepare_output``).
     """
 
     def __init__(self, scene: Scene, out: pathlib.Path | None = None,
-                 bag: pathlib.Path | None = None, robot: Robot | None = None) -> None:
+                 bag: pathlib.Path | None = None, robot: Robot | None = None,
+                 made: tuple[str, ...] = ()) -> None:
         self.scene = scene
         self.out = out
         self.robot = robot or load_robot()
         self.sim = start_simulator(scene, self.robot)
         self.n_periods = int(round(scene.duration / scene.simulator.control_period))
         if out is not None:
-            prepare_output(out, bag)
+            prepare_output(out, bag, made=made)
         #: the disk kept for metrics.json and events.json (none without ``out``)
         self._rooms: dict[str, Room] = {}
         try:
