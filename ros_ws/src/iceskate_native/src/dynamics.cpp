@@ -405,25 +405,39 @@ const LinearizedSystem & Dynamics::linearize(
   out.row_change = w.row_change;
   out.n = w.n;
   out.nc = w.nc;
-  out.damping = damping_;
-  out.stiffness.setZero();
+  held_terms(q, v, inputs, lookahead, out.damping, &out.stiffness);
+  return out;
+}
+
+void Dynamics::held_terms(const Vector18 & q, const Vector18 & v, const Inputs & inputs,
+                          double lookahead, Vector18 & damping, Vector18 * stiffness) const
+{
+  damping = damping_;
+  if (stiffness != nullptr) {
+    stiffness->setZero();
+  }
   if (params_.joint_limits) {
     for (const auto & limit : limits_) {
       const double now = q[limit.index];
       const double ahead = now + lookahead * v[limit.index];
       if (now < limit.lower || now > limit.upper || ahead < limit.lower || ahead > limit.upper) {
-        out.damping[limit.index] += params_.limit_damping;
-        out.stiffness[limit.index] += params_.limit_stiffness;
+        damping[limit.index] += params_.limit_damping;
+        if (stiffness != nullptr) {
+          (*stiffness)[limit.index] += params_.limit_stiffness;
+        }
       }
     }
   }
   if (inputs.has_impedance) {
-    out.damping += inputs.damping;
-    out.stiffness += inputs.stiffness;
+    damping += inputs.damping;
+    if (stiffness != nullptr) {
+      *stiffness += inputs.stiffness;
+    }
   }
-  out.damping[kY0] = 0.0;
-  out.stiffness[kY0] = 0.0;
-  return out;
+  damping[kY0] = 0.0;
+  if (stiffness != nullptr) {
+    (*stiffness)[kY0] = 0.0;
+  }
 }
 
 void Dynamics::solve(const Contact & contact, const Vector18 & q, const Vector18 & v)
@@ -490,18 +504,8 @@ Vector18 Dynamics::implicit_acceleration(
   }
   assemble(contact, q, v, inputs);
   Workspace & w = *work_;
-  Vector18 implicit = damping_;
-  if (w.engaged) {
-    for (const auto & limit : limits_) {
-      if (q[limit.index] < limit.lower || q[limit.index] > limit.upper) {
-        implicit[limit.index] += params_.limit_damping;
-      }
-    }
-  }
-  if (inputs.has_impedance) {
-    implicit += inputs.damping;
-  }
-  implicit[kY0] = 0.0;
+  Vector18 implicit;
+  held_terms(q, v, inputs, 0.0, implicit, nullptr);
   const auto & act = mode(contact.mode).active;
   w.A.diagonal().head(w.n) += h * implicit(act);
   solve(contact, q, v);

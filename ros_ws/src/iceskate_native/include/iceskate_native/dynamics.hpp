@@ -212,6 +212,11 @@ private:
     const Contact & contact, const Vector18 & q, const Inputs & inputs,
     const DynamicsResult & result);
   bool limits_engaged(const Vector18 & q) const;
+  /// The velocity-proportional terms an implicit step takes implicitly, and (if `stiffness`)
+  /// the position-proportional ones: Table 1's damping, the commanded impedance, a soft stop's
+  /// where q or q + lookahead v [s] is past it; none on y0.
+  void held_terms(const Vector18 & q, const Vector18 & v, const Inputs & inputs, double lookahead,
+                  Vector18 & damping, Vector18 * stiffness) const;
   /// The applied generalized forces at (q, v): passive, inputs, push (sets work's passive and
   /// engaged).
   Vector18 applied_forces(
