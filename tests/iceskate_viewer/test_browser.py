@@ -105,8 +105,10 @@ def test_the_replay_page_shows_two_runs_that_move_with_the_slider(browser, skate
         (client,) = server.get_clients().values()
         client.camera.position = (0.6, -3.0, 1.0)  # from the front: side by side
         client.camera.look_at = (0.6, 0.3, 0.8)
-        time.sleep(1.0)
-        before = _robot(tab.shot())
+        before, deadline = _robot(tab.shot()), time.monotonic() + FIRST_SHOT_S
+        while before.sum() < 2 * ROBOT_PIXELS and time.monotonic() < deadline:  # a busy machine
+            time.sleep(0.5)  # draws the moved camera late: wait for it, to a deadline
+            before = _robot(tab.shot())
         columns = _columns_with_robot(before)
         assert before.sum() >= 2 * ROBOT_PIXELS
         gaps = np.flatnonzero(np.diff(columns) > 10)
