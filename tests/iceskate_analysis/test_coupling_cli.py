@@ -91,17 +91,17 @@ def test_the_left_shoulder_can_be_chosen(tmp_path, synthetic_bag):
 
 
 def test_a_truncated_bag_is_refused_with_a_message(tmp_path, truncated_bag, capsys):
-    assert main([str(truncated_bag), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(truncated_bag), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     assert 'truncated or corrupt' in capsys.readouterr().err
 
 
 def test_a_bag_without_accelerations_is_refused(tmp_path, sim_bag, bag_without, capsys):
     broken = bag_without(sim_bag, '/joint_dynamics')
-    assert main([str(broken), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(broken), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     err = capsys.readouterr().err
     assert 'no topic /joint_dynamics' in err and 'accelerations' in err
 
 
 def test_an_unknown_joint_is_refused(tmp_path, synthetic_bag, capsys):
-    assert main([str(synthetic_bag), '--joint', '21', '--out', str(tmp_path), '--quiet']) == 1
+    assert main([str(synthetic_bag), '--joint', '21', '--out', str(tmp_path), '--quiet']) == 2
     assert 'unknown joint' in capsys.readouterr().err

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 import json
+import os
 import pathlib
+import subprocess
+import sys
 
 import pytest
 
@@ -129,3 +132,15 @@ def test_the_shipped_scenes_enter_every_mode_of_table_2(tmp_path):
     assert all(coverage.time_s[mode] > 0.0 for mode in TABLE_2), coverage.table()
     assert coverage.visited_by[14] == ['walk_slippery']
     assert all(coverage.visited_by[mode] == ['stand_ice'] for mode in (11, 15, 19))
+
+
+def test_mode_coverage_refuses_an_events_json_that_is_a_fifo_at_once(tmp_path):
+    """Reading a FIFO blocks until a writer comes: it is refused in one line before."""
+    os.mkfifo(tmp_path / 'events.json')
+    (tmp_path / 'metrics.json').write_text('{"sim_time_s": 1.0}')
+    result = subprocess.run([sys.executable, '-m', 'iceskate_analysis.coverage_cli',
+                             str(tmp_path), '--out', str(tmp_path / 'c')],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.splitlines() == [f'mode_coverage: error: {tmp_path / "events.json"} '
+                                          'is not a regular file']

@@ -139,3 +139,44 @@ def test_a_legal_step_index_beyond_a_run_gets_no_answer_and_no_crash(gait_manage
     assert sent == []
     node.on_gait_state(data)
     assert [ns for ns, _ in sent] == [0]
+
+
+def test_commands_carry_the_run_token_and_two_simulators_are_said_once(ros_context, tmp_path):
+    """A controller given its run's token sends it with every command; one that sees two
+    gait_state writers on its domain (two graphs) says so once."""
+    import time
+
+    from rclpy.node import Node
+
+    from iceskate_interfaces.msg import GaitState
+    from iceskate_sim.ros.node_support import STATE_QOS
+    params = tmp_path / 'gait_manager.yaml'
+    write_parameter_file(params, {'gait_manager': flatten(
+        node_parameters(load_scene('skate'))['gait_manager']) | {'run_token': 'tok'}})
+    node = GaitManagerNode(context=ros_context, cli_args=['--ros-args', '--params-file',
+                                                          str(params)])
+    simulators = Node('two_simulators', context=ros_context)
+    warnings = []
+    logger = node.get_logger()
+    node.get_logger = lambda: type('Log', (), {'warning': lambda self, t: warnings.append(t),
+                                               'info': lambda self, t: logger.info(t)})()
+    sent = []
+    node._publisher.publish = sent.append
+    try:
+        node.on_gait_state(_state_bytes(skate_session()))
+        assert CommandDecoder('tok').decode(sent[0])[0] == 'gait_manager'
+        node._check_simulator()
+        assert warnings == []
+        for _ in range(2):
+            simulators.create_publisher(GaitState, 'gait_state', STATE_QOS)
+        deadline = time.monotonic() + 10.0
+        while node._states.get_publisher_count() < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for _ in range(2):
+            node._check_simulator()
+        assert len(warnings) == 1 and warnings[0].startswith(
+            '2 nodes publish gait_state on this ROS domain: this controller answers the states '
+            'of more than one simulator'), warnings
+    finally:
+        simulators.destroy_node()
+        node.destroy_node()

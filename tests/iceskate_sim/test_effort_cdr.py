@@ -38,7 +38,7 @@ def answers() -> dict[str, ControllerCommand]:
                                       np.array([0.1, 1.2, -0.05]))}
 
 
-def rosbags_bytes(typestore, source: str, stamp_ns: int, **fields) -> bytes:
+def rosbags_bytes(typestore, source: str, stamp_ns: int, run_token: str = '', **fields) -> bytes:
     """A message of ``fields`` (others empty) serialized by rosbags."""
     empty = np.zeros(0)
     values = {'joint_names': list(COORDINATE_NAMES), 'effort': np.zeros(18),
@@ -51,7 +51,7 @@ def rosbags_bytes(typestore, source: str, stamp_ns: int, **fields) -> bytes:
     header = types['std_msgs/msg/Header'](
         stamp=types['builtin_interfaces/msg/Time'](sec=stamp_ns // 10**9,
                                                    nanosec=stamp_ns % 10**9), frame_id='')
-    msg = types[TYPE](header=header, source=source, **values)
+    msg = types[TYPE](header=header, source=source, run_token=run_token, **values)
     return bytes(typestore.serialize_cdr(msg, TYPE))
 
 
@@ -120,6 +120,7 @@ def wire_bytes(serialization, msg, typestore) -> bytes:
     76 bytes arrives as 76 bytes; ``serialize_message`` gives 92)."""
     size = len(rosbags_bytes(
         typestore, msg.source, msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
+        msg.run_token,
         joint_names=list(msg.joint_names), source_names=list(msg.source_names),
         **{key: np.asarray(getattr(msg, key)) for key in (
             'effort', 'stiffness', 'damping', 'position_reference', 'source_efforts',
@@ -279,3 +280,18 @@ def test_the_skeleton_tells_senders_and_source_names_of_one_layout_apart(typesto
             assert (source, ns, got.sources) == (sender, STAMP + k, tuple(names))
             np.testing.assert_array_equal(got.effort, np.full(18, k + 1.0))
             np.testing.assert_array_equal(got.source_efforts, np.arange(36.0) * k)
+
+
+def test_a_command_of_another_run_is_refused_on_both_paths(typestore):
+    """A decoder with the run's token refuses a command carrying another one (or none), on the
+    checked path and on the path of a layout already known for that controller."""
+    from iceskate_sim.ros.effort_cdr import ForeignCommand
+    values = values_of(answers()['breakdown'])
+    decoder = CommandDecoder('ours')
+    assert decoder.decode(CommandEncoder('gait_manager', 'ours').encode(values, STAMP))[0] \
+        == 'gait_manager'  # its layout is known from now on
+    for token in ('', 'ourz', 'x' * 64):
+        with pytest.raises(ForeignCommand, match="naming 'gait_manager' is not of this run"):
+            decoder.decode(CommandEncoder('gait_manager', token).encode(values, STAMP))
+    with pytest.raises(ForeignCommand):
+        CommandDecoder().decode(CommandEncoder('gait_manager', 'ours').encode(values, STAMP))

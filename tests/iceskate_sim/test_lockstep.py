@@ -160,6 +160,35 @@ def test_offer_checks_the_breakdown_against_the_scenes_sources(scene):
     np.testing.assert_array_equal(recorded, pd.torque(state.q, state.v))
 
 
+def test_offer_refuses_a_force_beyond_the_urdf_effort_limit_at_the_state(scene):
+    """The command's generalized force at the state it answers (effort and impedance) must
+    stay within each coordinate's effort limit (the URDF's 500 N m); at the limit it is taken."""
+    session = make_session(scene)
+    limit = session.robot.effort_limit
+    assert limit.shape == (18,) and np.all(limit == 500.0)
+    sources = scene_sources(scene)['gait_manager']
+    state = session.sim.state
+
+    def command(effort, *impedance):
+        return values_of(ControllerCommand(JointCommand(effort, *impedance),
+                                           {s: np.zeros(18) for s in sources}))
+    at_limit = np.zeros(18)
+    at_limit[5] = -500.0
+    over = at_limit.copy()
+    over[5] = np.nextafter(-500.0, -np.inf)
+    with pytest.raises(SimulationError, match=r"'gait_manager' asks -500 N m of q5 at "
+                                              r"t=0.000000 s, beyond its effort limit 500"):
+        session.offer('gait_manager', 0, command(over))
+    reference = state.q.copy()
+    reference[9] += 1.0  # 1 rad from the state: 501 N m of stiffness there
+    with pytest.raises(SimulationError, match='asks 501 N m of q9'):
+        session.offer('gait_manager', 0, command(np.zeros(18), np.full(18, 501.0),
+                                                 np.zeros(18), reference))
+    with pytest.raises(SimulationError, match='N of y0'):
+        session.offer('gait_manager', 0, command(np.full(18, 1e300)))
+    assert session.offer('gait_manager', 0, command(at_limit))
+
+
 def test_reset_is_refused_while_recording_and_restarts_otherwise(scene, tmp_path):
     recording = make_session(scene, bag=tmp_path / 'bag')
     with pytest.raises(SimulationError, match='refused while'):
@@ -207,6 +236,35 @@ def test_rejected_commands_are_summarised_per_reason(capsys):
     assert err.count('  first: ') == FIRST_REJECTED
     _report_rejected({'rejected_commands': LoopMonitor((), 5.0, 0.001).rejected_summary()}, {})
     assert capsys.readouterr().err == ''
+
+
+def test_commands_of_another_run_are_refused_said_once_and_counted(scene):
+    """A simulator given a run token takes only commands that carry it: another run's (or a
+    hand-started node's, without one) are refused, said once per controller name, each counted;
+    the graph's clashes are said once each."""
+    from iceskate_sim.ros.effort_cdr import CommandEncoder
+    from iceskate_sim.ros.lockstep import LockstepLoop
+    session = make_session(scene)
+    loop = LockstepLoop(session, lambda topic, data: None, lambda text, failed: None,
+                        run_token='ours')
+    loop.phase = 'running'
+    gm = zero(scene, 'gait_manager', 1.0)
+    said = [loop.take(CommandEncoder('gait_manager', token).encode(gm, 0))
+            for token in ('', 'theirs', '')]
+    assert said[0].startswith("rejected command: a command naming 'gait_manager' is not of "
+                              'this run (its run token differs)') and said[1:] == [None, None]
+    assert session.missing() == list(session.controllers)  # none was taken
+    assert loop.monitor.rejected == 3
+    assert loop.take(CommandEncoder('gait_manager', 'ours').encode(gm, 0)) is None
+    assert session.missing() == ['visual_lifting']
+    first = loop.clashes(2, ['gait_manager', 'gait_manager', 'visual_lifting', 'spy'])
+    assert len(first) == 3 and first[0].startswith('2 nodes publish gait_state')
+    assert "2 node(s) named 'gait_manager' publish effort_commands on this ROS domain besides " \
+        "the run's own; commands without this run's token are refused" in first
+    assert "1 node(s) named 'spy' publish effort_commands on this ROS domain; commands " \
+        "without this run's token are refused" in first
+    assert loop.clashes(2, ['gait_manager', 'gait_manager', 'spy']) == []  # said once each
+    assert loop.clashes(1, ['gait_manager', 'visual_lifting']) == []
 
 
 def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):

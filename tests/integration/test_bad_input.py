@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+import yaml
 
 pytest.importorskip('rclpy')
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -19,7 +20,7 @@ from rosbags.highlevel import AnyReader  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from iceskate_bringup.graph import command_of, graph_nodes  # noqa: E402
+from iceskate_bringup.graph import command_of, config_file, graph_nodes, stop  # noqa: E402
 from iceskate_interfaces.msg import EffortCommand  # noqa: E402
 from iceskate_interfaces.srv import StepSimulation  # noqa: E402
 from iceskate_sim.model.robot import COORDINATE_NAMES  # noqa: E402
@@ -87,39 +88,56 @@ def test_sigterm_mid_run_closes_the_bag_the_forked_writer_wrote(
 BREAKDOWN = {'source_names': ['posture', 'weight_transfer'], 'source_efforts': [0.0] * 36}
 
 
-def _command(source: str, ns: int, **fields) -> EffortCommand:
-    msg = EffortCommand(source=source, joint_names=list(COORDINATE_NAMES), effort=[0.0] * 18)
+def _command(source: str, ns: int, token: str, **fields) -> EffortCommand:
+    msg = EffortCommand(source=source, run_token=token, joint_names=list(COORDINATE_NAMES),
+                        effort=[0.0] * 18)
     for key, value in fields.items():
         setattr(msg, key, value)
     set_stamp(msg.header.stamp, ns)
     return msg
 
 
+def _run_token(out: Path) -> str:
+    """The token the launcher gave the nodes of the run in ``out``."""
+    return yaml.safe_load((out / 'params' / 'simulator.yaml').read_text())[
+        'simulator']['ros__parameters']['run_token']
+
+
 def test_bad_commands_are_rejected_and_never_reach_the_state(
         graph_run, listener, tmp_path, graph_factory, assert_same_trajectory):
     stats = tmp_path / 'stats.json'
     graph = graph_factory(tmp_path / 'out', start_paused=True, stats_file=str(stats)).start()
+    token = _run_token(tmp_path / 'out')
     listener.subscribe('/clock', Clock)
     clocks = listener.messages['/clock']
     publisher = listener.node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
     step = StepSimulation.Request(control_periods=3)
-    bad = [_command('gait_manager', 3 * MS, effort=[float('nan')] + [0.0] * 17),
-           _command('gait_manager', 3 * MS, effort=[1.0] * 17),
-           _command('gait_manager', 3 * MS, joint_names=['y0', 'knee'], effort=[1.0, 1.0]),
-           _command('gait_manager', 3 * MS, source_names=['posture'], source_efforts=[0.0]),
-           _command('gait_manager', 3 * MS, source_names=['posture'],
+    bad = [_command('gait_manager', 3 * MS, token, effort=[float('nan')] + [0.0] * 17),
+           _command('gait_manager', 3 * MS, token, effort=[1.0] * 17),
+           _command('gait_manager', 3 * MS, token, joint_names=['y0', 'knee'],
+                    effort=[1.0, 1.0]),
+           _command('gait_manager', 3 * MS, token, source_names=['posture'],
+                    source_efforts=[0.0]),
+           _command('gait_manager', 3 * MS, token, source_names=['posture'],
                     source_efforts=[0.0] * 18),
-           _command('gait_manager', 1 * MS, **BREAKDOWN),
-           _command('gait_manager', 1000 * MS, **BREAKDOWN),
-           _command('posture', 3 * MS)]
+           _command('gait_manager', 1 * MS, token, **BREAKDOWN),
+           _command('gait_manager', 1000 * MS, token, **BREAKDOWN),
+           _command('posture', 3 * MS, token),
+           _command('gait_manager', 3 * MS, token, effort=[0.0] * 5 + [1e300] + [0.0] * 12,
+                    **BREAKDOWN),
+           _command('gait_manager', 3 * MS, token, effort=[0.0] * 5 + [500.5] + [0.0] * 12,
+                    **BREAKDOWN),
+           _command('gait_manager', 3 * MS, '', **BREAKDOWN),
+           _command('gait_manager', 3 * MS, 'another run', **BREAKDOWN)]
     try:
         listener.spin_until(lambda: listener.call(StepSimulation, '/simulator/step', step,
                                                   timeout=60.0).success, 60.0, 'a step')
         listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) == 3 * MS, 30.0,
                             '/clock at 3 ms')
         listener.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0, 'matching')
-        for msg in bad:
+        for msg in bad:  # one at a time: the simulator's best-effort reader keeps 10
             publisher.publish(msg)
+            listener.spin_for(0.05)
         assert publisher.wait_for_all_acked(Duration(seconds=10))
         assert listener.call(Trigger, '/simulator/resume', Trigger.Request()).success
         listener.spin_until(lambda: graph.simulator.poll() is not None, 60.0, 'the end')
@@ -132,13 +150,48 @@ def test_bad_commands_are_rejected_and_never_reach_the_state(
                    'source_efforts has 1 entries for 1 source names x 18 joint names',
                    "'gait_manager' breaks down into sources ['posture']",
                    "stale command of 'gait_manager' stamped 0.001",
-                   "'gait_manager' stamped 1.0 s is in the future", "unknown source 'posture'"):
+                   "'gait_manager' stamped 1.0 s is in the future", "unknown source 'posture'",
+                   "command of 'gait_manager' asks 1e+300 N m of q5 at t=0.003000 s, beyond "
+                   "its effort limit 500 (the URDF's)", 'asks 500.5 N m of q5',
+                   "a command naming 'gait_manager' is not of this run (its run token differs)"):
         assert 'rejected command: ' in log and reason in log, reason
+    assert log.count('is not of this run') == 1, log  # said once, counted every time
     assert json.loads(stats.read_text())['rejected'] == len(bad)
     rejected = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['rejected_commands']
     assert rejected['count'] == len(bad) == sum(rejected['by_reason'].values())
     assert len(rejected['first']) == 5 and "stale command of 'gait_manager' stamped # s " \
         '(simulation at # s)' in rejected['by_reason']
+    assert_same_trajectory(tmp_path / 'out' / 'trajectory.npz',
+                           graph_run.headless / 'trajectory.npz')
+
+
+def test_a_second_controller_on_the_domain_steers_nothing_and_is_named(
+        graph_run, listener, tmp_path, graph_factory, assert_same_trajectory):
+    """A gait_manager started by hand on the run's domain (its shipped parameters, no run
+    token) answers the run's states: the simulator names it once, refuses each of its commands
+    (one line, every one counted) and the run is the headless one."""
+    graph = graph_factory(tmp_path / 'out', start_paused=True).start()
+    (spec,) = [s for s in graph.specs if s.executable == 'gait_manager']
+    with open(tmp_path / 'intruder.log', 'wb') as log:
+        intruder = subprocess.Popen(
+            command_of(spec) + ['--ros-args', '--params-file',
+                                str(config_file('gait_manager', 'gait_manager'))],
+            env=graph.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        listener.spin_until(lambda: 'publish effort_commands' in graph.log('simulator'), 60.0,
+                            'the simulator to see the second gait_manager')
+        assert listener.call(Trigger, '/simulator/resume', Trigger.Request()).success
+        listener.spin_until(lambda: graph.simulator.poll() is not None, 60.0, 'the end')
+    finally:
+        codes = graph.stop()
+        stop(intruder)
+    log = graph.log('simulator')
+    assert codes['simulator'] == 0, log
+    assert ("2 node(s) named 'gait_manager' publish effort_commands on this ROS domain besides "
+            "the run's own; commands without this run's token are refused") in log, log
+    assert log.count("a command naming 'gait_manager' is not of this run") == 1, log
+    rejected = json.loads((tmp_path / 'out' / 'metrics.json').read_text())['rejected_commands']
+    assert rejected['count'] >= 1 and all('not of this run' in r for r in rejected['by_reason'])
     assert_same_trajectory(tmp_path / 'out' / 'trajectory.npz',
                            graph_run.headless / 'trajectory.npz')
 

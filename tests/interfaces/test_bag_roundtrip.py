@@ -64,7 +64,7 @@ def make_messages(typestore, step: int):
     header = Header(stamp=stamp, frame_id='world')
     n = len(COORDINATES)
     effort = t[EFFORT_COMMAND](
-        header=header, source='visual_lifting', joint_names=COORDINATES,
+        header=header, source='visual_lifting', run_token='', joint_names=COORDINATES,
         effort=np.linspace(-3.0, 3.0, n) + step, stiffness=np.full(n, 800.0),
         damping=np.full(n, 16.0), position_reference=np.linspace(-0.1, 0.1, n),
         source_names=['posture', 'yaw'], source_efforts=np.linspace(-1.0, 1.0, 2 * n),

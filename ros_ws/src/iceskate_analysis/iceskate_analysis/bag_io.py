@@ -16,6 +16,7 @@ import functools
 import json
 import pathlib
 import re
+import stat
 from typing import TYPE_CHECKING, Any
 
 from mcap.exceptions import EndOfFile
@@ -40,8 +41,8 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 __all__ = ['BLOCK', 'BagData', 'BagReading', 'BagTopic', 'LATCHED_TOPICS', 'LATE',
-           'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS', 'open_bag', 'read_bag',
-           'resolve_bag_path']
+           'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS', 'Spacing', 'open_bag',
+           'read_bag', 'resolve_bag_path']
 
 #: Topics the analysis cannot do without, and the message type each must have.
 REQUIRED_TOPICS = {
@@ -203,6 +204,8 @@ class OpenBag:
     :ivar custom_data: the custom_data of metadata.yaml ({} without it).
     :ivar recovered: '' for a closed bag (metadata.yaml, every file complete to its footer);
         else what was wrong with it and how much could be read.
+    :ivar gaps: '' when the log times of /joint_states (the samples) have no gap, else the note
+        of the gaps (``Spacing.note``).
     :ivar incompatible: message types the files define otherwise than our typestore.
     :ivar last_messages: the CDR bytes of the last message of each channel of a topic of
         ``LATCHED_TOPICS`` (keyed as ``BagTopic.keys``).
@@ -224,6 +227,8 @@ class OpenBag:
         counts: Counter[tuple[int, int]] = Counter()
         problems: list[str] = []
         last = 0
+        # the increasing log times of /joint_states (the samples), counted a block at a time
+        spacing, sampled, latest = Spacing(), list[int](), -1
         for index, record in self._records(problems):
             if isinstance(record, Schema):
                 schemas[(index, record.id)] = record
@@ -233,8 +238,17 @@ class OpenBag:
                 key = (index, record.channel_id)
                 counts[key] += 1
                 last = max(last, record.log_time)
-                if key in channels and channels[key].topic in LATCHED_TOPICS:
+                topic = channels[key].topic if key in channels else ''
+                if topic in LATCHED_TOPICS:
                     self.last_messages[key] = record.data
+                elif topic == '/joint_states' and record.log_time > latest:
+                    latest = record.log_time
+                    sampled.append(latest)
+                    if len(sampled) == BLOCK:
+                        spacing.add(np.array(sampled))
+                        sampled.clear()
+        spacing.add(np.array(sampled, dtype=np.int64))
+        self.gaps = spacing.note()
         self.topics: list[BagTopic] = []
         for key, channel in channels.items():
             schema = schemas.get((key[0], channel.schema_id))
@@ -249,9 +263,10 @@ class OpenBag:
                                   'complete chunk of messages (the file is truncated or '
                                   f'corrupt: {"; ".join(problems) or "empty"})')
         end = f'; {"; ".join(problems)}' if problems else ''
+        unknown = '' if custom_data else ' (without metadata: the scene parameters are not known)'
         self.recovered = '' if not why else (
             f'bag {path}: {why}; rebuilt from {", ".join(f.name for f in files)}: {total} '
-            f'messages of its complete chunks, up to log time {last * 1e-9:.6f} s{end}')
+            f'messages of its complete chunks, up to log time {last * 1e-9:.6f} s{end}{unknown}')
 
     def _records(self, problems: list[str]) -> Iterator[tuple[int, McapRecord]]:
         """(file index, record) of every record of the files, those of a chunk once the whole
@@ -300,17 +315,20 @@ class OpenBag:
 def open_bag(path: str | pathlib.Path) -> OpenBag:
     """Open a bag (a bag or run directory, or an .mcap file) for reading. A bag without
     metadata.yaml (never closed: a killed run, a power cut) or with a file cut short is read as
-    far as it reached the disk; ``recovered`` says so and how much was read.
+    far as it reached the disk; ``recovered`` says so and how much was read. Its files must be
+    regular files (``_check_regular``).
 
     :raises SimulationError: naming the bag and the problem.
     """
     bag = resolve_bag_path(path)
-    if bag.is_file() and (bag.parent / 'metadata.yaml').is_file():
+    if not bag.is_dir():
+        _check_regular([bag])
+        if not (bag.parent / 'metadata.yaml').is_file():
+            return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it')
         bag = bag.parent
-    if bag.is_file():
-        return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it')
     files = sorted(bag.glob('*.mcap'), key=_recording_order)
     metadata = bag / 'metadata.yaml'
+    _check_regular([*files, *([metadata] if metadata.exists() else [])])
     if not metadata.is_file():
         return OpenBag(bag, files, {}, 'it has no metadata.yaml (the recording was not '
                        'closed: a killed run or a power cut)')
@@ -318,6 +336,29 @@ def open_bag(path: str | pathlib.Path) -> OpenBag:
         raise SimulationError(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
                               'are read)')
     return OpenBag(bag, files, _metadata_custom_data(metadata), '')
+
+
+#: What a path that is not a regular file is, by its ``stat.S_IS*`` test.
+_KINDS = ((stat.S_ISFIFO, 'a named pipe (FIFO)'), (stat.S_ISCHR, 'a character device'),
+          (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket'),
+          (stat.S_ISDIR, 'a directory'))
+
+
+def _check_regular(paths: Iterable[pathlib.Path]) -> None:
+    """Refuse a bag's file that is not a regular file, before it is opened: opening a FIFO
+    blocks until a writer comes, and a device never ends.
+
+    :raises SimulationError: naming the file and what it is.
+    """
+    for path in paths:
+        try:
+            mode = path.stat().st_mode
+        except OSError as exc:
+            raise SimulationError(f'cannot read bag file {path}: {exc.strerror or exc}') from None
+        if not stat.S_ISREG(mode):
+            kind = next((name for test, name in _KINDS if test(mode)), 'of an unknown kind')
+            raise SimulationError(f'bag file {path} is {kind}, not a regular file, and is not '
+                                  'read')
 
 
 def _recording_order(path: pathlib.Path) -> tuple[tuple[int, int | str], ...]:
@@ -617,7 +658,7 @@ class BagReading:
             yield from join.samples(tables, None, size)
         finally:
             bar.close()
-        self.notes = ([self._recovered()] if self._reader.recovered else []) + join.notes()
+        self.notes = ([self._reader.recovered] if self._reader.recovered else []) + join.notes()
 
     def _decode(self, conn: BagTopic, where: str, raw: bytes) -> Any:
         try:
@@ -625,11 +666,6 @@ class BagReading:
         except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
             raise SimulationError(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
                                   f'{conn.topic} at {where} ({exc})') from exc
-
-    def _recovered(self) -> str:
-        extra = ('' if self.custom_data
-                 else ' (without metadata: the scene parameters are not known)')
-        return self._reader.recovered + extra
 
 
 class _Cut:
@@ -668,12 +704,9 @@ class _Join:
         self.path, self.custom, self.urdf = path, custom, urdf
         self.sources: list[str] = []  # every source, by the first sample that carries it
         self.emitted = 0  # samples given
-        self.last = -1  # the last sample's stamp [ns]
         self.missing = self.duplicates = self.late = self.heads = 0
         self.stamps = {t: 0 for t in REQUIRED_TOPICS}  # distinct stamps of each
-        self.least = 0  # the least spacing of two samples [ns]
-        self.spacings: dict[int, int] = {}  # spacing bin (``_bin``) -> how many
-        self.longest = (0, 0)  # the longest spacing [ns] and the stamp before it
+        self.spacing = Spacing()  # of the samples given
 
     def samples(self, tables: dict[str, _Table], before: int | None, size: int
                 ) -> Iterator[BagData]:
@@ -720,27 +753,13 @@ class _Join:
         head_position = np.full((stamps.size, 3), np.nan)
         head_position[has] = tables['/head_pose'].fields['head_position'][rows[at[has]]]
         self.heads += int(has.sum())
-        self._space(stamps)
+        self.emitted += stamps.size
+        self.spacing.add(stamps)
         data = BagData(path=self.path, t_ns=stamps, efforts=efforts,
                        head_position=head_position, urdf=self.urdf, custom_data=self.custom,
                        **columns)
         _validate(data)
         return data
-
-    def _space(self, stamps: np.ndarray) -> None:
-        """Count the spacings of the samples (the gaps note), in bins of 1/64 octave."""
-        starts = np.concatenate([[self.last], stamps]) if self.emitted else stamps
-        steps = np.diff(starts)
-        self.emitted += stamps.size
-        self.last = int(stamps[-1])
-        if not steps.size:
-            return
-        self.least = int(steps.min()) if not self.least else min(self.least, int(steps.min()))
-        for spacing, count in zip(*np.unique(_bin(steps), return_counts=True), strict=True):
-            self.spacings[int(spacing)] = self.spacings.get(int(spacing), 0) + int(count)
-        k = int(np.argmax(steps))
-        if steps[k] > self.longest[0]:
-            self.longest = (int(steps[k]), int(starts[k]))
 
     def notes(self) -> list[str]:
         """What was dropped or assumed, once every sample was given.
@@ -765,14 +784,48 @@ class _Join:
             notes.append('no /head_pose at any sample: head positions are nan')
         if not self.urdf:
             notes.append('no /robot_description: the installed URDF is assumed')
+        gaps = self.spacing.note()
+        if gaps:
+            notes.append(gaps)
+        return notes
+
+
+class Spacing:
+    """The spacings of increasing stamps given a block at a time, counted in bins of 1/64
+    octave (``_bin``), for the note of the gaps among them (``note``): a spacing over ``GAP``
+    times the least is a gap."""
+
+    def __init__(self) -> None:
+        self.last: int | None = None  # the last stamp given [ns]
+        self.least = 0  # the least spacing [ns]
+        self.spacings: dict[int, int] = {}  # spacing bin -> how many
+        self.longest = (0, 0)  # the longest spacing [ns] and the stamp before it
+
+    def add(self, stamps: np.ndarray) -> None:
+        """Count the spacings of ``stamps`` [ns] (increasing, after the last given)."""
+        if not stamps.size:
+            return
+        starts = stamps if self.last is None else np.concatenate([[self.last], stamps])
+        steps = np.diff(starts)
+        self.last = int(stamps[-1])
+        if not steps.size:
+            return
+        self.least = int(steps.min()) if not self.least else min(self.least, int(steps.min()))
+        for spacing, count in zip(*np.unique(_bin(steps), return_counts=True), strict=True):
+            self.spacings[int(spacing)] = self.spacings.get(int(spacing), 0) + int(count)
+        k = int(np.argmax(steps))
+        if steps[k] > self.longest[0]:
+            self.longest = (int(steps[k]), int(starts[k]))
+
+    def note(self) -> str:
+        """What the gaps are ('' for none)."""
         gaps = sum(n for spacing, n in self.spacings.items()
                    if spacing > _bin(np.array([GAP * self.least]))[0])
-        if gaps:
-            step, start = self.longest
-            notes.append(f'the samples have {gaps} gap(s) (sampled every '
-                         f'{self.least * 1e-9:g} s); the longest from t = {start * 1e-9:.6f} s '
-                         f'to {(start + step) * 1e-9:.6f} s')
-        return notes
+        if not gaps:
+            return ''
+        step, start = self.longest
+        return (f'the samples have {gaps} gap(s) (sampled every {self.least * 1e-9:g} s); the '
+                f'longest from t = {start * 1e-9:.6f} s to {(start + step) * 1e-9:.6f} s')
 
 
 def _bin(spacings: np.ndarray) -> np.ndarray:

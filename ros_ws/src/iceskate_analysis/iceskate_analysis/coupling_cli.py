@@ -1,6 +1,7 @@
 """``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``: the
-eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0, or 1 with a
-one-line message for a bag or argument it refuses; the notes of the reading go to stderr.
+eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0; 2 with a one-line
+message for a bag or argument it refuses; 1 with one line when the output cannot be written. The
+notes of the reading go to stderr.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
                                progress=not args.quiet)
     except SimulationError as exc:
         print(f'coupling_analysis: error: {exc}', file=sys.stderr)
-        return 1
+        return 2
     except OSError as exc:  # the output folder cannot be made or written
         where = f' {exc.filename}' if exc.filename else ''
         print(f'coupling_analysis: error: cannot write{where}: {exc.strerror or exc}',

@@ -128,6 +128,8 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
     """
     loaded = []
     for path in (run_dir / 'events.json', run_dir / 'metrics.json'):
+        if path.exists() and not path.is_file():  # a FIFO would block the read
+            raise SimulationError(f'{path} is not a regular file')
         try:
             loaded.append(json.loads(path.read_text(encoding='utf-8')))
         except OSError as exc:

@@ -1,8 +1,11 @@
 """``ros2 run iceskate_analysis replay <bag> [--rate X | --fast]``: republish a recorded bag.
 
-Every topic as recorded (raw CDR bytes, log-time pacing scaled by ``rate``), ``/clock``
-synthesized when the bag has none; a bag never closed or cut is read as far as it reached the
-disk (``bag_io.open_bag``), with a warning saying how much (docs/usage.md).
+Every topic as recorded (raw CDR bytes, log-time pacing scaled by ``rate``, from ``RATES``),
+``/clock`` synthesized when the bag has none; a bag never closed or cut is read as far as it
+reached the disk (``bag_io.open_bag``), and the notes of the bag (rebuilt, gaps) go to stderr as
+coupling_analysis gives them (docs/usage.md). Exit status 0; 2 with one line for a bag or
+argument it refuses; 130, 143 or 129 with one line on SIGINT, SIGTERM or SIGHUP, answered
+within ``WAIT_SLICE``; 1 for any other failure.
 """
 
 from __future__ import annotations
@@ -17,17 +20,25 @@ from typing import Any
 
 import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
 from iceskate_analysis.bag_io import open_bag
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.model.stamps import set_stamp
 from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS
+from iceskate_sim.shutdown import StopRequest, say
+
+#: The speed factors --rate takes (x recorded time); --fast plays without pacing.
+RATES = (0.01, 100.0)
+#: Longest wall time [s] a wait goes on without looking for a stop signal.
+WAIT_SLICE = 0.05
+#: Wall time [s] the subscribers get to acknowledge the last messages.
+ACK_TIMEOUT = 2.0
 
 
 def message_class(msgtype: str) -> type:
@@ -37,13 +48,18 @@ def message_class(msgtype: str) -> type:
 
 
 class ReplayNode(Node):
-    """Publishes the messages of one bag."""
+    """Publishes the messages of one bag; every wait looks for a stop signal at least every
+    ``WAIT_SLICE`` s.
 
-    def __init__(self, bag: pathlib.Path, depth: int = 1000) -> None:
+    :ivar notes: what the reading of the bag found (rebuilt, gaps), as coupling_analysis says.
+    :ivar count: messages published. :ivar reached: log time [ns] of the last (None: none).
+    """
+
+    def __init__(self, bag: pathlib.Path, stop: StopRequest, depth: int = 1000) -> None:
         super().__init__('replay')
         self.reader = open_bag(bag)
-        if self.reader.recovered:
-            self.get_logger().warning(self.reader.recovered)
+        self.notes = [note for note in (self.reader.recovered, self.reader.gaps) if note]
+        self.stop = stop
         self.publishers_by_topic: dict[str, Any] = {}
         for conn in self.reader.topics:
             if conn.topic in self.publishers_by_topic:
@@ -61,27 +77,51 @@ class ReplayNode(Node):
         self._clock = None
         if '/clock' not in self.publishers_by_topic:
             self._clock = self.create_publisher(Clock, '/clock', CLOCK_QOS)
+        self.connections = [c for c in self.reader.topics if c.topic in self.publishers_by_topic]
         self.count = 0
+        self.reached: int | None = None
+
+    def _check_stop(self) -> None:
+        """:raises RunInterrupted: once a stop signal came."""
+        if self.stop.requested:
+            total = sum(c.count for c in self.connections)
+            raise self.stop.error(None if self.reached is None else self.reached * 1e-9,
+                                  f'{self.count} of {total} messages replayed')
+
+    def _pause(self, seconds: float) -> None:
+        """Wait ``seconds`` of wall time, in slices of ``WAIT_SLICE``.
+
+        :raises RunInterrupted: on a stop signal.
+        """
+        end = time.monotonic() + seconds
+        self._check_stop()
+        while (left := end - time.monotonic()) > 0:
+            time.sleep(min(left, WAIT_SLICE))
+            self._check_stop()
 
     def wait_for_subscribers(self, timeout: float) -> bool:
-        """Wait until every topic has a subscriber (or ``timeout`` s); True if they all do."""
+        """Wait until every topic has a subscriber (or ``timeout`` s); True if they all do.
+
+        :raises RunInterrupted: on a stop signal.
+        """
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if all(p.get_subscription_count() > 0 for p in self.publishers_by_topic.values()):
                 return True
-            time.sleep(0.01)
+            self._pause(0.01)
         return False
 
     def play(self, rate: float | None) -> int:
-        """Publish every message; pace to ``rate`` x recorded time (None: no pacing)."""
+        """Publish every message; pace to ``rate`` x recorded time (None: no pacing); then give
+        the subscribers up to ``ACK_TIMEOUT`` s to acknowledge them.
+
+        :raises RunInterrupted: on a stop signal.
+        """
         start_wall, first, last_clock = time.monotonic(), None, None
-        connections = [c for c in self.reader.topics if c.topic in self.publishers_by_topic]
-        for conn, timestamp, raw in self.reader.messages(connections):
+        for conn, timestamp, raw in self.reader.messages(self.connections):
             first = timestamp if first is None else first
-            if rate is not None:
-                delay = start_wall + (timestamp - first) / 1e9 / rate - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
+            self._pause(0.0 if rate is None else
+                        start_wall + (timestamp - first) / 1e9 / rate - time.monotonic())
             if self._clock is not None and timestamp != last_clock:
                 clock = Clock()
                 set_stamp(clock.clock, timestamp)
@@ -89,8 +129,12 @@ class ReplayNode(Node):
                 last_clock = timestamp
             self.publishers_by_topic[conn.topic].publish(bytes(raw))
             self.count += 1
+            self.reached = timestamp
+        deadline = time.monotonic() + ACK_TIMEOUT
         for publisher in self.publishers_by_topic.values():
-            publisher.wait_for_all_acked(Duration(seconds=2.0))
+            while not publisher.wait_for_all_acked(Duration(seconds=WAIT_SLICE)) and \
+                    time.monotonic() < deadline:
+                self._check_stop()
         return self.count
 
 
@@ -100,36 +144,43 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='replay', description=__doc__.split('\n\n')[0])
     parser.add_argument('bag', type=pathlib.Path, help='rosbag2 directory (MCAP)')
     pace = parser.add_mutually_exclusive_group()
-    pace.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    pace.add_argument('--rate', type=float, default=1.0,
+                      help=f'speed factor, {RATES[0]:g} to {RATES[1]:g} (default 1)')
     pace.add_argument('--fast', action='store_true', help='as fast as possible')
     parser.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
                         help='first wait up to S s for a subscriber on every topic')
     args = parser.parse_args(remove_ros_args(argv)[1:])
-    if not args.fast and not args.rate > 0:
-        parser.error('--rate must be > 0')
-    loopback_dds(os.environ)
-    rclpy.init(args=argv)
+    if not args.fast and not RATES[0] <= args.rate <= RATES[1]:
+        say(f'replay: error: --rate {args.rate:g} is outside {RATES[0]:g} to {RATES[1]:g} '
+            '(--fast plays without pacing)')
+        return 2
     node = None
-    try:
-        node = ReplayNode(args.bag)
-        if args.wait_for_subscribers > 0 and not node.wait_for_subscribers(
-                args.wait_for_subscribers):
-            node.get_logger().warning('not every topic has a subscriber; playing anyway')
-        count = node.play(None if args.fast else args.rate)
-        node.get_logger().info(f'replayed {count} messages from {args.bag}')
-        return 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    except SimulationError as exc:  # bag missing or unreadable (its message names the file)
-        print(f'replay: error: {exc}', file=sys.stderr)
-        return 1
-    except Exception as exc:  # e.g. an unknown message type
-        print(f'replay: error: {args.bag}: {type(exc).__name__}: {exc}', file=sys.stderr)
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    with StopRequest() as stop:  # rclpy's own handlers are not installed (as ``run_node``)
+        try:
+            loopback_dds(os.environ)
+            rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+            node = ReplayNode(args.bag, stop)
+            for note in node.notes:  # e.g. a bag rebuilt after a killed run
+                say(f'replay: note: {note}')
+            if args.wait_for_subscribers > 0 and not node.wait_for_subscribers(
+                    args.wait_for_subscribers):
+                node.get_logger().warning('not every topic has a subscriber; playing anyway')
+            count = node.play(None if args.fast else args.rate)
+            node.get_logger().info(f'replayed {count} messages from {args.bag}')
+            return 0
+        except RunInterrupted as exc:
+            say(f'replay: {exc}')
+            return exc.exit_code
+        except SimulationError as exc:  # bag missing or unreadable (its message names the file)
+            say(f'replay: error: {exc}')
+            return 2
+        except Exception as exc:  # e.g. an unknown message type
+            say(f'replay: error: {args.bag}: {type(exc).__name__}: {exc}')
+            return 1
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

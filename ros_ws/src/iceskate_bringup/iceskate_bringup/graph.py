@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import json
 import os
 import pathlib
+import secrets
 import signal
 import subprocess
 import tempfile
@@ -87,15 +88,18 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
     """The simulator and the controller nodes the scene runs, each with its parameter file
     written into ``out/params/`` (``<node>.yaml``: the scene composed into node parameters;
     reusable to start the nodes by hand), and the scene the simulator reads, ``scene.yaml``
-    (its base merged in, ``overrides`` set: dotted key -> value)."""
+    (its base merged in, ``overrides`` set: dotted key -> value). Every node gets the run's
+    token (``run_token``, new for each call): the simulator takes commands only from nodes
+    that carry it."""
     scene = load_scene(scene_arg, overrides)
+    token = secrets.token_hex(16)
     controllers = scene_sources(scene)
     folder = out / 'params'
     folder.mkdir(parents=True, exist_ok=True)
     (folder / 'scene.yaml').write_text(yaml.safe_dump(scene.raw, sort_keys=False),
                                        encoding='utf-8')
     params: dict[str, Any] = {'scene': str((folder / 'scene.yaml').resolve()),
-                              'out_dir': str(out)}
+                              'out_dir': str(out), 'run_token': token}
     if scene.record_bag:
         params['record_bag'] = str(out / 'bag')
     if duration is not None:
@@ -112,12 +116,14 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
         params = composed[node]
         if isinstance(params, PluginBlock):  # iceskate_bringup.plugin_node, named after its key
             write_parameter_file(folder / f'{node}.yaml', {node: {
-                'plugin': params.plugin, 'parameters': json.dumps(params.parameters)}})
+                'plugin': params.plugin, 'parameters': json.dumps(params.parameters),
+                'run_token': token}})
             specs.append(NodeSpec('iceskate_bringup', 'plugin_controller',
                                   'iceskate_bringup.plugin_node', 'PluginControllerNode',
                                   folder / f'{node}.yaml', node))
             continue
-        write_parameter_file(folder / f'{node}.yaml', {node: flatten(params)})
+        write_parameter_file(folder / f'{node}.yaml',
+                             {node: flatten(params) | {'run_token': token}})
         specs.append(NodeSpec(node, node, f'{node}.{node}_node', CONTROLLER_CLASSES[node],
                               folder / f'{node}.yaml'))
     return specs

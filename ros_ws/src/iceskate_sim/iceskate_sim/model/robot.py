@@ -108,6 +108,7 @@ class Robot:
     urdf_model: pin.Model
     models: dict[tuple[str, str], SupportModel]
     damping: np.ndarray  # N m s/rad per Table-2 coordinate (y0: 0), shape (18,)
+    effort_limit: np.ndarray  # N m (N for y0) per Table-2 coordinate, shape (18,)
     total_mass: float  # kg
 
     @property
@@ -232,6 +233,18 @@ def _damping(urdf_model: pin.Model, side: str) -> np.ndarray:
     return damping
 
 
+def _effort_limit(urdf_model: pin.Model, side: str) -> np.ndarray:
+    """The URDF joints' effort limits per Table-2 coordinate [N m]; q1 takes its support
+    ankle's (as its damping), y0 (no URDF joint) the largest of them [N]."""
+    limit = np.zeros(N_COORDINATES)
+    for i, urdf_joint, _sign in anatomical_map(side):
+        jid = urdf_model.getJointId(urdf_joint)
+        limit[i] = float(urdf_model.effortLimit[urdf_model.joints[jid].idx_v])
+    limit[1] = limit[2]
+    limit[0] = limit[1:].max()
+    return limit
+
+
 @functools.lru_cache(maxsize=4)
 def load_robot(urdf_path: str | None = None) -> Robot:
     """Load the URDF (default: the one the package installs, ``share/iceskate_sim/urdf``) and
@@ -245,8 +258,11 @@ def load_robot(urdf_path: str | None = None) -> Robot:
     links, joints = _urdf_links(urdf_model)
     models = {(side, pivot): _build_support_model(urdf_model, links, joints, side, pivot)
               for side in SIDES for pivot in PIVOTS}
-    damping = _damping(urdf_model, 'right')
+    damping, effort_limit = _damping(urdf_model, 'right'), _effort_limit(urdf_model, 'right')
     if not np.array_equal(damping, _damping(urdf_model, 'left')):
         raise SimulationError('URDF leg damping differs between sides; Table 2 needs it equal')
+    if not np.array_equal(effort_limit, _effort_limit(urdf_model, 'left')):
+        raise SimulationError('URDF leg effort limits differ between sides; Table 2 needs them '
+                              'equal')
     total_mass = float(sum(link.mass for link in links.values()))
-    return Robot(path, urdf_model, models, damping, total_mass)
+    return Robot(path, urdf_model, models, damping, effort_limit, total_mass)

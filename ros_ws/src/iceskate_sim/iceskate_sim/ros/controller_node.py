@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Generic, TypeVar
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,15 +49,20 @@ class ControllerNode(Node, Generic[P]):
             self.set_parameters([Parameter('use_sim_time', Parameter.Type.BOOL, True)])
         self.params: P = declare_parameters(self, self.parameter_class, self.parameter_error,
                                             self._on_parameters)
+        run_token = self.declare_parameter('run_token', '', ParameterDescriptor(
+            description='the token of the run this node answers, carried by its commands (its '
+                        "launcher gives every node of a run one: the simulator's run_token); "
+                        'empty: none')).value
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
         typestore = make_typestore()
-        self._encoder = CommandEncoder(node_name, typestore)
+        self._encoder = CommandEncoder(node_name, run_token, typestore)
         self._gait_states = GaitStateReader(typestore)
         self._publisher = self.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
         self._states = self.create_subscription(GaitState, 'gait_state', self.on_gait_state,
                                                 LOCKSTEP_READER_QOS, raw=True)
         self._served = False  # a state has come: a simulator serves this node
+        self._clash_said = False  # said that states come from more than one simulator
         #: The simulator it served is gone (``node_support.run_node`` then ends the node).
         self.finished = False
         self.create_timer(SIMULATOR_CHECK_PERIOD, self._check_simulator,
@@ -64,8 +70,16 @@ class ControllerNode(Node, Generic[P]):
         self.get_logger().info('ready: answering gait_state on effort_commands')
 
     def _check_simulator(self) -> None:
-        """End the node once the simulator it served has no gait_state publisher left."""
-        if self._served and not self.finished and self._states.get_publisher_count() == 0:
+        """End the node once the simulator it served has no gait_state publisher left; say
+        once when states come from more than one simulator (two graphs on one domain)."""
+        simulators = self._states.get_publisher_count()
+        if simulators > 1 and not self._clash_said:
+            self._clash_said = True
+            self.get_logger().warning(
+                f'{simulators} nodes publish gait_state on this ROS domain: this controller '
+                'answers the states of more than one simulator (give each graph its own '
+                'ROS_DOMAIN_ID)')
+        if self._served and not self.finished and simulators == 0:
             self.get_logger().info('the simulator is gone: the run is over')
             self.finished = True
 

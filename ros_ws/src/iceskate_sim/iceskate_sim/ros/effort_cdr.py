@@ -26,6 +26,16 @@ _TYPE = 'iceskate_interfaces/msg/EffortCommand'
 _STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
 
 
+class ForeignCommand(SimulationError):
+    """A command that does not carry the run's token: another node on the domain answers the
+    run's states (``source``: the controller it names)."""
+
+    def __init__(self, source: str) -> None:
+        super().__init__(f'a command naming {source[:64]!r} is not of this run (its run token '
+                         "differs): another node on this ROS domain answers the run's states")
+        self.source = source[:64]
+
+
 def _stamp_ns(layout: Layout, data: bytes) -> int:
     sec, nanosec = (int(layout.read(data, path)[0]) for path in _STAMP)
     return sec * NS_PER_S + nanosec
@@ -33,10 +43,12 @@ def _stamp_ns(layout: Layout, data: bytes) -> int:
 
 class CommandDecoder:
     """``effort_commands`` CDR bytes -> (source, stamp [ns], command), every message checked
-    as ``command_from_message`` checks it (see the module docstring); ``typestore``: the types
+    as ``command_from_message`` checks it (see the module docstring); ``run_token``: the token
+    every command of this run carries ('' for nodes started by hand); ``typestore``: the types
     (default: ``make_typestore()``)."""
 
-    def __init__(self, typestore: Typestore | None = None) -> None:
+    def __init__(self, run_token: str = '', typestore: Typestore | None = None) -> None:
+        self.run_token = run_token
         self._typestore = typestore or make_typestore()
         #: per source: its last checked message's layout, the places of its values and sources
         self._known: dict[str, tuple[Layout, np.ndarray, tuple[slice, ...], tuple[str, ...]]] = {}
@@ -45,11 +57,12 @@ class CommandDecoder:
         """The sender, stamp and command values of one message (views of ``data`` when its
         layout is known).
 
-        :raises SimulationError: naming the problem (and the source, once it is readable).
+        :raises SimulationError: naming the problem (and the source, once it is readable);
+            a command of another run (``ForeignCommand``).
         """
         data = bytes(data)
         for source, (layout, every, arrays, sources) in self._known.items():
-            if layout.fits(data):  # the skeleton holds the source's name
+            if layout.fits(data):  # the skeleton holds the source's name and the run's token
                 values = self._values(data, layout, every, arrays, sources)
                 if values is not None:
                     return source, _stamp_ns(layout, data), values
@@ -59,6 +72,8 @@ class CommandDecoder:
         except LayoutError as exc:
             raise SimulationError(f'undecodable effort_commands message ({len(data)} bytes): '
                                   f'{exc}') from None
+        if layout.strings['run_token'] != self.run_token:
+            raise ForeignCommand(layout.strings['source'])
         message = SimpleNamespace(
             stamp_ns=_stamp_ns(layout, data), frame_id=layout.strings['header.frame_id'],
             source=layout.strings['source'], joint_names=layout.texts('joint_names'),
@@ -89,11 +104,12 @@ class CommandDecoder:
 
 class CommandEncoder:
     """A controller's ``CommandValues`` -> its ``effort_commands`` CDR bytes (see the module
-    docstring); ``source``: the controller's name; ``typestore``: the types (default:
-    ``make_typestore()``)."""
+    docstring); ``source``: the controller's name; ``run_token``: its run's token ('': none);
+    ``typestore``: the types (default: ``make_typestore()``)."""
 
-    def __init__(self, source: str, typestore: Typestore | None = None) -> None:
-        self.source = source
+    def __init__(self, source: str, run_token: str = '',
+                 typestore: Typestore | None = None) -> None:
+        self.source, self.run_token = source, run_token
         self._typestore = typestore or make_typestore()
         self._last: tuple[tuple, iceskate_native.CdrProgram] | None = None
         self._stamp = np.zeros((1, 1), dtype=np.int64)
@@ -104,7 +120,8 @@ class CommandEncoder:
         shape = (values.sources, *(x.size for x in arrays))
         if self._last is None or self._last[0] != shape:
             layout = layout_for(self._typestore, _TYPE, {
-                'source': self.source, 'joint_names': COORDINATE_NAMES,
+                'source': self.source, 'run_token': self.run_token,
+                'joint_names': COORDINATE_NAMES,
                 'source_names': values.sources,
                 **{name: x.size for name, x in zip(ARRAYS, arrays, strict=True)}})
             # column 0: the stamp [ns]; column 1 + k: array k of ARRAYS

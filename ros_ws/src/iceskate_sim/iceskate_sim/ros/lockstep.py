@@ -18,11 +18,12 @@ import numpy as np
 
 from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.model.command import CommandValues
+from iceskate_sim.model.robot import COORDINATE_NAMES
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import HybridState
 from iceskate_sim.recording.bag_types import make_typestore
 from iceskate_sim.recording.messages import SampleMessages
-from iceskate_sim.ros.effort_cdr import CommandDecoder
+from iceskate_sim.ros.effort_cdr import CommandDecoder, ForeignCommand
 from iceskate_sim.run.pace import PaceClock
 from iceskate_sim.run.session import Session
 
@@ -106,10 +107,12 @@ class LockstepSession:
         An empty breakdown is the effort of a controller's only source, named like it,
         evaluated at the current state.
 
-        :raises SimulationError: for an unknown controller, a breakdown that does not name the
-            controller's sources in order, a stamp that is stale (before t_k, or in
-            free-running mode before the controller's last command) or in the future, or
-            values of a wrong size, not finite or negative gains.
+        :raises SimulationError: for an unknown controller, a generalized force at the
+            current state (effort and impedance) beyond a coordinate's effort limit
+            (``Robot.effort_limit``), a breakdown that does not name the controller's sources
+            in order, a stamp that is stale (before t_k, or in free-running mode before the
+            controller's last command) or in the future, or values of a wrong size, not finite
+            or negative gains.
         """
         if controller not in self.controllers:
             raise SimulationError(f'command from unknown source {controller!r}; scene '
@@ -120,10 +123,17 @@ class LockstepSession:
             self._adopt(controller, command.sources)
             expected = command.sources
         self._learning.discard(controller)
+        state = self.sim.state
+        torque = command.torque(state.q, state.v)
         if not command.sources and expected == (controller,):
-            state = self.sim.state
-            command = command._replace(source_efforts=command.torque(state.q, state.v),
-                                       sources=expected)
+            command = command._replace(source_efforts=torque, sources=expected)
+        over = np.abs(torque) > self.robot.effort_limit
+        if over.any():
+            k = int(np.argmax(over))
+            raise SimulationError(f'command of {controller!r} asks {torque[k]:.6g} '
+                                  f'{"N" if k == 0 else "N m"} of {COORDINATE_NAMES[k]} at '
+                                  f't={self.sim.time:.6f} s, beyond its effort limit '
+                                  f"{self.robot.effort_limit[k]:g} (the URDF's)")
         if command.sources != expected:
             raise SimulationError(f'command of {controller!r} breaks down into sources '
                                   f'{list(command.sources)}; scene {self.scene.name!r} '
@@ -275,13 +285,16 @@ class LockstepLoop:
     :param stats_file: JSON file for the loop timings (None or '': none).
     :param listened: ``listened(topic)``: whether a live topic has readers (its messages are
         built only then).
+    :param run_token: the token every command of this run carries ('': nodes started by hand,
+        commands without one).
     """
 
     def __init__(self, session: LockstepSession, publish: Callable[[str, bytes], None],
                  report: Callable[[str, bool], None], control_timeout: float = 5.0,
                  pace: float = 0.0, paused: bool = False,
                  stats_file: str | pathlib.Path | None = None,
-                 listened: Callable[[str], bool] = lambda topic: True) -> None:
+                 listened: Callable[[str], bool] = lambda topic: True,
+                 run_token: str = '') -> None:
         if not session.lockstep and pace <= 0.0:
             raise SimulationError('a free-running run (lockstep false) needs a pace > 0')
         self.session = session
@@ -289,7 +302,9 @@ class LockstepLoop:
         self.monitor = LoopMonitor(session.controllers, control_timeout,
                                    session.scene.simulator.control_period, pace)
         self._publish, self._report = publish, report
-        self._decoder = CommandDecoder()
+        self._decoder = CommandDecoder(run_token)
+        self._foreign: set[str] = set()  # controller names another run's commands carried
+        self._clashes: set[str] = set()  # what ``clashes`` said
         self._stats_file = pathlib.Path(stats_file) if stats_file else None
         self.phase, self.paused, self.budget, self.exit_code = 'starting', paused, 0, 0
 
@@ -335,6 +350,31 @@ class LockstepLoop:
                 end='controller_timeout'))
         return False
 
+    def clashes(self, simulators: int, command_writers: list[str]) -> list[str]:
+        """What the ROS graph shows of another graph on this domain, each said once: more
+        than one ``simulators`` (gait_state writers), and ``command_writers`` (the nodes
+        publishing effort_commands, one name per writer) that are not this run's controllers
+        or name one of them twice."""
+        said = []
+        if simulators > 1 and 'simulators' not in self._clashes:
+            self._clashes.add('simulators')
+            said.append(f'{simulators} nodes publish gait_state on this ROS domain: another '
+                        'simulator runs here, and controllers may answer both (give each '
+                        'graph its own ROS_DOMAIN_ID)')
+        counts = Counter(command_writers)
+        ours = set(self.session.controllers)
+        for name in sorted(counts):
+            if (name not in ours or counts[name] > 1) and name not in self._clashes:
+                self._clashes.add(name)
+                said.append(
+                    f'{counts[name]} node(s) named {name[:64]!r} publish effort_commands on '
+                    'this ROS domain' + (" besides the run's own" if name in ours else '')
+                    + ("; commands without this run's token are refused"
+                       if self._decoder.run_token else
+                       "; their commands cannot be told from the run's own (a run started "
+                       'by run_scene --ros gives its nodes a token that tells them apart)'))
+        return said
+
     def publish_state(self, again: bool = False) -> None:
         """Publish the live state at t_k (``again``: the same t_k once more): the controllers'
         topics first; then, while they compute, the periods stepped are recorded (trajectory,
@@ -365,13 +405,20 @@ class LockstepLoop:
         """Take an EffortCommand (its CDR bytes); step once every source has answered t_k
         (lockstep), when the pace allows (``_step_on_pace``).
 
-        :returns: why the command was rejected (None: taken, or ignored while not running).
+        :returns: why the command was rejected (None: taken, ignored while not running, or
+            another run's command from a controller name already reported).
         """
         if self.phase != 'running':
             return None
         try:
             source, stamp_ns, command = self._decoder.decode(data)
             self.session.offer(source, stamp_ns, command)
+        except ForeignCommand as exc:  # said once per name (a few names), every one counted
+            self.monitor.reject(str(exc))
+            if exc.source in self._foreign or len(self._foreign) >= FIRST_REJECTED:
+                return None
+            self._foreign.add(exc.source)
+            return f'rejected command: {exc} (ignored from now on, counted in metrics.json)'
         except SimulationError as exc:
             self.monitor.reject(str(exc))
             return f'rejected command: {exc}'

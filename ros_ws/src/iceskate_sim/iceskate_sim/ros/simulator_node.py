@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 from functools import partial
 import pathlib
 import sys
+import time
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped
@@ -43,6 +44,11 @@ from iceskate_sim.run.pace import MAX_PACE
 from iceskate_sim.run.scene import MAX_DURATION, Scene, load_scene
 from iceskate_sim.run.session import Session
 
+#: Wall seconds between two looks at the graph for another run on the domain.
+GRAPH_CHECK_PERIOD = 0.5
+#: The node name rmw gives an endpoint whose node it has not discovered yet.
+UNNAMED = '_NODE_NAME_UNKNOWN_'
+
 
 @dataclass(frozen=True)
 class SimulatorNodeParameters:
@@ -68,6 +74,9 @@ class SimulatorNodeParameters:
     start_paused: bool = setting(False, 'start paused (~/step, ~/resume)')
     exit_on_end: bool = setting(True, 'exit when the run is over')
     stats_file: str = setting('', 'JSON file for the loop timings; empty: none')
+    run_token: str = setting('', "the token every command of this run must carry (its "
+                             "launcher gives it to each node of the run: the controllers' "
+                             'run_token); empty: commands without one')
 
     def __post_init__(self) -> None:
         checked(SimulationError)(self)
@@ -102,12 +111,13 @@ class SimulatorNode(Node):
         self.loop = LockstepLoop(
             self.session, lambda topic, data: self._pub[topic].publish(data), self._report,
             c.control_timeout, c.pace, c.start_paused, c.stats_file,
-            lambda topic: topic in self._readers)
+            lambda topic: topic in self._readers, c.run_token)
         self._pub = {'/clock': self.create_publisher(Clock, '/clock', CLOCK_QOS)} | {
             f'/{n}': self.create_publisher(t, n, STATE_QOS) for n, t in
             (('joint_states', JointState), ('head_pose', PoseStamped), ('gait_state', GaitState))}
         self._readers: set[str] = set()  # live topics with readers (``timer_callback``)
         self._waited: set[str] | None = None  # controller nodes seen up while starting
+        self._graph_seen_at = 0.0  # when the graph was last looked at for another run [s]
         self.create_publisher(String, 'robot_description', LATCHED_QOS).publish(
             String(data=self.session.robot.urdf_path.read_text(encoding='utf-8')))
         self.create_service(StepSimulation, '~/step', self.step_callback)
@@ -180,6 +190,13 @@ class SimulatorNode(Node):
         """Start once the controllers are up; watchdog and resend; the pace (``tick``)."""
         # the live topics with readers (4 rmw calls: here, not at every instant)
         self._readers = {t for t, pub in self._pub.items() if pub.get_subscription_count()}
+        now = time.monotonic()
+        if now - self._graph_seen_at > GRAPH_CHECK_PERIOD:
+            self._graph_seen_at = now
+            writers = [i.node_name for i in self.get_publishers_info_by_topic('effort_commands')
+                       if i.node_name != UNNAMED]  # named once discovery has it
+            for text in self.loop.clashes(self.count_publishers('gait_state'), writers):
+                self.get_logger().warning(text)
         self._try_start() if self.loop.phase == 'starting' else self.loop.tick()
 
     def _try_start(self) -> None:
