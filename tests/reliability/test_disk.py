@@ -68,6 +68,29 @@ def test_a_disk_that_fills_up_ends_the_run_with_metrics_and_a_readable_bag(disk,
     proc.assert_all_gone(run.seen)
 
 
+@pytest.mark.ros
+def test_a_disk_that_fills_up_under_the_graph_ends_the_run_as_headless_does(disk, launch,
+                                                                            proc):
+    """The node graph (``--ros``): the simulator ends the run with the disk named, its
+    metrics ``io_error`` and its bag readable, as a headless run does."""
+    pytest.importorskip('rclpy')
+    out = disk('4m') / 'run'
+    run = launch('skate', '--ros', '--duration', '120', out=out)
+    code, stdout, stderr = run.communicate(timeout=300)
+    assert code == 1, stderr
+    (line,) = [line for line in stderr.splitlines() if 'error' in line]
+    assert line.startswith('run_scene: error: ') and str(out) in line, stderr
+    assert 'No space left on device' in line, line
+    assert 'Traceback' not in stderr
+    metrics = run.metrics()
+    assert metrics['end'] == 'io_error' and not metrics['fell']
+    assert 0.0 < metrics['sim_time_s'] < 120.0
+    assert json.loads((out / 'events.json').read_text())
+    _bag_is_whole(out / 'bag')
+    assert not [path for path in out.rglob('*.room')]
+    proc.assert_all_gone(run.seen)
+
+
 def test_a_disk_without_room_for_the_metrics_is_refused_before_the_run(disk, launch):
     out = disk('1m') / 'run'
     run = launch('stand', '--duration', '1', out=out)

@@ -19,6 +19,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y, SOLE_Z
 from iceskate_sim.shutdown import say
+from iceskate_viewer.front import Front, bind, inner_host
 from iceskate_viewer.pose import BodyPose, ViewFrame
 
 #: Lateral distance [m] between two runs' robots.
@@ -40,21 +41,63 @@ UNIT_MESHES = {coal.Box: trimesh.creation.box((1.0, 1.0, 1.0)),
                coal.Cylinder: trimesh.creation.cylinder(1.0, 1.0, sections=24)}
 
 
-def serve(host: str, port: int) -> viser.ViserServer:
-    """A viser server on ``host``:``port`` (0: any free port; a busy port: the next free one),
-    with a warning when ``host`` is not a loopback address. The page has no share link (it
-    would tunnel the page through a server outside this machine): the button is hidden and a
-    request is refused."""
+def serve(host: str, port: int) -> PageServer:
+    """The page's server on ``host``:``port`` (0: any free port; a busy port: the next free
+    one), with a warning when ``host`` is not a loopback address (``PageServer``)."""
     check_port(port)
     check_host(host)
     if not _loopback(host):
         say(f'warning: the view is served on {host}, reachable from other machines '
             '(127.0.0.1 keeps it on this one)')
-    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
-        server = viser.ViserServer(host=host, port=port, verbose=False)
-    server.request_share_url = _no_share_url
+    server = PageServer(host, port)
     server.gui.configure_theme(show_share_button=False, dark_mode=False)
     return server
+
+
+class PageServer(viser.ViserServer):
+    """A viser server behind a front of ours: viser listens on a free port of a loopback
+    address drawn at random (``front.inner_host``), and the page is served on
+    ``host``:``port`` by ``Front`` (``iceskate_viewer.front``), which lets in only requests
+    that name this server and WebSockets of the page's own origin. ``get_host`` and
+    ``get_port`` give the page's address. The page has no share link (it would tunnel the page
+    through a server outside this machine): the button is hidden and a request is refused.
+
+    :raises SimulationError: when ``host``:``port`` cannot be served (``bind``).
+    """
+
+    def __init__(self, host: str, port: int) -> None:
+        sock = bind(host, port)
+        inner = inner_host()
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
+                super().__init__(host=inner, port=0, verbose=False)
+        except BaseException:
+            sock.close()
+            raise
+        try:
+            self._page_front = Front(sock, host, inner, super().get_port())
+        except BaseException:
+            self.stop()
+            raise
+
+    def get_host(self) -> str:
+        """The host the page is served on."""
+        return self._page_front.host
+
+    def get_port(self) -> int:
+        """The port the page is served on."""
+        return self._page_front.port
+
+    def request_share_url(self, verbose: bool = True) -> None:
+        """A share link is never made: the page stays on this machine."""
+        del verbose
+
+    def stop(self) -> None:
+        """Stop the front (closing every browser's connection), then viser."""
+        front = getattr(self, '_page_front', None)
+        if front is not None:  # (None: its start failed)
+            front.stop()
+        super().stop()
 
 
 def check_port(port: int, what: str = 'port') -> None:
@@ -80,11 +123,6 @@ def stop_server(server: viser.ViserServer) -> None:
     """Stop ``server`` (quietly)."""
     with contextlib.redirect_stdout(io.StringIO()):
         server.stop()
-
-
-def _no_share_url(verbose: bool = True) -> None:
-    """A share link is never made: the page stays on this machine."""
-    del verbose
 
 
 def url_of(server: viser.ViserServer) -> str:

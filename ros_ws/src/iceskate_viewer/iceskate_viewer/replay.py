@@ -3,17 +3,24 @@
 Each run comes from its ``trajectory.npz`` (or, without one, its bag); given several, their
 robots stand side by side and move in step (the same simulated time). The page has a time
 slider, play/pause, the playback speed and a jump to the next support exchange.
+
+A run of more than ``MAX_FRAMES`` samples is thinned to that many, evenly spaced in time (said
+on stderr); ``trajectory.npz`` is read a chunk at a time, so what is held is the frames kept,
+whatever the length of the run. What the reading of a bag notes (a bag rebuilt after a killed
+run, gaps in its samples) goes to stderr, as ``coupling_analysis`` says it.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+import math
 import pathlib
 import sys
 import threading
 import time
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 import zipfile
 import zlib
 
@@ -25,8 +32,15 @@ from iceskate_sim.shutdown import StopRequest, say
 if TYPE_CHECKING:  # the page's modules load viser and Pinocchio: only once the runs are read
     from iceskate_viewer.page import RunPage
 
-#: The trajectory columns the view reads.
-COLUMNS = ('t', 'q', 'mode', 'side', 'pivot', 'step_index', 'psi_d')
+#: The trajectory columns the view reads, and the shape of one sample of each.
+SHAPES = {'t': (), 'q': (18,), 'mode': (), 'side': (), 'pivot': (), 'step_index': (),
+          'psi_d': (3,)}
+COLUMNS = tuple(SHAPES)
+#: Samples of a run the view keeps at the most (a millisecond each of 100 s: more than a
+#: slider has positions, and than playback shows at its usual speeds).
+MAX_FRAMES = 100_000
+#: Bytes of a column of ``trajectory.npz`` read at a time.
+CHUNK_BYTES = 4 * 1024 * 1024
 #: Wall time [s] between two frames while playing (at the most).
 PLAY_STEP = 1.0 / 30.0
 
@@ -55,7 +69,8 @@ class Run:
 
 
 def load_run(path: str | pathlib.Path) -> Run:
-    """The run in directory ``path``: its ``trajectory.npz``, else its bag.
+    """The run in directory ``path``: its ``trajectory.npz``, else its bag (what its reading
+    notes said on stderr); more than ``MAX_FRAMES`` samples thinned to them.
 
     :raises SimulationError: naming what is wrong with ``path`` in one sentence.
     """
@@ -65,25 +80,171 @@ def load_run(path: str | pathlib.Path) -> Run:
     npz = run_dir / 'trajectory.npz'
     if npz.is_file():
         try:
-            with np.load(npz) as data:
-                missing = [name for name in COLUMNS if name not in data.files]
-                if missing:
-                    raise SimulationError(f'{npz} lacks the columns {", ".join(missing)}')
-                columns = {name: np.asarray(data[name]) for name in COLUMNS}
+            with zipfile.ZipFile(npz) as archive:
+                columns = _read_trajectory(archive, npz)
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise SimulationError(f'{npz} cannot be read: {exc}') from None
     elif (run_dir / 'bag').is_dir():
         from iceskate_analysis.bag_io import read_bag
         bag = read_bag(run_dir / 'bag')
+        for note in bag.notes:  # e.g. a bag rebuilt after a killed run
+            say(f'view: {run_dir}: note: {note}')
         columns = {'t': bag.t, 'q': bag.q, 'mode': bag.mode, 'side': bag.side,
                    'pivot': bag.pivot, 'step_index': bag.step_index,
                    'psi_d': np.full((bag.n_samples, 3), np.nan)}
+        t = bag.t
+        if len(t):
+            first, last = _check_times([t], f'bag {bag.path}')
+            kept = _frames([t], first, last, len(t), f'bag {bag.path}')
+            if kept is not None:
+                columns = {name: column[kept] for name, column in columns.items()}
     else:
         raise SimulationError(f'{run_dir} holds neither trajectory.npz nor bag/: '
                               'not the output folder of a run')
     if len(columns['t']) == 0:
         raise SimulationError(f'{run_dir} holds no samples')
     return Run(run_dir.resolve().name, columns)
+
+
+def _read_trajectory(archive: zipfile.ZipFile, npz: pathlib.Path) -> dict[str, np.ndarray]:
+    """The ``COLUMNS`` of the ``trajectory.npz`` ``archive`` (a zip of .npy files, stored or
+    deflated: no memory map applies), their times checked, read a chunk at a time and thinned
+    to ``MAX_FRAMES`` samples.
+
+    :raises SimulationError: naming ``npz`` and what is wrong with it.
+    """
+    missing = [name for name in COLUMNS if f'{name}.npy' not in archive.namelist()]
+    if missing:
+        raise SimulationError(f'{npz} lacks the columns {", ".join(missing)}')
+    samples = None
+    for name, shape in SHAPES.items():
+        with archive.open(f'{name}.npy') as stream:
+            found, dtype = _header(stream, npz, name)
+        samples = found[0] if name == 't' and found else samples
+        if found != (samples, *shape) or dtype.kind not in 'biuf':
+            expected = ', '.join(map(str, ('N' if samples is None else samples, *shape)))
+            expected += ',' if not shape else ''
+            raise SimulationError(f'{npz}: column {name} holds {dtype} of shape {found} where '
+                                  f'numbers of shape ({expected}) are expected')
+    if samples == 0:
+        return {name: np.empty((0, *shape)) for name, shape in SHAPES.items()}
+    first, last = _check_times(_chunks(archive, 't', npz), str(npz))
+    kept = _frames(_chunks(archive, 't', npz), first, last, samples, str(npz))
+    columns = {name: _rows(_chunks(archive, name, npz), kept, samples) for name in COLUMNS}
+    _check_codes(columns, npz)
+    return columns
+
+
+def _check_codes(columns: dict[str, np.ndarray], npz: pathlib.Path) -> None:
+    """Refuse, naming ``npz``, a mode, side or pivot code the view cannot draw."""
+    from iceskate_sim.model.modes import MODES
+    from iceskate_sim.model.robot import SIDES
+    from iceskate_sim.ros.conversions import PIVOT_OF_CODE
+    for name, known in (('mode', MODES), ('side', range(len(SIDES))), ('pivot', PIVOT_OF_CODE)):
+        unknown = np.setdiff1d(np.unique(columns[name]), list(known))
+        if len(unknown):
+            raise SimulationError(f'{npz}: column {name} holds codes the view does not know: '
+                                  f'{", ".join(f"{code:g}" for code in unknown[:5])}')
+
+
+def _header(stream: IO[bytes], npz: pathlib.Path, name: str) -> tuple[tuple[int, ...],
+                                                                       np.dtype]:
+    """The shape and dtype of the .npy ``stream`` (column ``name`` of ``npz``), which is left
+    at its first value."""
+    version = np.lib.format.read_magic(stream)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
+    else:
+        raise SimulationError(f'{npz}: column {name} is in .npy format {version}, not 1.0 or '
+                              '2.0')
+    if fortran and len(shape) > 1:
+        raise SimulationError(f'{npz}: column {name} is stored column by column (Fortran '
+                              'order), not sample by sample')
+    return tuple(shape), dtype
+
+
+def _chunks(archive: zipfile.ZipFile, name: str, npz: pathlib.Path) -> Iterator[np.ndarray]:
+    """Column ``name``'s samples in order, about ``CHUNK_BYTES`` at a time."""
+    with archive.open(f'{name}.npy') as stream:
+        shape, dtype = _header(stream, npz, name)
+        size = dtype.itemsize * math.prod(shape[1:])
+        per_chunk = max(1, CHUNK_BYTES // size)
+        for start in range(0, shape[0], per_chunk):
+            count = min(per_chunk, shape[0] - start)
+            data = stream.read(count * size)
+            if len(data) != count * size:
+                raise SimulationError(f'{npz}: column {name} ends after '
+                                      f'{start + len(data) // size} of its {shape[0]} '
+                                      'samples')
+            yield np.frombuffer(data, dtype).reshape(count, *shape[1:])
+
+
+def _check_times(chunks: Iterable[np.ndarray], where: str) -> tuple[float, float]:
+    """The first and last of the times ``t`` [s] in ``chunks``.
+
+    :raises SimulationError: naming ``where`` when a time is not finite, is negative or does
+        not follow the one before (a slider needs times from 0 s on that increase).
+    """
+    samples, first, previous = 0, math.nan, -math.inf
+    for chunk in chunks:
+        t = np.asarray(chunk, dtype=float)
+        bad = np.flatnonzero(~np.isfinite(t))
+        if len(bad):
+            raise SimulationError(f'{where}: time t of sample {samples + bad[0]} is '
+                                  f'{t[bad[0]]} (not a finite number)')
+        if samples == 0:
+            first = float(t[0])
+            if first < 0.0:
+                raise SimulationError(f'{where}: time t starts at {first:g} s (before 0 s)')
+        steps = np.diff(t, prepend=previous)
+        back = np.flatnonzero(steps <= 0.0)
+        if len(back):
+            k = back[0]
+            before = t[k - 1] if k else previous
+            raise SimulationError(f'{where}: time t does not increase: sample {samples + k} '
+                                  f'is at {t[k]:g} s after {before:g} s')
+        samples, previous = samples + len(t), float(t[-1])
+    return first, previous
+
+
+def _frames(chunks: Iterable[np.ndarray], first: float, last: float, samples: int,
+            where: str) -> np.ndarray | None:
+    """The samples kept of the increasing times ``t`` [s] in ``chunks`` (``first`` to ``last``,
+    ``samples`` of them): at most ``MAX_FRAMES``, the first at or after each of as many evenly
+    spaced times, said on stderr (None: all of them)."""
+    if samples <= MAX_FRAMES:
+        return None
+    targets = np.linspace(first, last, MAX_FRAMES)
+    kept, start, previous = [], 0, -math.inf
+    for chunk in chunks:
+        t = np.asarray(chunk, dtype=float)
+        here = targets[(targets > previous) & (targets <= t[-1])]
+        kept.append(start + np.searchsorted(t, here, side='left'))
+        start, previous = start + len(t), float(t[-1])
+    rows = np.unique(np.concatenate(kept))
+    say(f'view: {where}: {samples} samples over {last - first:g} s; showing {len(rows)} of '
+        f'them (at most {MAX_FRAMES}), evenly spaced in time')
+    return rows
+
+
+def _rows(chunks: Iterable[np.ndarray], kept: np.ndarray | None, samples: int) -> np.ndarray:
+    """The samples ``kept`` (increasing indices; None: all ``samples``) of the column in
+    ``chunks``, gathered into one array."""
+    out, start, filled = None, 0, 0
+    for chunk in chunks:
+        if out is None:
+            out = np.empty((samples if kept is None else len(kept), *chunk.shape[1:]),
+                           chunk.dtype)
+        if kept is None:
+            rows = chunk
+        else:
+            lo, hi = np.searchsorted(kept, [start, start + len(chunk)])
+            rows = chunk[kept[lo:hi] - start]
+        out[filled:filled + len(rows)] = rows
+        start, filled = start + len(chunk), filled + len(rows)
+    return out
 
 
 class Replay:

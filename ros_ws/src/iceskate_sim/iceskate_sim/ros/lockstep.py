@@ -392,14 +392,18 @@ class LockstepLoop:
                 self._publish(topic, data)
 
     def step(self) -> None:
-        """One period, then the next state out (``publish_state``)."""
+        """One period, then the next state out (``publish_state``); an error on the way (e.g.
+        ``io_error``: the disk is full) ends the run with it, as a headless run ends."""
         start = time.perf_counter()
-        self.session.step()
-        self.monitor.samples['physics'].append(time.perf_counter() - start)
-        self.budget = max(0, self.budget - 1)
-        if self.session.session.done:
-            return self.finish()
-        self.publish_state()
+        try:
+            self.session.step()
+            self.monitor.samples['physics'].append(time.perf_counter() - start)
+            self.budget = max(0, self.budget - 1)
+            if self.session.session.done:
+                return self.finish()
+            self.publish_state()
+        except SimulationError as exc:
+            self.finish(exc)
 
     def take(self, data: bytes) -> str | None:
         """Take an EffortCommand (its CDR bytes); step once every source has answered t_k
