@@ -297,9 +297,30 @@ def test_an_impossible_initial_posture_is_one_sentence(tmp_path, capsys, ros):
                              *(['--ros'] if ros else [])])
     assert not (tmp_path / 'out' / 'params').exists()
     assert line == ("run_scene: error: scene 'tiny_stand': the initial state cannot be "
-                    'simulated, it ends the run at once in mode 1 (toe-first touchdown of the '
+                    'simulated, it ends the run at once from mode 1 (toe-first touchdown of the '
                     "swing foot (not representable in the paper's model)); change "
                     'initial.posture, initial.q, initial.v or initial.mode')
+
+
+@pytest.mark.parametrize('ros', [False, True], ids=['headless', 'ros'])
+def test_a_posture_the_first_command_lifts_off_the_floor_is_no_fall(tmp_path, capsys, ros):
+    """A posture that stands until the controllers' first command lifts the support foot (at
+    t = 0) is an error naming the initial state, not a fall; the outputs say so."""
+    if ros:
+        pytest.importorskip('rclpy')
+    scene = _scene(tmp_path, initial={'mode': 1, 'q': {'q5': -0.5}})
+    out = tmp_path / 'out'
+    assert main([str(scene), '--out', str(out), '--quiet', *(['--ros'] if ros else [])]) == 1
+    err = capsys.readouterr().err
+    assert 'Traceback' not in err and 'Warning' not in err, err
+    (line,) = [line for line in err.splitlines() if 'error' in line]
+    assert line.startswith('run_scene: error: ') and line.endswith(
+        "scene 'tiny_stand': the initial state cannot be simulated under the controllers' "
+        'first command, it ends the run at once from mode 1 (flight: the support foot left '
+        "the floor with the swing foot in the air (not representable in the paper's model)); "
+        'change initial.posture, initial.q, initial.v or initial.mode'), line
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert metrics['end'] == 'failed' and not metrics['fell'] and metrics['sim_time_s'] == 0.0
 
 
 @pytest.mark.ros

@@ -41,7 +41,10 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
 
 
 def legend_above(ax: Axes, ncol: int = 4) -> None:
-    """The legend of ``ax`` in a row above it, right-aligned, off the data."""
+    """The legend of ``ax`` in a row above it, right-aligned, off the data (none without a
+    labelled line, e.g. a run ended at its first instant)."""
+    if not ax.get_legend_handles_labels()[0]:
+        return
     ax.legend(loc='lower right', bbox_to_anchor=(1.0, 0.99), ncol=ncol, fontsize=7.5,
               frameon=False, borderaxespad=0.0, handlelength=2.2)
 

@@ -194,11 +194,17 @@ def start_simulator(scene: Scene, robot: Robot) -> Simulator:
     """
     sim = Simulator(robot, scene.simulator, scene.initial)
     if sim.ended is not None:
-        raise SimulationError(
-            f'scene {scene.name!r}: the initial state cannot be simulated, it ends the run at '
-            f'once in mode {sim.state.mode.number} ({sim.ended}); change initial.posture, '
-            'initial.q, initial.v or initial.mode')
+        raise _unstartable(scene, sim, '')
     return sim
+
+
+def _unstartable(scene: Scene, sim: Simulator, under: str) -> SimulationError:
+    """The error of an initial state that ends the run at once (``under``: the input that
+    makes it do so, '' for none)."""
+    return SimulationError(
+        f'scene {scene.name!r}: the initial state cannot be simulated{under}, it ends the run '
+        f'at once from mode {scene.initial.mode.number} ({sim.ended}); change '
+        'initial.posture, initial.q, initial.v or initial.mode')
 
 
 class Session:
@@ -399,6 +405,10 @@ class Session:
             return self.metrics
         if error is not None and self.error is None:
             self.error = error
+        if self.error is None and self.sim.ended is not None and self.sim.time == 0.0:
+            # not a fall: a posture the controllers' first command cannot hold on the floor
+            self.error = _unstartable(self.scene, self.sim, " under the controllers' first "
+                                      'command')
         output_error: SimulationError | None = None  # an output that could not be written
         try:
             self.flush()
