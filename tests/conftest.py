@@ -40,6 +40,12 @@ _add_unbuilt_packages_to_path()
 # a real package.
 sys.path.append(str(REPO_ROOT / 'tests'))
 
+# ROS tests skip themselves where rclpy is missing (``pytest.importorskip``); where ROS must be
+# there (CI: ICESKATE_REQUIRE_ROS=1) its absence stops the run instead of hiding those tests.
+if os.environ.get('ICESKATE_REQUIRE_ROS') == '1' and importlib.util.find_spec('rclpy') is None:
+    raise pytest.UsageError('ICESKATE_REQUIRE_ROS=1 but rclpy is not importable: the ROS tests '
+                            'would all be skipped')
+
 # Session-wide guard, set at import time so that it holds before any test creates a participant:
 # Fast DDS stays on loopback (the shipped rule, ``loopback_dds``). Child processes inherit it
 # through os.environ.
