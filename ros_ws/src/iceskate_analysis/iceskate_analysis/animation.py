@@ -5,6 +5,7 @@ in each sample's support model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import pathlib
 from typing import TYPE_CHECKING
 
@@ -142,8 +143,11 @@ class _Stick:
 
 
 def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames: int = 120,
-               fps: float = 20.0, progress: bool = False) -> pathlib.Path:
-    """Write a stick-figure GIF of the run (``max_frames`` frames spread over the run)."""
+               fps: float = 20.0, progress: bool = False,
+               check: Callable[[], None] | None = None) -> pathlib.Path:
+    """Write a stick-figure GIF of the run (``max_frames`` frames spread over the run);
+    ``check`` is called before each frame (it may raise to end the drawing, the file then
+    partly written)."""
     import imageio.v2 as imageio
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -164,6 +168,8 @@ def render_gif(bag: BagData, robot: Robot, path: str | pathlib.Path, max_frames:
     try:
         with imageio.get_writer(path, mode='I', duration=1000.0 / fps, loop=0) as writer:
             for row, k in enumerate(indices):
+                if check is not None:
+                    check()
                 stick.update(points, row, _caption(bag, int(k)))
                 canvas.restore_region(background)
                 for artist in stick.artists:

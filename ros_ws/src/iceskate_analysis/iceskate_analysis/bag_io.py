@@ -40,6 +40,8 @@ if TYPE_CHECKING:
     from mcap.records import McapRecord
     from rosbags.typesys.store import Typestore
 
+    from iceskate_sim.shutdown import StopRequest
+
 __all__ = ['BLOCK', 'BagData', 'BagReading', 'BagTopic', 'LATCHED_TOPICS', 'LATE',
            'OPTIONAL_TOPICS', 'OpenBag', 'PASSIVE', 'REQUIRED_TOPICS', 'Spacing', 'open_bag',
            'read_bag', 'resolve_bag_path']
@@ -212,11 +214,13 @@ class OpenBag:
     """
 
     def __init__(self, path: pathlib.Path, files: list[pathlib.Path],
-                 custom_data: dict[str, str], missing: str) -> None:
+                 custom_data: dict[str, str], missing: str, stop: StopRequest | None = None
+                 ) -> None:
         """Scan ``files`` once for their channels and message counts (``missing``: what the bag
-        lacks, '' for nothing).
+        lacks, '' for nothing), looking for a stop signal (``stop``) at every record.
 
         :raises SimulationError: when a bag that is not complete holds no complete chunk.
+        :raises RunInterrupted: on a stop signal (t: the log time scanned up to).
         """
         self.path, self._files, self.custom_data = path, files, custom_data
         self._typestore = _typestore()
@@ -230,6 +234,8 @@ class OpenBag:
         # the increasing log times of /joint_states (the samples), counted a block at a time
         spacing, sampled, latest = Spacing(), list[int](), -1
         for index, record in self._records(problems):
+            if stop is not None and stop.requested:
+                raise stop.error(last * 1e-9, f'scanning bag {path}')
             if isinstance(record, Schema):
                 schemas[(index, record.id)] = record
             elif isinstance(record, Channel):
@@ -312,30 +318,31 @@ class OpenBag:
         return msgtype in self._typestore.fielddefs
 
 
-def open_bag(path: str | pathlib.Path) -> OpenBag:
+def open_bag(path: str | pathlib.Path, stop: StopRequest | None = None) -> OpenBag:
     """Open a bag (a bag or run directory, or an .mcap file) for reading. A bag without
     metadata.yaml (never closed: a killed run, a power cut) or with a file cut short is read as
     far as it reached the disk; ``recovered`` says so and how much was read. Its files must be
     regular files (``_check_regular``).
 
     :raises SimulationError: naming the bag and the problem.
+    :raises RunInterrupted: on a signal of ``stop`` while its files are scanned.
     """
     bag = resolve_bag_path(path)
     if not bag.is_dir():
         _check_regular([bag])
         if not (bag.parent / 'metadata.yaml').is_file():
-            return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it')
+            return OpenBag(bag, [bag], {}, 'it has no metadata.yaml beside it', stop)
         bag = bag.parent
     files = sorted(bag.glob('*.mcap'), key=_recording_order)
     metadata = bag / 'metadata.yaml'
     _check_regular([*files, *([metadata] if metadata.exists() else [])])
     if not metadata.is_file():
         return OpenBag(bag, files, {}, 'it has no metadata.yaml (the recording was not '
-                       'closed: a killed run or a power cut)')
+                       'closed: a killed run or a power cut)', stop)
     if not files:
         raise SimulationError(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
                               'are read)')
-    return OpenBag(bag, files, _metadata_custom_data(metadata), '')
+    return OpenBag(bag, files, _metadata_custom_data(metadata), '', stop)
 
 
 #: What a path that is not a regular file is, by its ``stat.S_IS*`` test.
@@ -597,12 +604,16 @@ class BagReading:
     :ivar notes: what was dropped or assumed; complete once ``blocks`` is exhausted.
     """
 
-    def __init__(self, path: str | pathlib.Path, progress: bool = False) -> None:
-        """Open the bag and check its topics.
+    def __init__(self, path: str | pathlib.Path, progress: bool = False,
+                 stop: StopRequest | None = None) -> None:
+        """Open the bag and check its topics; the scan of its files and ``blocks`` look for
+        a stop signal (``stop``) at every record.
 
         :raises SimulationError: as ``read_bag``.
+        :raises RunInterrupted: on a stop signal.
         """
-        self._reader = open_bag(path)
+        self._stop = stop
+        self._reader = open_bag(path, stop)
         self.path = self._reader.path
         self.custom_data = self._reader.custom_data
         self._chosen = _check_connections(self._reader, self.path)
@@ -626,6 +637,7 @@ class BagReading:
         (``_validate``) before it is given.
 
         :raises SimulationError: as ``read_bag``, when the block it concerns is reached.
+        :raises RunInterrupted: on a stop signal (t: the log time read up to).
         """
         sampled = [t for t in _READERS if t in self._chosen and self._chosen[t].count]
         tables = {t: _Table(t, min(self._chosen[t].count, size + 2 * LATE)
@@ -637,6 +649,8 @@ class BagReading:
         due = size + LATE  # rows of /joint_states that call for a join
         try:
             for conn, log_ns, raw in self._reader.messages(self._chosen[t] for t in sampled):
+                if self._stop is not None and self._stop.requested:
+                    raise self._stop.error(log_ns * 1e-9, f'reading bag {self.path}')
                 bar.update(1)
                 msg = self._decode(conn, f'log time {log_ns * 1e-9:.6f} s', raw)
                 stamp = _stamp_ns(msg)

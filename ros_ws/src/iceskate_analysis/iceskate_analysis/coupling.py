@@ -5,13 +5,14 @@ docs/model.md §13; the interval-averaged accelerations are described in docs/us
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 import csv
 from dataclasses import dataclass, field, replace
 import hashlib
+import os
 import pathlib
 import tempfile
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -24,6 +25,9 @@ from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
+
+if TYPE_CHECKING:
+    from iceskate_sim.shutdown import StopRequest
 
 __all__ = ['ArmSwing', 'CaseResult', 'FIGURE_ROWS', 'JointDecomposition', 'RIGHT_SHOULDER',
            'LEFT_SHOULDER', 'TERMS', 'analyse_bag', 'analyse_case', 'arm_swing', 'decompose',
@@ -81,8 +85,11 @@ def robot_for_bag(bag: BagData) -> Robot:
         return robot
     digest = hashlib.sha256(bag.urdf.encode('utf-8')).hexdigest()[:16]
     path = pathlib.Path(tempfile.gettempdir()) / f'iceskate_bag_urdf_{digest}.urdf'
-    if not path.is_file():
-        path.write_text(bag.urdf, encoding='utf-8')
+    if not path.is_file():  # whole or not at all: a later run trusts the file by its name
+        with tempfile.NamedTemporaryFile('w', encoding='utf-8', dir=path.parent,
+                                         prefix=f'.{path.stem}.', delete=False) as staged:
+            staged.write(bag.urdf)
+        os.replace(staged.name, path)
     return load_robot(str(path))
 
 
@@ -412,6 +419,7 @@ class CaseResult:
         ``FIGURE_ROWS``, else every 2^k-th (a bag is never held whole).
     :ivar decompositions: eq. (11) at the joint and its mirror, at the kept samples.
     :ivar averaged_decompositions: the same with the interval-averaged accelerations.
+    :ivar end_s: time of the run's last sample [s].
     """
 
     label: str
@@ -422,6 +430,7 @@ class CaseResult:
     arms: ArmSwing
     torso_yaw_input: bool
     fourth_step_s: float | None
+    end_s: float
     rankings: dict[int, list[tuple[str, float]]] = field(repr=False)
     summary_entry: dict[str, Any] = field(repr=False)
 
@@ -630,7 +639,7 @@ class _Analysis:
             'notes': list(notes),
         }
         return CaseResult(label, self.joint, kept_bag, decompositions, averaged, arms,
-                          self.yaw, self.fourth_step_s, rankings, entry)
+                          self.yaw, self.fourth_step_s, self.last_t, rankings, entry)
 
     def _ranking(self, sums: _MeanSquares, i: int, view: str) -> list[tuple[str, float]]:
         p = COORDINATE_NAMES[i]
@@ -690,14 +699,17 @@ def _with_next(blocks: Iterable[BagData]) -> Iterator[tuple[BagData, BagData | N
 
 def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
                 csv: pathlib.Path | None = None, progress: bool = False,
-                size: int = BLOCK) -> CaseResult:
+                size: int = BLOCK, stop: StopRequest | None = None) -> CaseResult:
     """Read and analyse a bag block by block (``size`` samples): eq. (11) at ``joint`` (and at
     the other shoulder for a shoulder), the arm swing, and ``csv``, the CSV of every series
     (``_columns``) when given. What is held is a few blocks, the figures' samples and the
-    shoulders' angles, whatever the length of the run.
+    shoulders' angles, whatever the length of the run. A stop signal (``stop``, also given
+    to ``reading``) is looked for between blocks and between the blocks of the CSV.
 
     :raises SimulationError: on a bag that cannot be read or a sample the model cannot
         evaluate.
+    :raises RunInterrupted: on a stop signal (t: the samples before it were analysed; ``csv``
+        may then be partly written).
     """
     joint = parse_joint(joint)
     spill = _Spill(csv) if csv is not None else None
@@ -707,17 +719,26 @@ def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
                           progress, leave=False)
         try:
             for block, following in _with_next(reading.blocks(size)):
+                _check(stop, float(block.t[0]), f'analysing bag {reading.path}')
                 analysis.add(block, following, bar)
         finally:
             bar.close()
         case = analysis.result(label, reading.notes, reading.path,
                                reading.custom_data.get('scene', ''))
         if spill is not None:
-            spill.write(analysis.coupled, analysis.joints)
+            spill.write(analysis.coupled, analysis.joints,
+                        lambda: _check(stop, case.end_s, f'writing the CSV of bag {reading.path}'))
         return case
     finally:
         if spill is not None:
             spill.close()
+
+
+def _check(stop: StopRequest | None, t: float, doing: str) -> None:
+    """:raises RunInterrupted: once ``stop`` has a signal (at time ``t`` [s] of the run, while
+        ``doing``)."""
+    if stop is not None and stop.requested:
+        raise stop.error(t, doing)
 
 
 def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,
@@ -778,10 +799,11 @@ class _Spill:
         for array in columns.values():
             np.save(self.file, np.asarray(array))
 
-    def write(self, coupled: dict[tuple[int, str], np.ndarray], joints: tuple[int, ...]
-              ) -> pathlib.Path:
+    def write(self, coupled: dict[tuple[int, str], np.ndarray], joints: tuple[int, ...],
+              check: Callable[[], None]) -> pathlib.Path:
         """The CSV: a coupling column of a coordinate that never couples is left out; a column
-        a block lacks (a source that came later) is 0 where its joint is valid, else nan."""
+        a block lacks (a source that came later) is 0 where its joint is valid, else nan;
+        ``check`` is called before each block (it may raise to end the writing)."""
         never = {_coupling_column(i, j) for i in joints for j in range(N_COORDINATES)
                  if j != i and not coupled[(i, 'exact')][j]}
         header = [n for n in self.names if n not in never]
@@ -790,6 +812,7 @@ class _Spill:
 
         def blocks() -> Iterator[dict[str, np.ndarray]]:
             while self.file.tell() < end:
+                check()
                 names = [str(n) for n in np.load(self.file)]
                 block = {name: np.load(self.file) for name in names}
                 yield {name: block[name] if name in block

@@ -1,7 +1,9 @@
 """``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``: the
 eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0; 2 with a one-line
-message for a bag or argument it refuses; 1 with one line when the output cannot be written. The
-notes of the reading go to stderr.
+message for a bag or argument it refuses; 1 with one line when the output cannot be written;
+130, 143 or 129 with one line on SIGINT, SIGTERM or SIGHUP, within about a second, the output
+folder then as it was (every file is renamed into it once all are complete). The notes of the
+reading go to stderr.
 """
 
 from __future__ import annotations
@@ -10,7 +12,8 @@ import argparse
 import pathlib
 import sys
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.shutdown import StopRequest, say
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -35,21 +38,28 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point."""
+    with StopRequest() as stop:  # first of all: a signal never ends it half-written
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopRequest) -> int:
     args = _parser().parse_args(argv)
-    from iceskate_analysis.report import run_analysis
     try:
+        from iceskate_analysis.report import run_analysis
         if args.frames < 1:
             raise SimulationError(f'--frames must be >= 1, got {args.frames}')
         summary = run_analysis(args.bag, args.out, joint=args.joint, compare=args.compare,
                                animate=args.animate, frames=args.frames,
-                               progress=not args.quiet)
+                               progress=not args.quiet, stop=stop)
+    except RunInterrupted as exc:
+        say(f'coupling_analysis: {exc}; nothing written into {args.out}')
+        return exc.exit_code
     except SimulationError as exc:
-        print(f'coupling_analysis: error: {exc}', file=sys.stderr)
+        say(f'coupling_analysis: error: {exc}')
         return 2
     except OSError as exc:  # the output folder cannot be made or written
         where = f' {exc.filename}' if exc.filename else ''
-        print(f'coupling_analysis: error: cannot write{where}: {exc.strerror or exc}',
-              file=sys.stderr)
+        say(f'coupling_analysis: error: cannot write{where}: {exc.strerror or exc}')
         return 1
     joint = summary['joint']
     for label, case in summary['cases'].items():

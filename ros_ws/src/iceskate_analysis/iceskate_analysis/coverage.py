@@ -15,11 +15,14 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 import json
 import pathlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
 from iceskate_sim.physics.hybrid import CAUSES, RESOLVED
+
+if TYPE_CHECKING:
+    from iceskate_sim.shutdown import StopRequest
 
 __all__ = ['KIND_OF_EVENT', 'Coverage', 'coverage_of', 'load_events']
 
@@ -156,12 +159,16 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
     return events, float(duration), int(still) if str(still).isdigit() else None
 
 
-def coverage_of(run_dirs: Iterable[pathlib.Path]) -> Coverage:
-    """The coverage of the finished runs in ``run_dirs``.
+def coverage_of(run_dirs: Iterable[pathlib.Path], stop: StopRequest | None = None
+                ) -> Coverage:
+    """The coverage of the finished runs in ``run_dirs`` (``stop`` looked for before each).
 
     :raises SimulationError: naming a run that cannot be read.
+    :raises RunInterrupted: on a stop signal.
     """
     coverage = Coverage()
     for run_dir in run_dirs:
+        if stop is not None and stop.requested:
+            raise stop.error(None)
         coverage.add(run_dir.name, *load_events(run_dir))
     return coverage

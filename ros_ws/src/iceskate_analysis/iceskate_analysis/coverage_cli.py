@@ -1,6 +1,7 @@
 """``mode_coverage RUN_DIR [RUN_DIR ...] --out DIR``: the modes and transitions finished runs
 visited (``iceskate_analysis.coverage``), as ``coverage.md``, ``coverage.json`` and the diagram
-``coverage.png``.
+``coverage.png``, all three or none (SIGINT, SIGTERM or SIGHUP: exit 128 + the signal's number,
+one line).
 """
 
 from __future__ import annotations
@@ -8,30 +9,55 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import signal
 import sys
+from typing import TYPE_CHECKING
 
-from iceskate_analysis.coverage import Coverage, coverage_of
-from iceskate_analysis.plots import plot_mode_coverage
-from iceskate_sim.errors import SimulationError
-from iceskate_sim.model.modes import TABLE_2
-from iceskate_sim.shutdown import say
+from iceskate_analysis.outputs import StagedFiles
+from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.shutdown import StopRequest, say
+
+if TYPE_CHECKING:
+    from iceskate_analysis.coverage import Coverage
 
 __all__ = ['main', 'write_coverage']
 
 
-def write_coverage(coverage: Coverage, out: pathlib.Path) -> list[pathlib.Path]:
-    """Write ``coverage.md``, ``coverage.json`` and ``coverage.png`` into ``out``."""
+def write_coverage(coverage: Coverage, out: pathlib.Path, stop: StopRequest | None = None
+                   ) -> list[pathlib.Path]:
+    """Write ``coverage.md``, ``coverage.json`` and ``coverage.png`` into ``out``, all three or
+    none (``StagedFiles``).
+
+    :param stop: looked for before the picture and before the renaming.
+    :raises RunInterrupted: on a stop signal (nothing is then written).
+    """
+    from iceskate_analysis.plots import plot_mode_coverage
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'coverage.md').write_text(coverage.table(), encoding='utf-8')
-    (out / 'coverage.json').write_text(json.dumps(coverage.as_dict(), indent=1) + '\n',
-                                       encoding='utf-8')
-    return [out / 'coverage.md', out / 'coverage.json',
-            plot_mode_coverage(coverage, out / 'coverage.png')]
+    with StagedFiles(out) as staged:
+        staged('coverage.md').write_text(coverage.table(), encoding='utf-8')
+        staged('coverage.json').write_text(json.dumps(coverage.as_dict(), indent=1) + '\n',
+                                           encoding='utf-8')
+        _check(stop)
+        plot_mode_coverage(coverage, staged('coverage.png'))
+        _check(stop)
+        return staged.commit()
+
+
+def _check(stop: StopRequest | None) -> None:
+    """:raises RunInterrupted: once ``stop`` has a signal."""
+    if stop is not None and stop.requested:
+        raise stop.error(None)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point ``mode_coverage RUN_DIR ... --out DIR``: exit 0 (one line: the modes
-    entered and the files), or 1 with one line on stderr saying why."""
+    entered and the files), 1 with one line on stderr saying why, or 128 + the number of a stop
+    signal with one line."""
+    with StopRequest() as stop:  # before the imports of the model (about 0.3 s)
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser = argparse.ArgumentParser(
         prog='mode_coverage', description="Which of Table 2's modes and transitions finished "
         "runs visited: a table and a picture laid out like the paper's gait diagram.")
@@ -39,9 +65,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=pathlib.Path, required=True,
                         help='folder for coverage.md, coverage.json and coverage.png')
     args = parser.parse_args(argv)
+    from iceskate_analysis.coverage import coverage_of
+    from iceskate_sim.model.modes import TABLE_2
     try:
-        coverage = coverage_of(args.runs)
-        files = write_coverage(coverage, args.out)
+        coverage = coverage_of(args.runs, stop)
+        files = write_coverage(coverage, args.out, stop)
+    except RunInterrupted as exc:
+        say(f'mode_coverage: interrupted by {signal.Signals(exc.signum).name}; nothing written '
+            f'into {args.out}')
+        return exc.exit_code
     except SimulationError as exc:
         say(f'mode_coverage: error: {exc}')
         return 1

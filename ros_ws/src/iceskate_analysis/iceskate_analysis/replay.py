@@ -57,7 +57,7 @@ class ReplayNode(Node):
 
     def __init__(self, bag: pathlib.Path, stop: StopRequest, depth: int = 1000) -> None:
         super().__init__('replay')
-        self.reader = open_bag(bag)
+        self.reader = open_bag(bag, stop)
         self.notes = [note for note in (self.reader.recovered, self.reader.gaps) if note]
         self.stop = stop
         self.publishers_by_topic: dict[str, Any] = {}

@@ -1,7 +1,8 @@
 """The picture of a run, ``summary.png``, from its trajectory and metrics (no bag, no ROS): head
 height and pitch against their targets, gait mode, shoulder angles and forward speed over time,
 the support exchanges marked. Long series are decimated (min/max per bucket) for drawing.
-``summary DIR`` draws it for a run that has none (the nodes run by hand write none).
+``summary DIR`` draws it for a run that has none (the nodes run by hand write none); SIGINT,
+SIGTERM or SIGHUP end it with 128 + the signal's number and one line, the picture not written.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import argparse
 from collections.abc import Iterable, Mapping
 import json
 import pathlib
+import signal
 import sys
 import textwrap
 from typing import TYPE_CHECKING, Any
@@ -18,10 +20,9 @@ import zlib
 
 import numpy as np
 
-from iceskate_analysis.plots import clip_to_bulk, legend_above
-from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
-from iceskate_sim.shutdown import say
+from iceskate_analysis.outputs import StagedFiles
+from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.shutdown import StopRequest, say
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -73,11 +74,14 @@ def draw_picked(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: path
     return _checked_draw(a, metrics, path, f'the trajectory of {path.parent}')
 
 
-def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
-    """Draw ``out_dir/summary.png`` from ``out_dir/trajectory.npz`` and ``metrics.json``.
+def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pathlib.Path:
+    """Draw ``out_dir/summary.png`` from ``out_dir/trajectory.npz`` and ``metrics.json``, whole
+    or not at all (drawn under a hidden name, renamed when complete).
 
+    :param stop: looked for before the reading, the drawing and the renaming.
     :return: the path of the PNG.
     :raises SimulationError: when a file is missing, lacks a column or holds no sample.
+    :raises RunInterrupted: on a stop signal (the picture is then not written).
     """
     out_dir = pathlib.Path(out_dir)
     missing = [name for name in ('trajectory.npz', 'metrics.json')
@@ -85,6 +89,7 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     if missing:
         raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
     trajectory = out_dir / 'trajectory.npz'
+    _check(stop)
     try:
         metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
         with np.load(trajectory) as npz:
@@ -94,19 +99,39 @@ def write_summary(out_dir: pathlib.Path) -> pathlib.Path:
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # damaged
         raise SimulationError(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
                               f'{exc}') from None
-    return _checked_draw(a, metrics, out_dir / SUMMARY_NAME, str(trajectory))
+    with StagedFiles(out_dir) as staged:
+        _check(stop)
+        _checked_draw(a, metrics, staged(SUMMARY_NAME), str(trajectory))
+        _check(stop)
+        (path,) = staged.commit()
+    return path
+
+
+def _check(stop: StopRequest | None) -> None:
+    """:raises RunInterrupted: once ``stop`` has a signal."""
+    if stop is not None and stop.requested:
+        raise stop.error(None)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point ``summary DIR``: exit 0 (the picture's path on stdout), or 1 with
-    one line on stderr saying why."""
+    """Console entry point ``summary DIR``: exit 0 (the picture's path on stdout), 1 with one
+    line on stderr saying why, or 128 + the number of a stop signal with one line."""
+    with StopRequest() as stop:  # before the imports of the model and matplotlib (about 1 s)
+        return _main(argv, stop)
+
+
+def _main(argv: list[str] | None, stop: StopRequest) -> int:
     parser = argparse.ArgumentParser(
         prog='summary', description="Draw DIR/summary.png from a finished run's "
         'trajectory.npz and metrics.json (e.g. of the nodes run by hand, which draw none).')
     parser.add_argument('dir', type=pathlib.Path, help='output folder of a run')
     args = parser.parse_args(argv)
     try:
-        path = write_summary(args.dir)
+        path = write_summary(args.dir, stop)
+    except RunInterrupted as exc:
+        say(f'summary: interrupted by {signal.Signals(exc.signum).name}; '
+            f'{args.dir / SUMMARY_NAME} not written')
+        return exc.exit_code
     except SimulationError as exc:
         say(f'summary: error: {exc}')
         return 1
@@ -116,9 +141,6 @@ def main(argv: list[str] | None = None) -> int:
     print(path, flush=True)
     return 0
 
-
-if __name__ == '__main__':
-    sys.exit(main())
 
 
 def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pathlib.Path,
@@ -156,6 +178,9 @@ def _shoulders(path: pathlib.Path, chunk: int = 65536) -> np.ndarray:
 def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from iceskate_analysis.plots import clip_to_bulk, legend_above
+    from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
     t, psi, psi_d = a['t'], a['psi'], a['psi_d']
     steps = a['step_index']
@@ -264,6 +289,7 @@ def _tracking(ax: Axes, t: np.ndarray, y: np.ndarray, target: np.ndarray, target
               **style: Any) -> None:
     """``y`` (drawn with ``style``) against its ``target`` (dashed black), y range clipped
     only for a blow-up."""
+    from iceskate_analysis.plots import clip_to_bulk
     _line(ax, t, y, **style)
     _line(ax, t, target, color='k', lw=1.0, ls='--', label=target_label)
     clip_to_bulk(ax, (y, target), **_DIVERGENCE)
@@ -297,3 +323,7 @@ def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
                 color='0.35', va='center', ha='left')
     ax.set_ylabel('gait mode [no. 1-20]\n(labelled: visited)')
     ax.set_title(_SWING_KEY, loc='left', fontsize=7, color='0.35')
+
+
+if __name__ == '__main__':
+    sys.exit(main())
