@@ -3,14 +3,41 @@ iceskate_bringup.plugin_node): ``run_scene --ros`` starts one per plug-in of the
 graph gives the headless run."""
 
 import json
+import os
+from pathlib import Path
+import re
+import shlex
+import signal
+import subprocess
+import time
 
 import numpy as np
 import pytest
 
-from iceskate_bringup.plugin_node import PluginNodeParameters, node_name
+from iceskate_bringup.examples.visual_lifting_numpy import VisualLifting
+from iceskate_bringup.plugin_node import (
+    PluginNodeParameters,
+    keyword_defaults,
+    node_name,
+    ros_value,
+)
 from iceskate_sim.errors import SimulationError
 
 EXAMPLE = 'iceskate_bringup.examples.visual_lifting_numpy:VisualLifting'
+USAGE = Path(__file__).resolve().parents[2] / 'docs' / 'usage.md'
+
+
+def documented_plugin_node(tmp_path: Path) -> tuple[list[str], Path]:
+    """The by-hand command of docs/usage.md, 'Your own controller', and a folder holding its
+    ``my_package.my_module`` (the section's first Python block)."""
+    text = USAGE.read_text().split('## Your own controller', 1)[1]
+    code = re.search(r'```python\n(.*?)```', text, re.S).group(1)
+    command = re.search(r'^ *(plugin_controller --ros-args .*)$', text, re.M).group(1)
+    package = tmp_path / 'my_package'
+    package.mkdir()
+    (package / '__init__.py').write_text('')
+    (package / 'my_module.py').write_text(code)
+    return shlex.split(command), tmp_path
 
 
 def test_the_node_takes_its_name_from_the_remapping_and_its_parameters_as_json():
@@ -22,6 +49,76 @@ def test_the_node_takes_its_name_from_the_remapping_and_its_parameters_as_json()
         PluginNodeParameters(EXAMPLE, '[1]').block()
     with pytest.raises(SimulationError, match='parameters is no JSON mapping'):
         PluginNodeParameters(EXAMPLE, '{desired_y: fixed}').block()
+
+
+def test_the_keyword_arguments_of_a_plugin_class_become_typed_parameter_values():
+    defaults = keyword_defaults(VisualLifting)
+    assert defaults['kp'] == (20.0, 290.0, 1100.0) and defaults['z_d'] is None
+    assert ros_value(defaults['kp']) == [20.0, 290.0, 1100.0]
+    assert ros_value((1, 2.5)) == [1.0, 2.5] and ros_value(True) is True
+    assert ros_value(None) is None and ros_value(()) is None and ros_value({'a': 1}) is None
+
+
+@pytest.mark.parametrize('executable, package', [
+    ('simulator', 'iceskate_sim'), ('visual_lifting', 'visual_lifting'),
+    ('gait_manager', 'gait_manager'), ('plugin_controller', 'iceskate_bringup')])
+def test_each_node_s_help_names_its_package(executable, package):
+    done = subprocess.run([executable, '--help'], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith(f'usage: {executable} [-h] [--ros-args')
+    assert lines[1].startswith(f'   or: ros2 run {package} {executable} [-h]')
+
+
+@pytest.mark.ros
+def test_the_documented_plugin_node_command_declares_the_keyword_parameters(tmp_path, ros_env,
+                                                                            ros_context):
+    """The docs' exact line starts the node; its keyword parameter is typed, set as given, and
+    a value the class's default type refuses is one sentence."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    command, folder = documented_plugin_node(tmp_path)
+    assert command[-2:] == ['-p', 'gain:=2.0']
+    ros_env['PYTHONPATH'] = os.pathsep.join([str(folder), ros_env.get('PYTHONPATH', '')])
+    bad = subprocess.run([*command[:-1], 'gain:=2'], env=ros_env, capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode == 1
+    assert bad.stderr.strip().splitlines()[-1] == ("knees: error: parameter 'gain' must be of "
+                                                   'type DOUBLE, as its default 5.0 is; write '
+                                                   '2.0, not 2')
+    node = subprocess.Popen(command, env=ros_env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    probe = Node('probe', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe)
+    try:
+        client = AsyncParameterClient(probe, 'knees')
+        deadline = time.monotonic() + 60.0
+        while not client.services_are_ready() and time.monotonic() < deadline:
+            assert node.poll() is None, node.communicate()[0]
+            executor.spin_once(timeout_sec=0.1)
+        assert client.services_are_ready(), 'no parameter services of /knees within 60 s'
+
+        def answer(future):
+            executor.spin_until_future_complete(future, timeout_sec=30.0)
+            assert future.done()
+            return future.result()
+
+        values = answer(client.get_parameters(['plugin', 'gain'])).values
+        assert values[0].string_value == 'my_package.my_module:KneeDamper'
+        assert (values[1].type, values[1].double_value) == (Parameter.Type.DOUBLE.value, 2.0)
+        results = answer(client.set_parameters([Parameter('gain', value=3.0)])).results
+        assert results[0].successful
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.send_signal(signal.SIGINT)
+        output = node.communicate(timeout=30)[0]
+    assert node.returncode == 0, output
+    assert "controller my_package.my_module:KneeDamper with {'gain': 2.0}" in output
 
 
 @pytest.mark.ros

@@ -399,7 +399,7 @@ def test_help_prints_the_usage_and_the_parameters_and_starts_nothing(ros_env, na
     result = subprocess.run([sys.executable, '-m', NODE_MODULES[name], '--help'], env=ros_env,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.startswith(f'usage: ros2 run <package> {name} [-h] [--ros-args')
+    assert result.stdout.startswith(f'usage: {name} [-h] [--ros-args')
     assert f'\n  {parameter} = ' in result.stdout, result.stdout
     assert result.stderr == ''  # no node came up: nothing logged
 

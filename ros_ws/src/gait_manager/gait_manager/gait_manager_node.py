@@ -49,7 +49,8 @@ class GaitManagerNode(ControllerNode[GaitManagerParameters]):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point."""
-    return run_node(GaitManagerNode, 'gait_manager', args, __doc__, GaitManagerParameters)
+    return run_node(GaitManagerNode, 'gait_manager', 'gait_manager', args, __doc__,
+                    GaitManagerParameters)
 
 
 if __name__ == '__main__':

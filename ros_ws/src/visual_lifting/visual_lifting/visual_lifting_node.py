@@ -42,7 +42,7 @@ class VisualLiftingNode(ControllerNode[VisualLiftingParameters]):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point."""
-    return run_node(VisualLiftingNode, 'visual_lifting', args, __doc__,
+    return run_node(VisualLiftingNode, 'visual_lifting', 'visual_lifting', args, __doc__,
                     VisualLiftingParameters)
 
 

@@ -53,6 +53,7 @@ class ControllerNode(Node, Generic[P]):
             description='the token of the run this node answers, carried by its commands (its '
                         "launcher gives every node of a run one: the simulator's run_token); "
                         'empty: none')).value
+        self.declare_more_parameters()
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data
         typestore = make_typestore()
@@ -68,6 +69,10 @@ class ControllerNode(Node, Generic[P]):
         self.create_timer(SIMULATOR_CHECK_PERIOD, self._check_simulator,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))  # /clock stops at the end
         self.get_logger().info('ready: answering gait_state on effort_commands')
+
+    def declare_more_parameters(self) -> None:
+        """Declare a subclass's further parameters (called before overrides no parameter
+        takes are refused; ``self.params`` is set)."""
 
     def _check_simulator(self) -> None:
         """End the node once the simulator it served has no gait_state publisher left; say

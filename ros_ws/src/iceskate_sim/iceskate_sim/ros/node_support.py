@@ -201,13 +201,17 @@ def spin_until(executor: Any, done: Callable[[], bool], context: Any = None,
         executor.spin_once(timeout_sec=period)
 
 
-def usage(name: str, about: str, parameters: type | None) -> str:
-    """The ``--help`` text of a node's executable: how to call it, what it does, its ROS
-    parameters (from the parameter class: default, unit, range, description)."""
-    lines = [f'usage: ros2 run <package> {name} [-h] [--ros-args [-p NAME:=VALUE]... '
-             '[--params-file FILE]]', '', about.strip()]
+def usage(package: str, name: str, about: str, parameters: type | None) -> str:
+    """The ``--help`` text of executable ``name`` of ROS package ``package``: how to call it
+    (here, and with ROS 2's CLI), what it does, its ROS parameters (from the parameter class:
+    default, unit, range, description)."""
+    options = '[-h] [--ros-args [-p NAME:=VALUE]... [--params-file FILE]]'
+    lines = [f'usage: {name} {options}', f'   or: ros2 run {package} {name} {options}',
+             '       (with ROS 2 Jazzy installed and ros_ws built into an overlay)', '',
+             about.strip()]
     if parameters is not None:
-        lines += ['', 'ROS parameters (-p NAME:=VALUE; ros2 param describe shows them too):']
+        lines += ['', 'ROS parameters (-p NAME:=VALUE or a --params-file; with ROS 2 installed, '
+                  'ros2 param describe shows them too):']
         for key, (_, rules, default) in leaf_fields(parameters).items():
             extra = ', '.join(x for x in (rules.unit, rules.bounds_text()) if x)
             lines.append(f'  {key} = {default!r}{f" ({extra})" if extra else ""}: '
@@ -215,12 +219,12 @@ def usage(name: str, about: str, parameters: type | None) -> str:
     return '\n'.join(lines)
 
 
-def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None,
+def run_node(make: Callable[..., Node], package: str, name: str, args: list[str] | None = None,
              about: str = '', parameters: type | None = None) -> int:
     """The Jazzy main(): init, make the node, spin until it is finished or stopped.
 
-    ``-h``/``--help`` before ``--ros-args`` prints ``usage(name, about, parameters)`` and starts
-    nothing.
+    ``-h``/``--help`` before ``--ros-args`` prints ``usage(package, name, about, parameters)``
+    and starts nothing.
 
     SIGINT, SIGTERM and SIGHUP stop the node cleanly (rclpy's own handlers are not installed:
     ``StopRequest`` notes the signal and the spin loop ends within 0.1 s). The node may define
@@ -236,7 +240,7 @@ def run_node(make: Callable[..., Node], name: str, args: list[str] | None = None
     argv = sys.argv[1:] if args is None else args[1:]
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     if {'-h', '--help'} & set(own):
-        print(usage(name, about, parameters))
+        print(usage(package, name, about, parameters))
         return 0
     node = None
     parent = os.getppid()

@@ -208,8 +208,9 @@ class SimulatorNode(Node):
             self._waited = set()
             self.get_logger().info(
                 f'waiting up to {self.config.startup_timeout:g} s for the controller node(s) '
-                f'{sorted(nodes)} (e.g. ros2 run visual_lifting visual_lifting; run_scene '
-                'SCENE --ros starts them all)')
+                f'{sorted(nodes)} (after `. ./env.sh`, e.g. `visual_lifting --ros-args '
+                '--params-file DIR/params/visual_lifting.yaml` on this ROS_DOMAIN_ID; '
+                '`run_scene SCENE --ros` starts them all)')
         for name in sorted((up & nodes) - (self._waited or set())):
             self._waited.add(name)
             self.get_logger().info(f'controller node {name!r} is up')
@@ -238,7 +239,8 @@ class SimulatorNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point (``ros2 run iceskate_sim simulator``)."""
-    return run_node(SimulatorNode, 'simulator', args, __doc__, SimulatorNodeParameters)
+    return run_node(SimulatorNode, 'iceskate_sim', 'simulator', args, __doc__,
+                    SimulatorNodeParameters)
 
 
 if __name__ == '__main__':
