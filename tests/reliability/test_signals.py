@@ -38,7 +38,8 @@ def _check_interrupted(run, code: int, stderr: str, name: str) -> None:
     signum = SIGNALS[name]
     assert code == 128 + signum, stderr
     assert 'Traceback' not in stderr, stderr
-    lines = [line for line in stderr.splitlines() if line.startswith('run_scene:')]
+    lines = [line for line in stderr.splitlines() if line.startswith('run_scene:')
+             and not line.startswith('run_scene: controllers: ')]  # the run's start line
     assert len(lines) == 1 and lines[0].startswith(f'run_scene: interrupted by {name} at t='), \
         stderr
     metrics = run.metrics()
@@ -166,3 +167,42 @@ def test_sigkilled_ros_launcher_takes_its_nodes_along(launch, proc):
     metrics = run.metrics()
     assert metrics['interrupted'] and 'its parent process' in metrics['failure'], metrics
     assert _messages(run.out / 'bag') == len(np.load(run.out / 'trajectory.npz')['t']) > 0
+
+
+@pytest.mark.parametrize('name', ['SIGINT', 'SIGTERM'])
+def test_a_sweep_of_a_million_runs_ends_at_once_on_a_signal(tmp_path, proc, name):
+    """A SPEC whose axis has the most values a SPEC may have (10**6 runs): the sweep checks
+    their scenes for many minutes before its first run; a signal meanwhile ends it within
+    seconds, in one line, with nothing written and no process left."""
+    import os
+    import subprocess
+    import sys
+
+    import yaml
+    spec = tmp_path / 'million.yaml'
+    spec.write_text(yaml.safe_dump({
+        'study': 'million', 'scene': 'skate', 'overrides': {'duration': 0.01},
+        'axes': {'floor.mu': {'linspace': [0.004, 0.02, 1_000_000]}}, 'metrics': ['steps']}))
+    out = tmp_path / 'out'
+    sweep = subprocess.Popen([sys.executable, '-m', 'iceskate_study.sweep', str(spec), '--out',
+                              str(out), '--workers', '1', '--quiet'],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        time.sleep(3.0)  # past the imports: among the scenes' checks
+        assert sweep.poll() is None, sweep.communicate()
+        seen = proc.descendants(sweep.pid)
+        sent = time.monotonic()
+        sweep.send_signal(SIGNALS[name])
+        _stdout, stderr = sweep.communicate(timeout=10.0)
+        took = time.monotonic() - sent
+    finally:
+        if sweep.poll() is None:
+            os.killpg(sweep.pid, signal.SIGKILL)
+            sweep.communicate()
+    assert sweep.returncode == 128 + SIGNALS[name], stderr
+    assert took < 2.5, took
+    assert stderr == (f'sweep: interrupted by {name} before any run started; the same command '
+                      'resumes\n')
+    proc.assert_all_gone(seen)
+    assert not (out / 'results.parquet').exists()

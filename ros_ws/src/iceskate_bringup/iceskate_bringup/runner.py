@@ -233,9 +233,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                         help='with --view: port of the page (default 8080; a busy one: the next '
                              'free one; 0: any)')
     args = parser.parse_args(argv)
-    from iceskate_bringup.scene import load_scene
+    from iceskate_bringup.scene import controllers_line, load_scene
+    from iceskate_sim.model.robot import load_robot
     from iceskate_sim.run.scene import MAX_DURATION
-    from iceskate_sim.run.session import prepare_output
+    from iceskate_sim.run.session import prepare_output, start_simulator
     started = False
     try:
         if not args.ros and (args.single_process or args.rt_priority):
@@ -248,8 +249,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
                 raise SimulationError(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
                                       f"limits of a scene's duration), got {args.duration:g}")
             scene = replace(scene, duration=args.duration)
+        start_simulator(scene, load_robot())  # an initial state it cannot start from: refused
         prepare_output(args.out, args.out / 'bag' if scene.record_bag else None)
         started = True  # from here on, what is in --out is this run's
+        say(f'run_scene: {controllers_line(scene, args.scene, overrides)}')
         if args.ros:
             from iceskate_bringup.graph import run_graph
             metrics = run_graph(args.scene, args.out, duration=args.duration,

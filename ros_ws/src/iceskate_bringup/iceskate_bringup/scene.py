@@ -21,7 +21,7 @@ from iceskate_bringup.plugin import (
 )
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.parameters import Rules, field_types, rules_of
-from iceskate_sim.run.scene import Scene, SceneSettings
+from iceskate_sim.run.scene import Scene, SceneSettings, scene_steps
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
 from visual_lifting.errors import VisualLiftingError
@@ -139,3 +139,46 @@ def load_scene(name_or_path: str | pathlib.Path,
     """Load a shipped scene by name or a scene YAML by path (with its base and ``overrides``,
     dotted key -> value: ``iceskate_sim.run.scene.scene_raw``), validated whole."""
     return load_scene_file(name_or_path, validate_inputs, overrides)
+
+
+def controllers_line(scene: Scene, name_or_path: str | pathlib.Path,
+                     overrides: Mapping[str, Any] | None = None) -> str:
+    """What run_scene says at its start: the controllers ``scene`` (loaded from
+    ``name_or_path`` with ``overrides``) runs, in summing order, each with where its block comes
+    from (the scene that gave it, then those that changed it; 'this scene', a base as named,
+    '--set'), and the controllers a scene removed, e.g. ``controllers: gait_manager (skate),
+    knees (plugin my_pkg.knees:Knees, this scene); visual_lifting removed by this scene``."""
+    steps = scene_steps(name_or_path, overrides)
+    top = max(i for i, step in enumerate(steps) if step.name is not None)
+    history: dict[str, list[str]] = {}  # node -> where its block comes from
+    removed: dict[str, str] = {}  # node -> who removed it
+    before: dict[str, Any] = {}
+    for i, step in enumerate(steps):
+        label = '--set' if step.name is None else 'this scene' if i == top else step.name
+        own, after = (_inputs_of(keys) for keys in (step.keys, step.raw))
+        for node, block in after.items():
+            old = before.get(node)
+            if block is None:
+                if old is not None or node not in before:
+                    removed[node] = f'removed by {label}'
+            elif not isinstance(old, dict) or own.get(node) == block:
+                history[node] = [label]
+                removed.pop(node, None)
+            elif block != old:
+                history[node].append(f'changed by {label}')
+        before = after
+    running = scene_sources(scene)
+    runs = []
+    for node, block in scene.inputs.items():
+        if node in running:
+            where = [f'plugin {block["plugin"]}'] if is_plugin(block) else []
+            runs.append(f'{node} ({", ".join(where + history[node])})')
+    gone = [f'{node} {removed[node]}' for node, block in before.items()
+            if block is None and node in removed]
+    return f'controllers: {", ".join(runs) or "none"}' + (f'; {", ".join(gone)}' if gone else '')
+
+
+def _inputs_of(raw: Mapping[str, Any]) -> dict[str, Any]:
+    """The controller blocks of scene keys ``raw`` (none where ``inputs`` is no mapping)."""
+    inputs = raw.get('inputs')
+    return inputs if isinstance(inputs, dict) else {}

@@ -13,7 +13,7 @@ from dataclasses import MISSING, dataclass, field, make_dataclass
 import math
 import pathlib
 import re
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -239,7 +239,8 @@ def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None]
         raise _fail('inputs', f'must be a mapping, got {type(top.inputs).__name__}')
     inputs: dict[str, dict[str, Any]] = {}
     for node, block_ in top.inputs.items():
-        block_ = {} if block_ is None else block_
+        if block_ is None:  # not run (a base's controller removed)
+            continue
         if not isinstance(block_, dict):
             raise _fail(f'inputs.{node}', f'must be a mapping, got {type(block_).__name__}')
         if validate_inputs is not None:
@@ -336,44 +337,93 @@ def set_key(raw: dict[str, Any], key: str, value: Any) -> None:
             node = node[token]
 
 
-def _merged(base: Any, child: Any) -> Any:
-    """``child`` over ``base``: mappings key by key, anything else replaced whole."""
-    if not (isinstance(base, dict) and isinstance(child, dict)):
+def _merged(base: Any, child: Any, path: tuple[Any, ...] = ()) -> Any:
+    """``child`` over ``base`` (at scene key ``path``): mappings key by key, anything else
+    replaced whole, and so is a controller block that names its plug-in (``inputs.<name>`` with
+    ``plugin``): nothing of the base's block of that name is kept. A null block stays null: the
+    controller is removed (``parse_scene`` leaves it out)."""
+    if (not (isinstance(base, dict) and isinstance(child, dict))
+            or (len(path) == 2 and path[0] == 'inputs' and 'plugin' in child)):
         return copy.deepcopy(child)
     out = copy.deepcopy(base)
     for key, value in child.items():
-        out[key] = _merged(base.get(key), value)
+        out[key] = _merged(base.get(key), value, (*path, key))
     return out
 
 
-def scene_raw(name_or_path: str | pathlib.Path, overrides: Mapping[str, Any] | None = None,
-              _seen: tuple[pathlib.Path, ...] = ()) -> dict[str, Any]:
-    """The keys of a scene: its file's over those of the scene its ``base`` names (a shipped
-    name, or a path relative to the file), mappings merged key by key and anything else
-    replaced whole, then ``overrides`` (dotted key -> value, ``set_key``).
+class SceneStep(NamedTuple):
+    """A step of a scene's composition (``scene_steps``)."""
 
-    :raises SimulationError: for an unreadable file, a base that is no scene or names itself
-        in a chain, or a bad override.
+    #: the file as named (the scene's name or path as given; a base as the file above names it);
+    #: None for the overrides
+    name: str | None
+    #: what the step gives: the file's own keys (without ``base``), or the overrides
+    keys: dict[str, Any]
+    #: the scene's keys after the step
+    raw: dict[str, Any]
+
+
+def _scene_files(name_or_path: str | pathlib.Path, name: str,
+                 seen: tuple[pathlib.Path, ...] = ()) -> list[tuple[str, dict[str, Any]]]:
+    """The files a scene is made of, its deepest base first: how each is named, its own keys.
+
+    :raises SimulationError: for an unreadable file, a file that is no mapping, a base that is
+        no scene or names itself in a chain.
     """
     path = scene_path(name_or_path)
     raw = read_yaml(path, 'scene')
-    if isinstance(raw, dict) and 'base' in raw:
-        base = raw.pop('base')
-        if not isinstance(base, str) or not base:
-            raise SimulationError(f'scene {path}: base must be a shipped scene name or the '
-                                  f'path of a scene file, got {base!r}')
-        relative = path.parent / base
-        base_file = scene_path(relative if pathlib.Path(base).suffix and relative.is_file()
-                               else base)
-        if base_file.resolve() in (*_seen, path.resolve()):
-            raise SimulationError(f'scene {path}: its base {base!r} leads back to itself')
-        parent = scene_raw(base_file, None, (*_seen, path.resolve()))
-        raw = _merged(parent, raw)
     if not isinstance(raw, dict):
         raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__} '
                               f'({path})')
-    set_keys(raw, overrides or {})
-    return raw
+    if 'base' not in raw:
+        return [(name, raw)]
+    base = raw.pop('base')
+    if not isinstance(base, str) or not base:
+        raise SimulationError(f'scene {path}: base must be a shipped scene name or the path of '
+                              f'a scene file, got {base!r}')
+    relative = path.parent / base
+    base_file = scene_path(relative if pathlib.Path(base).suffix and relative.is_file() else base)
+    if base_file.resolve() in (*seen, path.resolve()):
+        raise SimulationError(f'scene {path}: its base {base!r} leads back to itself')
+    return [*_scene_files(base_file, base, (*seen, path.resolve())), (name, raw)]
+
+
+def scene_steps(name_or_path: str | pathlib.Path,
+                overrides: Mapping[str, Any] | None = None) -> list[SceneStep]:
+    """How the keys of a scene are composed: each file's over those of the scene its ``base``
+    names (a shipped name, or a path relative to the file), deepest base first, mappings merged
+    key by key and anything else replaced whole (``_merged``: a controller block that names its
+    ``plugin`` replaces the base's whole, a null one removes it), then ``overrides`` (dotted
+    key -> value, ``set_key``; a last step when given).
+
+    :raises SimulationError: for an unreadable file, a base that is no scene or names itself in
+        a chain, a null controller block in a file whose base runs no controller of that name,
+        or a bad override.
+    """
+    steps: list[SceneStep] = []
+    raw: dict[str, Any] = {}
+    for name, keys in _scene_files(name_or_path, str(name_or_path)):
+        inputs, had = keys.get('inputs'), raw.get('inputs')
+        for node, block_ in (inputs.items() if isinstance(inputs, dict) and steps else ()):
+            if block_ is None and (not isinstance(had, dict) or had.get(node) is None):
+                raise _fail(f'inputs.{node}', f'null removes a controller of the base scene, and '
+                            f'{steps[-1].name!r} runs none of that name')
+        raw = _merged(raw, keys)
+        steps.append(SceneStep(name, keys, raw))
+    if overrides:
+        raw = copy.deepcopy(raw)
+        set_keys(raw, overrides)
+        steps.append(SceneStep(None, dict(overrides), raw))
+    return steps
+
+
+def scene_raw(name_or_path: str | pathlib.Path,
+              overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The keys of a scene, its bases and ``overrides`` composed (``scene_steps``).
+
+    :raises SimulationError: as ``scene_steps``.
+    """
+    return scene_steps(name_or_path, overrides)[-1].raw
 
 
 def set_keys(raw: dict[str, Any], overrides: Mapping[str, Any]) -> None:
