@@ -200,6 +200,8 @@ def test_the_arm_swing_ratio_is_the_mean_swing_over_the_same_scene_without_yaw(t
     assert expected > 2.0  # the shoulders swing with tau8 from the 4th step
     assert metrics['arm_swing_ratio'] == pytest.approx(expected, rel=1e-12)
     assert printed['arm_swing_ratio'] == metrics['arm_swing_ratio']
+    for figure in ('arm_swing', 'arm_swing_steady'):  # both arm-swing figures are printed
+        assert printed[figure] == metrics[figure]
     swing = metrics['arm_swing']
     assert swing['mean_peak_to_peak'] == pytest.approx(
         (swing['q11_peak_to_peak'] + swing['q14_peak_to_peak']) / 2, rel=1e-15)

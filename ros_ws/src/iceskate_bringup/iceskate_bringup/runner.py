@@ -274,7 +274,8 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         return 1
     summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'end', 'failure',
                                            'forward_distance_m', 'head_error_rms', 'arm_swing',
-                                           'arm_swing_ratio', 'real_time_factor')
+                                           'arm_swing_steady', 'arm_swing_ratio',
+                                           'real_time_factor')
                if k in metrics}
     with contextlib.suppress(OSError, ValueError):  # stdout gone (a closed terminal)
         print(json.dumps(summary, indent=2), flush=True)
