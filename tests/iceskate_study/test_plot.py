@@ -26,7 +26,7 @@ def table(tmp_path, grid):
                'arm_swing_steady.corr_q11_q14': -0.5}
         if i == 3:
             row = {'key': point.key, 'status': 'failed', 'failure': 'it broke'}
-        results.add(row)
+        results.add(point, row)
     results.write()
     return tmp_path / RESULTS
 
@@ -75,7 +75,7 @@ def test_a_vector_valued_axis_is_drawn_one_column_per_vector(tmp_path, grid):
     points = expand(spec)
     results = ResultTable(tmp_path, spec, points)
     for i, point in enumerate(points):
-        results.add({'key': point.key, 'status': 'ok', 'steps': i})
+        results.add(point, {'key': point.key, 'status': 'ok', 'steps': i})
     results.write()
     written = draw_maps(tmp_path / RESULTS, 'inputs.visual_lifting.kp', 'floor.mu', ['steps'],
                         tmp_path / 'maps')

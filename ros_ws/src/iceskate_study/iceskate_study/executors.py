@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import abc
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 import concurrent.futures as cf
 import contextlib
+import itertools
 import multiprocessing
 import os
 import pathlib
@@ -40,11 +41,14 @@ def crashed_row(task: Task, failure: str) -> Row:
 
 
 class _Executor(abc.ABC):
-    """Runs queued and, at most two per worker at a time, in flight as futures."""
+    """Runs in flight as futures, at most two per worker at a time; the next ones taken as
+    they finish from those given back to be run again (``_queue``), then from those given
+    (``_given``, an iterable read no further than that)."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
         self._queue: deque[Task] = deque()
+        self._given: Iterator[Task] = iter(())
         self._futures: dict[cf.Future[Row | None], Task] = {}
         #: why the runs left cannot run here any more (None: they can); they have no row, so
         #: the next call runs them
@@ -59,18 +63,26 @@ class _Executor(abc.ABC):
         """The rows of the runs whose future raised (at least one)."""
 
     @property
-    def pending(self) -> int:
-        """Runs given and not yet handed back."""
-        return len(self._queue) + len(self._futures)
+    def pending(self) -> bool:
+        """Whether runs given are not handed back yet (after ``submit`` and ``completed``,
+        which start the next ones: none in flight means none left)."""
+        return bool(self._queue or self._futures)
 
     def submit(self, tasks: Iterable[Task]) -> None:
-        """Queue ``tasks``."""
-        self._queue.extend(tasks)
+        """Run ``tasks``, read as runs finish."""
+        self._given = itertools.chain(self._given, tasks)
         self._feed()
 
+    def _drop(self) -> None:
+        """Drop the runs not started."""
+        self._queue.clear()
+        self._given = iter(())
+
     def _feed(self) -> None:
-        while self._queue and len(self._futures) < 2 * self.workers:
-            task = self._queue.popleft()
+        while len(self._futures) < 2 * self.workers:
+            task = self._queue.popleft() if self._queue else next(self._given, None)
+            if task is None:
+                return
             self._futures[self._start(task)] = task
 
     def completed(self, timeout: float) -> list[Row]:
@@ -141,8 +153,8 @@ class LocalExecutor(_Executor):
 
     def interrupt(self, signum: int) -> None:
         """End the runs in flight cleanly (``signum`` to every worker: each ends its run
-        between two control periods) and drop the queued ones."""
-        self._queue.clear()
+        between two control periods) and drop the ones not started."""
+        self._drop()
         for future in self._futures:
             future.cancel()
         for child in multiprocessing.active_children():
@@ -231,15 +243,16 @@ class RayExecutor(_Executor):
                 self.lost = (f'Ray lost a run ({type(error).__name__}: '
                              f'{(str(error).splitlines() or [""])[0]})')
         if self.lost is not None:  # what is left would be lost the same way
-            self._queue.clear()
+            self._drop()
             for future in self._futures:
                 future.cancel()
             self._futures.clear()
         return rows
 
     def interrupt(self, signum: int) -> None:
-        """Cancel the runs in flight (their workers are stopped) and drop the queued ones."""
-        self._queue.clear()
+        """Cancel the runs in flight (their workers are stopped) and drop the ones not
+        started."""
+        self._drop()
         for future in self._futures:
             with contextlib.suppress(Exception):
                 self._ray.cancel(self._refs[future], force=True)

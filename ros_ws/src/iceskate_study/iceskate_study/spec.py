@@ -1,20 +1,22 @@
 """SPEC files of parameter studies: a base scene, overrides and axes over dotted scene keys, and
 the runs they generate, every scene validated before any run starts (the format: docs/usage.md,
-"Parameter studies"). A bad SPEC is a one-line ``StudyError`` naming its key.
+"Parameter studies"). A bad SPEC is a one-line ``StudyError`` naming its key. The runs are made
+on demand (``Points``), never a million of them at once, and every loop over the values or points
+of a SPEC ends at a signal of its ``StopRequest`` (``RunInterrupted``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Container, Iterable, Iterator, Sequence
 import copy
 from dataclasses import MISSING, asdict, dataclass, replace
 import hashlib
-import itertools
 import json
 import math
 import numbers
 import pathlib
 import re
-from typing import Any
+from typing import Any, TypeVar, overload
 
 import numpy as np
 
@@ -25,6 +27,7 @@ from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key
+from iceskate_sim.shutdown import StopRequest
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
 
@@ -41,6 +44,7 @@ RUN_COLUMNS = ('key', 'point', 'repeat', 'status', 'failure', 'run_dir', 'worker
 MAX_RUNS = 1_000_000
 
 _METRIC = re.compile(r'[A-Za-z0-9_]+(?:\.[A-Za-z0-9_]+)*')
+T = TypeVar('T')
 
 
 def _study_rules(obj: Any) -> None:
@@ -171,6 +175,15 @@ def _is_number(value: Any) -> bool:
             and math.isfinite(float(value)))
 
 
+def polled(items: Iterable[T], stop: StopRequest | None) -> Iterator[T]:
+    """``items``, ending with ``RunInterrupted`` before the next one once ``stop`` has a
+    signal (None: never)."""
+    for item in items:
+        if stop is not None and stop.requested:
+            raise stop.error(None)
+        yield item
+
+
 # ------------------------------------------------------------------ dotted scene keys
 def set_key(raw: dict[str, Any], key: str, value: Any, where: str) -> None:
     """``iceskate_sim.run.scene.set_key``, its refusal named as SPEC key ``where``."""
@@ -245,13 +258,16 @@ def _axis(key: str, raw: Any, sampling: str) -> Axis:
     return Axis(key, tuple(float(v) for v in values), log=kind == 'logspace')
 
 
-def points_values(spec: Spec) -> list[tuple[Any, ...]]:
-    """The axes' values of every parameter point of ``spec``: the grid's combinations (first
-    axis slowest), or ``samples`` random or Latin-hypercube points (``seed``) mapped onto the
-    ranges."""
+def point_count(spec: Spec) -> int:
+    """The parameter points of ``spec`` (each run ``repeats`` times)."""
+    return (spec.samples if spec.sampling != 'grid'
+            else math.prod(len(axis.values or ()) for axis in spec.axes))
+
+
+def drawn_values(spec: Spec) -> np.ndarray:
+    """The axes' values of the ``samples`` random or Latin-hypercube points (``seed``) of a
+    sampled ``spec``, mapped onto the ranges: one row per point."""
     axes, samples = spec.axes, spec.samples
-    if spec.sampling == 'grid':
-        return list(itertools.product(*(axis.values or () for axis in axes)))
     rng = np.random.default_rng(spec.seed)
     if spec.sampling == 'random':
         unit = rng.random((samples, len(axes)))
@@ -263,7 +279,7 @@ def points_values(spec: Spec) -> list[tuple[Any, ...]]:
     bounds[log] = np.log(bounds[log])
     values = bounds[:, 0] + unit * (bounds[:, 1] - bounds[:, 0])
     values[:, log] = np.exp(values[:, log])
-    return [tuple(float(v) for v in point) for point in values]
+    return values
 
 
 def _match(value: Any, wanted: Any) -> bool:
@@ -293,14 +309,15 @@ def kept(name: str, metrics: tuple[str, ...]) -> bool:
 STUDY_RESOURCE = 'iceskate_studies'
 
 
-def load_spec(name_or_path: str | pathlib.Path) -> Spec:
-    """Read and validate a SPEC file (a path, or a shipped study's name)."""
+def load_spec(name_or_path: str | pathlib.Path, stop: StopRequest | None = None) -> Spec:
+    """Read and validate a SPEC file (a path, or a shipped study's name); ``stop``: as
+    ``parse_spec``'s."""
     try:
         path = shipped_or_path(name_or_path, STUDY_RESOURCE, 'studies', 'study')
         raw = read_yaml(path, 'SPEC')
     except SimulationError as exc:
         raise StudyError(str(exc)) from None
-    return parse_spec(raw, path)
+    return parse_spec(raw, path, stop)
 
 
 def _base_scene(raw: str, path: pathlib.Path) -> tuple[pathlib.Path, dict[str, Any]]:
@@ -322,8 +339,11 @@ def _check_scene(raw: dict[str, Any], where: str, what: str) -> None:
         raise _fail(where, f'{what} gives a bad scene: {exc}') from None
 
 
-def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
-    """Validate a SPEC mapping read from ``path`` (StudyError naming the key)."""
+def parse_spec(raw: Any, path: pathlib.Path, stop: StopRequest | None = None) -> Spec:
+    """Validate a SPEC mapping read from ``path`` (StudyError naming the key).
+
+    :param stop: its signal ends the checks of the axes' values (``RunInterrupted``).
+    """
     if not isinstance(raw, dict):
         raise StudyError(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
     top = keyed_from_mapping(StudySettings, raw, StudyError, _fail)
@@ -355,21 +375,38 @@ def parse_spec(raw: Any, path: pathlib.Path) -> Spec:
     if points * top.repeats > MAX_RUNS:  # before any run's scene is made
         raise _fail('axes', f'the SPEC generates {points * top.repeats} runs, more than '
                             f'{MAX_RUNS}')
+    keys = tuple(axis.key for axis in axes)
+    bags = _bags(top.bags, keys)
+    alone = one_scene_per_value(axes, sampling)
     for axis in axes:  # each axis alone, at each value (or both ends of its range)
-        for value in axis.values if axis.values is not None else (axis.low, axis.high):
+        for value in polled(axis.values if axis.values is not None else (axis.low, axis.high),
+                            stop):
             scene = copy.deepcopy(base)
             set_key(scene, axis.key, value, f'axes.{axis.key}')
+            if alone:  # the very scene of the run: expand() need not check it again
+                set_key(scene, 'record.bag', bagged({axis.key: value}, bags), 'bags')
             _check_scene(scene, f'axes.{axis.key}', f'the value {value!r}')
 
     metrics = DEFAULT_METRICS if top.metrics is None else top.metrics
     if not metrics:
         raise _fail('metrics', 'must name at least one metric, got []')
     metrics = tuple(dict.fromkeys(_metric_name(m, 'metrics') for m in metrics))
-    keys = tuple(axis.key for axis in axes)
-    ratios = _ratios(top.ratios, axes, metrics, sampling)
+    ratios = _ratios(top.ratios, axes, metrics, sampling, stop)
     return Spec(top.study, top.description, path, scene_file, base, axes, sampling,
-                top.samples or 0, top.seed or 0, top.repeats, metrics, _bags(top.bags, keys),
+                top.samples or 0, top.seed or 0, top.repeats, metrics, bags,
                 ratios, _maps(top.maps, keys, metrics, ratios))
+
+
+def one_scene_per_value(axes: tuple[Axis, ...], sampling: str) -> bool:
+    """Whether the runs' scenes are those of the values of one grid axis (``parse_spec``
+    checks them as such, bag flag included)."""
+    return sampling == 'grid' and len(axes) == 1
+
+
+def bagged(values: dict[str, Any], bags: tuple[dict[str, Any], ...] | None) -> bool:
+    """Whether the point of the axes' ``values`` is recorded with a bag (``Spec.bags``)."""
+    return bags is None or any(all(_match(values[k], v) for k, v in selector.items())
+                               for selector in bags)
 
 
 def _bags(raw: Any, keys: tuple[str, ...]) -> tuple[dict[str, Any], ...] | None:
@@ -388,8 +425,8 @@ def _bags(raw: Any, keys: tuple[str, ...]) -> tuple[dict[str, Any], ...] | None:
     return tuple(raw)
 
 
-def _ratios(raw: Any, axes: tuple[Axis, ...], metrics: tuple[str, ...], sampling: str
-            ) -> tuple[Ratio, ...]:
+def _ratios(raw: Any, axes: tuple[Axis, ...], metrics: tuple[str, ...], sampling: str,
+            stop: StopRequest | None) -> tuple[Ratio, ...]:
     if raw is None:
         return ()
     if not isinstance(raw, dict):
@@ -422,7 +459,7 @@ def _ratios(raw: Any, axes: tuple[Axis, ...], metrics: tuple[str, ...], sampling
         axis = next((a for a in axes if a.key == key), None)
         if axis is None or axis.values is None:
             raise _fail(f'{where}.baseline', f'{key!r} is not an axis')
-        exact = next((v for v in axis.values if _match(v, value)), None)
+        exact = next((v for v in polled(axis.values, stop) if _match(v, value)), None)
         if exact is None:
             raise _fail(f'{where}.baseline', f'{value!r} is not a value of axis {key!r}: '
                                              f'{list(axis.values)}')
@@ -451,27 +488,95 @@ def _maps(raw: Any, keys: tuple[str, ...], metrics: tuple[str, ...],
 
 
 # ---------------------------------------------------------------------- the runs
-def expand(spec: Spec) -> list[Point]:
-    """Every run of ``spec`` (parameter points in order, each ``repeats`` times), each scene
-    validated; StudyError naming the point whose scene is refused."""
-    keys = spec.axis_keys
-    combos = points_values(spec)
-    selected: set[int] = set()
-    for i, selector in enumerate(spec.bags or ()):
-        hits = {j for j, combo in enumerate(combos)
-                if all(_match(combo[keys.index(k)], v) for k, v in selector.items())}
-        if not hits:
-            raise _fail(f'bags[{i}]', f'selects no point of the sweep: {selector}')
-        selected |= hits
-    points = []
-    for index, combo in enumerate(combos):
-        raw, values = copy.deepcopy(spec.base), dict(zip(keys, combo, strict=True))
+class Points(Sequence[Point]):
+    """The runs of a spec (parameter points in order, each ``repeats`` times), each made when
+    asked for (its scene copied from the base, its key hashed): what a sweep holds of a
+    million runs is their count."""
+
+    def __init__(self, spec: Spec) -> None:
+        self.spec = spec
+        self.count = point_count(spec)  # parameter points
+        self._drawn = drawn_values(spec) if spec.sampling != 'grid' else None
+
+    def __len__(self) -> int:
+        """Runs."""
+        return self.count * self.spec.repeats
+
+    @overload
+    def __getitem__(self, item: int) -> Point: ...
+
+    @overload
+    def __getitem__(self, item: slice) -> list[Point]: ...
+
+    def __getitem__(self, item: int | slice) -> Point | list[Point]:
+        """The run at ``item`` (a slice: those runs)."""
+        at = range(len(self))[item]
+        if isinstance(at, range):
+            return [self[i] for i in at]
+        index, repeat = divmod(at, self.spec.repeats)
+        values, raw, bag = self.scene(index)
+        return Point(index, repeat, values, raw, run_key(raw, repeat), bag)
+
+    def __iter__(self) -> Iterator[Point]:
+        """Every run, in order."""
+        return self.remaining(())
+
+    def remaining(self, done: Container[tuple[int, int]]) -> Iterator[Point]:
+        """The runs whose (point, repeat) is not in ``done``, in order (a scene made once for
+        a point's repeats)."""
+        repeats = range(self.spec.repeats)
+        for index in range(self.count):
+            left = [r for r in repeats if (index, r) not in done]
+            if left:
+                values, raw, bag = self.scene(index)
+                yield from (Point(index, r, values, raw, run_key(raw, r), bag) for r in left)
+
+    def values(self, index: int) -> dict[str, Any]:
+        """The axes' values of parameter point ``index``, by key: the grid's combination
+        (first axis slowest) or the drawn point."""
+        axes = self.spec.axes
+        if self._drawn is not None:
+            return {axis.key: float(v) for axis, v in zip(axes, self._drawn[index], strict=True)}
+        combo: list[tuple[str, Any]] = []
+        for axis in reversed(axes):
+            index, i = divmod(index, len(axis.values or ()))
+            combo.append((axis.key, (axis.values or ())[i]))
+        return dict(reversed(combo))
+
+    def scene(self, index: int) -> tuple[dict[str, Any], dict[str, Any], bool]:
+        """The axes' values, the whole scene mapping and the bag flag of point ``index``."""
+        values, raw = self.values(index), copy.deepcopy(self.spec.base)
         for key, value in values.items():
             set_key(raw, key, value, f'axes.{key}')
-        bag = spec.bags is None or index in selected
+        bag = bagged(values, self.spec.bags)
         set_key(raw, 'record.bag', bag, 'bags')
-        where = ', '.join(f'{k}={v!r}' for k, v in values.items())
-        _check_scene(raw, 'axes', f'the point {where}')
-        points += [Point(index, repeat, values, raw, run_key(raw, repeat), bag)
-                   for repeat in range(spec.repeats)]
+        return values, raw, bag
+
+    def check(self, stop: StopRequest | None = None) -> None:
+        """Check every selector of bags selects a point and every point's scene (those
+        ``parse_spec`` checked as values of an axis are not checked again); StudyError
+        naming the selector or the point, ``RunInterrupted`` at a signal of ``stop``."""
+        spec = self.spec
+        for i, selector in enumerate(spec.bags or ()):
+            if self._drawn is None:  # a grid: each selected axis has a value selected
+                hit = all(any(_match(v, selector[axis.key])
+                              for v in polled(axis.values or (), stop))
+                          for axis in spec.axes if axis.key in selector)
+            else:
+                hit = any(bagged(self.values(j), (selector,))
+                          for j in polled(range(self.count), stop))
+            if not hit:
+                raise _fail(f'bags[{i}]', f'selects no point of the sweep: {selector}')
+        if one_scene_per_value(spec.axes, spec.sampling):
+            return
+        for index in polled(range(self.count), stop):
+            values, raw, _bag = self.scene(index)
+            where = ', '.join(f'{k}={v!r}' for k, v in values.items())
+            _check_scene(raw, 'axes', f'the point {where}')
+
+
+def expand(spec: Spec, stop: StopRequest | None = None) -> Points:
+    """Every run of ``spec``, each scene validated (``Points.check``)."""
+    points = Points(spec)
+    points.check(stop)
     return points

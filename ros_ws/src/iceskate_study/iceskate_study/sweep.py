@@ -19,13 +19,17 @@ import time
 from typing import TYPE_CHECKING
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_study.errors import StudyError
 
 if TYPE_CHECKING:
-    from iceskate_study.spec import Spec
+    from collections.abc import Iterator
+
+    from iceskate_study.spec import Point, Points, Spec
+    from iceskate_study.table import ResultTable
+    from iceskate_study.worker import Task
 
 #: Seconds between two writes of the table while runs finish.
 WRITE_INTERVAL = 1.0
@@ -64,73 +68,85 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
     :param stop: the signals' stop request (None: one is installed for the call); a signal ends
         the runs in flight and the sweep (``signum`` in the result; no maps).
     :raises StudyError: a bad output folder, a table of another SPEC, Ray not reached.
+    :raises RunInterrupted: a signal before the first run was given (the table untouched).
     """
     from iceskate_sim.run.session import prepare_output, release_output
     from iceskate_study.spec import expand
     from iceskate_study.table import RESULTS, ResultTable
+    with contextlib.ExitStack() as signals:
+        if stop is None:
+            stop = signals.enter_context(StopRequest())
+        points = expand(spec, stop)
+        try:
+            # the entries a sweep of its own makes before its table (a first sweep cut short)
+            prepare_output(out, resumes=RESULTS,
+                           made=('runs', RAY_MESSAGES, f'.{RESULTS}.partial'))
+        except SimulationError as exc:
+            raise StudyError(str(exc)) from None
+        try:
+            table = ResultTable(out, spec, points, stop)
+            result = SweepResult(len(points), len(table.done), table=table.path)
+            _run(points, table, result, out, workers, ray, progress, stop)
+        finally:
+            release_output(out)
+    if maps and spec.maps is not None and result.signum is None:
+        from iceskate_study.plot import draw_maps
+        result.maps = draw_maps(table.path, spec.maps.x, spec.maps.y, spec.maps.metrics,
+                                out / 'maps')
+    return result
+
+
+def _run(points: Points, table: ResultTable, result: SweepResult, out: pathlib.Path,
+         workers: int | None, ray: str | None, progress: bool, stop: StopRequest) -> None:
+    """Run the runs of ``points`` that ``table`` has no row of, given to the executor a few at
+    a time (as many as it keeps in flight), into ``table`` and ``result``."""
     from iceskate_study.worker import Task
-    points = expand(spec)
-    try:
-        # the entries a sweep of its own makes before its table (a first sweep cut short)
-        prepare_output(out, resumes=RESULTS,
-                       made=('runs', RAY_MESSAGES, f'.{RESULTS}.partial'))
-    except SimulationError as exc:
-        raise StudyError(str(exc)) from None
-    try:
-        table = ResultTable(out, spec, points)
-        todo = [p for p in points if p.key not in table.rows]
-        result = SweepResult(len(points), len(points) - len(todo), table=table.path)
-        with contextlib.ExitStack() as stack:
-            if stop is None:
-                stop = stack.enter_context(StopRequest())
-            lost: str | None = None  # why the runs left could not run (Ray lost them)
-            if todo and not stop.requested:
-                from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
-                executor = (RayExecutor(ray, workers) if ray is not None
-                            else LocalExecutor(min(workers or cpu_count(), len(todo))))
-                stack.callback(executor.close)
-                bar = stack.enter_context(ProgressBar(len(todo), f'sweep {spec.study}', 'run',
-                                                      progress))
-                bar.note(f'{len(todo)} runs on {executor.describe()}'
-                         + (f' ({result.resumed} done before)' if result.resumed else ''))
-                start = time.perf_counter()
-                executor.submit(Task(p.key, p.raw, spec.metrics,
-                                     str((out / 'runs' / p.key).resolve()) if p.bag else None)
-                                for p in todo)
-                interrupted, written, statuses = False, time.perf_counter(), Counter()
-                while executor.pending:
-                    if stop.requested and not interrupted:
-                        executor.interrupt(stop.signum or 0)
-                        interrupted = True
-                    for row in executor.completed(POLL):
-                        table.add(row)
-                        result.ran += 1
-                        statuses[row['status']] += 1
-                        minutes = (time.perf_counter() - start) / 60.0
-                        bar.update(1, f'{result.ran / minutes:.1f} runs/min, fell '
-                                      f'{statuses["fell"]}, failed {statuses["failed"]}')
-                    if table.dirty and time.perf_counter() - written >= WRITE_INTERVAL:
-                        table.write()
-                        written = time.perf_counter()
-                result.wall_time_s = time.perf_counter() - start
-                lost = executor.lost
-            if table.dirty or not table.path.exists():
-                table.write()
-            if lost is not None and not stop.requested:
-                left = len(points) - len(table.rows)
-                raise StudyError(f'{lost}; {left} runs have no row yet: the same command '
-                                 'runs them')
-            result.counts = dict(Counter(row['status'] for row in table.rows.values()))
-            if stop.requested:
-                result.signum = stop.signum
-                return result
-        if maps and spec.maps is not None:
-            from iceskate_study.plot import draw_maps
-            result.maps = draw_maps(table.path, spec.maps.x, spec.maps.y, spec.maps.metrics,
-                                    out / 'maps')
-        return result
-    finally:
-        release_output(out)
+    spec, todo = points.spec, len(points) - len(table.done)
+    with contextlib.ExitStack() as stack:
+        lost: str | None = None  # why the runs left could not run (Ray lost them)
+        if todo and not stop.requested:
+            from iceskate_study.executors import LocalExecutor, RayExecutor, cpu_count
+            executor = (RayExecutor(ray, workers) if ray is not None
+                        else LocalExecutor(min(workers or cpu_count(), todo)))
+            stack.callback(executor.close)
+            bar = stack.enter_context(ProgressBar(todo, f'sweep {spec.study}', 'run', progress))
+            bar.note(f'{todo} runs on {executor.describe()}'
+                     + (f' ({result.resumed} done before)' if result.resumed else ''))
+            start = time.perf_counter()
+            given: dict[str, Point] = {}  # the runs the executor was given, by key
+
+            def tasks() -> Iterator[Task]:
+                for p in points.remaining(table.done):
+                    given[p.key] = p
+                    yield Task(p.key, p.raw, spec.metrics,
+                               str((out / 'runs' / p.key).resolve()) if p.bag else None)
+
+            executor.submit(tasks())
+            interrupted, written, statuses = False, time.perf_counter(), Counter()
+            while executor.pending:
+                if stop.requested and not interrupted:
+                    executor.interrupt(stop.signum or 0)
+                    interrupted = True
+                for row in executor.completed(POLL):
+                    table.add(given.pop(row['key']), row)
+                    result.ran += 1
+                    statuses[row['status']] += 1
+                    minutes = (time.perf_counter() - start) / 60.0
+                    bar.update(1, f'{result.ran / minutes:.1f} runs/min, fell '
+                                  f'{statuses["fell"]}, failed {statuses["failed"]}')
+                if table.dirty and time.perf_counter() - written >= WRITE_INTERVAL:
+                    table.write()
+                    written = time.perf_counter()
+            result.wall_time_s = time.perf_counter() - start
+            lost = executor.lost
+        if table.dirty or not table.path.exists():
+            table.write()
+        if lost is not None and not stop.requested:
+            left = len(points) - len(table.rows)
+            raise StudyError(f'{lost}; {left} runs have no row yet: the same command runs them')
+        result.counts = dict(Counter(row['status'] for row in table.rows.values()))
+        if stop.requested:
+            result.signum = stop.signum
 
 
 #: The file of DIR that receives what Ray's driver prints (a sweep on Ray only, if any).
@@ -197,7 +213,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         if args.workers is not None and args.workers < 1:
             raise StudyError(f'--workers must be >= 1, got {args.workers}')
         from iceskate_study.spec import load_spec
-        spec = load_spec(args.spec)
+        spec = load_spec(args.spec, stop)
         if args.ray == 'local':  # one machine: Ray's node address is loopback, not probed
             os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')  # via 8.8.8.8
         # Ray's driver prints the cluster's messages (a raylet's death: its last log lines)
@@ -210,6 +226,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         say(f'sweep: error: {exc}' + (f" (Ray's messages: {ray_messages.path})"
                                       if args.ray and ray_messages.written else ''))
         return 1
+    except RunInterrupted as exc:  # while the SPEC's scenes or the table were read
+        say(f'sweep: interrupted by {signal.Signals(exc.signum).name} before any run started; '
+            'the same command resumes')
+        return exc.exit_code
     if result.signum is not None:
         say(f'sweep: interrupted by {signal.Signals(result.signum).name}: {result.ran} runs '
             f'finished now, {sum(result.counts.values())} of {result.total} in {result.table}; '

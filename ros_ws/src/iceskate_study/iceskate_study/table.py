@@ -15,10 +15,13 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from iceskate_sim.shutdown import StopRequest
 from iceskate_study.errors import StudyError
-from iceskate_study.spec import RUN_COLUMNS, Point, Spec
+from iceskate_study.spec import RUN_COLUMNS, Point, Points, Spec, polled
 
 RESULTS = 'results.parquet'
+#: Rows of a table read (and checked) between two looks at the stop request.
+READ_BATCH = 4096
 METADATA_KEY = b'iceskate_study'
 #: Columns that measure time, which differ between two sweeps of the same SPEC.
 TIMING_COLUMNS = ('worker_time_s', 'wall_time_s', 'real_time_factor')
@@ -49,36 +52,49 @@ def _mean(row: dict[str, Any], names: tuple[str, ...]) -> float | None:
 class ResultTable:
     """The rows of a sweep of ``spec`` over ``points``, kept in ``DIR/results.parquet``.
 
-    Rows already in the file are kept (a resumed sweep); a row whose key is not among the
-    points' keys means the folder holds another sweep, which is refused.
+    Rows already in the file are kept (a resumed sweep); a row whose key is not the key of the
+    run at its point and repeat means the folder holds another sweep, which is refused.
+
+    :param stop: its signal ends the reading of the rows (``RunInterrupted``).
     """
 
-    def __init__(self, out: pathlib.Path, spec: Spec, points: list[Point]) -> None:
+    def __init__(self, out: pathlib.Path, spec: Spec, points: Points,
+                 stop: StopRequest | None = None) -> None:
         self.path = out / RESULTS
         self.spec = spec
-        self._points = {p.key: p for p in points}  # in the order of the rows
         self.rows: dict[str, dict[str, Any]] = {}
+        #: (point, repeat) of every row
+        self.done: set[tuple[int, int]] = set()
         table = read_table(self.path)[0] if self.path.exists() else None
         missing = [] if table is None else [
             name for name in RUN_COLUMNS[:4] if name not in table.column_names]
         if missing:  # e.g. edited by hand: its rows cannot say which runs are done
             raise StudyError(f"{self.path} lacks the column {missing[0]!r} of a sweep's results "
                              'table (edited?); restore it or choose a new --out')
-        for row in table.to_pylist() if table is not None else []:
-            if row.get('key') not in self._points:
-                raise StudyError(f'{self.path} holds runs this SPEC does not make (another '
-                                 'SPEC, or the base scene changed); choose a new --out')
-            self.rows[row['key']] = {k: v for k, v in row.items() if v is not None}
+        batches = table.to_batches(READ_BATCH) if table is not None else []
+        for batch in polled(batches, stop):
+            for row in batch.to_pylist():
+                at = (row.get('point'), row.get('repeat'))
+                if not (all(isinstance(i, int) and i >= 0 for i in at) and at[0] < points.count
+                        and at[1] < spec.repeats
+                        and points[at[0] * spec.repeats + at[1]].key == row.get('key')):
+                    raise StudyError(f'{self.path} holds runs this SPEC does not make (another '
+                                     'SPEC, or the base scene changed); choose a new --out')
+                self.rows[row['key']] = {k: v for k, v in row.items() if v is not None}
+                self.done.add(at)
+        #: the table's metadata, the SPEC's description (made once: an axis may have a
+        #: million values)
+        self._metadata = {METADATA_KEY: json.dumps(spec.description_for_table(), default=str)}
         self.dirty = False
 
-    def add(self, row: dict[str, Any]) -> None:
-        """Record the row of a finished run."""
-        point = self._points[row['key']]
+    def add(self, point: Point, row: dict[str, Any]) -> None:
+        """Record the row of ``point``'s finished run."""
         row = {k: v for k, v in row.items() if v is not None}
         if 'run_dir' in row:  # relative to the sweep's folder
             row['run_dir'] = os.path.relpath(row['run_dir'], self.path.parent)
         self.rows[row['key']] = {'key': point.key, 'point': point.index,
                                  'repeat': point.repeat, **point.values, **row}
+        self.done.add((point.index, point.repeat))
         self.dirty = True
 
     def _ratios(self, rows: list[dict[str, Any]]) -> None:
@@ -98,13 +114,12 @@ class ResultTable:
 
     def write(self) -> None:
         """Write every row into the table file (atomically)."""
-        rows = [self.rows[key] for key in self._points if key in self.rows]
+        rows = sorted(self.rows.values(), key=lambda row: (row['point'], row['repeat']))
         self._ratios(rows)
         first = [*RUN_COLUMNS[:3], *self.spec.axis_keys, *RUN_COLUMNS[3:]]
         later = dict.fromkeys(k for row in rows for k in row if k not in first)
         columns = {name: [row.get(name) for row in rows] for name in [*first, *later]}
-        table = pa.table(columns).replace_schema_metadata(
-            {METADATA_KEY: json.dumps(self.spec.description_for_table(), default=str)})
+        table = pa.table(columns).replace_schema_metadata(self._metadata)
         partial = self.path.with_name(f'.{self.path.name}.partial')
         pq.write_table(table, partial)
         os.replace(partial, self.path)
