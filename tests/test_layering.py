@@ -59,12 +59,25 @@ def _declared(package: str) -> set[str]:
     return {e.text for tag in ('depend', 'exec_depend', 'build_depend') for e in root.iter(tag)}
 
 
+def _sources(package: str) -> dict[str, Path]:
+    """Every Python file of a package: its modules (by dotted name) and the files beside them
+    (by path: a build's code generators, launch files, setup.py), which its build or its users
+    run and so depend on what they import."""
+    out = _modules(package)
+    modules = set(out.values())
+    root = PACKAGES[package]
+    for path in sorted(root.rglob('*.py')):
+        if path not in modules:
+            out[str(path.relative_to(root))] = path
+    return out
+
+
 def _package_graph() -> dict[str, set[str]]:
-    """Workspace package -> the workspace packages its modules import."""
+    """Workspace package -> the workspace packages its Python files import."""
     graph: dict[str, set[str]] = {}
     for package in PACKAGES:
         used = set()
-        for module, path in _modules(package).items():
+        for module, path in _sources(package).items():
             for name in _imports(path, module):
                 top = name.split('.')[0]
                 if top in PACKAGES and top != package:

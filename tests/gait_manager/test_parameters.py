@@ -24,7 +24,7 @@ from gait_manager.parameters import (
     YawParameters,
     head_stance,
 )
-from iceskate_sim.parameters import Rules, field_types, flatten, leaf_fields, unflatten
+from iceskate_native.parameters import Rules, field_types, flatten, leaf_fields, unflatten
 
 CLASSES = (PostureParameters, BalanceParameters, FeedforwardParameters,
            WeightTransferParameters, HeelParameters, ArmAssistParameters, YawParameters,

@@ -14,10 +14,10 @@ pytestmark = [pytest.mark.ros]
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
 from gait_manager.native import GaitManagerController  # noqa: E402
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources  # noqa: E402
+from iceskate_native.parameters import flatten  # noqa: E402
 
 # noqa: E402
 from iceskate_sim.model.robot import load_robot  # noqa: E402
-from iceskate_sim.parameters import flatten  # noqa: E402
 from iceskate_sim.physics.native_control import native_kinematics  # noqa: E402
 from iceskate_sim.recording.bag_types import make_typestore  # noqa: E402
 from iceskate_sim.recording.messages import Events, SampleMessages  # noqa: E402

@@ -1,4 +1,4 @@
-"""The parameter schema (iceskate_sim.parameters) on small example classes: every kind of field,
+"""The parameter schema (iceskate_native.parameters) on small example classes: every kind of field,
 its checks and messages, building from mappings, and the flat form of ROS parameters."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from iceskate_sim.parameters import (
+from iceskate_native.parameters import (
     Rules,
     block,
     check_fields,

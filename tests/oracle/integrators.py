@@ -21,9 +21,9 @@ import numpy as np
 from scipy import integrate as sp_integrate
 from scipy import optimize
 
+from iceskate_native.parameters import setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import DynamicsResult
-from iceskate_sim.parameters import setting
 from iceskate_sim.physics.integrators import (
     FIXED_STEP,
     GUARD_MARGIN,

@@ -13,7 +13,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 
 from gait_manager.gait_manager_node import GaitManagerNode  # noqa: E402
 from gait_manager.parameters import GaitManagerParameters  # noqa: E402
-from iceskate_sim.parameters import leaf_fields  # noqa: E402
+from iceskate_native.parameters import leaf_fields  # noqa: E402
 from visual_lifting.parameters import VisualLiftingParameters  # noqa: E402
 from visual_lifting.visual_lifting_node import VisualLiftingNode  # noqa: E402
 

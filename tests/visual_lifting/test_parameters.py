@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from iceskate_sim.parameters import flatten, leaf_fields
+from iceskate_native.parameters import flatten, leaf_fields
 from visual_lifting.errors import VisualLiftingError
 from visual_lifting.native import VisualLiftingController
 from visual_lifting.parameters import VisualLiftingParameters

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from typing import Any, Self
 
 from gait_manager.errors import GaitManagerError
+from iceskate_native.parameters import block, checked, from_mapping, setting
 from iceskate_sim.model.stance import StanceSchedule
-from iceskate_sim.parameters import block, checked, from_mapping, setting
 
 #: The torque sources, in the order they are computed, sent and summed.
 SOURCES = ('posture', 'feedforward', 'weight_transfer', 'heel', 'arm_assist', 'yaw')

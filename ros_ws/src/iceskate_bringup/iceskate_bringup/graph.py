@@ -25,10 +25,10 @@ import yaml
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_bringup.watch import Watch, live_view
+from iceskate_native.parameters import flatten
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.model.robot import load_robot
-from iceskate_sim.parameters import flatten
 from iceskate_sim.ros.loopback import PROFILE_VARIABLES, loopback_dds
 from iceskate_sim.ros.node_support import write_parameter_file
 from iceskate_sim.run.session import (

@@ -20,9 +20,9 @@ from rclpy.parameter import Parameter
 
 from iceskate_bringup.plugin import PluginBlock, make_controller, plugin_class
 import iceskate_native
+from iceskate_native.parameters import check_fields, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import CommandValues
-from iceskate_sim.parameters import check_fields, setting
 from iceskate_sim.physics.native_control import native_values
 from iceskate_sim.ros.controller_node import ControllerNode
 from iceskate_sim.ros.node_support import ConfigError, run_node

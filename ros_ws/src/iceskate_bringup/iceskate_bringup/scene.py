@@ -19,8 +19,8 @@ from iceskate_bringup.plugin import (
     make_controller,
     plugin_sources,
 )
+from iceskate_native.parameters import Rules, field_types, rules_of
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.parameters import Rules, field_types, rules_of
 from iceskate_sim.run.scene import Scene, SceneSettings, scene_steps
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene

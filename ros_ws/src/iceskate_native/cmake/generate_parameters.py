@@ -212,7 +212,7 @@ def choice_enums(module: Any) -> dict[tuple[str, ...], Enum]:
 def generate(module_name: str, namespace: str) -> tuple[str, str]:
     """(parameters.hpp, parameter_readers.hpp) of ``module_name``."""
     module = importlib.import_module(module_name)
-    from iceskate_sim.parameters import field_types, rules_of
+    from iceskate_native.parameters import field_types, rules_of
     classes = parameter_classes(module)
     if not classes:
         raise SystemExit(f'{module_name} defines no parameter dataclass')
@@ -302,8 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         structs, readers = generate(args.module, args.namespace)
     except ImportError as exc:
-        raise SystemExit(f'cannot import {args.module} ({exc}): iceskate_sim must be importable '
-                         'in the build environment') from None
+        raise SystemExit(f"cannot import {args.module} ({exc}): the package's dependencies "
+                         'must be importable in the build environment') from None
     args.out.mkdir(parents=True, exist_ok=True)
     outputs = [args.out / 'parameters.hpp', args.out / 'parameter_readers.hpp']
     for path, text in zip(outputs, (structs, readers), strict=True):

@@ -21,9 +21,9 @@ from typing import Any, TypeVar, overload
 import numpy as np
 
 from iceskate_bringup.scene import parse_scene
+from iceskate_native.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_or_path
-from iceskate_sim.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.run.metrics import METRIC_NAMES
 from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from iceskate_sim.parameters import checked, from_mapping, setting
+from iceskate_native.parameters import checked, from_mapping, setting
 from visual_lifting.errors import VisualLiftingError
 
 #: The forward targets y_d: 'moving' y_H(0) + v_d t, 'follow' y_H(t), 'fixed' y_H(0).

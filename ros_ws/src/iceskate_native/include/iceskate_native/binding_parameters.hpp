@@ -1,4 +1,4 @@
-// Reading a law's Python parameter object (a frozen dataclass of iceskate_sim.parameters, the one
+// Reading a law's Python parameter object (a frozen dataclass of iceskate_native.parameters, the one
 // schema) into C++ in a controller package's nanobind module. The dataclass has checked its
 // rules already; this checks again what C++ relies on: numbers finite, lists of the right length
 // and range, choices known. A bad field is std::invalid_argument (ValueError in Python) in one

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from iceskate_native.parameters import checked, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import GaitMode
 from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, Robot
-from iceskate_sim.parameters import checked, setting
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 _LEG_CHAIN = slice(1, 8)  # q1..q7: the swing-sole pitch C_fr = q0 + q1 + ... + q7 (q0 = 0)

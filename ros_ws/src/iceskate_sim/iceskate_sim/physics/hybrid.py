@@ -11,11 +11,11 @@ from typing import Callable
 
 import numpy as np
 
+from iceskate_native.parameters import checked, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import MODES, GaitMode
 from iceskate_sim.model.robot import Q1, Y0
-from iceskate_sim.parameters import checked, setting
 
 # Dead bands (hysteresis) of the force-based guards. A guard that is the complement of the
 # transition just made (flat <-> edge, stick <-> slip, flat sole <-> heel only) would otherwise

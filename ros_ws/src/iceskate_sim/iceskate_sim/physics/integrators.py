@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from iceskate_native.parameters import checked, setting
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.parameters import checked, setting
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 ADAPTIVE = ('rk45', 'ros34pw2')

@@ -35,8 +35,7 @@ from rclpy.qos import (
 )
 import yaml
 
-from iceskate_sim.errors import SimulationError
-from iceskate_sim.parameters import (
+from iceskate_native.parameters import (
     Rules,
     flatten,
     from_mapping,
@@ -44,6 +43,7 @@ from iceskate_sim.parameters import (
     optional_inner,
     unflatten,
 )
+from iceskate_sim.errors import SimulationError
 from iceskate_sim.recording.bag_types import OFFERED_QOS
 from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.shutdown import STOP_SIGNALS, StopRequest, process_alive

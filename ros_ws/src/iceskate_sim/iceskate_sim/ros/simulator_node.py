@@ -26,9 +26,9 @@ from std_srvs.srv import Trigger
 
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_interfaces.srv import StepSimulation
+from iceskate_native.parameters import checked, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.stamps import set_stamp
-from iceskate_sim.parameters import checked, setting
 from iceskate_sim.ros.lockstep import LockstepLoop, LockstepSession
 from iceskate_sim.ros.node_support import (
     CLOCK_QOS,

@@ -17,11 +17,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from iceskate_native.parameters import block, checked, keyed_from_mapping, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
-from iceskate_sim.parameters import block, checked, keyed_from_mapping, setting
 from iceskate_sim.physics.hybrid import FrictionModel, HybridState
 from iceskate_sim.physics.integrators import IntegratorConfig
 from iceskate_sim.physics.simulation import SimulatorConfig, initial_state
@@ -77,7 +77,7 @@ class Scene:
 # ------------------------------------------------------------------- the scene's schema
 # Every key of a scene's simulator part is a ``setting`` of these classes or of the run's own
 # configurations (``FrictionModel``, ``IntegratorConfig``, ``DynamicsParameters``; the parameter
-# schema of the project, ``iceskate_sim.parameters``): its default, description, unit and rules.
+# schema of the project, ``iceskate_native.parameters``): its default, description, unit and rules.
 _checked = checked(SimulationError)
 
 
