@@ -11,11 +11,16 @@
   the head-top pose is the oracle's, the root link's world pose Pinocchio's in the support
   model.
 * ``bag_without``: a copy of a bag with one topic left out; ``truncated_bag``: a copy cut short.
+* ``saved_figures``: every matplotlib figure saved during a test, by file name
+  (``record_figures``: the same as a context manager); ``legends_clear``: asserts a figure's
+  legends are clear of its axes, texts and each other.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+import contextlib
+import itertools
 import pathlib
 import shutil
 from types import SimpleNamespace
@@ -230,3 +235,77 @@ def truncated_bag(tmp_path: pathlib.Path, sim_bag: pathlib.Path) -> pathlib.Path
     with mcap.open('r+b') as stream:
         stream.truncate(size // 2)
     return target
+
+
+@contextlib.contextmanager
+def recording_figures() -> Iterator[dict[str, object]]:
+    """Within: every ``Figure.savefig`` records the figure under its file's name (a staged
+    output's, ``.name.partial.png``, as ``name.png``)."""
+    from matplotlib.figure import Figure
+    figures: dict[str, object] = {}
+    save = Figure.savefig
+
+    def record(fig: Figure, path: str | pathlib.Path, *args: object, **kwargs: object) -> None:
+        path = pathlib.Path(path)
+        figures[path.name.removeprefix('.').replace('.partial', '')] = fig
+        save(fig, path, *args, **kwargs)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Figure, 'savefig', record)
+        yield figures
+
+
+@pytest.fixture(scope='session')
+def record_figures() -> Callable[[], contextlib.AbstractContextManager[dict[str, object]]]:
+    """``recording_figures`` (for fixtures of a wider scope than ``saved_figures``)."""
+    return recording_figures
+
+
+@pytest.fixture
+def saved_figures() -> Iterator[dict[str, object]]:
+    """The figures saved during the test, by file name (``recording_figures``)."""
+    with recording_figures() as figures:
+        yield figures
+
+
+def _overlap(a, b, tol: float = 0.5) -> bool:
+    """Two display-space boxes share more than ``tol`` pixels in both directions."""
+    return (min(a.x1, b.x1) - max(a.x0, b.x0) > tol
+            and min(a.y1, b.y1) - max(a.y0, b.y0) > tol)
+
+
+def assert_legends_clear(fig) -> int:
+    """Every legend of ``fig`` (drawn on an Agg canvas) lies above its own axes, inside the
+    figure, its entries apart, clear of every axes, title, text and other legend; the number
+    of legends."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+    FigureCanvasAgg(fig).draw()
+    renderer = fig.canvas.get_renderer()
+    legends = [(ax, ax.get_legend()) for ax in fig.axes if ax.get_legend() is not None]
+    texts = [artist for ax in fig.axes for artist in ax.get_children()
+             if isinstance(artist, Text) and artist.get_text()] + list(fig.texts)
+    for ax, legend in legends:
+        box = legend.get_window_extent(renderer)
+        where = f'legend of {[t.get_text() for t in legend.get_texts()]}'
+        assert box.y0 >= ax.get_window_extent(renderer).y1 - 0.5, f'{where} on the data'
+        assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1 + 0.5, f'{where} cut off'
+        assert box.y1 <= fig.bbox.y1 + 0.5, f'{where} cut off at the top'
+        for other in fig.axes:
+            assert not _overlap(box, other.get_window_extent(renderer)), f'{where} on axes'
+        for text in texts:
+            assert not _overlap(box, text.get_window_extent(renderer)), (
+                f'{where} on the text {text.get_text()!r}')
+        for _, another in legends:
+            if another is not legend:
+                assert not _overlap(box, another.get_window_extent(renderer)), (
+                    f'{where} on another legend')
+        entries = [t.get_window_extent(renderer) for t in legend.get_texts()]
+        for a, b in itertools.combinations(entries, 2):
+            assert not _overlap(a, b), f'{where}: entries overlap'
+    return len(legends)
+
+
+@pytest.fixture(scope='session')
+def legends_clear() -> Callable[[object], int]:
+    """``assert_legends_clear``."""
+    return assert_legends_clear

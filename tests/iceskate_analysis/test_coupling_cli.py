@@ -1,9 +1,13 @@
-"""``coupling_analysis``: the whole analysis of a pair of bags, and its refusals."""
+"""``coupling_analysis``: the whole analysis of a pair of bags, its figures' legends clear of
+their titles and data, its refusals, and no progress bar into a pipe."""
 
 from __future__ import annotations
 
 import csv
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 
@@ -11,13 +15,22 @@ from iceskate_analysis.coupling_cli import main
 
 
 @pytest.fixture(scope='module')
-def compared(tmp_path_factory, synthetic_bag, synthetic_no_yaw_bag):
-    """Run the CLI once: the yaw bag compared with the no-yaw bag, with the animation."""
+def compared_with_figures(tmp_path_factory, synthetic_bag, synthetic_no_yaw_bag,
+                          record_figures):
+    """Run the CLI once: the yaw bag compared with the no-yaw bag, with the animation; its
+    output folder and the figures it saved, by file name."""
     out = tmp_path_factory.mktemp('analysis')
-    code = main([str(synthetic_bag), '--compare', str(synthetic_no_yaw_bag), '--out', str(out),
-                 '--animate', '--frames', '5', '--quiet'])
+    with record_figures() as figures:
+        code = main([str(synthetic_bag), '--compare', str(synthetic_no_yaw_bag), '--out',
+                     str(out), '--animate', '--frames', '5', '--quiet'])
     assert code == 0
-    return out
+    return out, figures
+
+
+@pytest.fixture(scope='module')
+def compared(compared_with_figures):
+    """The output folder of ``compared_with_figures``."""
+    return compared_with_figures[0]
 
 
 def test_paper_figures_are_written_for_the_right_cases(compared):
@@ -41,6 +54,61 @@ def test_paper_figures_are_written_for_the_right_cases(compared):
                 assert figures[f'rms_m_total_minus_g_over_rms_g_{view}'] >= 0.0
         assert reading['rms_h_with_over_without'] == pytest.approx(
             reading['with_yaw']['rms_h'] / reading['without_yaw']['rms_h'])
+
+
+def test_no_legend_runs_over_a_title_the_data_or_another_legend(compared_with_figures,
+                                                                legends_clear):
+    """Figs. 5-8 carry long titles and the terms' legend two rows: the titles sit above the
+    legends, the legends above their panels."""
+    _out, figures = compared_with_figures
+    for name in ('fig5_shoulders.png', 'fig6_shoulders.png', 'fig7_terms_q11.png',
+                 'fig8_terms_q11_instantaneous.png', 'compare_shoulders.png',
+                 'synthetic_yaw_coupling_q11.png'):
+        assert legends_clear(figures[name]) >= 1, name
+    fig7 = figures['fig7_terms_q11.png']
+    title = fig7.axes[0].get_title()
+    assert title.startswith('Fig. 7: terms of eq. (11) at q11 without τ8')
+    rows = {round(t.get_window_extent().y0)
+            for t in fig7.axes[0].get_legend().get_texts()}
+    assert len(rows) == 2  # 7 entries in rows of 6 (no soft stop or swing constraint)
+
+
+def test_no_progress_bar_goes_into_a_pipe(tmp_path, synthetic_bag):
+    """stderr a pipe (``coupling_analysis ... 2> log``): no bar, not even a frozen first one."""
+    run = subprocess.run([sys.executable, '-m', 'iceskate_analysis.coupling_cli',
+                          str(synthetic_bag), '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=240, check=False)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == ''
+    assert (tmp_path / 'summary.json').is_file()
+
+
+def test_a_terminal_gets_the_progress_bars(tmp_path, synthetic_bag):
+    """stderr a terminal (a pseudo-terminal of 100 columns here): the bars are drawn there."""
+    import fcntl
+    import pty
+    import struct
+    import termios
+    controller, terminal = pty.openpty()
+    try:
+        fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack('HHHH', 24, 100, 0, 0))
+        process = subprocess.Popen([sys.executable, '-m', 'iceskate_analysis.coupling_cli',
+                                    str(synthetic_bag), '--out', str(tmp_path)],
+                                   stdout=subprocess.DEVNULL, stderr=terminal)
+        os.close(terminal)
+        seen = b''
+        while True:
+            try:
+                chunk = os.read(controller, 4096)
+            except OSError:  # EIO: the terminal's last writer has closed it
+                break
+            if not chunk:
+                break
+            seen += chunk
+        assert process.wait(timeout=240) == 0
+    finally:
+        os.close(controller)
+    assert b'reading bag' in seen and b'eq. (11) bag' in seen
 
 
 def test_every_case_gets_figures_csv_and_animation(compared):

@@ -51,6 +51,31 @@ def test_a_short_run_writes_the_summary_picture(stand_run):
     _assert_picture(out / 'summary.png')
 
 
+def test_the_picture_shows_the_head_y_against_its_target(tmp_path, saved_figures,
+                                                         legends_clear):
+    """The README's headline figure: a panel of the head's forward position y and its target
+    [m], labelled with the error RMS of metrics.json; every legend clear of the rest."""
+    t = np.linspace(0.0, 2.0, 201)
+    psi = np.column_stack([0.3 * t + 0.02 * np.sin(5.0 * t), np.full_like(t, 1.69),
+                           np.zeros_like(t)])
+    psi_d = np.column_stack([0.3 * t, np.full_like(t, 1.695), np.zeros_like(t)])
+    columns = {'t': t, 'psi': psi, 'psi_d': psi_d, 'mode': np.full(t.size, 3),
+               'side': (t > 1.0).astype(int), 'step_index': (t > 1.0).astype(int),
+               'q': np.zeros((t.size, 18))}
+    metrics = {'scene': 'skate', 'steps': 1, 'failure': None,
+               'head_error_rms': {'y': 0.0493, 'z': 0.005, 'pitch': 0.001}}
+    draw_summary(columns.items(), metrics, tmp_path / 'summary.png')
+    fig = saved_figures['summary.png']
+    (ax,) = [ax for ax in fig.axes if ax.get_legend() is not None and any(
+        text.get_text().startswith('head y') for text in ax.get_legend().get_texts())]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    assert set(lines) == {'head y (error RMS 4.93 cm)', 'target y_d'}
+    np.testing.assert_array_equal(lines['head y (error RMS 4.93 cm)'].get_ydata(), psi[:, 0])
+    np.testing.assert_array_equal(lines['target y_d'].get_ydata(), psi_d[:, 0])
+    assert ax.get_ylabel() == 'head forward position\ny [m]'
+    assert legends_clear(fig) == 6
+
+
 def test_write_summary_returns_the_path_and_redraws(stand_run, tmp_path):
     out, _metrics = stand_run
     for name in ('trajectory.npz', 'metrics.json'):

@@ -84,10 +84,3 @@ def test_get_mode_rejects_unknown_numbers_naming_them(bad):
 def test_get_mode_rejects_non_integer_numbers(number):
     with pytest.raises(SimulationError, match='unknown gait mode'):
         get_mode(number)
-
-
-@pytest.mark.parametrize(('support', 'swing', 'named'), [
-    ('F-X', 'A', "'F-X'"), ('F-S', 'Hx', "'Hx'"), ('A', 'F-S', "'A'"), ('f-s', 'a', "'f-s'")])
-def test_mode_for_rejects_unknown_codes_naming_them(support, swing, named):
-    with pytest.raises(SimulationError, match=named):
-        mode_for(support, swing)

@@ -3,7 +3,7 @@ eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0; 2 w
 message for a bag or argument it refuses; 1 with one line when the output cannot be written;
 130, 143 or 129 with one line on SIGINT, SIGTERM or SIGHUP, within about a second, the output
 folder then as it was (every file is renamed into it once all are complete). The notes of the
-reading go to stderr.
+reading go to stderr, and the progress bars when stderr is a terminal (none into a pipe or file).
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument('--animate', action='store_true',
                         help='also write a stick-figure GIF and a key-frame strip per bag')
     parser.add_argument('--frames', type=int, default=120, help='most GIF frames (default 120)')
-    parser.add_argument('--quiet', action='store_true', help='no progress bars')
+    parser.add_argument('--quiet', action='store_true',
+                        help='no progress bars (none either when stderr is not a terminal)')
     return parser
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import pathlib
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,10 +26,15 @@ __all__ = ['plot_compare_shoulders', 'plot_coupling', 'plot_mode_coverage', 'plo
 _DPI = 110
 
 
-def _figure(rows: int, height: float = 2.6, width: float = 9.0) -> tuple[Figure, list[Axes]]:
+def _figure(rows: int, height: float = 2.6, width: float = 9.0, sharey: bool = False,
+            ) -> tuple[Figure, list[Axes]]:
+    """``rows`` panels one above the other sharing the time axis (and the y axis if
+    ``sharey``), each ``height`` inches high, on an Agg canvas (``legend_above`` measures)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     fig = Figure(figsize=(width, 0.6 + height * rows), layout='constrained')
-    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, sharex=True, sharey=sharey, squeeze=False)[:, 0]
     return fig, list(axes)
 
 
@@ -40,13 +45,26 @@ def _save(fig: Figure, path: str | pathlib.Path) -> pathlib.Path:
     return path
 
 
-def legend_above(ax: Axes, ncol: int = 4) -> None:
-    """The legend of ``ax`` in a row above it, right-aligned, off the data (none without a
-    labelled line, e.g. a run ended at its first instant)."""
-    if not ax.get_legend_handles_labels()[0]:
-        return
-    ax.legend(loc='lower right', bbox_to_anchor=(1.0, 0.99), ncol=ncol, fontsize=7.5,
-              frameon=False, borderaxespad=0.0, handlelength=2.2)
+def legend_above(ax: Axes, ncol: int = 4, title: str = '', **title_style: Any) -> None:
+    """The legend of ``ax`` just above it, right-aligned, off the data, in rows of ``ncol``
+    entries (fewer if the rows would be wider than the axes; no legend without a labelled line,
+    e.g. a run ended at its first instant), and ``title`` (``Axes.set_title`` with
+    ``title_style``) above the legend, however many rows it has. Call it once every labelled
+    line is drawn; the figure needs an Agg canvas (it measures the legend)."""
+    fig = ax.get_figure()
+    renderer = fig.canvas.get_renderer()
+    size, gap = 7.5, 0.2  # the legend's font [pt]; its gap to the axes [font sizes]
+    room = 0.0  # [pt] the legend takes above the axes
+    for columns in range(min(ncol, len(ax.get_legend_handles_labels()[0])), 0, -1):
+        legend = ax.legend(loc='lower right', bbox_to_anchor=(1.0, 1.0), ncol=columns,
+                           fontsize=size, frameon=False, borderaxespad=gap, handlelength=2.2)
+        box = legend.get_window_extent(renderer)  # pixels
+        room = box.height * 72.0 / fig.dpi + gap * size
+        if box.width <= ax.get_window_extent(renderer).width:
+            break
+    if title:
+        from matplotlib import rcParams
+        ax.set_title(title, pad=rcParams['axes.titlepad'] + room, **title_style)
 
 
 def clip_to_bulk(ax: Axes, series: Sequence[np.ndarray], percentile: float = 2.0,
@@ -85,23 +103,24 @@ def _mark_steps(ax: Axes, case: CaseResult, legend: bool = True) -> None:
         ax.axvline(fourth, color='k', lw=1.2, ls='--', label='4th step' if legend else None)
 
 
-def _shoulder_lines(ax: Axes, case: CaseResult, lw: float, label: str = '') -> None:
-    """q11 (right) and q14 (left shoulder) [deg] against time, the steps marked."""
+def _shoulder_lines(ax: Axes, case: CaseResult, lw: float, title: str, label: str = '',
+                    **title_style: Any) -> None:
+    """q11 (right) and q14 (left shoulder) [deg] against time, the steps marked, the legend
+    and ``title`` above."""
     for joint, colour, side in ((11, 'tab:red', 'right'), (14, 'tab:blue', 'left')):
         ax.plot(case.kept.t, np.degrees(case.kept.q[:, joint]), color=colour, lw=lw,
                 label=f'q{joint} {side}{label}')
     _mark_steps(ax, case)
     ax.grid(True, alpha=0.3)
-    legend_above(ax)
+    legend_above(ax, title=title, **title_style)
 
 
 def plot_shoulders(case: CaseResult, path: str | pathlib.Path, title: str | None = None,
                    ) -> pathlib.Path:
     """Figs. 5/6: q11 (right) and q14 (left shoulder) against time [deg]."""
     fig, (ax,) = _figure(1, height=3.4)
-    _shoulder_lines(ax, case, 1.3, ' shoulder')
+    _shoulder_lines(ax, case, 1.3, title or f'{case.label}: shoulder angles', ' shoulder')
     arms = case.arms
-    ax.set_title(title or f'{case.label}: shoulder angles')
     ax.set_xlabel('time [s]')
     ax.set_ylabel('joint angle [deg]')
     ax.text(0.01, 0.02, f'from {"step 4" if arms.window_from_step is not None else "start"}: '
@@ -114,12 +133,12 @@ def plot_shoulders(case: CaseResult, path: str | pathlib.Path, title: str | None
 
 def plot_compare_shoulders(cases: list[CaseResult], path: str | pathlib.Path,
                            ) -> pathlib.Path:
-    """Both cases' shoulder angles one above the other, on the same scales."""
-    fig, axes = _figure(len(cases), height=2.8)
+    """Both cases' shoulder angles one above the other, on the same time and angle scales."""
+    fig, axes = _figure(len(cases), height=2.8, sharey=True)
     for ax, case in zip(axes, cases, strict=True):
-        _shoulder_lines(ax, case, 1.2)
         yaw = 'with' if case.torso_yaw_input else 'without'
-        ax.set_title(f'{case.label} ({yaw} torso-yaw input τ8)', fontsize=10)
+        _shoulder_lines(ax, case, 1.2, f'{case.label} ({yaw} torso-yaw input τ8)',
+                        fontsize=10)
         ax.set_ylabel('angle [deg]')
     axes[-1].set_xlabel('time [s]')
     return _save(fig, path)
@@ -152,12 +171,11 @@ def plot_terms(case: CaseResult, path: str | pathlib.Path, title: str | None = N
     if np.any(np.nan_to_num(d.constraint) != 0.0):
         ax.plot(t, d.constraint, color='tab:olive', lw=1.0, label='swing constraint')
     ax.set_ylabel('torque [N m]')
-    ax.set_title(title or f'{case.label}: terms of eq. (11) at {d.name}'
-                 + (' (q̈ averaged over each sampling interval)' if averaged else ''))
     clip_to_bulk(ax, [d.m_total, d.gravity, d.coriolis, d.damping, d.tau, d.own_inertia],
                  note='; full values in the CSV')
     _mark_steps(ax, case)
-    legend_above(ax, ncol=6)
+    legend_above(ax, ncol=6, title=title or f'{case.label}: terms of eq. (11) at {d.name}'
+                 + (' (q̈ averaged over each sampling interval)' if averaged else ''))
 
     ax = axes[1]
     ax.plot(t, d.m_total - d.gravity, color='tab:purple', lw=1.3, label=f'M_total − g_{i}')
@@ -199,11 +217,11 @@ def plot_coupling(case: CaseResult, path: str | pathlib.Path, top: int = 6,
     clip_to_bulk(ax, [d.m_total] + [series[name] for name, _ in ranking],
                  note='; full values in the CSV')
     _mark_steps(ax, case)
-    ax.set_title(f'{case.label}: largest coupling terms at {d.name} (ranked by RMS)')
     ax.set_xlabel('time [s]')
     ax.set_ylabel('torque [N m]')
     ax.grid(True, alpha=0.3)
-    legend_above(ax, ncol=4)
+    legend_above(ax, ncol=4,
+                 title=f'{case.label}: largest coupling terms at {d.name} (ranked by RMS)')
     return _save(fig, path)
 
 

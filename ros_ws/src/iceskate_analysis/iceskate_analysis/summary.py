@@ -1,8 +1,9 @@
 """The picture of a run, ``summary.png``, from its trajectory and metrics (no bag, no ROS): head
-height and pitch against their targets, gait mode, shoulder angles and forward speed over time,
-the support exchanges marked. Long series are decimated (min/max per bucket) for drawing.
-``summary DIR`` draws it for a run that has none (the nodes run by hand write none); SIGINT,
-SIGTERM or SIGHUP end it with 128 + the signal's number and one line, the picture not written.
+forward position, height and pitch against their targets, gait mode, shoulder angles and
+forward speed over time, the support exchanges marked. Long series are decimated (min/max per
+bucket) for drawing. ``summary DIR`` draws it for a run that has none (the nodes run by hand
+write none); SIGINT, SIGTERM or SIGHUP end it with 128 + the signal's number and one line, the
+picture not written.
 """
 
 from __future__ import annotations
@@ -178,6 +179,7 @@ def _shoulders(path: pathlib.Path, chunk: int = 65536) -> np.ndarray:
 def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
 
     from iceskate_analysis.plots import clip_to_bulk, legend_above
     from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
@@ -186,27 +188,32 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     steps = a['step_index']
     exchanges = t[np.flatnonzero(np.diff(steps) != 0) + 1]
     rms = metrics.get('head_error_rms') or {}
-    fig = Figure(figsize=(10.0, 12.0))
+    height = 13.6  # inches; the two title lines take the top 0.7
+    fig = Figure(figsize=(10.0, height),
+                 layout=ConstrainedLayoutEngine(rect=(0.0, 0.0, 1.0, 1.0 - 0.7 / height)))
     FigureCanvasAgg(fig)
-    axes = fig.subplots(5, 1, sharex=True, gridspec_kw={'height_ratios': (1, 1, 1.35, 1, 1)})
-    fig.subplots_adjust(left=0.1, right=0.955, top=0.925, bottom=0.05, hspace=0.22)
+    axes = fig.subplots(6, 1, sharex=True,
+                        gridspec_kw={'height_ratios': (1, 1, 1, 1.35, 1, 1)})
     head, failure = _title(metrics, t)
-    fig.text(0.1, 0.982, head, fontsize=11, weight='bold', va='top')
-    fig.text(0.1, 0.960, failure, fontsize=9, va='top',
+    fig.text(0.015, 1.0 - 0.15 / height, head, fontsize=11, weight='bold', va='top')
+    fig.text(0.015, 1.0 - 0.4 / height, failure, fontsize=9, va='top',
              color='darkgreen' if metrics.get('failure') is None else 'firebrick')
 
-    _tracking(axes[0], t, psi[:, 1], psi_d[:, 1], 'target z_d', color='tab:blue', lw=1.1,
+    _tracking(axes[0], t, psi[:, 0], psi_d[:, 0], 'target y_d', color='tab:green', lw=1.1,
+              label='head y' + _rms(rms, 'y', 1e2, 'cm'))
+    axes[0].set_ylabel('head forward position\ny [m]')
+    _tracking(axes[1], t, psi[:, 1], psi_d[:, 1], 'target z_d', color='tab:blue', lw=1.1,
               label='head z' + _rms(rms, 'z', 1e3, 'mm'))
-    axes[0].set_ylabel('head height z [m]')
-    axes[0].ticklabel_format(axis='y', useOffset=False)
-    _tracking(axes[1], t, np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2]), 'target',
+    axes[1].set_ylabel('head height z [m]')
+    axes[1].ticklabel_format(axis='y', useOffset=False)
+    _tracking(axes[2], t, np.degrees(psi[:, 2]), np.degrees(psi_d[:, 2]), 'target',
               color='tab:purple', lw=1.0,
               label='head pitch' + _rms(rms, 'pitch', np.degrees(1.0), 'deg'))
-    axes[1].set_ylabel('head pitch [deg]')
+    axes[2].set_ylabel('head pitch [deg]')
 
-    _mode_panel(axes[2], t, a['mode'], a['side'], exchanges)
+    _mode_panel(axes[3], t, a['mode'], a['side'], exchanges)
 
-    ax = axes[3]
+    ax = axes[4]
     q11, q14 = np.degrees(a['shoulders']).T
     _line(ax, t, q11, color='tab:red', lw=1.4, label='q11 right shoulder')
     _line(ax, t, q14, color='tab:blue', lw=1.1, label='q14 left shoulder')
@@ -216,7 +223,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     ax.set_ylabel('shoulder angle [deg]')
     clip_to_bulk(ax, (q11, q14), **_DIVERGENCE)
 
-    ax = axes[4]
+    ax = axes[5]
     if t.size >= 2:
         _tracking(ax, t, np.gradient(psi[:, 0], t), np.gradient(psi_d[:, 0], t),
                   'target dy_d/dt', color='tab:green', lw=1.0, label='head dy/dt')
@@ -231,11 +238,11 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
         if exchanges.size:
             ax.vlines(exchanges, 0.0, 1.0, transform=ax.get_xaxis_transform(), colors='0.65',
                       lw=0.6, linestyles=':', zorder=0)
-        if ax is not axes[2]:
+        if ax is not axes[3]:  # the mode panel has its own grid, legend and key
             ax.grid(True, axis='y', color='0.9', lw=0.6)
+            legend_above(ax)
         ax.tick_params(labelsize=8)
         ax.yaxis.label.set_size(9)
-        legend_above(ax)
     axes[-1].set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1e-3)
     fig.align_ylabels(axes)
     fig.savefig(path, dpi=_DPI)
@@ -298,7 +305,9 @@ def _tracking(ax: Axes, t: np.ndarray, y: np.ndarray, target: np.ndarray, target
 def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
                 exchanges: np.ndarray) -> None:
     """Gait mode as a step plot from its change points; left-support spans shaded, exchanges
-    marked by triangles along the top; the swing-foot state of each band of 4 on the right."""
+    marked by triangles along the top; the swing-foot state of each band of 4 on the right;
+    the legend above, the key of the states above it."""
+    from iceskate_analysis.plots import legend_above
     end = t[-1] + (t[-1] - t[-2] if t.size >= 2 else 1e-3)
     changes = np.flatnonzero(np.diff(mode) != 0) + 1
     starts = np.concatenate([[0], changes])
@@ -322,7 +331,7 @@ def _mode_panel(ax: Axes, t: np.ndarray, mode: np.ndarray, side: np.ndarray,
         ax.text(1.006, m + 1.5, code, transform=ax.get_yaxis_transform(), fontsize=7.5,
                 color='0.35', va='center', ha='left')
     ax.set_ylabel('gait mode [no. 1-20]\n(labelled: visited)')
-    ax.set_title(_SWING_KEY, loc='left', fontsize=7, color='0.35')
+    legend_above(ax, title=_SWING_KEY, loc='left', fontsize=7, color='0.35')
 
 
 if __name__ == '__main__':

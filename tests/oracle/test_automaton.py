@@ -1,5 +1,5 @@
 """The oracle's hybrid gait automaton (docs/model.md §5-§7): re-rooting, impacts, the ice rule,
-the guards.
+the guard values (the shipped guard table itself: tests/iceskate_sim/test_hybrid.py).
 
 Expectations are derived here from docs/model.md, not from the code under test: link poses and
 velocities come from Pinocchio on the support-rooted models, constraint rows are built from the
@@ -17,7 +17,7 @@ import pytest
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import ContactState, DynamicsResult
-from iceskate_sim.model.modes import MODES, get_mode
+from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import JOINT_LIMITS, LINK_NAMES, N_COORDINATES, Q1, Y0
 from iceskate_sim.physics.hybrid import GUARDS, FrictionModel, HybridState, guards_of
 from oracle.automaton import (
@@ -44,10 +44,6 @@ NEW_SUPPORT = {'Fp': 'F-S', 'Fs': 'F-G', 'Hp': 'R-S', 'Hs': 'R-G'}
 # swing constraints of each swing code (docs/model.md §3.2), in the order (C_hz, C_hy, C_fr)
 SWING_ROWS = {'A': (), 'Hs': ('hz',), 'Hp': ('hz', 'hy'), 'Fs': ('hz', 'fr'),
               'Fp': ('hz', 'hy', 'fr')}
-# Table 2 rows by number: q1 present for R-S/R-G, y0 for F-G/R-G; swing code by block of four
-Q1_MODES = {2, 4, 6, 8, 10, 12, 14, 16, 18, 20}
-Y0_MODES = {3, 4, 7, 8, 11, 12, 15, 16, 19, 20}
-SWING_OF_MODE = {n: ('A', 'Hs', 'Hp', 'Fs', 'Fp')[(n - 1) // 4] for n in range(1, 21)}
 KNEE_BENT = np.array([-0.05, 0.1, -0.05, 0.05, -0.1, 0.05])  # q2..q7, docs/model.md §12
 
 
@@ -579,39 +575,6 @@ def test_ice_rule_with_real_reactions(robot, dynamics):
     assert seen == {(True, False), (False, True), (False, False)}  # all three cases occur
 
 
-# ----------------------------------------------------------------------- guards table
-EXPECTED_APPLIES = {
-    'E1': lambda n: n not in Q1_MODES, 'E2': lambda n: n not in Q1_MODES,
-    'E3': lambda n: n in Q1_MODES, 'E4': lambda n: n not in Y0_MODES,
-    'E5': lambda n: n in Y0_MODES, 'E6': lambda n: True,
-    'S1': lambda n: SWING_OF_MODE[n] == 'A', 'S7': lambda n: SWING_OF_MODE[n] == 'A',
-    'S2': lambda n: SWING_OF_MODE[n] in ('Hs', 'Fs'),
-    'S3': lambda n: SWING_OF_MODE[n] in ('Hp', 'Fp'),
-    'S4': lambda n: SWING_OF_MODE[n] in ('Hs', 'Hp'),
-    'S5': lambda n: SWING_OF_MODE[n] in ('Fs', 'Fp'),
-    'S6': lambda n: SWING_OF_MODE[n] != 'A',
-}
-
-
-def test_every_guard_of_the_spec_exists_once():
-    names = [g.name for g in GUARDS]
-    assert sorted(names) == sorted(EXPECTED_APPLIES)
-    assert len(set(names)) == len(names)
-
-
-@pytest.mark.parametrize('number', sorted(MODES))
-def test_guards_apply_to_the_modes_of_the_spec(number):
-    mode = get_mode(number)
-    expected = {name for name, applies in EXPECTED_APPLIES.items() if applies(number)}
-    assert {g.name for g in guards_of(mode)} == expected
-    for g in GUARDS:
-        assert g.applies(mode) == (g.name in expected), (g.name, number)
-    # the table's own codes agree with Table 2 as written above
-    assert mode.q1_active == (number in Q1_MODES)
-    assert mode.y0_active == (number in Y0_MODES)
-    assert mode.swing == SWING_OF_MODE[number]
-
-
 def _wrench(m_x: float) -> np.ndarray:
     w = np.zeros(6)
     w[3] = m_x
@@ -668,3 +631,10 @@ def test_guard_signs(name, mode, contact, changes, fields, due):
     assert (value > 0.0) == due, (name, value)
     position = [g.name for g in guards_of(state.mode)].index(name)
     assert guard_values(state, result, ICE)[position] == value
+
+
+@pytest.mark.parametrize(('support', 'swing', 'named'), [
+    ('F-X', 'A', "'F-X'"), ('F-S', 'Hx', "'Hx'"), ('A', 'F-S', "'A'"), ('f-s', 'a', "'f-s'")])
+def test_mode_for_rejects_unknown_codes_naming_them(support, swing, named):
+    with pytest.raises(SimulationError, match=named):
+        mode_for(support, swing)
