@@ -1,8 +1,9 @@
 """The pages in a real browser: Debian's headless chromium, driven by playwright, loads the
 replay page and the live page of ``run_scene --view`` from 127.0.0.1. In its screenshots the
 robot's pixels (the red right side, the blue left side) are there, they move when the slider
-moves and as the live run advances, two runs show two robots, and the page asks nothing of any
-other machine. The set-up installs chromium where it can (root with apt-get); without it these
+moves and as the live run advances, two runs show two robots (the page's own camera), the live
+view keeps the robot in its middle as it goes, and the page asks nothing of any other
+machine. The set-up installs chromium where it can (root with apt-get); without it these
 tests skip, unless ICESKATE_REQUIRE_BROWSER=1 (CI), where they fail."""
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ ONLY_THE_CANVAS = '* { visibility: hidden !important; } canvas { visibility: vis
 ROBOT_PIXELS = 150
 #: Deadline [s] for a robot to move on the screen (a loaded machine draws late).
 MOVE_S = 30
+#: Wall time [s] the live run goes on before the view is checked to have followed it.
+FOLLOWED_S = 10
 
 
 @pytest.fixture(scope='module')
@@ -101,10 +104,7 @@ def test_the_replay_page_shows_two_runs_that_move_with_the_slider(browser, skate
     try:
         replay = Replay(RunPage(server, BodyPose(load_robot()), ['one', 'two']),
                         [load_run(skate_run), load_run(skate_run)])
-        tab = Tab(browser, url_of(server))
-        (client,) = server.get_clients().values()
-        client.camera.position = (0.6, -3.0, 1.0)  # from the front: side by side
-        client.camera.look_at = (0.6, 0.3, 0.8)
+        tab = Tab(browser, url_of(server))  # the page's own camera: no robot hides the other
         before, deadline = _robot(tab.shot()), time.monotonic() + FIRST_SHOT_S
         while before.sum() < 2 * ROBOT_PIXELS and time.monotonic() < deadline:  # a busy machine
             time.sleep(0.5)  # draws the moved camera late: wait for it, to a deadline
@@ -159,6 +159,12 @@ def test_the_live_page_follows_the_run_and_ctrl_c_ends_it(browser, tmp_path, tra
             else:
                 moved = (first ^ shot).sum()
             time.sleep(1.0)
+        time.sleep(FOLLOWED_S)  # far along the ice: the view follows it, the robot in the middle
+        rows, columns = np.nonzero(_robot(tab.shot()))
+        tab.page.screenshot(path=tmp_path / 'followed.png')
+        middle = np.array([rows.mean() / VIEWPORT['height'], columns.mean() / VIEWPORT['width']])
+        assert len(rows) >= ROBOT_PIXELS and np.all(np.abs(middle - 0.5) < 0.15), (
+            f'the robot is at {middle} of the view (0.5: its middle), in {tmp_path}')
         assert tab.local_only(), tab.requests
         run.send_signal(signal.SIGINT)  # with the page open
         _, err = run.communicate(timeout=60)

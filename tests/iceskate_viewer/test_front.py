@@ -224,3 +224,33 @@ def test_ctrl_c_ends_view_with_a_page_connected(skate_run):
     assert time.monotonic() - started < 5.0
     assert view.returncode == 0 and err == ''
     assert codes == [1001]
+
+
+@pytest.mark.timeout(120)
+def test_a_connection_that_is_not_http_leaves_no_traceback(skate_run):
+    """A port probe (connect and close, or a line that is not HTTP, as ``printf 'hello\\n' | nc``
+    sends) is closed without an answer and without a word on ``view``'s stderr; the page is
+    still served."""
+    import socket
+    view = subprocess.Popen([sys.executable, '-m', 'iceskate_viewer.replay', str(skate_run),
+                             '--port', '0'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        url = view.stdout.readline().split()[1]
+        address = ('127.0.0.1', int(url.rsplit(':', 1)[1]))
+        socket.create_connection(address, timeout=DEADLINE_S).close()
+        for probe in (b'hello\n', b'\x16\x03\x01\x00\x05hello', b'GET / HTTP/1.1\r\nHost: x'):
+            with socket.create_connection(address, timeout=DEADLINE_S) as sock:
+                sock.sendall(probe)
+                sock.shutdown(socket.SHUT_WR)
+                assert b'viser' not in sock.recv(65536)
+        with urllib.request.urlopen(url + '/', timeout=DEADLINE_S) as answer:
+            assert answer.status == 200
+        time.sleep(1.0)  # anything the probes made it say, said
+        view.send_signal(signal.SIGINT)
+        _, err = view.communicate(timeout=3 * DEADLINE_S)
+    finally:
+        if view.poll() is None:
+            view.kill()
+            view.communicate()
+    assert view.returncode == 0 and 'Traceback' not in err and err == ''

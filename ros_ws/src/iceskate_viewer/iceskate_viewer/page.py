@@ -30,8 +30,16 @@ ICE_HALF_WIDTH, ICE_AHEAD, ICE_BEHIND = 3.0, 40.0, 5.0
 ICE, MARK, SUPPORT, TARGET = (196, 222, 240), (115, 120, 125), (255, 196, 0), (40, 170, 80)
 #: Least move [m] of a following camera (smaller ones wait for the next frame).
 FOLLOW_STEP = 0.005
-#: How far ahead of the robots' heads (along y) the cameras look [m].
-LOOK_AHEAD = 0.6
+#: The default camera: the height [m] it looks at (mid-body), its bearing from behind the
+#: robots (from -y, turned towards +x) and its elevation [rad], its least distance [m] from
+#: what it looks at, and the narrowest window (width / height) it frames every run in.
+VIEW_HEIGHT, VIEW_BEARING, VIEW_ELEVATION = 0.8, np.radians(30.0), np.radians(15.0)
+VIEW_DISTANCE, VIEW_ASPECT = 3.5, 4.0 / 3.0
+#: Height [m] and width [m] of what the default camera frames of a robot (with a margin).
+ROBOT_HEIGHT, ROBOT_WIDTH = 2.0, 1.6
+#: Largest difference [m] between a browser's reported camera and the page's view (up to a
+#: move along y) that shows the browser took the page's view.
+SAME_VIEW = 1e-3
 
 
 #: Unit meshes of the URDF's shapes (a box of side 1, a sphere and a cylinder along z of
@@ -141,9 +149,12 @@ def _loopback(host: str) -> bool:
 class RunPage:
     """The scene of ``names`` runs (one robot each, ``RUN_SPACING`` apart along x) on ``server``.
 
-    ``show(k, frame)`` places run ``k``'s robot and overlays; safe from any thread. While the
-    page's **Follow** box is on, every browser's camera moves along y to look ``LOOK_AHEAD``
-    ahead of the robots (their heads' mean y), keeping the angle and distance its user chose.
+    ``show(k, frame)`` places run ``k``'s robot and overlays; safe from any thread. The page's
+    camera (``page_camera``) sees every robot from behind and to the side. While the page's
+    **Follow** box is on, every browser's camera target moves along y to the robots (their
+    heads' mean y) and its position by the same offset, keeping the angle and distance its
+    user chose; until a browser reports the page's view (it reports its own default camera
+    first), it is given the page's.
     """
 
     def __init__(self, server: viser.ViserServer, body: BodyPose, names: Sequence[str]) -> None:
@@ -164,9 +175,15 @@ class RunPage:
             [[[left, y, 0.002], [right, y, 0.002]] for y in metres]), MARK, thickness=0.01)
         for metre in metres[metres >= 0].astype(int):
             scene.add_label(f'/marks/{metre}m', f'{metre} m', position=(0.45, metre, 0.01))
-        server.initial_camera.position = (centre[0] + 3.2, -0.8, 1.3)
-        server.initial_camera.look_at = (centre[0], LOOK_AHEAD, 0.75)
-        self._bodies, self._support, self._target, self._names = [], [], [], []
+        position, look_at = page_camera(len(names), server.initial_camera.fov)
+        server.initial_camera.position, server.initial_camera.look_at = position, look_at
+        #: (target, position - target) of the page's camera and of each browser's that took it
+        self._page_view = (look_at, position - look_at)
+        self._views: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        server.on_client_connect(self._client_connected)
+        server.on_client_disconnect(lambda client: self._views.pop(client.client_id, None))
+        self.names = tuple(names)
+        self._bodies, self._support, self._target, self._labels = [], [], [], []
         for k, name in enumerate(names):
             root = f'/run{k}'
             scene.add_frame(root, show_axes=False, position=(k * RUN_SPACING, 0.0, 0.0))
@@ -175,16 +192,17 @@ class RunPage:
                 f'{root}/support', SUPPORT, (0.14, SOLE_TOE_Y - SOLE_HEEL_Y + 0.04, 0.004),
                 opacity=0.8, cast_shadow=False))
             self._target.append(scene.add_icosphere(f'{root}/head_target', 0.035, TARGET))
-            self._names.append(scene.add_label(f'{root}/name', name))
-        self._text = server.gui.add_markdown('')
+            self._labels.append(scene.add_label(f'{root}/name', name))
+        self.status = server.gui.add_markdown('')  # a line per run
         self._texts = [''] * len(names)
         self._follow = server.gui.add_checkbox('Follow the robot', True)
         self._head_y = [0.0] * len(names)  # of each run's last frame [m]
 
     def show(self, k: int, frame: ViewFrame) -> None:
         """Place run ``k``'s robot at ``frame`` (its name above its head), highlight its
-        support sole, put its head target (at the head's x) and write its time, mode and
-        step."""
+        support sole, put its head target (at the head's x) and write its name, time, mode and
+        step (the n-th support phase is step n: ``step_index + 1``, as ``coupling_analysis
+        --animate`` numbers them)."""
         body = self.body
         body.place(body.configuration(frame))
         foot = body.frame_placement(f'{frame.side}_foot')
@@ -192,32 +210,69 @@ class RunPage:
         sole = foot * pin.SE3(np.eye(3), np.array([0.0, (SOLE_TOE_Y + SOLE_HEEL_Y) / 2,
                                                       SOLE_Z - 0.004]))
         mode = MODES[frame.mode]
-        self._texts[k] = (f'**t = {frame.t:6.3f} s** · mode {frame.mode} ({mode.support}/'
-                          f'{mode.swing}) · support {frame.side} ({frame.pivot}) · '
-                          f'step {frame.step_index}')
+        self._texts[k] = (f'**{self.names[k]}** · **t = {frame.t:6.3f} s** · mode {frame.mode} '
+                          f'({mode.support}/{mode.swing}) · support {frame.side} '
+                          f'({frame.pivot}) · step {frame.step_index + 1}')
         with self.server.atomic():
             self._bodies[k].place(body.geometry.oMg)
-            self._names[k].position = head.translation + (0.0, 0.0, 0.12)
+            self._labels[k].position = head.translation + (0.0, 0.0, 0.12)
             self._support[k].position = sole.translation
             self._support[k].wxyz = _wxyz(sole.rotation)
             target = frame.head_target
             self._target[k].visible = bool(np.all(np.isfinite(target)))
             if self._target[k].visible:
                 self._target[k].position = (head.translation[0], target[0], target[1])
-            self._text.content = '  \n'.join(self._texts)
+            self.status.content = '  \n'.join(self._texts)
         self._head_y[k] = float(head.translation[1])
         if self._follow.value:
             self._follow_robots(float(np.mean(self._head_y)))
 
     def _follow_robots(self, y: float) -> None:
-        """Move each client's camera along y to look ``LOOK_AHEAD`` ahead of ``y`` [m] (its
-        orientation and distance kept; from where it looks now, so a late report of the
-        browser's own camera is caught up with at the next frame)."""
+        """Move each browser's camera target to ``y`` [m] along y (its height and x kept) and
+        its position by the same offset (from the target as its user chose it, or as the
+        page's camera has it while the browser has not reported the page's view)."""
         for client in self.server.get_clients().values():
-            with contextlib.suppress(AssertionError):  # its camera not reported yet
-                shift = y + LOOK_AHEAD - float(client.camera.look_at[1])
-                if abs(shift) >= FOLLOW_STEP:
-                    client.camera.position = client.camera.position + np.array([0, shift, 0])
+            look_at, offset = self._views.get(client.client_id, self._page_view)
+            target = np.array([look_at[0], y, look_at[2]])
+            camera = client.camera
+            if (np.allclose(camera.look_at, target, rtol=0.0, atol=FOLLOW_STEP)
+                    and np.allclose(camera.position, target + offset, rtol=0.0,
+                                    atol=FOLLOW_STEP)):
+                continue
+            with camera.client.atomic():
+                camera.position = target + offset
+                camera.look_at = target
+
+    async def _client_connected(self, client: viser.ClientHandle) -> None:
+        """A browser connected: its camera reports (the first one included) are watched."""
+        client.camera.on_update(self._camera_reported)
+
+    async def _camera_reported(self, camera: viser.CameraHandle) -> None:
+        """A browser reported its camera (in order, on the server's loop): once it has shown
+        the page's view, its target and offset are followed from."""
+        look_at, offset = np.array(camera.look_at), camera.position - camera.look_at
+        client_id = camera.client.client_id
+        if client_id in self._views or np.allclose(offset, self._page_view[1], rtol=0.0,
+                                                   atol=SAME_VIEW):
+            self._views[client_id] = (look_at, offset)
+
+
+def page_camera(runs: int, fov: float) -> tuple[np.ndarray, np.ndarray]:
+    """The page's camera (position, target) [m] for ``runs`` robots side by side at the start
+    (``RUN_SPACING`` apart along x): from behind and ``VIEW_BEARING`` to the side, so that no
+    robot hides another, at least ``VIEW_DISTANCE`` away and far enough for a window of
+    ``VIEW_ASPECT`` at the vertical field of view ``fov`` [rad] to frame them all."""
+    spread = RUN_SPACING * (runs - 1) / 2  # from the middle to the outer runs
+    look_at = np.array([spread, 0.0, VIEW_HEIGHT])
+    half = np.tan(fov / 2)
+    across = spread * np.cos(VIEW_BEARING) + ROBOT_WIDTH / 2  # the nearest run: its far side,
+    nearer = spread * np.sin(VIEW_BEARING)  # from the view's middle, and the camera
+    distance = max(VIEW_DISTANCE, ROBOT_HEIGHT / 2 / half,
+                   across / (half * VIEW_ASPECT) + nearer)
+    direction = np.array([np.sin(VIEW_BEARING) * np.cos(VIEW_ELEVATION),
+                          -np.cos(VIEW_BEARING) * np.cos(VIEW_ELEVATION),
+                          np.sin(VIEW_ELEVATION)])
+    return look_at + distance * direction, look_at
 
 
 class _Body:
