@@ -3,9 +3,13 @@
 Runs a base scene (default ``skate``) for a short time with ``balance`` and
 ``weight_transfer`` ('com' rule) parameters drawn from ``SPACE`` and scores each run by its
 *clean* support exchanges (at least 0.2 s apart, so that exchange chatter does not count),
-plus twice the fraction of the run survived, plus 3 when it did not fall. Two methods:
-``random`` (uniform draws) and ``cma`` (CMA-ES on the box scaled to [0, 1], started from the
-base scene's values). Results go to a JSON lines file, best at the end. The shipped walk
+plus twice the fraction of the run survived, plus 3 when it ran its whole duration (neither
+fell nor failed). Two methods: ``random`` (uniform draws) and ``cma`` (CMA-ES on the box scaled
+to [0, 1], started from the base scene's values). The figures of a run it scores come from its
+``metrics.json``, read by their names in the metric registry
+(``iceskate_sim.run.metrics.METRICS``; the arm-swing ratio is ``arm_swing_ratio``, with its
+fall rule); what it counts itself are the support exchanges, the step periods and the ice
+cycle, from ``events.json``. Results go to a JSON lines file, best at the end. The shipped walk
 values are the best point of a random search (72 runs, 5 s each, with a throw-away prototype
 of this script whose random draws differ), rounded to 3 digits and checked over 15 s.
 
@@ -21,9 +25,11 @@ step period's distance to ``CADENCE``, its spread, its head y error beyond ``HEA
 ``--height-weight`` times its head height error beyond ``HEAD_Z_RMS`` (each the larger of the
 nominal case's and its twin's on the same friction); the visual-lifting target then moves at
 the gait's speed (v_d = balance.speed). About 2 s ('robust') to 8 s ('phases') a point with
-``--jobs 2``. ``--start LOG`` starts from the best point of an earlier
-search's log (``--start-run N``: from its run N), ``--set block.key=value`` from a given value;
-``--check`` runs the base scene (with ``--start``/``--set``: that point) over ``CHECKS``, cases
+``--jobs 2``. ``--start LOG`` starts from the best point of an earlier search's log
+(``--start-run N``: from its run N); ``--set KEY=VALUE`` sets a scene key as ``run_scene --set``
+does (dotted, VALUE in YAML, e.g. ``inputs.gait_manager.balance.drive=37``), after ``--start``,
+so a search starts from that value of the box; ``--check`` runs the base scene (with
+``--start``/``--set``: that point) over ``CHECKS``, cases
 the search did not see, and prints one JSON line per case. ``--cycle-weight W`` adds the paper's
 ice cycle to the robust objective: W times the nominal case's shortfall of exchanges from a flat
 front sole (``FLAT_SHARE`` of the clean exchanges from the 4th on, from a mode of
@@ -58,7 +64,7 @@ adds the no-yaw twin on two low frictions:
     git show 8559d86:ros_ws/src/iceskate_bringup/scenes/skate.yaml > /tmp/start.yaml
     python scripts/tune_gait.py --scene /tmp/start.yaml --method cma --objective robust \
         --duration 12 --runs 300 --jobs 2 --sigma 0.06 --seed 7 \
-        --set balance.feedback_limit=10 --out runs/bounded.jsonl
+        --set inputs.gait_manager.balance.feedback_limit=10 --out runs/bounded.jsonl
     python scripts/tune_gait.py --scene /tmp/start.yaml --method cma --objective robust \
         --scenarios pushes --duration 12 --runs 126 --jobs 2 --sigma 0.04 --seed 11 \
         --start runs/bounded.jsonl --start-run 211 --out runs/pushes.jsonl
@@ -88,8 +94,8 @@ nothing better:
 
     python scripts/tune_gait.py --scene skate --method cma --objective robust \
         --scenarios phases --height-weight 3 --cycle-weight 10 --duration 13.5 --runs 154 \
-        --jobs 2 --sigma 0.05 --seed 41 --set weight_transfer.heel_share=0.35 \
-        --out runs/cycle.jsonl
+        --jobs 2 --sigma 0.05 --seed 41 \
+        --set inputs.gait_manager.weight_transfer.heel_share=0.35 --out runs/cycle.jsonl
     python scripts/tune_gait.py --scene skate --method cma --objective robust \
         --scenarios phases --height-weight 3 --cycle-weight 10 --arm-weight 10 \
         --cadence-weight 5 --duration 13.5 --runs 196 --jobs 2 --sigma 0.03 --seed 43 \
@@ -135,16 +141,17 @@ import multiprocessing
 import pathlib
 import tempfile
 import time
+from typing import Any
 
 import cma
 import numpy as np
 
 from gait_manager.parameters import GaitManagerParameters
-from iceskate_bringup.runner import run
+from iceskate_bringup.runner import run, set_options
 from iceskate_bringup.scene import parse_scene
 from iceskate_sim.errors import SimulationError
-from iceskate_sim.run.metrics import arm_swing_ratio
-from iceskate_sim.run.scene import scene_raw
+from iceskate_sim.run.metrics import METRICS, arm_swing_ratio, completed, metric_value
+from iceskate_sim.run.scene import scene_raw, set_keys
 
 # block.key -> (low, high)
 SPACE = {
@@ -235,6 +242,12 @@ ARM_SWING_RATIO = 3.0  # the arm-swing ratio sought (``--arm-weight``; the paper
 LOW, HIGH = (np.array([bounds[i] for bounds in SPACE.values()]) for i in (0, 1))
 
 
+def read(metrics: dict, name: str) -> Any:
+    """Metric ``name`` of a run's metrics by its registry name (``METRICS``; KeyError for a
+    name that is none), None where the run has none."""
+    return metric_value(metrics, METRICS[name].name)
+
+
 def point_of(unit: np.ndarray) -> dict[str, float]:
     """The parameters at ``unit`` (the box scaled to [0, 1])."""
     values = LOW + np.clip(unit, 0.0, 1.0) * (HIGH - LOW)
@@ -272,25 +285,24 @@ def score(metrics: dict, events: list[dict], duration: float,
     """(score, clean exchanges): see the module docstring; clean exchanges beyond
     ``max_rate`` per second count -1/2 each instead of +1 (a cadence bound)."""
     clean = len(exchange_times(events))
-    survived = metrics.get('sim_time_s', 0.0) / duration
+    survived = (read(metrics, 'sim_time_s') or 0.0) / duration
     excess = max(clean - max_rate * duration, 0.0)
-    return (clean - 1.5 * excess + 2.0 * survived + (0.0 if metrics.get('fell', True) else 3.0),
-            clean)
+    return clean - 1.5 * excess + 2.0 * survived + (3.0 if completed(metrics) else 0.0), clean
 
 
 def arm_swing_score(with_yaw: dict, without_yaw: dict, events: list[dict],
                     duration: float, max_rate: float = float('inf')) -> float:
     """Walking score of the run with yaw, its clean exchanges counted up to the acceptance
-    rate (12 in 15 s), plus, when both runs stood: the arm-swing ratio (up to 3), plus twice
-    the anti-phase -corr(q11, q14) with yaw."""
+    rate (12 in 15 s), plus, where the two runs have an ``arm_swing_ratio``: that ratio (up
+    to 3), plus twice the anti-phase -corr(q11, q14) with yaw (``arm_swing.corr_q11_q14``)."""
     walking, clean = score(with_yaw, events, duration, max_rate)
     value = walking - min(clean, max_rate * duration) + 3.0 * min(
         clean / (12.0 * duration / 15.0), 1.0)
-    swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
-    if with_yaw.get('fell', True) or without_yaw.get('fell', True) or not swing or not reference:
-        return value  # fell, or fewer than 4 steps: no arm swing to score
-    ratio = arm_swing_ratio(with_yaw, without_yaw) or 0.0
-    return value + min(ratio, 3.0) + 2.0 * max(-swing['corr_q11_q14'], 0.0)
+    ratio = arm_swing_ratio(with_yaw, without_yaw)
+    if ratio is None:  # fell, failed, fewer than 4 steps, or no swing without yaw
+        return value
+    corr = read(with_yaw, 'arm_swing.corr_q11_q14')
+    return value + min(ratio, 3.0) + 2.0 * (max(-corr, 0.0) if np.isfinite(corr) else 0.0)
 
 
 def clean_exchanges(events: list[dict]) -> list[dict]:
@@ -373,10 +385,11 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
             case = {'mu': case['mu'], 'push': (nominal_exchanges[exchange] - lead, force)}
         metrics, events = run_metrics(scenario(raw, case))
         exchanges = exchange_times(events)
-        until = min(metrics.get('sim_time_s', 0.0), (exchanges[-1] if exchanges else 0.0) + STALL)
+        sim_time = read(metrics, 'sim_time_s')
+        until = min(sim_time or 0.0, (exchanges[-1] if exchanges else 0.0) + STALL)
         walked.append(until / duration)
-        details[str(case)] = {'sim_time_s': metrics.get('sim_time_s'), 'walked_s': until,
-                              'failure': metrics.get('failure')}
+        details[str(case)] = {'sim_time_s': sim_time, 'walked_s': until,
+                              'failure': read(metrics, 'failure')}
         if k == 0:
             nominal, nominal_exchanges = (metrics, events), exchanges
             periods = np.diff(exchanges[3:])
@@ -384,8 +397,9 @@ def robust_score(raw: dict, duration: float, cases: tuple[dict, ...], height_wei
         if case == {**cases[0], 'yaw': False}:
             twin = metrics
         if k == 0 or case == {**cases[0], 'yaw': False}:  # the nominal case, its no-yaw twin
-            errors = metrics.get('head_error_rms') or {}
-            head = {axis: max(head[axis], errors.get(axis, float('inf'))) for axis in head}
+            errors = {axis: read(metrics, f'head_error_rms.{axis}') for axis in head}
+            head = {axis: max(head[axis], float('inf') if error is None else error)
+                    for axis, error in errors.items()}
     if periods.size >= 2:
         mean = float(periods.mean())
         miss = max(CADENCE[0] - mean, mean - CADENCE[1], 0.0) / 0.1
@@ -418,21 +432,22 @@ def check(raw: dict, duration: float) -> list[dict]:
         exchanges = exchange_times(events)
         periods = np.diff(exchanges[3:])
         rows.append({'case': str(case), 'duration_s': edited['duration'],
-                     'sim_time_s': metrics.get('sim_time_s'), 'fell': metrics.get('fell', True),
-                     'failure': metrics.get('failure'), 'steps': metrics.get('steps'),
+                     **{name: read(metrics, name) for name in ('sim_time_s', 'fell', 'failure',
+                                                               'steps')},
                      'step_period_s': float(periods.mean()) if periods.size else None,
-                     'head_error_rms': metrics.get('head_error_rms')})
+                     'head_error_rms': read(metrics, 'head_error_rms')})
     return rows
 
 
 def run_metrics(raw: dict) -> tuple[dict, list[dict]]:
-    """(metrics, events) of the scene ``raw``; a SimulationError counts as a run of 0 s."""
+    """(metrics, events) of the scene ``raw``; a SimulationError counts as a run of 0 s that
+    did not fall (its ``failure`` says why)."""
     with tempfile.TemporaryDirectory() as tmp:
         try:
             metrics = run(parse_scene(raw), pathlib.Path(tmp), progress=False, picture=False)
             return metrics, json.loads((pathlib.Path(tmp) / 'events.json').read_text())
         except SimulationError as exc:
-            return {'steps': 0, 'failure': str(exc)}, []
+            return {'sim_time_s': 0.0, 'steps': 0, 'fell': False, 'failure': str(exc)}, []
 
 
 def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases: str,
@@ -446,10 +461,10 @@ def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases
     else:
         metrics, events = run_metrics(raw)
     value, clean = score(metrics, events, duration, max_rate)
-    entry = {'score': value, 'clean_exchanges': clean, 'steps': metrics['steps'],
-             'forward_distance_m': metrics.get('forward_distance_m'),
-             'sim_time_s': metrics.get('sim_time_s'), 'failure': metrics.get('failure'),
-             'arm_swing': metrics.get('arm_swing'), 'params': point}
+    entry = {'score': value, 'clean_exchanges': clean,
+             **{name: read(metrics, name) for name in ('steps', 'forward_distance_m',
+                                                       'sim_time_s', 'failure', 'arm_swing')},
+             'params': point}
     if objective == 'robust':
         entry['score'], entry['robustness'] = robust, robustness
     elif objective == 'arm_swing':
@@ -457,20 +472,30 @@ def evaluate(base: dict, duration: float, objective: str, max_rate: float, cases
         gm['enabled'] = [name for name in gm['enabled'] if name != 'yaw']
         reference, _ = run_metrics(raw)
         entry['score'] = arm_swing_score(metrics, reference, events, duration, max_rate)
-        entry['arm_swing_without_yaw'] = reference.get('arm_swing')
+        entry['arm_swing_without_yaw'] = read(reference, 'arm_swing')
     entry['wall_s'] = time.perf_counter() - start
     return entry
 
 
-def parse_setting(text: str) -> tuple[str, float]:
-    """('block.key', value) of a ``--set`` argument 'block.key=value'."""
-    key, sep, value = text.partition('=')
-    if not sep or key.count('.') != 1:
-        raise SystemExit(f'--set {text!r}: expected block.key=value, e.g. balance.drive=37')
+def settings(texts: list[str]) -> dict[str, Any]:
+    """Scene key -> value of the ``--set KEY=VALUE`` arguments, as ``run_scene --set`` reads
+    them (a one-line SystemExit for a malformed one)."""
     try:
-        return key, float(value)
-    except ValueError:
-        raise SystemExit(f'--set {text!r}: {value!r} is not a number') from None
+        return set_options(texts)
+    except SimulationError as exc:
+        raise SystemExit(f'tune_gait.py: {exc}') from None
+
+
+def with_settings(raw: dict, overrides: dict[str, Any]) -> dict:
+    """The scene ``raw`` with the ``--set`` keys ``overrides`` set, validated as a scene (a
+    one-line SystemExit naming the key it refuses)."""
+    raw = copy.deepcopy(raw)
+    try:
+        set_keys(raw, overrides)
+        parse_scene(raw)
+    except SimulationError as exc:
+        raise SystemExit(f'tune_gait.py: --set: {exc}') from None
+    return raw
 
 
 def main() -> None:
@@ -505,12 +530,15 @@ def main() -> None:
                         help="start from the best point of this log (a previous search's --out)")
     parser.add_argument('--start-run', type=int,
                         help='with --start: start from this run of the log instead')
-    parser.add_argument('--set', action='append', default=[], metavar='BLOCK.KEY=VALUE',
-                        help='start from this gait-manager value (after --start; repeatable)')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help="set a scene key, as run_scene's --set (dotted, e.g. "
+                             'inputs.gait_manager.balance.drive=37; VALUE in YAML), after '
+                             '--start: a search starts from it; repeatable')
     parser.add_argument('--check', action='store_true',
                         help='no search: run the base scene (with --start/--set: that point) '
                              'over CHECKS and print one JSON line per case')
     args = parser.parse_args()
+    overrides = settings(args.set)
     cases = SCENARIOS[args.scenarios]
     if args.arm_weight > 0.0 and {**cases[0], 'yaw': False} not in cases:
         raise SystemExit(f'--arm-weight: the scenarios {args.scenarios!r} have no no-yaw twin of '
@@ -530,7 +558,7 @@ def main() -> None:
         if not chosen:
             raise SystemExit(f'--start-run: no run {args.start_run} in {args.start}')
         base = apply(base, chosen[0]['params'])
-    base = apply(base, dict(parse_setting(text) for text in args.set))
+    base = with_settings(base, overrides)
     if args.check:
         if args.objective == 'robust':  # as the robust search ran it
             base = target_at_gait_speed(base)

@@ -19,6 +19,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
+from iceskate_sim.run.metrics import shoulder_correlation
 from oracle.dynamics import GaitDynamics
 
 CLOSURE = 1e-9  # relative closure residual the decomposition must reach
@@ -151,6 +152,19 @@ def test_a_run_short_of_four_steps_is_measured_over_the_whole_run(sim):
     swing = _swing(sim)
     assert swing.window_from_step is None
     assert swing.samples == sim.n_samples
+
+
+def test_the_analysis_corr_q11_q14_is_that_of_metrics_json():
+    """One corr(q11, q14): the analysis's is the registry's (raw over the window from the 4th
+    step), not a detrended one; the phase is of the detrended angles."""
+    t = np.linspace(0.0, 6.0, 601)
+    step_index = (t // 1.0).astype(int)
+    right, left = np.sin(2 * np.pi * t) + 0.3 * t, -np.sin(2 * np.pi * t) + 0.3 * t
+    swing = arm_swing(t, right, left, step_index)
+    window = step_index >= 3
+    assert swing.correlation == shoulder_correlation(right[window], left[window])
+    assert swing.correlation > -0.9  # the shared drift counts (detrended: -1)
+    assert abs(swing.phase_difference_deg) == pytest.approx(180.0, abs=5.0)
 
 
 def _swing(bag):

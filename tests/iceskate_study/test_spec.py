@@ -9,7 +9,7 @@ from hostile import alias_bomb
 from iceskate_bringup.runner import simulate
 from iceskate_bringup.scene import load_scene, parse_scene
 from iceskate_sim.installed import shipped_files
-from iceskate_sim.run.metrics import METRIC_NAMES
+from iceskate_sim.run.metrics import METRIC_NAMES, METRICS
 from iceskate_study.errors import StudyError
 from iceskate_study.spec import STUDY_RESOURCE, expand, load_spec, parse_spec, run_key, set_key
 
@@ -110,12 +110,28 @@ def test_an_empty_axis_is_refused(make):
      r"SPEC key 'ratios.r.baseline': 0.02 is not a value of axis 'floor.mu'"),
     ({'ratios': {'r': {'metric': 'arm_swing.corr_q11_q14', 'baseline': {'floor.mu': 0.01}}}},
      r"'arm_swing.corr_q11_q14' is not among the metrics kept"),
+    ({'metrics': ['arm_swing'], 'ratios': {'arm_swing_ratio': {
+        'metric': 'arm_swing.q11_peak_to_peak', 'baseline': {'floor.mu': 0.01}}}},
+     r"SPEC key 'ratios.arm_swing_ratio.metric': arm_swing_ratio is the ratio of "
+     r"arm_swing.mean_peak_to_peak"),
+    ({'ratios': {'steps': {'metric': 'fell', 'baseline': {'floor.mu': 0.01}}}},
+     r"SPEC key 'ratios.steps': the name is already a column"),
+    ({'ratios': {'edge_mode_fraction': {'metric': 'steps', 'baseline': {'floor.mu': 0.01}}}},
+     r"SPEC key 'ratios.edge_mode_fraction': 'edge_mode_fraction' is a metric of metrics.json"),
+    ({'ratios': {'r': {'baseline': {'floor.mu': 0.01}}}}, r"SPEC key 'ratios.r': must be "),
     ({'bags': [{'floor.mu': 0.3}]}, r"SPEC key 'bags\[0\]': selects no point"),
     ({'bags': [{'duration': 1.0}]}, r"SPEC key 'bags\[0\].duration': not an axis"),
 ])
 def test_a_bad_spec_is_refused_naming_the_key(make, changes, message):
     with pytest.raises(StudyError, match=message):
         expand(make(**changes))
+
+
+def test_the_arm_swing_ratio_is_the_registry_s_by_its_name(make):
+    """A ratio named as the registry's arm_swing_ratio needs no metric: it is that one."""
+    spec = make(metrics=['fell', 'arm_swing'], ratios={'arm_swing_ratio': {
+        'baseline': {'inputs.gait_manager.yaw.amplitude': 0.0}}})
+    assert spec.ratios[0].metrics == METRICS['arm_swing_ratio'].ratio_of
 
 
 def test_a_grid_makes_every_combination_first_axis_slowest(make):

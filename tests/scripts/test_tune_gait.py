@@ -193,13 +193,39 @@ def test_the_arm_weight_needs_the_no_yaw_twin(tune, monkeypatch):
         tune.main()
 
 
-def test_set_arguments_name_a_value_or_stop_in_one_sentence(tune):
-    assert tune.parse_setting('balance.drive=37') == ('balance.drive', 37.0)
-    for text, words in (('balance.drive', 'expected block.key=value'),
-                        ('drive=37', 'expected block.key=value'),
-                        ('balance.drive=fast', "'fast' is not a number")):
-        with pytest.raises(SystemExit, match=words):
-            tune.parse_setting(text)
+def test_set_means_what_run_scene_set_means(tune, skate):
+    """``--set KEY=VALUE`` sets a dotted scene key, VALUE read as YAML, as ``run_scene --set``;
+    a malformed argument or a key the scene refuses stops in one line."""
+    overrides = tune.settings(['inputs.gait_manager.balance.drive=37', 'floor.mu=0.01',
+                               'inputs.visual_lifting.kp=[30, 290, 1100]'])
+    assert overrides == {'inputs.gait_manager.balance.drive': 37, 'floor.mu': 0.01,
+                         'inputs.visual_lifting.kp': [30, 290, 1100]}
+    edited = tune.with_settings(skate, overrides)
+    assert edited['inputs']['gait_manager']['balance']['drive'] == 37
+    assert edited['floor']['mu'] == 0.01 and edited['inputs']['visual_lifting']['kp'] == [
+        30, 290, 1100]
+    assert skate['floor'].get('mu') != 0.01  # the base scene is left as it was
+    with pytest.raises(SystemExit, match='give KEY=VALUE'):
+        tune.settings(['balance.drive'])
+    with pytest.raises(SystemExit, match="tune_gait.py: --set: .*'balance'"):
+        tune.with_settings(skate, tune.settings(['balance.drive=37']))  # the old short form
+
+
+def test_the_scores_read_the_metrics_by_their_registry_names(tune):
+    """The arm-swing score adds the registry's arm_swing_ratio and -corr(q11, q14) only where
+    that ratio exists: not when the run without yaw fell, nor when it failed."""
+    def run(p2p, corr, **end):
+        return {'sim_time_s': 15.0, 'fell': False, 'failure': None,
+                'arm_swing': {'mean_peak_to_peak': p2p, 'corr_q11_q14': corr}, **end}
+    events = exchanges(np.arange(0.5, 15.0, 0.9))
+    base = tune.arm_swing_score(run(0.6, -0.9), run(0.3, 0.5, fell=True, failure='fell'),
+                                events, 15.0)
+    assert tune.arm_swing_score(run(0.6, -0.9), run(0.3, 0.5, failure='diverged'),
+                                events, 15.0) == base
+    assert tune.arm_swing_score(run(0.6, -0.9), run(0.3, 0.5), events, 15.0) == pytest.approx(
+        base + 2.0 + 2.0 * 0.9)
+    with pytest.raises(KeyError):
+        tune.read(run(0.6, -0.9), 'arm_swing.correlation')  # no such metric
 
 
 def test_check_cases_edit_the_scene(tune, skate):

@@ -24,7 +24,13 @@ from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelT
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
 from iceskate_sim.progress import ProgressBar
-from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
+from iceskate_sim.run.metrics import (
+    ARM_SWING_FROM_STEP,
+    LEFT_SHOULDER,
+    RIGHT_SHOULDER,
+    TORSO_YAW,
+    shoulder_correlation,
+)
 
 if TYPE_CHECKING:
     from iceskate_sim.shutdown import StopRequest
@@ -33,9 +39,6 @@ __all__ = ['ArmSwing', 'CaseResult', 'FIGURE_ROWS', 'JointDecomposition', 'RIGHT
            'LEFT_SHOULDER', 'TERMS', 'analyse_bag', 'analyse_case', 'arm_swing', 'decompose',
            'dynamics_for_bag', 'mirror_joint', 'parse_joint', 'robot_for_bag', 'write_csv']
 
-RIGHT_SHOULDER = 11
-LEFT_SHOULDER = 14
-TORSO_YAW = 8
 #: Fewest samples for an arm-swing window; shorter windows fall back to the whole run.
 MIN_WINDOW = 8
 #: Terms of eq. (11), in the order of the equation (keys of JointDecomposition.terms()).
@@ -62,12 +65,13 @@ def parse_joint(value: str | int) -> int:
         index = -1
     if not 0 <= index < N_COORDINATES:
         raise SimulationError(f'unknown joint {value!r}: give 0..17 or one of '
-                              f'{list(COORDINATE_NAMES)} (11 = right shoulder, 14 = left)')
+                              f'{list(COORDINATE_NAMES)} ({RIGHT_SHOULDER} = right shoulder, '
+                              f'{LEFT_SHOULDER} = left)')
     return index
 
 
 def mirror_joint(joint: int) -> int | None:
-    """The other arm's shoulder for a shoulder (11 <-> 14), else None."""
+    """The other arm's shoulder for a shoulder (q11 <-> q14), else None."""
     return {RIGHT_SHOULDER: LEFT_SHOULDER, LEFT_SHOULDER: RIGHT_SHOULDER}.get(joint)
 
 
@@ -344,9 +348,11 @@ class ArmSwing:
     :ivar samples: samples in the window.
     :ivar peak_to_peak: q11 and q14 peak-to-peak [rad].
     :ivar dominant_frequency: q11 and q14 strongest non-zero FFT frequency [Hz].
-    :ivar correlation: Pearson correlation of q11 and q14 (−1: mirror images).
-    :ivar phase_difference_deg: phase of q11 relative to q14 from the Hilbert transform
-        (amplitude-weighted mean over the window), in (−180, 180]; ±180 is anti-phase.
+    :ivar correlation: corr(q11, q14) over the window, ``shoulder_correlation`` (the
+        registry's ``arm_swing.corr_q11_q14``: raw, −1: mirror images).
+    :ivar phase_difference_deg: phase of q11 relative to q14 from the Hilbert transform of the
+        detrended angles (amplitude-weighted mean over the window), in (−180, 180]; ±180 is
+        anti-phase.
     """
 
     window_from_step: int | None
@@ -389,19 +395,20 @@ def _dominant_frequency(t: np.ndarray, x: np.ndarray) -> float:
 
 def arm_swing(t: np.ndarray, right: np.ndarray, left: np.ndarray, step_index: np.ndarray
               ) -> ArmSwing:
-    """Peak-to-peak, frequency, correlation and phase of q11 (``right`` [rad]) versus q14
-    (``left``) over the samples at times ``t`` [s] of ``analysis_window(step_index)``."""
+    """Peak-to-peak, frequency, correlation (``shoulder_correlation``, as ``metrics.json``'s)
+    and phase (of the linearly detrended angles, which the Hilbert transform needs) of q11
+    (``right`` [rad]) versus q14 (``left``) over the samples at times ``t`` [s] of
+    ``analysis_window(step_index)``."""
     from scipy.signal import detrend, hilbert
     mask, step = analysis_window(step_index)
     t, right, left = t[mask], right[mask], left[mask]
     p2p = {'q11': float(np.ptp(right)) if right.size else float('nan'),
            'q14': float(np.ptp(left)) if left.size else float('nan')}
     freq = {'q11': _dominant_frequency(t, right), 'q14': _dominant_frequency(t, left)}
-    correlation = phase = float('nan')
+    correlation, phase = shoulder_correlation(right, left), float('nan')
     if right.size >= 4:
         a, b = detrend(right), detrend(left)
         if np.std(a) > 0.0 and np.std(b) > 0.0:
-            correlation = float(np.corrcoef(a, b)[0, 1])
             za, zb = hilbert(a), hilbert(b)
             phase = float(np.degrees(np.angle(np.sum(za * np.conj(zb)))))
             if phase <= -180.0:

@@ -242,7 +242,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         if not args.ros and (args.single_process or args.rt_priority):
             raise SimulationError('--single-process and --rt-priority need --ros')
         watch = _watch(args)
-        overrides = _overrides(args.set)
+        overrides = set_options(args.set)
         scene = load_scene(args.scene, overrides)
         if args.duration is not None:
             if not (math.isfinite(args.duration) and 0.0 < args.duration <= MAX_DURATION):
@@ -303,7 +303,7 @@ def _watch(args: argparse.Namespace) -> Watch | None:
     return Watch(pace, args.view_host or '127.0.0.1', port)
 
 
-def _overrides(settings: list[str]) -> dict[str, Any]:
+def set_options(settings: list[str]) -> dict[str, Any]:
     """Scene key -> value of ``--set KEY=VALUE`` options (VALUE read as YAML)."""
     out = {}
     for setting in settings:

@@ -34,6 +34,13 @@ def shipped_files(resource: str, folder: str) -> dict[str, pathlib.Path]:
     return found
 
 
+def _plural(noun: str) -> str:
+    """The plural of an English noun of a kind of file (scene -> scenes, study -> studies)."""
+    if noun.endswith('y') and noun[-2:-1] not in ('', *'aeiou'):
+        return noun[:-1] + 'ies'
+    return noun + ('es' if noun.endswith(('s', 'x', 'z', 'ch', 'sh')) else 's')
+
+
 def shipped_or_path(name_or_path: str | pathlib.Path, resource: str, folder: str,
                     what: str) -> pathlib.Path:
     """The shipped YAML file of a name (``shipped_files``), or the path itself (one with a
@@ -52,5 +59,5 @@ def shipped_or_path(name_or_path: str | pathlib.Path, resource: str, folder: str
     shipped = shipped_files(resource, folder)
     if path.name in shipped:
         return shipped[path.name]
-    raise SimulationError(f'unknown {what} {str(name_or_path)!r}; shipped {what}s: '
+    raise SimulationError(f'unknown {what} {str(name_or_path)!r}; shipped {_plural(what)}: '
                           f'{", ".join(shipped)} (or give the path of a YAML file)')

@@ -1,44 +1,66 @@
 """Heat maps of a sweep's table: ``sweep-plot DIR --x KEY --y KEY --metric NAME``.
 
 One PNG per metric, ``DIR/maps/<metric>.png``: a grid sweep as cells (the mean over the runs at
-each (x, y), grid axes evenly spaced by index), a sampled one as coloured points.
+each (x, y), written in the cell; grid axes evenly spaced by index), a sampled one as coloured
+points; the axes and the colour bar say their key or metric, its unit and its meaning.
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 import math
 import pathlib
 import re
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from iceskate_sim.run.metrics import METRICS
 from iceskate_sim.shutdown import say
 from iceskate_study.errors import StudyError
 from iceskate_study.table import RESULTS, read_table
 
-#: Colour-bar labels of the usual metrics (others: their name).
-LABELS = {
-    'steps': 'support exchanges',
-    'fell': 'fraction of runs that fell',
-    'forward_distance_m': 'forward distance of the head [m]',
-    'arm_swing_ratio': 'arm swing over the swing without yaw [-]',
-    'arm_swing_steady.corr_q11_q14': 'corr(q11, q14), second half from the 4th step [-]',
-    'arm_swing.corr_q11_q14': 'corr(q11, q14) from the 4th step [-]',
-    'arm_swing_steady.q11_peak_to_peak': 'q11 peak to peak, steady [rad]',
-    'arm_swing_steady.q14_peak_to_peak': 'q14 peak to peak, steady [rad]',
-}
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 #: The maps drawn when neither the command nor the SPEC names any (those the table has).
 DEFAULT_METRICS = ('steps', 'fell', 'forward_distance_m', 'arm_swing_ratio',
                    'arm_swing_steady.corr_q11_q14')
 _MAX_ANNOTATED = 400  # cells: values are written in the cells of grids up to this size
+_PAD = 0.08  # [inch] kept clear around the figure's labels
+_CELL_DIGITS = (3, 6)  # significant digits of a cell's value: at least, at most
 
 
 def _label(value: Any) -> str:
     return f'{value:.3g}' if isinstance(value, float) else str(value)
+
+
+def cell_text(value: float) -> str:
+    """A cell's value at 3 significant digits, more (up to 6) where those would print a value
+    that is not a whole number as one (-0.9996: '-0.9996', not '-1'; 999.6: '999.6')."""
+    low, high = _CELL_DIGITS
+    whole = float(value).is_integer()
+    for digits in range(low, high + 1):
+        text = f'{value:.{digits}g}'
+        if whole or not float(text).is_integer():
+            break
+    return text
+
+
+def metric_label(metric: str, ratios: Collection[str] = ()) -> str:
+    """A colour bar's label: the metric's column, its unit and, below, its meaning, from the
+    metrics' registry (``METRICS``); a ratio of the table none registers: '×'; else the column
+    alone."""
+    known = METRICS.get(metric)
+    if known is not None:
+        unit, meaning = known.unit, known.label
+    elif metric in ratios:
+        unit, meaning = '×', 'ratio against the baseline run'
+    else:
+        return metric
+    return f'{metric} [{unit}]\n{meaning}' if unit else f'{metric}\n{meaning}'
 
 
 def axis_label(key: str) -> str:
@@ -104,38 +126,65 @@ def draw_maps(table_path: pathlib.Path, x: str | None, y: str | None,
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise StudyError(f'cannot create {out_dir}: {exc.strerror or exc}') from None
-    import matplotlib
-    from matplotlib.figure import Figure
-    xs, ys = table.column(x).to_pylist(), table.column(y).to_pylist()
-    grid = meta.get('sampling', 'grid') == 'grid'
     written = []
     for metric in metrics:
-        values = (_numbers(table.column(metric).to_pylist()) if metric in columns
-                  else np.full(table.num_rows, np.nan))
-        fig = Figure(figsize=(7.0, 5.2), dpi=100, layout='constrained')
-        ax = fig.add_subplot()
-        cmap, low, high = (('coolwarm', -1.0, 1.0) if 'corr' in metric else
-                           ('Reds', 0.0, 1.0) if metric == 'fell' else ('viridis', None, None))
-        style = {'cmap': matplotlib.colormaps[cmap].with_extremes(bad='0.85'), 'vmin': low,
-                 'vmax': high}
-        if grid:
-            image, per_cell = _grid(ax, xs, ys, values, style)
-        else:  # a coloured point per run, a grey cross where the run has no value
-            ok, px, py = np.isfinite(values), _numbers(xs), _numbers(ys)
-            image = ax.scatter(px[ok], py[ok], c=values[ok], s=36, edgecolors='none', **style)
-            ax.scatter(px[~ok], py[~ok], marker='x', color='0.5', s=24)
-            per_cell = 1
-            ax.set_xscale('log' if axes[x].get('log') else 'linear')
-            ax.set_yscale('log' if axes[y].get('log') else 'linear')
-        fig.colorbar(image, ax=ax, label=LABELS.get(metric, metric))
-        ax.set_xlabel(axis_label(x), fontsize=9)
-        ax.set_ylabel(axis_label(y), fontsize=9)
-        note = f' (mean of {per_cell} runs per cell)' if per_cell > 1 else ''
-        ax.set_title(f'{meta.get("study", "sweep")}: {metric}{note}', fontsize=10)
+        fig = map_figure(table, meta, x, y, metric)
         path = out_dir / (re.sub(r'[^A-Za-z0-9_.-]', '_', metric) + '.png')
         fig.savefig(path)
         written.append(path)
     return written
+
+
+def map_figure(table: Any, meta: dict[str, Any], x: str, y: str, metric: str) -> Figure:
+    """The heat map of column ``metric`` of ``table`` (a ``pyarrow.Table`` with the metadata
+    ``meta`` of ``read_table``) over its axes ``x`` and ``y``: cells for a grid sweep, points
+    for a sampled one; NaN where the table has no such column. Laid out (constrained) so that
+    every label lies inside the figure."""
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    axes = meta.get('axes', {})
+    xs, ys = table.column(x).to_pylist(), table.column(y).to_pylist()
+    values = (_numbers(table.column(metric).to_pylist()) if metric in table.column_names
+              else np.full(table.num_rows, np.nan))
+    fig = Figure(figsize=(7.0, 5.2), dpi=100, layout='constrained')
+    fig.get_layout_engine().set(w_pad=_PAD, h_pad=_PAD)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    cmap, low, high = (('coolwarm', -1.0, 1.0) if 'corr' in metric else
+                       ('Reds', 0.0, 1.0) if metric == 'fell' else ('viridis', None, None))
+    style = {'cmap': matplotlib.colormaps[cmap].with_extremes(bad='0.85'), 'vmin': low,
+             'vmax': high}
+    if meta.get('sampling', 'grid') == 'grid':
+        image, per_cell = _grid(ax, xs, ys, values, style)
+    else:  # a coloured point per run, a grey cross where the run has no value
+        ok, px, py = np.isfinite(values), _numbers(xs), _numbers(ys)
+        image = ax.scatter(px[ok], py[ok], c=values[ok], s=36, edgecolors='none', **style)
+        ax.scatter(px[~ok], py[~ok], marker='x', color='0.5', s=24)
+        per_cell = 1
+        ax.set_xscale('log' if axes[x].get('log') else 'linear')
+        ax.set_yscale('log' if axes[y].get('log') else 'linear')
+    bar = fig.colorbar(image, ax=ax)
+    bar.set_label(metric_label(metric, meta.get('ratios', {})), fontsize=9)
+    ax.set_xlabel(axis_label(x), fontsize=9)
+    ax.set_ylabel(axis_label(y), fontsize=9)
+    note = f' (mean of {per_cell} runs per cell)' if per_cell > 1 else ''
+    ax.set_title(f'{meta.get("study", "sweep")}: {metric}{note}', fontsize=10)
+    if ax.texts:
+        _fit_cells(fig, ax)
+    return fig
+
+
+def _fit_cells(fig: Figure, ax: Any) -> None:
+    """Shrink the values written in the cells of ``ax`` (all alike) until the widest takes at
+    most 90 % of a cell's width, measured on the laid-out figure."""
+    fig.draw_without_rendering()
+    renderer = fig.canvas.get_renderer()
+    cell = ax.get_window_extent(renderer).width / ax.images[0].get_array().shape[1]  # [px]
+    widest = max(text.get_window_extent(renderer).width for text in ax.texts)  # [px]
+    if widest > 0.9 * cell:
+        for text in ax.texts:
+            text.set_fontsize(text.get_fontsize() * 0.9 * cell / widest)
 
 
 def _grid(ax: Any, xs: list[Any], ys: list[Any], values: np.ndarray, style: dict[str, Any]
@@ -165,7 +214,8 @@ def _grid(ax: Any, xs: list[Any], ys: list[Any], values: np.ndarray, style: dict
         middle = (float(np.min(finite)) + float(np.max(finite))) / 2 if finite.size else 0.0
         for i in range(len(row)):
             for j in range(len(col)):
-                text = f'{mean[i, j]:.2g}' if counts[i, j] else ('failed' if runs[i, j] else '')
+                text = (cell_text(mean[i, j]) if counts[i, j] else
+                        'failed' if runs[i, j] else '')
                 dark = style['cmap'].name == 'viridis' and counts[i, j] and mean[i, j] < middle
                 ax.text(j, i, text, ha='center', va='center', fontsize=8,
                         color='white' if dark else 'black')

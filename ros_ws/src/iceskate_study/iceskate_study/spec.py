@@ -24,7 +24,7 @@ from iceskate_bringup.scene import parse_scene
 from iceskate_native.parameters import check_fields, keyed_from_mapping, setting
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.installed import shipped_or_path
-from iceskate_sim.run.metrics import METRIC_NAMES
+from iceskate_sim.run.metrics import METRIC_NAMES, METRICS
 from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key
 from iceskate_sim.shutdown import StopRequest
@@ -70,7 +70,8 @@ class StudySettings:
     metrics: tuple[str, ...] | None = setting(None, 'the entries of metrics.json the table '
                                               'keeps (dotted; None: DEFAULT_METRICS)')
     bags: Any = setting(None, "'all' or the axis values of the points recorded with a bag")
-    ratios: Any = setting(None, 'derived metrics: a metric over its value at a baseline')
+    ratios: Any = setting(None, 'derived metrics: a metric over its value at a baseline '
+                          '(metric_ratio)')
     maps: Any = setting(None, 'the heat maps drawn at the end')
     __post_init__ = _study_rules
 
@@ -89,7 +90,9 @@ class Axis:
 @dataclass(frozen=True)
 class Ratio:
     """A derived metric: the mean of ``metrics`` over its value at the run whose axis
-    ``baseline_key`` is ``baseline_value`` (the other axes and the repeat equal)."""
+    ``baseline_key`` is ``baseline_value`` (the other axes and the repeat equal), by
+    ``iceskate_sim.run.metrics.metric_ratio``; a ratio named as one of its ``METRICS`` is
+    that one."""
 
     name: str
     metrics: tuple[str, ...]
@@ -441,12 +444,23 @@ def _ratios(raw: Any, axes: tuple[Axis, ...], metrics: tuple[str, ...], sampling
             raise _fail(where, 'a ratio name is letters, digits and _')
         if kept(name, metrics) or name in RUN_COLUMNS:
             raise _fail(where, 'the name is already a column of the table')
-        if not isinstance(body, dict) or set(body) != {'metric', 'baseline'}:
+        known = METRICS.get(name)  # a ratio of the registry: its metric, or none given
+        if known is not None and not known.ratio_of:
+            raise _fail(where, f'{name!r} is a metric of metrics.json: give the ratio another '
+                               'name')
+        if (not isinstance(body, dict) or 'baseline' not in body
+                or not set(body) <= {'metric', 'baseline'}
+                or ('metric' not in body and known is None)):
             raise _fail(where, f'must be {{metric: NAME or [NAMES], baseline: {{axis: value}}}}, '
                                f'got {body!r}')
-        names = body['metric'] if isinstance(body['metric'], list) else [body['metric']]
+        given = body.get('metric', list(known.ratio_of) if known is not None else [])
+        names = given if isinstance(given, list) else [given]
         if not names:
             raise _fail(f'{where}.metric', 'names no metric')
+        if known is not None and tuple(names) != known.ratio_of:
+            raise _fail(f'{where}.metric', f'{name} is the ratio of '
+                                           f'{", ".join(known.ratio_of)} (metrics.json\'s); give '
+                                           'that metric, or name this ratio otherwise')
         for m in names:
             _metric_name(m, f'{where}.metric')
             if not kept(m, metrics):

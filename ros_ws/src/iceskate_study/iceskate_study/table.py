@@ -6,15 +6,14 @@ file renamed over it, so it is always complete and readable, also after a crash.
 from __future__ import annotations
 
 import json
-import math
 import os
 import pathlib
 from typing import Any
 
-import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from iceskate_sim.run.metrics import metric_ratio
 from iceskate_sim.shutdown import StopRequest
 from iceskate_study.errors import StudyError
 from iceskate_study.spec import RUN_COLUMNS, Point, Points, Spec, polled
@@ -38,15 +37,6 @@ def read_table(path: pathlib.Path) -> tuple[pa.Table, dict[str, Any]]:
         raise StudyError(f'{path} is not the results table of a sweep (no {METADATA_KEY.decode()}'
                          ' metadata)')
     return table, json.loads(meta)
-
-
-def _mean(row: dict[str, Any], names: tuple[str, ...]) -> float | None:
-    """The mean of the columns ``names`` of ``row`` (None if one is no number, or NaN)."""
-    values = [row.get(name) for name in names]
-    if any(isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v)
-           for v in values):
-        return None
-    return float(np.mean(values))
 
 
 class ResultTable:
@@ -98,19 +88,21 @@ class ResultTable:
         self.dirty = True
 
     def _ratios(self, rows: list[dict[str, Any]]) -> None:
-        """Fill in each ratio's column (null where the run or its baseline lacks a value)."""
+        """Fill in each ratio's column: ``metric_ratio`` of the run over the run at the baseline
+        (the same rule as ``run_scene --arm-swing-ratio``: null where either fell or failed,
+        lacks a value, or the baseline's is 0)."""
         for ratio in self.spec.ratios:
             others = [k for k in self.spec.axis_keys if k != ratio.baseline_key]
             wheres = [json.dumps([r['repeat'], *(r.get(k) for k in others)], default=str)
                       for r in rows]  # the run's place but for the ratio's axis
-            means = [_mean(r, ratio.metrics) for r in rows]
-            base = {where: mean for where, mean, r in zip(wheres, means, rows, strict=True)
+            base = {where: r for where, r in zip(wheres, rows, strict=True)
                     if r.get(ratio.baseline_key) == ratio.baseline_value}
-            for row, where, top in zip(rows, wheres, means, strict=True):
-                bottom = base.get(where)
+            for row, where in zip(rows, wheres, strict=True):
                 row.pop(ratio.name, None)
-                if top is not None and bottom:
-                    row[ratio.name] = top / bottom
+                bottom = base.get(where)
+                value = metric_ratio(ratio.metrics, row, bottom) if bottom is not None else None
+                if value is not None:
+                    row[ratio.name] = value
 
     def write(self) -> None:
         """Write every row into the table file (atomically)."""

@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.run.metrics import metric_value
 from iceskate_sim.shutdown import STOP_SIGNALS, die_with_parent
 
 
@@ -45,8 +46,9 @@ def warm_up() -> None:
 
 
 def select_metrics(metrics: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
-    """The columns of ``names`` in ``metrics``: a dotted name's value, a block's entries as
-    ``block.entry`` (nested blocks flattened too); absent values are left out."""
+    """The columns of ``names`` in ``metrics``: a dotted name's value (``metric_value``), a
+    block's entries as ``block.entry`` (nested blocks flattened too); absent values are left
+    out."""
     out: dict[str, Any] = {}
 
     def put(name: str, value: Any) -> None:
@@ -57,10 +59,7 @@ def select_metrics(metrics: dict[str, Any], names: tuple[str, ...]) -> dict[str,
             out[name] = value
 
     for name in names:
-        node: Any = metrics
-        for part in name.split('.'):
-            node = node.get(part) if isinstance(node, dict) else None
-        put(name, node)
+        put(name, metric_value(metrics, name))
     return out
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping, Sequence
 import contextlib
+from dataclasses import dataclass
+import math
 import os
 import pathlib
 import shutil
@@ -18,16 +20,130 @@ from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y
 
 ARM_SWING_FROM_STEP = 3  # step_index >= 3: the paper's 4th step on, arm inputs removed
+#: The right and left shoulder pitch, q11 and q14 (coordinate indices, docs/model.md Table 2):
+#: the arms whose swing the metrics measure.
+SHOULDERS = (11, 14)
+RIGHT_SHOULDER, LEFT_SHOULDER = SHOULDERS
+TORSO_YAW = 8  # q8, the torso yaw driven by the input tau8
+
+#: What a fall does to a metric (``Metric.fall``).
+FALL_RULES = {
+    'kept': 'a run that fell has it, computed up to the fall',
+    'none when fell': 'None when the run, or either run of a ratio, fell or failed',
+}
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One figure of a run a user sees.
+
+    :param name: as in ``metrics.json`` and the study table's columns, dotted inside a block
+        (``arm_swing.corr_q11_q14``).
+    :param unit: 'm', 's', 'rad', '-' (a count, a flag, a dimensionless figure), '×' (a ratio
+        of like quantities), '' (text, a list or a block of several units).
+    :param label: its meaning in a few words, for a plot (the unit apart: ``caption``).
+    :param inputs: what it is computed from: trajectory columns (``q[11]``: one coordinate),
+        the simulation's state (``sim.*``), or, for a ratio, the metrics of two runs.
+    :param fall: what a fall does to it, a key of ``FALL_RULES``.
+    :param by: the function, or the part of ``compute_metrics``, that computes it.
+    :param ratio_of: a ratio: the metrics whose mean in one run it divides by their mean in the
+        baseline run (``metric_ratio``); () for a metric of one run.
+    """
+
+    name: str
+    unit: str
+    label: str
+    inputs: tuple[str, ...]
+    fall: str = 'kept'
+    by: str = 'compute_metrics'
+    ratio_of: tuple[str, ...] = ()
+
+    @property
+    def caption(self) -> str:
+        """The label with its unit, e.g. 'forward distance of the head [m]'."""
+        return f'{self.label} [{self.unit}]' if self.unit else self.label
+
+
+_HEAD = {'y': ('m', 'forward position'), 'z': ('m', 'height'), 'pitch': ('rad', 'pitch')}
+_CORRELATION = ('corr(q11, q14): Pearson correlation of the shoulder angles over the window, '
+                'raw (not detrended); -1: mirror images, the anti-phase swing of tau8')
+
+
+def _swing_block(block: str, window: str, mask: str) -> tuple[Metric, ...]:
+    """The entries of an arm-swing block (``_arm_swing`` over the samples of ``mask``)."""
+    shoulders = tuple(f'q[{j}]' for j in SHOULDERS)
+    return (
+        Metric(block, '', f'arm swing, {window}', (*shoulders, 't', 'step_index'),
+               by=f'_arm_swing over {mask}; None for fewer than 3 samples (fewer than 4 steps)'),
+        Metric(f'{block}.q11_peak_to_peak', 'rad', f'q11 peak to peak, {window}',
+               shoulders[:1], by='_arm_swing: np.ptp'),
+        Metric(f'{block}.q14_peak_to_peak', 'rad', f'q14 peak to peak, {window}',
+               shoulders[1:], by='_arm_swing: np.ptp'),
+        Metric(f'{block}.mean_peak_to_peak', 'rad', f'mean q11, q14 peak to peak, {window}',
+               shoulders, by='_arm_swing: the mean of the two peak-to-peak'),
+        Metric(f'{block}.corr_q11_q14', '-', f'corr(q11, q14), {window}', shoulders,
+               by=f'shoulder_correlation: {_CORRELATION}'),
+        Metric(f'{block}.samples', '-', f'samples, {window}', ('step_index', 't'),
+               by='_arm_swing'),
+    )
+
+
+def _head_block(block: str, what: str, by: str) -> tuple[Metric, ...]:
+    """A block of the head's error (target minus pose) per coordinate."""
+    return (Metric(block, '', what, ('psi', 'psi_d'), by=by),
+            *(Metric(f'{block}.{axis}', unit, f'{what}, {meaning}', ('psi', 'psi_d'), by=by)
+              for axis, (unit, meaning) in _HEAD.items()))
+
+
+#: The registry: every figure of ``metrics.json`` (``compute_metrics``, in its order; blocks
+#: followed by their entries) and the figures derived from two runs' metrics (``ratio_of``).
+METRICS: dict[str, Metric] = {m.name: m for m in (
+    Metric('scene', '', 'scene name', ('scene',)),
+    Metric('sim_time_s', 's', 'simulated time', ('sim.time',)),
+    Metric('wall_time_s', 's', "wall-clock time of the run's loop", ('wall time',)),
+    Metric('real_time_factor', '×', 'simulated over wall-clock time',
+           ('sim_time_s', 'wall_time_s')),
+    Metric('steps', '-', 'support exchanges', ('sim.state.step_index',)),
+    Metric('end', '', 'how the run ended', ('error', 'sim.ended'),
+           by="compute_metrics: completed, fell, or the error's end"),
+    Metric('fell', '-', 'fraction of runs that fell', ('end',),
+           by="compute_metrics: end == 'fell'"),
+    Metric('failure', '', 'why the run ended early (None: it completed)', ('error', 'sim.ended')),
+    Metric('interrupted', '-', 'stopped by a signal', ('error',)),
+    Metric('transitions', '-', 'mode transitions', ('sim.events',)),
+    Metric('max_constraint_residual', '', 'largest constraint residual of the states',
+           ('sim.stats',)),
+    Metric('max_constraint_drift', '', 'largest constraint drift before a projection',
+           ('sim.stats',)),
+    Metric('physics_steps', '-', 'integrator steps', ('sim.stats',)),
+    Metric('dynamics_evaluations', '-', 'dynamics evaluations', ('sim.stats',)),
+    Metric('suppressed_cycles', '-', 'suppressed transition cycles', ('sim.stats',)),
+    Metric('resolved_cycles', '-', 'resolved transition cycles', ('sim.stats',)),
+    Metric('sources', '', 'input sources', ('tau_*',)),
+    Metric('rejected_commands', '', 'commands the simulator node refused', ('LoopMonitor',)),
+    *_head_block('head_error_rms', 'RMS head error', 'compute_metrics: _rms of psi_d - psi'),
+    Metric('forward_distance_m', 'm', 'forward distance of the head', ('psi',)),
+    *_head_block('head_error_final_max', 'largest head error in the last second after the '
+                 'pushes', 'compute_metrics: max |psi_d - psi| (scenes with pushes only)'),
+    Metric('mode_time_fraction', '-', 'share of the time in each gait mode', ('mode',)),
+    Metric('zmp_outside_support_fraction', '-', 'share of flat-sole time with the ZMP off '
+           'the sole', ('pivot', 'cop_y', 'q[0]')),
+    Metric('edge_mode_fraction', '-', 'share of the time on a sole edge', ('pivot',)),
+    Metric('support_positions_m', 'm', 'support foot position at each step',
+           ('q[0]', 'step_index')),
+    Metric('mode_sequence_per_step', '', 'gait modes of each step', ('mode', 'step_index')),
+    *_swing_block('arm_swing', 'from the 4th step', f'step_index >= {ARM_SWING_FROM_STEP}'),
+    *_swing_block('arm_swing_steady', 'second half from the 4th step',
+                  'the second half (in time) of that window'),
+    Metric('yaw_range_rad', 'rad', 'torso yaw range', (f'q[{TORSO_YAW}]',)),
+    Metric('arm_swing_ratio', '×', 'arm swing over the swing without yaw',
+           ('arm_swing.mean_peak_to_peak', 'fell', 'failure'), fall='none when fell',
+           by='arm_swing_ratio (metric_ratio): the run with tau8 over the same scene without',
+           ratio_of=('arm_swing.mean_peak_to_peak',)),
+)}
 #: The top-level entries of ``metrics.json`` (``compute_metrics``): from ``head_error_rms`` on
 #: only for a run with samples, ``head_error_final_max`` only for a scene with pushes.
-METRIC_NAMES = (
-    'scene', 'sim_time_s', 'wall_time_s', 'real_time_factor', 'steps', 'end', 'fell', 'failure',
-    'interrupted', 'transitions', 'max_constraint_residual', 'max_constraint_drift',
-    'physics_steps', 'dynamics_evaluations', 'suppressed_cycles', 'resolved_cycles', 'sources',
-    'rejected_commands', 'head_error_rms', 'forward_distance_m', 'head_error_final_max',
-    'mode_time_fraction', 'zmp_outside_support_fraction', 'edge_mode_fraction',
-    'support_positions_m', 'mode_sequence_per_step', 'arm_swing', 'arm_swing_steady',
-    'yaw_range_rad')
+METRIC_NAMES = tuple(name for name, m in METRICS.items() if '.' not in name and not m.ratio_of)
 
 
 #: In-memory size [bytes] above which a Trajectory with a spill directory moves its samples
@@ -196,33 +312,76 @@ def _runs(values: np.ndarray) -> list[int]:
     return values[first].tolist()
 
 
+def shoulder_correlation(q11: np.ndarray, q14: np.ndarray) -> float:
+    """corr(q11, q14): the Pearson correlation of the shoulder angles [rad] of the same samples,
+    raw (not detrended; -1: mirror images); nan for fewer than 3 samples or a still shoulder."""
+    if q11.size < 3 or not (np.std(q11) > 0.0 and np.std(q14) > 0.0):
+        return float('nan')
+    return float(np.corrcoef(q11, q14)[0, 1])
+
+
 def _arm_swing(shoulders: np.ndarray, mask: np.ndarray) -> dict[str, Any] | None:
-    """Peak-to-peak [rad] of the shoulders q11 and q14 (``shoulders``: their two rows), their
-    mean (the arm swing of ``arm_swing_ratio``) and their correlation over the samples of
-    ``mask`` (None for fewer than 3)."""
+    """An arm-swing block (``METRICS``): peak-to-peak [rad] of the shoulders q11 and q14
+    (``shoulders``: their two rows), their mean (the arm swing of ``arm_swing_ratio``) and their
+    correlation over the samples of ``mask`` (None for fewer than 3)."""
     samples = np.count_nonzero(mask)
     if samples <= 2:
         return None
     q11, q14 = shoulders[0, mask], shoulders[1, mask]
-    corr = (float(np.corrcoef(q11, q14)[0, 1])
-            if np.std(q11) > 0 and np.std(q14) > 0 else float('nan'))
     swing11, swing14 = np.ptp(q11), np.ptp(q14)
     return {'q11_peak_to_peak': float(swing11), 'q14_peak_to_peak': float(swing14),
             'mean_peak_to_peak': float((swing11 + swing14) / 2.0),
-            'corr_q11_q14': corr, 'samples': int(samples)}
+            'corr_q11_q14': shoulder_correlation(q11, q14), 'samples': int(samples)}
+
+
+def metric_value(metrics: Mapping[str, Any], name: str) -> Any:
+    """Metric ``name`` (dotted, ``METRICS``) of a run: from its ``metrics.json`` (blocks nested)
+    or its row of a study's table (dotted columns); None where it has none."""
+    if name in metrics:
+        return metrics[name]
+    node: Any = metrics
+    for part in name.split('.'):
+        node = node.get(part) if isinstance(node, Mapping) else None
+    return node
+
+
+def completed(metrics: Mapping[str, Any]) -> bool:
+    """Whether a run ran its whole duration: it did not fall (``fell``) and has no ``failure``
+    (a fall, a failure, a signal); metrics without either count as completed."""
+    return not metric_value(metrics, 'fell') and metric_value(metrics, 'failure') is None
+
+
+def _mean(metrics: Mapping[str, Any], names: Sequence[str]) -> float | None:
+    """The mean of the metrics ``names`` of a run (None if one is no number, or NaN)."""
+    values = [metric_value(metrics, name) for name in names]
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v)
+           for v in values):
+        return None
+    return float(np.mean(values))
+
+
+def metric_ratio(names: Sequence[str], run: Mapping[str, Any], baseline: Mapping[str, Any]
+                 ) -> float | None:
+    """A ratio of two runs (each its ``metrics.json`` or its row of a study's table): the mean
+    of the metrics ``names`` of ``run`` over their mean in ``baseline``. None (``FALL_RULES``
+    'none when fell') when either run fell or failed (``completed``), either has no value
+    (``arm_swing`` of a run of fewer than 4 steps), or the baseline's mean is 0 (its arms did
+    not swing)."""
+    if not (completed(run) and completed(baseline)):
+        return None
+    top, bottom = _mean(run, names), _mean(baseline, names)
+    if top is None or bottom is None or bottom == 0.0:
+        return None
+    return top / bottom
 
 
 def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
                     ) -> float | None:
-    """The arm-swing ratio: the shoulders' mean peak-to-peak from the 4th step to the end
-    (``arm_swing.mean_peak_to_peak``) of a run with the torso-yaw input tau8 over that of the
-    same scene without it, from the two runs' metrics (None where either fell or has no such
+    """``METRICS['arm_swing_ratio']``: the shoulders' mean peak-to-peak from the 4th step to the
+    end (``arm_swing.mean_peak_to_peak``) of a run with the torso-yaw input tau8 over that of
+    the same scene without it (``metric_ratio``: None when either fell or failed, has no such
     window, or the one without does not swing)."""
-    swing, reference = with_yaw.get('arm_swing'), without_yaw.get('arm_swing')
-    if (with_yaw.get('fell') or without_yaw.get('fell') or not swing or not reference
-            or reference['mean_peak_to_peak'] <= 0.0):
-        return None
-    return swing['mean_peak_to_peak'] / reference['mean_peak_to_peak']
+    return metric_ratio(METRICS['arm_swing_ratio'].ratio_of, with_yaw, without_yaw)
 
 
 #: The trajectory's columns the metrics are computed from (the others are not joined for them).
@@ -286,10 +445,11 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     metrics['mode_sequence_per_step'] = {str(k): _runs(modes[start:end]) for k, (start, end)
                                          in enumerate(zip(bounds[:-1], bounds[1:], strict=True))}
     late = steps >= ARM_SWING_FROM_STEP
-    shoulders = a['q'][:, [11, 14]].T.copy()  # q11 and q14, each contiguous
+    shoulders = a['q'][:, list(SHOULDERS)].T.copy()  # q11 and q14, each contiguous
     metrics['arm_swing'] = _arm_swing(shoulders, late)
     # the second half (in time) of that window: the swing once the transients have decayed
     t_half = (t[late][0] + t[-1]) / 2.0 if np.any(late) else np.inf
     metrics['arm_swing_steady'] = _arm_swing(shoulders, late & (t >= t_half))
-    metrics['yaw_range_rad'] = [float(a['q'][:, 8].min()), float(a['q'][:, 8].max())]
+    yaw = a['q'][:, TORSO_YAW]
+    metrics['yaw_range_rad'] = [float(yaw.min()), float(yaw.max())]
     return metrics
