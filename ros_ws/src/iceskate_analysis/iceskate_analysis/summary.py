@@ -60,10 +60,11 @@ def picked_columns(columns: Iterable[tuple[str, np.ndarray]]) -> dict[str, np.nd
     """What the picture is drawn from, copied out of (name, array) pairs as
     ``Trajectory.columns`` gives them: t, psi, psi_d, mode, side, step_index, and q's
     shoulders as ``shoulders`` (n, 2)."""
+    from iceskate_sim.run.metrics import SHOULDERS
     a: dict[str, np.ndarray] = {}
     for key, column in columns:  # one spilled column mapped at a time
         if key == 'q':
-            a['shoulders'] = np.array(column[:, [11, 14]])
+            a['shoulders'] = np.array(column[:, list(SHOULDERS)])
         elif key in DRAWN_COLUMNS:
             a[key] = np.array(column)
     return a
@@ -160,6 +161,7 @@ def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pa
 def _shoulders(path: pathlib.Path, chunk: int = 65536) -> np.ndarray:
     """Columns q11 and q14 of ``path``'s q, (n, 2), read ``chunk`` rows at a time (q of a
     600 s run holds 86 MB; the picture needs 2/18 of it)."""
+    from iceskate_sim.run.metrics import SHOULDERS
     with zipfile.ZipFile(path) as archive, archive.open('q.npy') as stream:
         version = np.lib.format.read_magic(stream)
         read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
@@ -172,7 +174,7 @@ def _shoulders(path: pathlib.Path, chunk: int = 65536) -> np.ndarray:
         for start in range(0, shape[0], chunk):
             rows = min(chunk, shape[0] - start)
             block = np.frombuffer(stream.read(rows * shape[1] * dtype.itemsize), dtype=dtype)
-            out[start:start + rows] = block.reshape(rows, shape[1])[:, [11, 14]]
+            out[start:start + rows] = block.reshape(rows, shape[1])[:, list(SHOULDERS)]
     return out
 
 
