@@ -62,7 +62,8 @@ def empty_command(typestore, source):
     """An EffortCommand (rosbags object) of ``source`` with every array empty."""
     empty = np.zeros(0)
     return typestore.types['iceskate_interfaces/msg/EffortCommand'](
-        header=header(typestore, 2_000_000), source=source, joint_names=[], effort=empty,
+        header=header(typestore, 2_000_000), source=source, run_token='', joint_names=[],
+        effort=empty,
         stiffness=empty, damping=empty, position_reference=empty, source_names=[],
         source_efforts=empty, head_target=empty)
 

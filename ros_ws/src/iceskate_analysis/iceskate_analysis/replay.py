@@ -37,7 +37,7 @@ from iceskate_sim.shutdown import StopRequest, say
 RATES = (0.01, 100.0)
 #: Longest wall time [s] a wait goes on without looking for a stop signal.
 WAIT_SLICE = 0.05
-#: Wall time [s] the subscribers get to acknowledge the last messages.
+#: Wall time [s] the subscribers of a topic get to acknowledge its last messages.
 ACK_TIMEOUT = 2.0
 
 
@@ -113,7 +113,7 @@ class ReplayNode(Node):
 
     def play(self, rate: float | None) -> int:
         """Publish every message; pace to ``rate`` x recorded time (None: no pacing); then give
-        the subscribers up to ``ACK_TIMEOUT`` s to acknowledge them.
+        each topic's subscribers up to ``ACK_TIMEOUT`` s to acknowledge them.
 
         :raises RunInterrupted: on a stop signal.
         """
@@ -130,8 +130,8 @@ class ReplayNode(Node):
             self.publishers_by_topic[conn.topic].publish(bytes(raw))
             self.count += 1
             self.reached = timestamp
-        deadline = time.monotonic() + ACK_TIMEOUT
         for publisher in self.publishers_by_topic.values():
+            deadline = time.monotonic() + ACK_TIMEOUT
             while not publisher.wait_for_all_acked(Duration(seconds=WAIT_SLICE)) and \
                     time.monotonic() < deadline:
                 self._check_stop()
