@@ -1,4 +1,5 @@
-"""Hostile inputs the tests build: YAML texts that stand for far more than they hold."""
+"""Hostile inputs the tests build: YAML texts that stand for far more than they hold, and
+trajectories far longer than a page can show."""
 
 import pathlib
 import zipfile

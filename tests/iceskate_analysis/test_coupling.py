@@ -347,3 +347,25 @@ def test_the_csv_is_the_same_whatever_the_blocks(synthetic_bag, tmp_path):
         analyse_bag(BagReading(synthetic_bag), 's', 11, csv=path, size=size)
         texts.append(path.read_text())
     assert texts[0] == texts[1] and texts[0].count('\n') == read_bag(synthetic_bag).n_samples + 1
+
+
+def test_files_made_from_bags_go_to_a_folder_of_this_user_alone(tmp_path, monkeypatch):
+    """A bag's URDF is trusted by its name in that folder: it must be this user's, mode 0700,
+    not a link; another folder there is refused in one sentence."""
+    import os
+    import tempfile
+
+    from iceskate_analysis.coupling import _private_cache
+    from iceskate_sim.errors import SimulationError
+    monkeypatch.setattr(tempfile, 'gettempdir', lambda: str(tmp_path))
+    folder = _private_cache()
+    assert folder == tmp_path / f'iceskate-{os.getuid()}'
+    assert folder.stat().st_mode & 0o777 == 0o700
+    folder.chmod(0o777)  # opened to others: another user could plant a URDF
+    with pytest.raises(SimulationError, match='is not a folder of this user alone'):
+        _private_cache()
+    folder.rmdir()
+    (tmp_path / 'elsewhere').mkdir(mode=0o700)
+    folder.symlink_to(tmp_path / 'elsewhere')
+    with pytest.raises(SimulationError, match='is not a folder of this user alone'):
+        _private_cache()

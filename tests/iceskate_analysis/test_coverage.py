@@ -142,5 +142,6 @@ def test_mode_coverage_refuses_an_events_json_that_is_a_fifo_at_once(tmp_path):
                              str(tmp_path), '--out', str(tmp_path / 'c')],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
-    assert result.stderr.splitlines() == [f'mode_coverage: error: {tmp_path / "events.json"} '
-                                          'is not a regular file']
+    assert result.stderr.splitlines() == [
+        f'mode_coverage: error: run file {tmp_path / "events.json"} is a named pipe (FIFO), '
+        'not a regular file, and is not read']

@@ -1,11 +1,30 @@
-"""The ROS-free parts of the graph launcher: real-time scheduling of the nodes."""
+"""The ROS-free parts of the graph launcher: the nodes' parameter files and their run token,
+real-time scheduling of the nodes."""
 
 import os
+import re
 
 import pytest
+import yaml
 
-from iceskate_bringup.graph import realtime_scheduling
+from iceskate_bringup.graph import graph_nodes, realtime_scheduling
 from iceskate_sim.errors import SimulationError
+
+
+def test_every_node_of_a_run_gets_its_token_in_a_file_only_the_user_reads(tmp_path):
+    """One new token per run, the same in every node's parameter file; the files are 0600."""
+    def tokens(out):
+        specs = graph_nodes('skate', out)
+        found = set()
+        for spec in specs:
+            assert spec.parameter_file.stat().st_mode & 0o777 == 0o600, spec.parameter_file
+            (block,) = yaml.safe_load(spec.parameter_file.read_text()).values()
+            found.add(block['ros__parameters']['run_token'])
+        assert len(specs) == 3
+        return found
+    (first,) = tokens(tmp_path / 'a')
+    (second,) = tokens(tmp_path / 'b')
+    assert re.fullmatch('[0-9a-f]{32}', first) and first != second
 
 
 def test_priority_zero_leaves_the_scheduling_as_it_is():

@@ -242,7 +242,7 @@ def test_commands_of_another_run_are_refused_said_once_and_counted(scene):
     """A simulator given a run token takes only commands that carry it: another run's (or a
     hand-started node's, without one) are refused, said once per controller name, each counted;
     the graph's clashes are said once each."""
-    from iceskate_sim.ros.effort_cdr import CommandEncoder
+    from iceskate_sim.ros.effort_cdr import CommandEncoder, ForeignCommand
     from iceskate_sim.ros.lockstep import LockstepLoop
     session = make_session(scene)
     loop = LockstepLoop(session, lambda topic, data: None, lambda text, failed: None,
@@ -255,16 +255,37 @@ def test_commands_of_another_run_are_refused_said_once_and_counted(scene):
                               'this run (its run token differs)') and said[1:] == [None, None]
     assert session.missing() == list(session.controllers)  # none was taken
     assert loop.monitor.rejected == 3
+    assert loop.monitor.rejected_summary()['by_reason'] == {ForeignCommand.REASON: 3}
     assert loop.take(CommandEncoder('gait_manager', 'ours').encode(gm, 0)) is None
     assert session.missing() == ['visual_lifting']
     first = loop.clashes(2, ['gait_manager', 'gait_manager', 'visual_lifting', 'spy'])
     assert len(first) == 3 and first[0].startswith('2 nodes publish gait_state')
-    assert "2 node(s) named 'gait_manager' publish effort_commands on this ROS domain besides " \
+    assert "1 node(s) named 'gait_manager' publish effort_commands on this ROS domain besides " \
         "the run's own; commands without this run's token are refused" in first
     assert "1 node(s) named 'spy' publish effort_commands on this ROS domain; commands " \
         "without this run's token are refused" in first
     assert loop.clashes(2, ['gait_manager', 'gait_manager', 'spy']) == []  # said once each
     assert loop.clashes(1, ['gait_manager', 'visual_lifting']) == []
+
+
+def test_the_runs_own_command_beyond_the_effort_limit_ends_the_run(scene):
+    """Refused and counted, and the run ends at once as its controller's failure (it would
+    only send the same command again)."""
+    from iceskate_sim.ros.effort_cdr import CommandEncoder
+    from iceskate_sim.ros.lockstep import LockstepLoop
+    reports = []
+    loop = LockstepLoop(make_session(scene), lambda topic, data: None,
+                        lambda text, failed: reports.append((text, failed)), run_token='ours')
+    loop.phase = 'running'
+    said = loop.take(CommandEncoder('gait_manager', 'ours').encode(
+        zero(scene, 'gait_manager', 600.0), 0))
+    assert said.startswith("rejected command: command of 'gait_manager' asks 600 N of y0 at "
+                           't=0.000000 s')
+    assert said.endswith('; the run ends')
+    assert loop.phase == 'finished' and loop.exit_code == 1 and loop.monitor.rejected == 1
+    metrics = loop.session.session.metrics
+    assert metrics['end'] == 'controller_failed' and 'beyond its effort limit 500' in \
+        metrics['failure'] and reports[-1][1]
 
 
 def test_a_scene_without_controllers_runs_in_lockstep(tmp_path):

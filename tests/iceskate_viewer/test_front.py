@@ -131,6 +131,11 @@ def test_the_page_itself_is_forwarded(server):
     with pytest.raises(urllib.error.HTTPError) as missing:
         urllib.request.urlopen(url_of(server) + '/../../etc/passwd', timeout=DEADLINE_S)
     assert missing.value.code == 404
+    import socket  # a path no page sends (bytes past ASCII): 400, not a broken answer
+    host, port = url_of(server).removeprefix('http://').rsplit(':', 1)
+    with socket.create_connection((host, int(port)), timeout=DEADLINE_S) as raw:
+        raw.sendall(f'GET /\xe9 HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n'.encode('latin-1'))
+        assert raw.recv(64).startswith(b'HTTP/1.1 400')
 
 
 @pytest.mark.timeout(60)

@@ -194,7 +194,9 @@ def test_a_scene_that_is_no_regular_file_is_refused_at_once(tmp_path, capsys, ki
     else:
         scene.mkdir()
     line = _refused(capsys, [str(scene), '--out', str(tmp_path / 'out')])
-    assert f'scene {scene} is not a regular file' in line
+    what = {'fifo': 'a named pipe (FIFO)', 'device': 'a character device',
+            'directory': 'a directory'}[kind]
+    assert f'scene {scene} is {what}, not a regular file, and is not read' in line
 
 
 def test_a_scene_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, capsys):

@@ -16,7 +16,6 @@ import functools
 import json
 import pathlib
 import re
-import stat
 from typing import TYPE_CHECKING, Any
 
 from mcap.exceptions import EndOfFile
@@ -27,6 +26,7 @@ from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typest
 
 from iceskate_analysis.rows import collect_rows
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.progress import ProgressBar
@@ -345,27 +345,13 @@ def open_bag(path: str | pathlib.Path, stop: StopRequest | None = None) -> OpenB
     return OpenBag(bag, files, _metadata_custom_data(metadata), '', stop)
 
 
-#: What a path that is not a regular file is, by its ``stat.S_IS*`` test.
-_KINDS = ((stat.S_ISFIFO, 'a named pipe (FIFO)'), (stat.S_ISCHR, 'a character device'),
-          (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket'),
-          (stat.S_ISDIR, 'a directory'))
-
-
 def _check_regular(paths: Iterable[pathlib.Path]) -> None:
-    """Refuse a bag's file that is not a regular file, before it is opened: opening a FIFO
-    blocks until a writer comes, and a device never ends.
+    """Refuse a bag's file that is not a regular file, before it is opened.
 
     :raises SimulationError: naming the file and what it is.
     """
     for path in paths:
-        try:
-            mode = path.stat().st_mode
-        except OSError as exc:
-            raise SimulationError(f'cannot read bag file {path}: {exc.strerror or exc}') from None
-        if not stat.S_ISREG(mode):
-            kind = next((name for test, name in _KINDS if test(mode)), 'of an unknown kind')
-            raise SimulationError(f'bag file {path} is {kind}, not a regular file, and is not '
-                                  'read')
+        regular_file(path, 'bag file')
 
 
 def _recording_order(path: pathlib.Path) -> tuple[tuple[int, int | str], ...]:

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 import hashlib
 import os
 import pathlib
+import stat
 import tempfile
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +32,7 @@ from iceskate_sim.run.metrics import (
     TORSO_YAW,
     shoulder_correlation,
 )
+from iceskate_sim.shutdown import raise_if_stopped
 
 if TYPE_CHECKING:
     from iceskate_sim.shutdown import StopRequest
@@ -76,6 +78,25 @@ def mirror_joint(joint: int) -> int | None:
 
 
 # ------------------------------------------------------------------------- the model of a bag
+def _private_cache() -> pathlib.Path:
+    """This user's folder for files made from bags (``$TMPDIR/iceskate-<uid>``, mode 0700):
+    a file there is trusted by its name, so no other user may write into it.
+
+    :raises SimulationError: when the folder is a link, another user's or open to others.
+    """
+    folder = pathlib.Path(tempfile.gettempdir()) / f'iceskate-{os.getuid()}'
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        info = folder.lstat()
+    except OSError as exc:
+        raise SimulationError(f'cannot use {folder}: {exc.strerror or exc}') from None
+    if (not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid()
+            or info.st_mode & 0o077):
+        raise SimulationError(f'{folder} is not a folder of this user alone (a link, another '
+                              "user's, or open to others): the bag's URDF is not written there")
+    return folder
+
+
 def robot_for_bag(bag: BagData) -> Robot:
     """The robot the run used: the bag's URDF when it carries one, else the installed one."""
     robot = load_robot()
@@ -88,7 +109,7 @@ def robot_for_bag(bag: BagData) -> Robot:
     if bag.urdf == installed:
         return robot
     digest = hashlib.sha256(bag.urdf.encode('utf-8')).hexdigest()[:16]
-    path = pathlib.Path(tempfile.gettempdir()) / f'iceskate_bag_urdf_{digest}.urdf'
+    path = _private_cache() / f'bag_urdf_{digest}.urdf'
     if not path.is_file():  # whole or not at all: a later run trusts the file by its name
         with tempfile.NamedTemporaryFile('w', encoding='utf-8', dir=path.parent,
                                          prefix=f'.{path.stem}.', delete=False) as staged:
@@ -726,26 +747,19 @@ def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
                           progress, leave=False)
         try:
             for block, following in _with_next(reading.blocks(size)):
-                _check(stop, float(block.t[0]), f'analysing bag {reading.path}')
+                raise_if_stopped(stop, float(block.t[0]), f'analysing bag {reading.path}')
                 analysis.add(block, following, bar)
         finally:
             bar.close()
         case = analysis.result(label, reading.notes, reading.path,
                                reading.custom_data.get('scene', ''))
         if spill is not None:
-            spill.write(analysis.coupled, analysis.joints,
-                        lambda: _check(stop, case.end_s, f'writing the CSV of bag {reading.path}'))
+            spill.write(analysis.coupled, analysis.joints, lambda: raise_if_stopped(
+                stop, case.end_s, f'writing the CSV of bag {reading.path}'))
         return case
     finally:
         if spill is not None:
             spill.close()
-
-
-def _check(stop: StopRequest | None, t: float, doing: str) -> None:
-    """:raises RunInterrupted: once ``stop`` has a signal (at time ``t`` [s] of the run, while
-        ``doing``)."""
-    if stop is not None and stop.requested:
-        raise stop.error(t, doing)
 
 
 def analyse_case(bag: BagData, label: str, joint: int = RIGHT_SHOULDER,

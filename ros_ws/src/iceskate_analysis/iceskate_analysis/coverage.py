@@ -18,6 +18,7 @@ import pathlib
 from typing import TYPE_CHECKING, Any
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
 from iceskate_sim.physics.hybrid import CAUSES, RESOLVED
 
@@ -131,8 +132,8 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
     """
     loaded = []
     for path in (run_dir / 'events.json', run_dir / 'metrics.json'):
-        if path.exists() and not path.is_file():  # a FIFO would block the read
-            raise SimulationError(f'{path} is not a regular file')
+        if path.exists():  # a FIFO would block the read
+            regular_file(path, 'run file')
         try:
             loaded.append(json.loads(path.read_text(encoding='utf-8')))
         except OSError as exc:

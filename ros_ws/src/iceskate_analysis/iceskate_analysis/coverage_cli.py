@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from iceskate_analysis.outputs import StagedFiles
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.shutdown import StopRequest, say
+from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 if TYPE_CHECKING:
     from iceskate_analysis.coverage import Coverage
@@ -37,16 +37,10 @@ def write_coverage(coverage: Coverage, out: pathlib.Path, stop: StopRequest | No
         staged('coverage.md').write_text(coverage.table(), encoding='utf-8')
         staged('coverage.json').write_text(json.dumps(coverage.as_dict(), indent=1) + '\n',
                                            encoding='utf-8')
-        _check(stop)
+        raise_if_stopped(stop)
         plot_mode_coverage(coverage, staged('coverage.png'))
-        _check(stop)
+        raise_if_stopped(stop)
         return staged.commit()
-
-
-def _check(stop: StopRequest | None) -> None:
-    """:raises RunInterrupted: once ``stop`` has a signal."""
-    if stop is not None and stop.requested:
-        raise stop.error(None)
 
 
 def main(argv: list[str] | None = None) -> int:

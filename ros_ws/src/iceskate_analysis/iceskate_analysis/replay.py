@@ -31,7 +31,7 @@ from iceskate_sim.errors import RunInterrupted, SimulationError
 from iceskate_sim.model.stamps import set_stamp
 from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS
-from iceskate_sim.shutdown import StopRequest, say
+from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 #: The speed factors --rate takes (x recorded time); --fast plays without pacing.
 RATES = (0.01, 100.0)
@@ -84,9 +84,9 @@ class ReplayNode(Node):
     def _check_stop(self) -> None:
         """:raises RunInterrupted: once a stop signal came."""
         if self.stop.requested:
-            total = sum(c.count for c in self.connections)
-            raise self.stop.error(None if self.reached is None else self.reached * 1e-9,
-                                  f'{self.count} of {total} messages replayed')
+            raise_if_stopped(self.stop, None if self.reached is None else self.reached * 1e-9,
+                             f'{self.count} of {sum(c.count for c in self.connections)} '
+                             'messages replayed')
 
     def _pause(self, seconds: float) -> None:
         """Wait ``seconds`` of wall time, in slices of ``WAIT_SLICE``.

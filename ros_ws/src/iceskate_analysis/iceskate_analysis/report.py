@@ -21,6 +21,7 @@ from iceskate_analysis.coupling import (
 )
 from iceskate_analysis.outputs import StagedFiles
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.shutdown import raise_if_stopped
 
 if TYPE_CHECKING:
     from iceskate_sim.shutdown import StopRequest
@@ -97,8 +98,7 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
         end = max(case.end_s for case in cases)
 
         def check(doing: str) -> None:
-            if stop is not None and stop.requested:
-                raise stop.error(end, doing)
+            raise_if_stopped(stop, end, doing)
 
         def draw(name: str, plot: Callable[..., object], *args: Any, **kwargs: Any) -> str:
             """``plot(*args, <staged file>, **kwargs)`` unless a stop signal came; ``name``."""

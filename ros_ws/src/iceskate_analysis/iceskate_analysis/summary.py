@@ -23,7 +23,7 @@ import numpy as np
 
 from iceskate_analysis.outputs import StagedFiles
 from iceskate_sim.errors import RunInterrupted, SimulationError
-from iceskate_sim.shutdown import StopRequest, say
+from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -91,7 +91,7 @@ def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pat
     if missing:
         raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
     trajectory = out_dir / 'trajectory.npz'
-    _check(stop)
+    raise_if_stopped(stop)
     try:
         metrics = json.loads((out_dir / 'metrics.json').read_text(encoding='utf-8'))
         with np.load(trajectory) as npz:
@@ -102,17 +102,11 @@ def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pat
         raise SimulationError(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
                               f'{exc}') from None
     with StagedFiles(out_dir) as staged:
-        _check(stop)
+        raise_if_stopped(stop)
         _checked_draw(a, metrics, staged(SUMMARY_NAME), str(trajectory))
-        _check(stop)
+        raise_if_stopped(stop)
         (path,) = staged.commit()
     return path
-
-
-def _check(stop: StopRequest | None) -> None:
-    """:raises RunInterrupted: once ``stop`` has a signal."""
-    if stop is not None and stop.requested:
-        raise stop.error(None)
 
 
 def main(argv: list[str] | None = None) -> int:

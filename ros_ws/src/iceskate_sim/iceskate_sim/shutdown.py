@@ -55,6 +55,16 @@ class StopRequest:
         return RunInterrupted(self.signum, t, detail)
 
 
+def raise_if_stopped(stop: StopRequest | None, t: float | None = None, detail: str = '') -> None:
+    """A long job's check between two of its steps.
+
+    :raises RunInterrupted: once ``stop`` (None: never) has a signal, at simulation time ``t``
+        [s] (None: none), saying ``detail`` (e.g. where the job was).
+    """
+    if stop is not None and stop.requested:
+        raise stop.error(t, detail)
+
+
 def process_alive(pid: int) -> bool:
     """Whether process ``pid`` runs (False once it is gone, a zombie or dying)."""
     try:

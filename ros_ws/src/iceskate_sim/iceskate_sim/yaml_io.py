@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import pathlib
 import re
-import stat
 from typing import Any
 
 import yaml
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.files import regular_file
 
 #: The largest YAML file read [bytes] (a scene or a SPEC is a few kB).
 MAX_YAML_BYTES = 1 << 20
@@ -117,9 +117,7 @@ def read_yaml(path: str | pathlib.Path, what: str) -> Any:
     ``MAX_YAML_VALUES`` values)."""
     path = pathlib.Path(path)
     try:
-        info = path.stat()
-        if not stat.S_ISREG(info.st_mode):
-            raise SimulationError(f'{what} {path} is not a regular file')
+        info = regular_file(path, what)
         if info.st_size > MAX_YAML_BYTES:
             raise SimulationError(f'{what} {path} is {info.st_size} bytes, more than the '
                                   f'{MAX_YAML_BYTES} a {what} file may have')

@@ -27,7 +27,7 @@ from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.run.metrics import METRIC_NAMES, METRICS
 from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key
-from iceskate_sim.shutdown import StopRequest
+from iceskate_sim.shutdown import StopRequest, raise_if_stopped
 from iceskate_sim.yaml_io import read_yaml
 from iceskate_study.errors import StudyError
 
@@ -182,8 +182,7 @@ def polled(items: Iterable[T], stop: StopRequest | None) -> Iterator[T]:
     """``items``, ending with ``RunInterrupted`` before the next one once ``stop`` has a
     signal (None: never)."""
     for item in items:
-        if stop is not None and stop.requested:
-            raise stop.error(None)
+        raise_if_stopped(stop)
         yield item
 
 

@@ -177,7 +177,11 @@ class Front:
         return None if upgrade else await asyncio.to_thread(self._forward, request)
 
     def _forward(self, request: Request) -> Response:
-        """viser's answer to the GET ``request`` (502: no answer in ``DEADLINE_S``)."""
+        """viser's answer to the GET ``request`` (400: a path or header that is not ASCII
+        text, as a page's are; 502: no answer in ``DEADLINE_S``)."""
+        if not request.path.isascii() or not all(value.isascii()
+                                                 for value in request.headers.values()):
+            return Response(http.HTTPStatus.BAD_REQUEST, 'Bad Request', Headers(), b'')
         viser = http.client.HTTPConnection(self._inner_host, self._inner, timeout=DEADLINE_S)
         try:
             encoding = request.headers.get_all('Accept-Encoding')

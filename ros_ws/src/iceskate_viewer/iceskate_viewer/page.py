@@ -109,15 +109,15 @@ class PageServer(viser.ViserServer):
 
 
 def check_port(port: int, what: str = 'port') -> None:
-    """Refuse, in one sentence naming ``what``, a port outside 0..65535 (viser's server thread
-    would fail on it, and its caller wait for it)."""
+    """Refuse, in one sentence naming ``what``, a port outside 0..65535, before anything is
+    served."""
     if not 0 <= port <= 65535:
         raise SimulationError(f'{what} must be 0..65535 (0: any free port), got {port}')
 
 
 def check_host(host: str) -> None:
-    """Refuse, in one sentence, a host this machine cannot serve on (viser would retry
-    every port of it)."""
+    """Refuse, in one sentence, a host this machine cannot serve on, before a run starts
+    (``run_scene --view``: its page is served once the run's outputs are taken)."""
     try:
         with socket.create_server((host, 0), family=socket.AF_INET6 if ':' in host
                                   else socket.AF_INET):

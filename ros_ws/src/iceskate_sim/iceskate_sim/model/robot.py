@@ -223,24 +223,26 @@ def _build_support_model(urdf_model: pin.Model, links: dict[str, _Link],
     return SupportModel(side, pivot, model, frame_ids)
 
 
+def _per_coordinate(joint_values: np.ndarray, urdf_model: pin.Model, side: str) -> np.ndarray:
+    """A per-joint URDF value (e.g. ``urdf_model.damping``, indexed by velocity) per Table-2
+    coordinate of the ``side`` support models; q1, the support foot on its edge, takes its
+    ankle's; y0 (no URDF joint): 0."""
+    out = np.zeros(N_COORDINATES)
+    for i, urdf_joint, _sign in anatomical_map(side):
+        out[i] = float(joint_values[urdf_model.joints[urdf_model.getJointId(urdf_joint)].idx_v])
+    out[1] = out[2]
+    return out
+
+
 def _damping(urdf_model: pin.Model, side: str) -> np.ndarray:
     """Table 1 damping per Table-2 coordinate, read from the URDF joints (y0: 0)."""
-    damping = np.zeros(N_COORDINATES)
-    for i, urdf_joint, _sign in anatomical_map(side):
-        jid = urdf_model.getJointId(urdf_joint)
-        damping[i] = float(urdf_model.damping[urdf_model.joints[jid].idx_v])
-    damping[1] = damping[2]  # the support foot's own damping: its ankle's
-    return damping
+    return _per_coordinate(urdf_model.damping, urdf_model, side)
 
 
 def _effort_limit(urdf_model: pin.Model, side: str) -> np.ndarray:
-    """The URDF joints' effort limits per Table-2 coordinate [N m]; q1 takes its support
-    ankle's (as its damping), y0 (no URDF joint) the largest of them [N]."""
-    limit = np.zeros(N_COORDINATES)
-    for i, urdf_joint, _sign in anatomical_map(side):
-        jid = urdf_model.getJointId(urdf_joint)
-        limit[i] = float(urdf_model.effortLimit[urdf_model.joints[jid].idx_v])
-    limit[1] = limit[2]
+    """The URDF joints' effort limits per Table-2 coordinate [N m]; y0 (no URDF joint) takes
+    the largest of them [N]."""
+    limit = _per_coordinate(urdf_model.effortLimit, urdf_model, side)
     limit[0] = limit[1:].max()
     return limit
 

@@ -52,7 +52,7 @@ class ControllerNode(Node, Generic[P]):
         run_token = self.declare_parameter('run_token', '', ParameterDescriptor(
             description='the token of the run this node answers, carried by its commands (its '
                         "launcher gives every node of a run one: the simulator's run_token); "
-                        'empty: none')).value
+                        'empty: none', read_only=True)).value
         self.declare_more_parameters()
         check_unknown(self)
         self.kinematics = native_kinematics(load_robot())  # the laws' own model data

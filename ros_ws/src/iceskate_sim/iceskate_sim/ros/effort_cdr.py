@@ -30,6 +30,9 @@ class ForeignCommand(SimulationError):
     """A command that does not carry the run's token: another node on the domain answers the
     run's states (``source``: the controller it names)."""
 
+    #: How such commands are counted in metrics.json (one reason, whatever names they carry).
+    REASON = 'a command not of this run (its run token differs)'
+
     def __init__(self, source: str) -> None:
         super().__init__(f'a command naming {source[:64]!r} is not of this run (its run token '
                          "differs): another node on this ROS domain answers the run's states")

@@ -34,6 +34,8 @@ CONTROL_TOPICS = ('/gait_state', '/clock')
 STATE_TOPICS = CONTROL_TOPICS + ('/joint_states', '/head_pose')
 #: Rejected commands kept whole for the run's summary (the rest are only counted).
 FIRST_REJECTED = 5
+#: Controller names of other runs' commands said in the log (every command is counted).
+FOREIGN_NAMES_SAID = 5
 #: Lockstep without controllers: periods stepped per timer tick (nothing to wait for).
 UNCONTROLLED_BATCH = 50
 #: Period of the simulator node's wall-clock timer [s]: timeouts, resends, the pace.
@@ -42,6 +44,14 @@ TICK = 0.02
 #: does not hold the node's services for long).
 FREE_BATCH = 200
 _NUMBERS = re.compile(r'[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?')
+
+
+class EffortLimitExceeded(SimulationError):
+    """A controller of the run asked for more than a coordinate's effort limit: the run ends
+    (``controller_failed``), naming the coordinate and the limit."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message, end='controller_failed')
 
 
 class LockstepSession:
@@ -107,12 +117,12 @@ class LockstepSession:
         An empty breakdown is the effort of a controller's only source, named like it,
         evaluated at the current state.
 
-        :raises SimulationError: for an unknown controller, a generalized force at the
-            current state (effort and impedance) beyond a coordinate's effort limit
-            (``Robot.effort_limit``), a breakdown that does not name the controller's sources
-            in order, a stamp that is stale (before t_k, or in free-running mode before the
-            controller's last command) or in the future, or values of a wrong size, not finite
-            or negative gains.
+        :raises EffortLimitExceeded: for a generalized force at the current state (effort and
+            impedance) beyond a coordinate's effort limit (``Robot.effort_limit``).
+        :raises SimulationError: for an unknown controller, a breakdown that does not name
+            the controller's sources in order, a stamp that is stale (before t_k, or in
+            free-running mode before the controller's last command) or in the future, or
+            values of a wrong size, not finite or negative gains.
         """
         if controller not in self.controllers:
             raise SimulationError(f'command from unknown source {controller!r}; scene '
@@ -130,7 +140,7 @@ class LockstepSession:
         over = np.abs(torque) > self.robot.effort_limit
         if over.any():
             k = int(np.argmax(over))
-            raise SimulationError(f'command of {controller!r} asks {torque[k]:.6g} '
+            raise EffortLimitExceeded(f'command of {controller!r} asks {torque[k]:.6g} '
                                   f'{"N" if k == 0 else "N m"} of {COORDINATE_NAMES[k]} at '
                                   f't={self.sim.time:.6f} s, beyond its effort limit '
                                   f"{self.robot.effort_limit[k]:g} (the URDF's)")
@@ -364,10 +374,11 @@ class LockstepLoop:
         counts = Counter(command_writers)
         ours = set(self.session.controllers)
         for name in sorted(counts):
-            if (name not in ours or counts[name] > 1) and name not in self._clashes:
+            others = counts[name] - (name in ours)  # writers of that name besides the run's
+            if others and name not in self._clashes:
                 self._clashes.add(name)
                 said.append(
-                    f'{counts[name]} node(s) named {name[:64]!r} publish effort_commands on '
+                    f'{others} node(s) named {name[:64]!r} publish effort_commands on '
                     'this ROS domain' + (" besides the run's own" if name in ours else '')
                     + ("; commands without this run's token are refused"
                        if self._decoder.run_token else
@@ -399,11 +410,12 @@ class LockstepLoop:
             self.session.step()
             self.monitor.samples['physics'].append(time.perf_counter() - start)
             self.budget = max(0, self.budget - 1)
-            if self.session.session.done:
-                return self.finish()
-            self.publish_state()
+            if not self.session.session.done:
+                self.publish_state()
+                return
         except SimulationError as exc:
-            self.finish(exc)
+            return self.finish(exc)
+        self.finish()
 
     def take(self, data: bytes) -> str | None:
         """Take an EffortCommand (its CDR bytes); step once every source has answered t_k
@@ -418,11 +430,15 @@ class LockstepLoop:
             source, stamp_ns, command = self._decoder.decode(data)
             self.session.offer(source, stamp_ns, command)
         except ForeignCommand as exc:  # said once per name (a few names), every one counted
-            self.monitor.reject(str(exc))
-            if exc.source in self._foreign or len(self._foreign) >= FIRST_REJECTED:
+            self.monitor.reject(ForeignCommand.REASON)  # one reason, whatever names they forge
+            if exc.source in self._foreign or len(self._foreign) >= FOREIGN_NAMES_SAID:
                 return None
             self._foreign.add(exc.source)
             return f'rejected command: {exc} (ignored from now on, counted in metrics.json)'
+        except EffortLimitExceeded as exc:  # the run's own controller: its law is broken
+            self.monitor.reject(str(exc))
+            self.finish(exc)
+            return f'rejected command: {exc}; the run ends'
         except SimulationError as exc:
             self.monitor.reject(str(exc))
             return f'rejected command: {exc}'

@@ -168,7 +168,7 @@ def _python_value(value: Any) -> Any:
 
 def write_parameter_file(path: pathlib.Path, nodes: dict[str, dict[str, Any]]) -> None:
     """Write a ROS 2 parameter file: ``{node: {ros__parameters: {name: value}}}`` (dotted
-    names nested as ROS expects, NaN as .nan)."""
+    names nested as ROS expects, NaN as .nan), readable by the user alone."""
     def nested(flat: dict[str, Any]) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for name, value in flat.items():
@@ -180,7 +180,11 @@ def write_parameter_file(path: pathlib.Path, nodes: dict[str, dict[str, Any]]) -
         return out
 
     document = {node: {'ros__parameters': nested(values)} for node, values in nodes.items()}
-    path.write_text(yaml.safe_dump(document, sort_keys=False, default_flow_style=None))
+    text = yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
+    # readable by the user alone (a run's files hold its run token), never through a link
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
+    with os.fdopen(fd, 'w', encoding='utf-8') as stream:
+        stream.write(text)
 
 
 def check_unknown(node: Node) -> None:
