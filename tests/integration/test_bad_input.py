@@ -103,15 +103,26 @@ def _run_token(out: Path) -> str:
         'simulator']['ros__parameters']['run_token']
 
 
+def _commands_at_3_ms(listener) -> object:
+    """A paused run stepped to 3 ms (its /clock there), and a publisher of effort_commands the
+    simulator has matched."""
+    listener.subscribe('/clock', Clock)
+    clocks = listener.messages['/clock']
+    publisher = listener.node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
+    step = StepSimulation.Request(control_periods=3)
+    listener.spin_until(lambda: listener.call(StepSimulation, '/simulator/step', step,
+                                              timeout=60.0).success, 60.0, 'a step')
+    listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) == 3 * MS, 30.0,
+                        '/clock at 3 ms')
+    listener.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0, 'matching')
+    return publisher
+
+
 def test_bad_commands_are_rejected_and_never_reach_the_state(
         graph_run, listener, tmp_path, graph_factory, assert_same_trajectory):
     stats = tmp_path / 'stats.json'
     graph = graph_factory(tmp_path / 'out', start_paused=True, stats_file=str(stats)).start()
     token = _run_token(tmp_path / 'out')
-    listener.subscribe('/clock', Clock)
-    clocks = listener.messages['/clock']
-    publisher = listener.node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
-    step = StepSimulation.Request(control_periods=3)
     bad = [_command('gait_manager', 3 * MS, token, effort=[float('nan')] + [0.0] * 17),
            _command('gait_manager', 3 * MS, token, effort=[1.0] * 17),
            _command('gait_manager', 3 * MS, token, joint_names=['y0', 'knee'],
@@ -126,11 +137,7 @@ def test_bad_commands_are_rejected_and_never_reach_the_state(
            _command('gait_manager', 3 * MS, '', **BREAKDOWN),
            _command('gait_manager', 3 * MS, 'another run', **BREAKDOWN)]
     try:
-        listener.spin_until(lambda: listener.call(StepSimulation, '/simulator/step', step,
-                                                  timeout=60.0).success, 60.0, 'a step')
-        listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) == 3 * MS, 30.0,
-                            '/clock at 3 ms')
-        listener.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0, 'matching')
+        publisher = _commands_at_3_ms(listener)
         for msg in bad:  # one at a time: the simulator's best-effort reader keeps 10
             publisher.publish(msg)
             listener.spin_for(0.05)
@@ -198,16 +205,8 @@ def test_a_command_of_the_run_beyond_the_effort_limit_ends_the_run_naming_it(
     controller that stopped answering); the outputs say so."""
     graph = graph_factory(tmp_path / 'out', start_paused=True).start()
     token = _run_token(tmp_path / 'out')
-    listener.subscribe('/clock', Clock)
-    clocks = listener.messages['/clock']
-    publisher = listener.node.create_publisher(EffortCommand, 'effort_commands', STATE_QOS)
-    step = StepSimulation.Request(control_periods=3)
     try:
-        listener.spin_until(lambda: listener.call(StepSimulation, '/simulator/step', step,
-                                                  timeout=60.0).success, 60.0, 'a step')
-        listener.spin_until(lambda: clocks and stamp_to_ns(clocks[-1].clock) == 3 * MS, 30.0,
-                            '/clock at 3 ms')
-        listener.spin_until(lambda: publisher.get_subscription_count() > 0, 10.0, 'matching')
+        publisher = _commands_at_3_ms(listener)
         publisher.publish(_command('gait_manager', 3 * MS, token,
                                    effort=[0.0] * 5 + [effort] + [0.0] * 12, **BREAKDOWN))
         listener.spin_until(lambda: graph.simulator.poll() is not None, 60.0, 'the end')
