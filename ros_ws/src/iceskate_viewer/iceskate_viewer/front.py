@@ -68,7 +68,8 @@ def bind(host: str, port: int) -> socket.socket:
             return socket.create_server((host, candidate), family=family)
         except OSError as exc:
             if exc.errno != errno.EADDRINUSE:
-                raise SimulationError(f'cannot serve the view on {host} port {candidate}: '
+                where = f'{host} port {candidate}' if candidate else host
+                raise SimulationError(f'cannot serve the view on {where}: '
                                       f'{exc.strerror or exc}') from None
     raise SimulationError(f'cannot serve the view on {host}: ports {ports[0]}..{ports[-1]} '
                           'are all busy')

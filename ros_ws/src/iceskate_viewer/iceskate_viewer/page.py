@@ -7,7 +7,6 @@ from collections.abc import Sequence
 import contextlib
 import io
 import ipaddress
-import socket
 
 import coal
 import numpy as np
@@ -118,13 +117,7 @@ def check_port(port: int, what: str = 'port') -> None:
 def check_host(host: str) -> None:
     """Refuse, in one sentence, a host this machine cannot serve on, before a run starts
     (``run_scene --view``: its page is served once the run's outputs are taken)."""
-    try:
-        with socket.create_server((host, 0), family=socket.AF_INET6 if ':' in host
-                                  else socket.AF_INET):
-            pass
-    except OSError as exc:
-        raise SimulationError(f'cannot serve the view on {host}: '
-                              f'{exc.strerror or exc}') from None
+    bind(host, 0).close()
 
 
 def stop_server(server: viser.ViserServer) -> None:
