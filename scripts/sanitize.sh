@@ -80,7 +80,7 @@ log "colcon build of iceskate_native under ASan+UBSan ($BUILD_TYPE) into ros_ws/
   # The environment of scripts/bootstrap.sh's build.
   # shellcheck source=scripts/colcon_env.sh
   . "$ROOT/scripts/colcon_env.sh"
-  colcon_environment "$VENV" "$TOOLCHAIN_FILE"
+  colcon_environment "$VENV" "$TOOLCHAIN_FILE" "$ROOT"
   # As the bootstrap: Pinocchio's C++ side under the pin wheel's cmeel.prefix, ccache (the
   # sanitizer flags are part of ccache's hash, so these objects never mix with the normal ones).
   cmake_args=(-DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE="$BUILD_TYPE"

@@ -26,6 +26,40 @@ macro(iceskate_find_nanobind)
   find_package(nanobind CONFIG REQUIRED)
 endmacro()
 
+# nanobind's core as one shared library, lib/libiceskate_nanobind.so of iceskate_native's install:
+# compiled once for the kernel and every controller module (a static copy per module would be
+# compiled once per package). ICESKATE_NANOBIND_CORE is the target nanobind_add_module(...
+# NB_SHARED PROTECT_STACK) builds its core as, or links if it exists. PROTECT_STACK leaves the
+# compiler's default stack protection (nanobind would set -fno-stack-protector on the core too,
+# which an imported library cannot take).
+set(ICESKATE_NANOBIND_CORE nanobind-ps)
+set(ICESKATE_NANOBIND_NAME iceskate_nanobind)
+macro(iceskate_nanobind_library)
+  set_target_properties(${ICESKATE_NANOBIND_CORE} PROPERTIES
+    OUTPUT_NAME ${ICESKATE_NANOBIND_NAME}
+    INTERPROCEDURAL_OPTIMIZATION_RELEASE OFF)  # a link-time pass would cost more than it saves
+endmacro()
+
+# In a controller package: iceskate_native's installed core as the target nanobind_add_module
+# links instead of building its own.
+macro(iceskate_import_nanobind_library)
+  if(NOT TARGET ${ICESKATE_NANOBIND_CORE})
+    get_filename_component(_nanobind_prefix "${iceskate_native_DIR}/../../.." ABSOLUTE)
+    set(_nanobind_file ${CMAKE_SHARED_LIBRARY_PREFIX}${ICESKATE_NANOBIND_NAME})
+    set(_nanobind_library "${_nanobind_prefix}/lib/${_nanobind_file}${CMAKE_SHARED_LIBRARY_SUFFIX}")
+    if(NOT EXISTS "${_nanobind_library}")
+      message(FATAL_ERROR "iceskate_native's nanobind core is not at ${_nanobind_library}: "
+                          "build iceskate_native first")
+    endif()
+    add_library(${ICESKATE_NANOBIND_CORE} SHARED IMPORTED)
+    set_target_properties(${ICESKATE_NANOBIND_CORE} PROPERTIES
+      IMPORTED_LOCATION "${_nanobind_library}"
+      INTERFACE_COMPILE_DEFINITIONS NB_SHARED
+      INTERFACE_INCLUDE_DIRECTORIES "${Python_INCLUDE_DIRS};${NB_DIR}/include"
+      INTERFACE_COMPILE_FEATURES cxx_std_17)
+  endif()
+endmacro()
+
 # A controller package (after project() and find_package(iceskate_native)):
 #   <project>_law   static library of SOURCES against iceskate_native's Eigen-only headers and
 #                   include/ (no Pinocchio), warnings are errors
@@ -75,9 +109,13 @@ macro(iceskate_controller_package)
   set_target_properties(${PROJECT_NAME}_law PROPERTIES
     POSITION_INDEPENDENT_CODE ON CXX_VISIBILITY_PRESET hidden VISIBILITY_INLINES_HIDDEN ON)
 
-  nanobind_add_module(_law NOMINSIZE NOSTRIP src/bindings.cpp)  # NOSTRIP: named in profiles
+  iceskate_import_nanobind_library()
+  # NOSTRIP: named in profiles; NB_SHARED PROTECT_STACK: link iceskate_native's nanobind core
+  nanobind_add_module(_law NB_SHARED NOMINSIZE NOSTRIP PROTECT_STACK src/bindings.cpp)
   target_link_libraries(_law PRIVATE ${PROJECT_NAME}_law)
   target_compile_options(_law PRIVATE ${_controller_warnings})
+  # nanobind's core from iceskate_native's lib/ (its build-tree RPATH already names it)
+  set_target_properties(_law PROPERTIES INSTALL_RPATH_USE_LINK_PATH TRUE)
 
   ament_python_install_package(${PROJECT_NAME})
   install(TARGETS _law LIBRARY DESTINATION "${PYTHON_INSTALL_DIR}/${PROJECT_NAME}")

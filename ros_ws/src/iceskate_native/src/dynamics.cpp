@@ -381,14 +381,16 @@ Vector18 Dynamics::applied_forces(
     const SupportModel & support = models_[static_cast<std::size_t>(k)];
     pinocchio::Data & data = w.data[static_cast<std::size_t>(k)];
     w.q = q;
+    // all joints' Jacobians and placements by Pinocchio's compiled algorithm (its
+    // computeFrameJacobian, the push frame's chain only, is not in the library for this
+    // argument type and would be compiled here, the heaviest part of this file's build)
+    pinocchio::computeJointJacobians(support.model.pin(), data, ConstVector(w.q));
+    w.placed_at(k, q);
     w.jacobian.setZero();
-    pinocchio::computeFrameJacobian(
-      support.model.pin(), data, ConstVector(w.q),
+    pinocchio::getFrameJacobian(
+      support.model.pin(), data,
       static_cast<pinocchio::FrameIndex>(support.frame(inputs.push_frame)), kWorldAligned,
       w.jacobian);
-    if (!w.is_placed_at(k, q)) {  // the placements of the push frame's chain only
-      w.unplaced(k);
-    }
     applied += w.jacobian.topRows<3>().transpose() * inputs.push_force;
   }
   return applied;

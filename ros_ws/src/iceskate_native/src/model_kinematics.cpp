@@ -277,12 +277,8 @@ Vector18 ModelKinematics::gravity(const SupportState & state, const Vector18 & q
   if (!c.gravity) {
     const pinocchio::Model & model = models_[k].model.pin();
     Workspace & w = *work_;
-    if (c.placed || c.moving) {  // the joint placements at q are in the data
-      pinocchio::jacobianCenterOfMass(model, w.data[k]);
-    } else {
-      w.q = q;
-      pinocchio::jacobianCenterOfMass(model, w.data[k], ConstVector(w.q));
-    }
+    w.q = q;  // Pinocchio's compiled algorithm: see velocities()
+    pinocchio::jacobianCenterOfMass(model, w.data[k], ConstVector(w.q));
     keep_gravity(model, w.data[k], c);
   }
   Vector18 out = Vector18::Zero();
@@ -337,11 +333,11 @@ const StateCache & ModelKinematics::velocities(
   const pinocchio::Model & model = models_[k].model.pin();
   Workspace & w = *work_;
   pinocchio::Data & data = w.data[k];
+  w.q = q;
   if (!c.moving) {
-    w.q = q;
     w.v = v;
-    // one forward pass for the joint velocities, the centre of mass and its Jacobian (what
-    // centerOfMass(q, v) and jacobianCenterOfMass(q) would each run again at the same state)
+    // one forward pass for the joint velocities and the centre of mass's velocity (what
+    // centerOfMass(q, v) would run again at the same state)
     pinocchio::forwardKinematics(model, data, ConstVector(w.q), ConstVector(w.v));
     c.moving = true;
   }
@@ -352,7 +348,11 @@ const StateCache & ModelKinematics::velocities(
   pinocchio::centerOfMass(model, data, pinocchio::VELOCITY);
   c.centre.position = data.com[0];
   c.centre.velocity = data.vcom[0];
-  c.centre.jacobian_y = pinocchio::jacobianCenterOfMass(model, data).row(1).transpose();
+  // Pinocchio's compiled jacobianCenterOfMass(q) runs one more placement pass; the form without
+  // q (the placements as they are) is not in its library and would be compiled here, the
+  // heaviest part of this file's build
+  c.centre.jacobian_y =
+    pinocchio::jacobianCenterOfMass(model, data, ConstVector(w.q)).row(1).transpose();
   if (!c.gravity) {
     keep_gravity(model, data, c);
   }
