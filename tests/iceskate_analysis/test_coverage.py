@@ -97,7 +97,7 @@ def test_mode_coverage_writes_the_table_and_the_diagram_of_real_runs(tmp_path, c
 
 
 def test_mode_coverage_names_a_folder_that_is_not_a_run(tmp_path, capsys):
-    assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 1
+    assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith('mode_coverage: error:') and 'is not a finished run' in err
     assert '\n' not in err
@@ -105,11 +105,11 @@ def test_mode_coverage_names_a_folder_that_is_not_a_run(tmp_path, capsys):
     for bad in ('{"not": "a list"}', '[{"t": "0.1", "from_mode": 1, "to_mode": 2, "event": "E1"}]',
                 '[{"t": 0.1, "from_mode": [1], "to_mode": 2, "event": "E1"}]'):
         (tmp_path / 'events.json').write_text(bad)
-        assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 1
+        assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 2
         err = capsys.readouterr().err
         assert 'events.json: not an event log' in err and 'Traceback' not in err
     (tmp_path / 'events.json').write_text('[')
-    assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 1
+    assert main([str(tmp_path), '--out', str(tmp_path / 'c')]) == 2
     assert f'{tmp_path / "events.json"} is not JSON' in capsys.readouterr().err
     (tmp_path / 'events.json').write_text('[]')
     (tmp_path / 'metrics.json').write_text('{"sim_time_s": 1.0, "mode_time_fraction": {"x": 1}}')
@@ -141,7 +141,7 @@ def test_mode_coverage_refuses_an_events_json_that_is_a_fifo_at_once(tmp_path):
     result = subprocess.run([sys.executable, '-m', 'iceskate_analysis.coverage_cli',
                              str(tmp_path), '--out', str(tmp_path / 'c')],
                             capture_output=True, text=True, timeout=60)
-    assert result.returncode == 1
+    assert result.returncode == 2
     assert result.stderr.splitlines() == [
         f'mode_coverage: error: run file {tmp_path / "events.json"} is a named pipe (FIFO), '
         'not a regular file, and is not read']

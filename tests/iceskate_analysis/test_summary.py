@@ -220,11 +220,11 @@ def test_summary_draws_the_picture_of_a_run_that_has_none(stand_run, tmp_path, c
     assert capsys.readouterr().out.strip() == str(tmp_path / 'summary.png')
     _assert_picture(tmp_path / 'summary.png')
     (tmp_path / 'trajectory.npz').write_bytes(b'PK\x03\x04 cut short')
-    assert main([str(tmp_path)]) == 1
+    assert main([str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f'summary: error: cannot read the run in {tmp_path}') and (
         err.count('\n') == 1 and 'Traceback' not in err)
-    assert main([str(tmp_path / 'missing')]) == 1
+    assert main([str(tmp_path / 'missing')]) == 2
     assert 'trajectory.npz, metrics.json missing' in capsys.readouterr().err
 
 

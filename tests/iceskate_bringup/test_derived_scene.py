@@ -133,7 +133,7 @@ def test_what_stays_wrong_is_refused_in_one_sentence(tmp_path, capsys, text, mes
     path = _scene_file(tmp_path, text)
     with pytest.raises(SimulationError, match='^' + re.escape(message)):
         load_scene(path)
-    assert main([str(path), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(path), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     err = capsys.readouterr().err
     assert err.startswith(f'run_scene: error: {message}') and err.count('\n') == 1, err
     assert not (tmp_path / 'out').exists()

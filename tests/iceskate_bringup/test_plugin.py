@@ -225,7 +225,7 @@ def test_run_scene_refuses_a_bad_plugin_before_the_run(tmp_path, capsys):
     raw['inputs'] = {'mine': {'plugin': 'no_such_package.module:Class'}}
     path = tmp_path / 'bad.yaml'
     path.write_text(json.dumps(raw))
-    assert main([str(path), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(path), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("run_scene: error: scene key 'inputs.mine.plugin': no module")
     assert '\n' not in err

@@ -85,7 +85,7 @@ def test_the_documented_plugin_node_command_declares_the_keyword_parameters(tmp_
     ros_env['PYTHONPATH'] = os.pathsep.join([str(folder), ros_env.get('PYTHONPATH', '')])
     bad = subprocess.run([*command[:-1], 'gain:=2'], env=ros_env, capture_output=True,
                          text=True, timeout=60)
-    assert bad.returncode == 1
+    assert bad.returncode == 2  # refused input
     assert bad.stderr.strip().splitlines()[-1] == ("knees: error: parameter 'gain' must be of "
                                                    'type DOUBLE, as its default 5.0 is; write '
                                                    '2.0, not 2')

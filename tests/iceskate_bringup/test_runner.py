@@ -121,16 +121,16 @@ def test_control_stack_computes_only_the_scene_sources():
     assert commands['gait_manager'].command.has_impedance  # the posture's
 
 
-def test_main_reports_a_bad_scene_and_exits_non_zero(tmp_path, capsys):
+def test_main_refuses_a_bad_scene_with_exit_status_2(tmp_path, capsys):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('scene: bad\nduration: 1.0\ncontrol_period: 0.001\ninputs: {}\nfoo: 1\n')
-    assert main([str(bad), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(bad), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     assert "scene key 'foo'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('option', [['--rt-priority', '10'], ['--single-process']])
 def test_main_refuses_graph_options_without_ros(tmp_path, capsys, option):
-    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', *option]) == 1
+    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', *option]) == 2
     assert '--single-process and --rt-priority need --ros' in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()
 
@@ -163,7 +163,7 @@ def test_set_changes_scene_keys_of_the_run(tmp_path, capsys):
     ('a..b=1', "override a..b: 'a..b' is not a dotted scene key"),
 ])
 def test_a_bad_set_is_refused_in_one_sentence(tmp_path, capsys, setting, expected):
-    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', '--set', setting]) == 1
+    assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', '--set', setting]) == 2
     err = capsys.readouterr().err
     assert expected in err and err.count('\n') == 1, err
     assert not (tmp_path / 'out').exists()
@@ -181,7 +181,7 @@ def test_a_bad_set_is_refused_in_one_sentence(tmp_path, capsys, setting, expecte
 ])
 def test_bad_view_options_are_refused_in_one_sentence(tmp_path, capsys, options, expected):
     assert main(['stand', '--out', str(tmp_path / 'out'), '--quiet', '--duration', '0.01',
-                 *options]) == 1
+                 *options]) == 2
     err = capsys.readouterr().err
     assert expected in err and 'Traceback' not in err
 

@@ -61,10 +61,10 @@ def test_sweep_plot_draws_the_default_maps_and_refuses_bad_names(table, capsys):
     printed = capsys.readouterr().out.split()
     assert [p.rsplit('/', 1)[1] for p in printed] == [
         'steps.png', 'fell.png', 'arm_swing_ratio.png', 'arm_swing_steady.corr_q11_q14.png']
-    assert main([str(table.parent), '--metric', 'speed']) == 1
+    assert main([str(table.parent), '--metric', 'speed']) == 2
     assert capsys.readouterr().err.startswith("sweep-plot: error: --metric 'speed' is not a "
                                               'column of')
-    assert main([str(table.parent), '--x', 'duration']) == 1
+    assert main([str(table.parent), '--x', 'duration']) == 2
     assert "--x 'duration' is not an axis" in capsys.readouterr().err
     with pytest.raises(StudyError, match='cannot read the results table'):
         draw_maps(table.parent / 'other.parquet', 'a', 'b', ['steps'], table.parent)

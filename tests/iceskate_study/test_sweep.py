@@ -105,7 +105,7 @@ def test_a_table_without_a_run_column_is_refused_before_anything_runs(tmp_path, 
     table = pq.read_table(path)
     pq.write_table(table.drop_columns(['status']), path)
     before = path.read_bytes()
-    assert main([str(spec), '--out', str(tmp_path / 'out'), '--quiet']) == 1
+    assert main([str(spec), '--out', str(tmp_path / 'out'), '--quiet']) == 2
     err = capsys.readouterr().err
     assert err == (f"sweep: error: {path} lacks the column 'status' of a sweep's results table "
                    '(edited?); restore it or choose a new --out\n')
@@ -118,7 +118,7 @@ def test_a_folder_of_other_files_is_refused_and_left_alone(tmp_path, grid, write
     out = tmp_path / 'mine'
     out.mkdir()
     (out / 'notes.txt').write_text('mine')
-    assert main([str(write_spec(grid)), '--out', str(out), '--quiet']) == 1
+    assert main([str(write_spec(grid)), '--out', str(out), '--quiet']) == 2
     assert capsys.readouterr().err == (f"sweep: error: output directory {out} is not empty (it "
                                        "holds 'notes.txt'): a run writes only into a new or "
                                        'empty directory; choose another output directory\n')
@@ -128,7 +128,7 @@ def test_a_folder_of_other_files_is_refused_and_left_alone(tmp_path, grid, write
 def test_a_bad_spec_or_another_sweeps_folder_is_refused_in_one_line(tmp_path, grid, write_spec,
                                                                       capsys):
     grid['axes']['floor.mu'] = []
-    assert main([str(write_spec(grid)), '--out', str(tmp_path / 'out')]) == 1
+    assert main([str(write_spec(grid)), '--out', str(tmp_path / 'out')]) == 2
     err = capsys.readouterr().err
     assert err == ("sweep: error: SPEC key 'axes.floor.mu': an axis needs at least one value, "
                    'got []\n')
@@ -136,8 +136,8 @@ def test_a_bad_spec_or_another_sweeps_folder_is_refused_in_one_line(tmp_path, gr
     (tmp_path / 'old' / RESULTS).write_bytes(
         (Path(__file__).parent / 'test_sweep.py').read_bytes())
     grid['axes']['floor.mu'] = [0.005]
-    assert main([str(write_spec(grid)), '--out', str(tmp_path / 'old')]) == 1
+    assert main([str(write_spec(grid)), '--out', str(tmp_path / 'old')]) == 2
     assert capsys.readouterr().err.startswith('sweep: error: cannot read the results table')
-    assert main([str(tmp_path / 'missing.yaml'), '--out', str(tmp_path / 'out')]) == 1
+    assert main([str(tmp_path / 'missing.yaml'), '--out', str(tmp_path / 'out')]) == 2
     assert capsys.readouterr().err.startswith('sweep: error: cannot read SPEC')
     assert not os.path.exists(tmp_path / 'out' / RESULTS)

@@ -119,7 +119,7 @@ def test_a_port_out_of_range_is_one_sentence_and_no_hang(skate_run, capsys, port
     line before anything is served, exit 2."""
     assert main([str(skate_run), '--port', port]) == 2
     err = capsys.readouterr().err
-    assert err.strip() == f'view: --port must be 0..65535 (0: any free port), got {port}'
+    assert err.strip() == f'view: error: --port must be 0..65535 (0: any free port), got {port}'
     with pytest.raises(SimulationError, match='port must be 0..65535'):
         serve('127.0.0.1', 70000)
 

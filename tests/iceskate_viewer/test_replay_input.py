@@ -51,7 +51,7 @@ def test_times_a_slider_cannot_take_are_one_sentence(skate_run, tmp_path, capsys
     assert main([str(run_dir), '--port', '0']) == 2
     err = capsys.readouterr().err
     assert err.strip().splitlines() == [err.strip()] and 'Traceback' not in err
-    assert err.startswith(f'view: {run_dir / "trajectory.npz"}') and expected in err, err
+    assert err.startswith(f'view: error: {run_dir / "trajectory.npz"}') and expected in err, err
 
 
 @pytest.mark.timeout(60)
@@ -82,8 +82,8 @@ def test_a_code_the_view_cannot_draw_is_one_sentence(skate_run, tmp_path, capsys
     np.savez(run_dir / 'trajectory.npz', **columns)
     assert main([str(run_dir), '--port', '0']) == 2
     err = capsys.readouterr().err
-    assert err.strip() == (f'view: {run_dir / "trajectory.npz"}: column {column} holds codes '
-                           f'the view does not know: {code:g}'), err
+    assert err.strip() == (f'view: error: {run_dir / "trajectory.npz"}: column {column} holds '
+                           f'codes the view does not know: {code:g}'), err
 
 
 @pytest.mark.timeout(60)

@@ -238,7 +238,7 @@ def test_bad_parameter_file_exits_non_zero_naming_the_parameter(
         [s for s in graph_nodes('stand', tmp_path / 'out') if s.executable == node]
     result = subprocess.run(command_of(spec) + ['--ros-args', '--params-file', str(params)],
                             env=ros_env, capture_output=True, text=True, timeout=60)
-    assert result.returncode == 1, result.stderr
+    assert result.returncode == 2, result.stderr
     assert expected in result.stderr and result.stderr.startswith(f'{node}: error:'), \
         result.stderr
     assert 'Traceback' not in result.stderr
@@ -249,4 +249,4 @@ def test_node_modules_run_without_an_install(tmp_path, ros_env):
     result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '-p', 'duration:=-1.0'], env=ros_env, capture_output=True,
                             text=True, timeout=60)
-    assert result.returncode == 1 and "parameter 'duration'" in result.stderr
+    assert result.returncode == 2 and "parameter 'duration'" in result.stderr

@@ -194,7 +194,7 @@ def test_run_scene_ros_refuses_an_out_holding_a_run_before_starting_nodes(tmp_pa
         [sys.executable, '-m', 'iceskate_bringup.runner', str(TINY), '--ros', '--out', str(out)],
         env=ros_env | {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}, capture_output=True, text=True,
         timeout=120)
-    assert result.returncode == 1
+    assert result.returncode == 2
     assert result.stderr.startswith(f'run_scene: error: output directory {out} already holds a '
                                     f'recorded run: {out / "bag"} already exists'), result.stderr
     assert 'graph: domain' not in result.stderr  # no node was started

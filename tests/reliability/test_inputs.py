@@ -22,8 +22,8 @@ PYTHON_METHOD = re.compile(r'\w\(\)')
 
 
 def _refused(capsys, argv: list[str]) -> str:
-    """run_scene with ``argv`` exits 1 with one error line; that line."""
-    assert main([*argv, '--quiet']) == 1
+    """run_scene with ``argv`` exits 2 (refused) with one error line; that line."""
+    assert main([*argv, '--quiet']) == 2
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('run_scene: error: '), err
@@ -237,7 +237,7 @@ def test_an_alias_bomb_or_a_deep_nest_in_a_scene_is_refused_small_and_fast(
                                '--out', str(tmp_path / 'out'), '--quiet'], capture_output=True,
                               text=True, timeout=60, preexec_fn=small)
         assert time.monotonic() - start < 20.0
-        assert done.returncode == 1 and done.stderr == f'run_scene: error: {expected}\n', (
+        assert done.returncode == 2 and done.stderr == f'run_scene: error: {expected}\n', (
             done.stderr[-2000:])
     assert not (tmp_path / 'out').exists()
 
@@ -341,7 +341,7 @@ def test_a_bad_node_parameter_file_is_refused_in_one_line(tmp_path, ros_env, con
     result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '--params-file', str(params)], env=ros_env, capture_output=True,
                             text=True, timeout=60)
-    assert result.returncode == 1
+    assert result.returncode == 2
     (line,) = result.stderr.strip().splitlines()
     assert line.startswith('simulator: error: ') and f'parameter file {params}' in line, line
     assert expected in line
@@ -360,7 +360,7 @@ def test_node_parameter_files_take_yaml_1_2_exponents(tmp_path, ros_env):
     result = subprocess.run([sys.executable, '-m', 'iceskate_sim.ros.simulator_node', '--ros-args',
                              '--params-file', str(params)], env=ros_env, capture_output=True,
                             text=True, timeout=60)
-    assert result.returncode == 1
+    assert result.returncode == 2
     assert result.stderr.strip().endswith(f'cannot read scene {tmp_path / "missing.yaml"}: '
                                           'No such file or directory'), result.stderr
 
@@ -391,6 +391,55 @@ NODE_MODULES = {'simulator': 'iceskate_sim.ros.simulator_node',
                 'visual_lifting': 'visual_lifting.visual_lifting_node',
                 'gait_manager': 'gait_manager.gait_manager_node',
                 'plugin_controller': 'iceskate_bringup.plugin_node'}
+#: The other console executables, by name: their modules (``python -m`` runs them).
+CONSOLE_MODULES = {'run_scene': 'iceskate_bringup.runner', 'sweep': 'iceskate_study.sweep',
+                   'sweep-plot': 'iceskate_study.plot', 'summary': 'iceskate_analysis.summary',
+                   'mode_coverage': 'iceskate_analysis.coverage_cli',
+                   'coupling_analysis': 'iceskate_analysis.coupling_cli',
+                   'replay': 'iceskate_analysis.replay', 'view': 'iceskate_viewer.replay'}
+#: Those that need rclpy.
+ROS_EXECUTABLES = {*NODE_MODULES, 'replay'}
+
+
+@pytest.mark.parametrize(('name', 'arguments'), [
+    ('run_scene', ['{missing}.yaml', '--out', '{out}']),
+    ('run_scene', ['stand', '--out', '{out}', '--duration', '-1']),
+    ('sweep', ['{missing}.yaml', '--out', '{out}']),
+    ('sweep', ['arm_swing', '--out', '{out}', '--workers', '0']),
+    ('sweep-plot', ['{missing}']),
+    ('summary', ['{missing}']),
+    ('mode_coverage', ['{missing}', '--out', '{out}']),
+    ('coupling_analysis', ['{missing}', '--out', '{out}']),
+    ('coupling_analysis', ['{missing}', '--out', '{out}', '--frames', '0']),
+    ('view', ['{missing}', '--port', '0']),
+    ('view', ['{missing}', '--port', '70000']),
+    pytest.param('replay', ['{missing}'], marks=pytest.mark.ros),
+    pytest.param('simulator', ['--ros-args', '-p', 'scene:={missing}.yaml'],
+                 marks=pytest.mark.ros),
+    pytest.param('simulator', ['--ros-args', '-p', 'control_timeout:=-1.0'],
+                 marks=pytest.mark.ros),
+    pytest.param('visual_lifting', ['--ros-args', '--params-file', '{missing}.yaml'],
+                 marks=pytest.mark.ros),
+    pytest.param('gait_manager', ['--ros-args', '-p', 'posture.stiffness:=-5.0'],
+                 marks=pytest.mark.ros),
+    pytest.param('plugin_controller', ['--ros-args', '-p', 'plugin:=missing.module:Class'],
+                 marks=pytest.mark.ros),
+])
+def test_every_executable_refuses_bad_input_with_exit_status_2(tmp_path, ros_env, name,
+                                                              arguments):
+    """The one exit-status convention (docs/usage.md, 'Exit status'): an input that does not
+    exist or a bad value is refused before anything runs, with exit status 2 and one line
+    ``NAME: error: ...``, no traceback, nothing written."""
+    if name in ROS_EXECUTABLES:
+        pytest.importorskip('rclpy')
+    argv = [a.format(missing=tmp_path / 'missing', out=tmp_path / 'out') for a in arguments]
+    result = subprocess.run(
+        [sys.executable, '-m', NODE_MODULES.get(name) or CONSOLE_MODULES[name], *argv],
+        env=ros_env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    (line,) = result.stderr.splitlines()
+    assert line.startswith(f'{name}: error: ') and not PYTHON_METHOD.search(line), line
+    assert not list((tmp_path / 'out').rglob('*'))  # coupling_analysis makes it, empty
 
 
 @pytest.mark.ros

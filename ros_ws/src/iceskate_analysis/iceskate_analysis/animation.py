@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.model.modes import get_mode
 from iceskate_sim.model.robot import LINK_NAMES, Robot
 from iceskate_sim.progress import ProgressBar
@@ -49,7 +49,7 @@ _GROUND_SPACING = 0.25  # m between ground ticks (they show the travel)
 def frame_indices(n: int, max_frames: int) -> np.ndarray:
     """At most ``max_frames`` sample indices spread evenly over ``n`` samples."""
     if n <= 0:
-        raise SimulationError('the bag has no samples to draw')
+        raise InputRefused('the bag has no samples to draw')
     count = max(1, min(n, int(max_frames)))
     return np.unique(np.linspace(0, n - 1, count).round().astype(int))
 

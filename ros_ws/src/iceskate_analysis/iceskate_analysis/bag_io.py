@@ -25,7 +25,7 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 
 from iceskate_analysis.rows import collect_rows
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
@@ -167,16 +167,16 @@ def resolve_bag_path(path: str | pathlib.Path) -> pathlib.Path:
     ``path/bag`` for a run directory. A bag directory holds a metadata.yaml or, for a recording
     that was never closed, an .mcap file alone.
 
-    :raises SimulationError: when the path does not exist or holds no rosbag2 bag.
+    :raises InputRefused: when the path does not exist or holds no rosbag2 bag.
     """
     p = pathlib.Path(path)
     if not p.exists():
-        raise SimulationError(f'bag {p} does not exist')
+        raise InputRefused(f'bag {p} does not exist')
     if p.is_dir() and not _is_bag_dir(p):
         if (p / 'bag').is_dir() and _is_bag_dir(p / 'bag'):
             return p / 'bag'
-        raise SimulationError(f'{p} is not a rosbag2 bag: it holds neither a metadata.yaml '
-                              'nor an .mcap file (nor a bag/ folder with one)')
+        raise InputRefused(f'{p} is not a rosbag2 bag: it holds neither a metadata.yaml '
+                           'nor an .mcap file (nor a bag/ folder with one)')
     return p
 
 
@@ -219,7 +219,7 @@ class OpenBag:
         """Scan ``files`` once for their channels and message counts (``missing``: what the bag
         lacks, '' for nothing), looking for a stop signal (``stop``) at every record.
 
-        :raises SimulationError: when a bag that is not complete holds no complete chunk.
+        :raises InputRefused: when a bag that is not complete holds no complete chunk.
         :raises RunInterrupted: on a stop signal (t: the log time scanned up to).
         """
         self.path, self._files, self.custom_data = path, files, custom_data
@@ -265,9 +265,9 @@ class OpenBag:
         why = missing or ('its index cannot be read' if problems else '')
         total = sum(counts.values())
         if why and not total:
-            raise SimulationError(f'cannot read bag {path}: {why}, and its .mcap file holds no '
-                                  'complete chunk of messages (the file is truncated or '
-                                  f'corrupt: {"; ".join(problems) or "empty"})')
+            raise InputRefused(f'cannot read bag {path}: {why}, and its .mcap file holds no '
+                               'complete chunk of messages (the file is truncated or '
+                               f'corrupt: {"; ".join(problems) or "empty"})')
         end = f'; {"; ".join(problems)}' if problems else ''
         unknown = '' if custom_data else ' (without metadata: the scene parameters are not known)'
         self.recovered = '' if not why else (
@@ -324,7 +324,7 @@ def open_bag(path: str | pathlib.Path, stop: StopRequest | None = None) -> OpenB
     far as it reached the disk; ``recovered`` says so and how much was read. Its files must be
     regular files (``_check_regular``).
 
-    :raises SimulationError: naming the bag and the problem.
+    :raises InputRefused: naming the bag and the problem.
     :raises RunInterrupted: on a signal of ``stop`` while its files are scanned.
     """
     bag = resolve_bag_path(path)
@@ -340,15 +340,15 @@ def open_bag(path: str | pathlib.Path, stop: StopRequest | None = None) -> OpenB
         return OpenBag(bag, files, {}, 'it has no metadata.yaml (the recording was not '
                        'closed: a killed run or a power cut)', stop)
     if not files:
-        raise SimulationError(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
-                              'are read)')
+        raise InputRefused(f'cannot open bag {bag}: it holds no .mcap file (only MCAP bags '
+                           'are read)')
     return OpenBag(bag, files, _metadata_custom_data(metadata), '', stop)
 
 
 def _check_regular(paths: Iterable[pathlib.Path]) -> None:
     """Refuse a bag's file that is not a regular file, before it is opened.
 
-    :raises SimulationError: naming the file and what it is.
+    :raises InputRefused: naming the file and what it is.
     """
     for path in paths:
         regular_file(path, 'bag file')
@@ -392,16 +392,16 @@ def _order(names: Iterable[str], topic: str, where: str) -> np.ndarray:
         return np.arange(N_COORDINATES)
     missing = [n for n in COORDINATE_NAMES if n not in names]
     if missing:
-        raise SimulationError(f'{topic} at {where}: coordinates {missing} missing from the '
-                              f'names {names}')
+        raise InputRefused(f'{topic} at {where}: coordinates {missing} missing from the '
+                           f'names {names}')
     return np.array([names.index(n) for n in COORDINATE_NAMES], dtype=np.intp)
 
 
 def _vector(values: Any, order: np.ndarray, topic: str, what: str, where: str) -> np.ndarray:
     x = np.asarray(values, dtype=float)
     if x.shape[0] <= int(order.max()):
-        raise SimulationError(f'{topic} at {where}: {what} has {x.shape[0]} entries, need '
-                              f'{N_COORDINATES}')
+        raise InputRefused(f'{topic} at {where}: {what} has {x.shape[0]} entries, need '
+                           f'{N_COORDINATES}')
     return x[order]
 
 
@@ -415,28 +415,28 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
         conns = by_topic.get(topic, [])
         if not conns:
             if topic in REQUIRED_TOPICS:
-                raise SimulationError(
+                raise InputRefused(
                     f'bag {path} has no topic {topic} ({expected}): the {_WHAT[topic]} are '
                     f'needed for the coupling analysis; topics present: {sorted(by_topic)}')
             continue
         other = next((c.msgtype for c in conns if c.msgtype != expected), None)
         if other is not None:
-            raise SimulationError(f'bag {path}: topic {topic} has message type '
-                                  f'{other}, expected {expected}')
+            raise InputRefused(f'bag {path}: topic {topic} has message type '
+                               f'{other}, expected {expected}')
         if expected in reader.incompatible:
-            raise SimulationError(f'bag {path}: topic {topic} was recorded with an incompatible '
-                                  f'message definition: the bag defines {expected} otherwise '
-                                  'than the installed interfaces')
+            raise InputRefused(f'bag {path}: topic {topic} was recorded with an incompatible '
+                               f'message definition: the bag defines {expected} otherwise '
+                               'than the installed interfaces')
         if not reader.knows(expected):
-            raise SimulationError(
+            raise InputRefused(
                 f'bag {path}: message type {expected} of topic {topic} is unknown: the bag '
                 'carries no definition of it and the iceskate_interfaces .msg files were not '
                 'found (build ros_ws or run from the source tree)')
         conn = BagTopic(topic, expected, sum(c.count for c in conns),
                         tuple(sorted(key for c in conns for key in c.keys)))
         if topic in REQUIRED_TOPICS and conn.count == 0:
-            raise SimulationError(f'bag {path}: topic {topic} has no messages: no '
-                                  f'{_WHAT[topic]} were recorded')
+            raise InputRefused(f'bag {path}: topic {topic} has no messages: no '
+                               f'{_WHAT[topic]} were recorded')
         chosen[topic] = conn
     return chosen
 
@@ -453,8 +453,8 @@ def _joint_states(msg: Any, where: str) -> tuple[np.ndarray, np.ndarray, np.ndar
 def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
     multipliers = np.zeros(len(MULTIPLIER_NAMES))
     if len(msg.multiplier_names) != len(msg.multipliers):
-        raise SimulationError(f'/gait_state at {where}: {len(msg.multiplier_names)} multiplier '
-                              f'names but {len(msg.multipliers)} values')
+        raise InputRefused(f'/gait_state at {where}: {len(msg.multiplier_names)} multiplier '
+                           f'names but {len(msg.multipliers)} values')
     for name, value in zip(msg.multiplier_names, msg.multipliers, strict=True):
         if name in MULTIPLIER_NAMES:
             multipliers[MULTIPLIER_NAMES.index(name)] = float(value)
@@ -468,19 +468,19 @@ def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
 def _joint_dynamics(msg: Any, where: str
                     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     if len(msg.acceleration) == 0:
-        raise SimulationError(f'/joint_dynamics at {where}: the message carries no joint '
-                              'accelerations (empty acceleration array)')
+        raise InputRefused(f'/joint_dynamics at {where}: the message carries no joint '
+                           'accelerations (empty acceleration array)')
     order = _order(msg.name, '/joint_dynamics', where)
     qdd = _vector(msg.acceleration, order, '/joint_dynamics', 'acceleration', where)
     active = np.asarray(msg.active, dtype=bool)[order]
     sources = [str(s) for s in msg.source_names]
     if len(set(sources)) != len(sources):
-        raise SimulationError(f'/joint_dynamics at {where}: repeated source names {sources}')
+        raise InputRefused(f'/joint_dynamics at {where}: repeated source names {sources}')
     n = len(msg.name)
     values = np.asarray(msg.source_efforts, dtype=float)
     if values.shape != (len(sources) * n,):
-        raise SimulationError(f'/joint_dynamics at {where}: source_efforts has {values.size} '
-                              f'values for {len(sources)} sources x {n} names')
+        raise InputRefused(f'/joint_dynamics at {where}: source_efforts has {values.size} '
+                           f'values for {len(sources)} sources x {n} names')
     efforts = {source: _vector(row, order, '/joint_dynamics', f'effort of {source!r}', where)
                for source, row in zip(sources, values.reshape(len(sources), n), strict=True)}
     return qdd, active, efforts
@@ -595,7 +595,7 @@ class BagReading:
         """Open the bag and check its topics; the scan of its files and ``blocks`` look for
         a stop signal (``stop``) at every record.
 
-        :raises SimulationError: as ``read_bag``.
+        :raises InputRefused: as ``read_bag``.
         :raises RunInterrupted: on a stop signal.
         """
         self._stop = stop
@@ -622,7 +622,7 @@ class BagReading:
         """The samples in time order, at most ``size`` per block; each block is checked
         (``_validate``) before it is given.
 
-        :raises SimulationError: as ``read_bag``, when the block it concerns is reached.
+        :raises InputRefused: as ``read_bag``, when the block it concerns is reached.
         :raises RunInterrupted: on a stop signal (t: the log time read up to).
         """
         sampled = [t for t in _READERS if t in self._chosen and self._chosen[t].count]
@@ -647,7 +647,7 @@ class BagReading:
                 try:
                     tables[conn.topic].append(stamp, _READERS[conn.topic](msg, where))
                 except AttributeError as exc:
-                    raise SimulationError(
+                    raise InputRefused(
                         f'bag {self.path}: {conn.topic} message at {where} lacks a field the '
                         f'analysis needs ({exc}); the bag was recorded with an incompatible '
                         'message definition') from exc
@@ -664,8 +664,8 @@ class BagReading:
         try:
             return self._reader.deserialize(raw, conn.msgtype)
         except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
-            raise SimulationError(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
-                                  f'{conn.topic} at {where} ({exc})') from exc
+            raise InputRefused(f'bag {self.path}: cannot decode a {conn.msgtype} message of '
+                               f'{conn.topic} at {where} ({exc})') from exc
 
 
 class _Cut:
@@ -764,12 +764,12 @@ class _Join:
     def notes(self) -> list[str]:
         """What was dropped or assumed, once every sample was given.
 
-        :raises SimulationError: when no sample had every required topic.
+        :raises InputRefused: when no sample had every required topic.
         """
         if not self.emitted:
-            raise SimulationError(f'bag {self.path}: no sample has all of '
-                                  f'{sorted(REQUIRED_TOPICS)} at the same header stamp '
-                                  f'(header stamps per topic: {self.stamps})')
+            raise InputRefused(f'bag {self.path}: no sample has all of '
+                               f'{sorted(REQUIRED_TOPICS)} at the same header stamp '
+                               f'(header stamps per topic: {self.stamps})')
         notes = []
         if self.missing:
             notes.append(f'{self.missing} sample(s) miss one of {sorted(REQUIRED_TOPICS)} '
@@ -837,17 +837,17 @@ def _bin(spacings: np.ndarray) -> np.ndarray:
 def _validate(data: BagData) -> None:
     bad_modes = sorted(set(data.mode[(data.mode < 1) | (data.mode > 20)].tolist()))
     if bad_modes:
-        raise SimulationError(f'bag {data.path}: /gait_state has modes {bad_modes} outside '
-                              'Table 2 (1-20)')
+        raise InputRefused(f'bag {data.path}: /gait_state has modes {bad_modes} outside '
+                           'Table 2 (1-20)')
     if np.any((data.side < 0) | (data.side > 1)) or np.any((data.pivot < 0) | (data.pivot > 2)):
-        raise SimulationError(f'bag {data.path}: /gait_state has an unknown support_side or '
-                              'pivot code')
+        raise InputRefused(f'bag {data.path}: /gait_state has an unknown support_side or '
+                           'pivot code')
     for name, x in (('positions', data.q), ('velocities', data.v),
                     ('accelerations', data.qdd)):
         if not np.all(np.isfinite(x)):
             k = int(np.flatnonzero(~np.all(np.isfinite(x), axis=1))[0])
-            raise SimulationError(f'bag {data.path}: non-finite joint {name} at t = '
-                                  f'{data.t[k]:.6f} s')
+            raise InputRefused(f'bag {data.path}: non-finite joint {name} at t = '
+                               f'{data.t[k]:.6f} s')
 
 
 def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
@@ -860,7 +860,7 @@ def read_bag(path: str | pathlib.Path, progress: bool = False) -> BagData:
     :param path: rosbag2 directory (or a run directory holding ``bag/``, or an .mcap file).
     :param progress: show a tqdm progress bar on stderr.
     :return: the samples joined on their header stamps.
-    :raises SimulationError: on a missing path, a missing or empty required topic, a topic of
+    :raises InputRefused: on a missing path, a missing or empty required topic, a topic of
         the wrong or an unknown message type, a file with no complete chunk, or messages that
         lack the fields the analysis needs; the message names what is wrong.
     """

@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from iceskate_analysis.bag_io import BLOCK, PASSIVE, BagData, BagReading
 from iceskate_analysis.rows import join_rows, sample_count, take_rows
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.model.dynamics import ContactState, DynamicsParameters, ModelTerms
 from iceskate_sim.model.modes import MULTIPLIER_NAMES, get_mode
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, Q1, Y0, Robot, load_robot
@@ -56,7 +56,7 @@ _HEEL_SPEED_EPS = 1e-9  # m/s: below it a sliding heel's friction direction defa
 def parse_joint(value: str | int) -> int:
     """Joint index of '11', 11 or 'q11' (0 or 'y0' for y0).
 
-    :raises SimulationError: for anything that is not one of the 18 coordinates.
+    :raises InputRefused: for anything that is not one of the 18 coordinates.
     """
     text = str(value).strip()
     if text in COORDINATE_NAMES:
@@ -66,9 +66,9 @@ def parse_joint(value: str | int) -> int:
     except ValueError:
         index = -1
     if not 0 <= index < N_COORDINATES:
-        raise SimulationError(f'unknown joint {value!r}: give 0..17 or one of '
-                              f'{list(COORDINATE_NAMES)} ({RIGHT_SHOULDER} = right shoulder, '
-                              f'{LEFT_SHOULDER} = left)')
+        raise InputRefused(f'unknown joint {value!r}: give 0..17 or one of '
+                           f'{list(COORDINATE_NAMES)} ({RIGHT_SHOULDER} = right shoulder, '
+                           f'{LEFT_SHOULDER} = left)')
     return index
 
 
@@ -274,7 +274,7 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
     :param dynamics: the model to use (default: :func:`dynamics_for_bag`).
     :param progress: show a tqdm progress bar (or advance this one).
     :return: joint -> its decomposition.
-    :raises SimulationError: for an unknown joint or a sample the model cannot evaluate.
+    :raises InputRefused: for an unknown joint or a sample the model cannot evaluate.
     """
     joints = tuple(parse_joint(j) for j in joints)
     dyn = dynamics or dynamics_for_bag(bag)
@@ -302,8 +302,8 @@ def decompose(bag: BagData, joints: tuple[int, ...] = (RIGHT_SHOULDER,),
                 force = (_constraint_force(dyn, contact, q, v, bag.multipliers[k], pin_data)
                          if mode.constraints else np.zeros(N_COORDINATES))
             except SimulationError as exc:
-                raise SimulationError(f'{bag.path}: cannot evaluate the model at t = '
-                                      f'{bag.t[k]:.6f} s (mode {mode.number}): {exc}') from exc
+                raise InputRefused(f'{bag.path}: cannot evaluate the model at t = '
+                                   f'{bag.t[k]:.6f} s (mode {mode.number}): {exc}') from exc
             for a, i in enumerate(joints):
                 where = np.flatnonzero(act == i)
                 if not where.size:
@@ -734,7 +734,7 @@ def analyse_bag(reading: BagReading, label: str, joint: int = RIGHT_SHOULDER,
     shoulders' angles, whatever the length of the run. A stop signal (``stop``, also given
     to ``reading``) is looked for between blocks and between the blocks of the CSV.
 
-    :raises SimulationError: on a bag that cannot be read or a sample the model cannot
+    :raises InputRefused: on a bag that cannot be read or a sample the model cannot
         evaluate.
     :raises RunInterrupted: on a stop signal (t: the samples before it were analysed; ``csv``
         may then be partly written).

@@ -1,8 +1,9 @@
 """``coupling_analysis <bag> [--joint 11] [--compare <other bag>] --out DIR [--animate]``: the
-eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status 0; 2 with a one-line
-message for a bag or argument it refuses; 1 with one line when the output cannot be written;
-130, 143 or 129 with one line on SIGINT, SIGTERM or SIGHUP, within about a second, the output
-folder then as it was (every file is renamed into it once all are complete). The notes of the
+eq. (11) analysis of recorded runs (``report.run_analysis``). Exit status
+(``iceskate_sim.exit_codes``) 0; 2 with a one-line message for a bag or argument it refuses; 1
+with one line when the output cannot be written; 130, 143 or 129 with one line on SIGINT,
+SIGTERM or SIGHUP, within about a second, the output folder then as it was (every file is
+renamed into it once all are complete). The notes of the
 reading go to stderr, and the progress bars when stderr is a terminal (none into a pipe or file).
 """
 
@@ -12,7 +13,8 @@ import argparse
 import pathlib
 import sys
 
-from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.errors import InputRefused, RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.shutdown import StopRequest, say
 
 
@@ -48,7 +50,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     try:
         from iceskate_analysis.report import run_analysis
         if args.frames < 1:
-            raise SimulationError(f'--frames must be >= 1, got {args.frames}')
+            raise InputRefused(f'--frames must be >= 1, got {args.frames}')
         summary = run_analysis(args.bag, args.out, joint=args.joint, compare=args.compare,
                                animate=args.animate, frames=args.frames,
                                progress=not args.quiet, stop=stop)
@@ -56,12 +58,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         say(f'coupling_analysis: {exc}; nothing written into {args.out}')
         return exc.exit_code
     except SimulationError as exc:
-        say(f'coupling_analysis: error: {exc}')
-        return 2
+        return error_exit('coupling_analysis', exc)
     except OSError as exc:  # the output folder cannot be made or written
         where = f' {exc.filename}' if exc.filename else ''
-        say(f'coupling_analysis: error: cannot write{where}: {exc.strerror or exc}')
-        return 1
+        return error_exit('coupling_analysis', exc, f'cannot write{where}: {exc.strerror or exc}')
     joint = summary['joint']
     for label, case in summary['cases'].items():
         for note in case.get('notes', []):  # e.g. a bag rebuilt after a killed run
@@ -75,7 +75,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
               f'{_fmt(arms["q14"]["peak_to_peak_deg"])} deg, phase '
               f'{_fmt(arms["phase_difference_deg"])} deg')
     print(f'written to {args.out} (summary.json)')
-    return 0
+    return DONE
 
 
 def _fmt(value: float | None) -> str:

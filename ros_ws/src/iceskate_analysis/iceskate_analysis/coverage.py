@@ -17,7 +17,7 @@ import json
 import pathlib
 from typing import TYPE_CHECKING, Any
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import SUPPORT_STATES, SWING_STATES, TABLE_2
 from iceskate_sim.physics.hybrid import CAUSES, RESOLVED
@@ -73,14 +73,14 @@ class Coverage:
         """Count the transitions of run ``name`` (``events`` in time order, ``duration`` [s]
         simulated; ``still``: the mode of a run without transitions, its whole duration).
 
-        :raises SimulationError: on an event that names no mode of Table 2 or no guard.
+        :raises InputRefused: on an event that names no mode of Table 2 or no guard.
         """
         self.runs.append(name)
         for k, event in enumerate(events):
             mode, to, guard = event['from_mode'], event['to_mode'], event['event']
             if mode not in TABLE_2 or to not in TABLE_2 or guard not in KIND_OF_EVENT:
-                raise SimulationError(f'{name}: event {k} ({guard}: {mode} -> {to}) is not a '
-                                      'transition between modes of Table 2')
+                raise InputRefused(f'{name}: event {k} ({guard}: {mode} -> {to}) is not a '
+                                   'transition between modes of Table 2')
             self.time_s[mode] += float(event['t']) - (float(events[k - 1]['t']) if k else 0.0)
             self.transitions[(mode, to, guard)] += 1
             if to == mode:  # a resolved switch cycle that changed only the side or pivot
@@ -128,7 +128,7 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
     """(events, simulated duration [s], the mode of a run that stayed in one) of a finished
     run's ``events.json`` and ``metrics.json``.
 
-    :raises SimulationError: naming the file that is missing or not what a run writes.
+    :raises InputRefused: naming the file that is missing or not what a run writes.
     """
     loaded = []
     for path in (run_dir / 'events.json', run_dir / 'metrics.json'):
@@ -137,10 +137,10 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
         try:
             loaded.append(json.loads(path.read_text(encoding='utf-8')))
         except OSError as exc:
-            raise SimulationError(f'{run_dir} is not a finished run: {exc.strerror or exc} '
-                                  f'({path})') from None
+            raise InputRefused(f'{run_dir} is not a finished run: {exc.strerror or exc} '
+                               f'({path})') from None
         except ValueError as exc:
-            raise SimulationError(f'{path} is not JSON ({exc})') from None
+            raise InputRefused(f'{path} is not JSON ({exc})') from None
     events, metrics = loaded
 
     def transition(e: Any) -> bool:
@@ -148,13 +148,13 @@ def load_events(run_dir: pathlib.Path) -> tuple[list[dict[str, Any]], float, int
                 and all(isinstance(e.get(f), int) for f in ('from_mode', 'to_mode'))
                 and isinstance(e.get('event'), str))
     if not isinstance(events, list) or not all(map(transition, events)):
-        raise SimulationError(f'{run_dir / "events.json"}: not an event log (a list of '
-                              'transitions, each with a time t [s], integer from_mode and '
-                              'to_mode, and an event name)')
+        raise InputRefused(f'{run_dir / "events.json"}: not an event log (a list of '
+                           'transitions, each with a time t [s], integer from_mode and '
+                           'to_mode, and an event name)')
     duration = metrics.get('sim_time_s') if isinstance(metrics, dict) else None
     if not isinstance(duration, (int, float)):
-        raise SimulationError(f'{run_dir / "metrics.json"}: no sim_time_s (the run did not '
-                              'start)')
+        raise InputRefused(f'{run_dir / "metrics.json"}: no sim_time_s (the run did not '
+                           'start)')
     modes = metrics.get('mode_time_fraction')
     still = next(iter(modes)) if isinstance(modes, dict) and len(modes) == 1 else None
     return events, float(duration), int(still) if str(still).isdigit() else None
@@ -164,7 +164,7 @@ def coverage_of(run_dirs: Iterable[pathlib.Path], stop: StopRequest | None = Non
                 ) -> Coverage:
     """The coverage of the finished runs in ``run_dirs`` (``stop`` looked for before each).
 
-    :raises SimulationError: naming a run that cannot be read.
+    :raises InputRefused: naming a run that cannot be read.
     :raises RunInterrupted: on a stop signal.
     """
     coverage = Coverage()

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from iceskate_analysis.outputs import StagedFiles
 from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 if TYPE_CHECKING:
@@ -45,8 +46,9 @@ def write_coverage(coverage: Coverage, out: pathlib.Path, stop: StopRequest | No
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point ``mode_coverage RUN_DIR ... --out DIR``: exit 0 (one line: the modes
-    entered and the files), 1 with one line on stderr saying why, or 128 + the number of a stop
-    signal with one line."""
+    entered and the files), 2 (a run refused) or 1 (the files not written) with one line on
+    stderr saying why, or 128 + the number of a stop signal with one line
+    (``iceskate_sim.exit_codes``)."""
     with StopRequest() as stop:  # before the imports of the model (about 0.3 s)
         return _main(argv, stop)
 
@@ -69,15 +71,14 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             f'into {args.out}')
         return exc.exit_code
     except SimulationError as exc:
-        say(f'mode_coverage: error: {exc}')
-        return 1
+        return error_exit('mode_coverage', exc)
     except OSError as exc:
-        say(f'mode_coverage: error: cannot write into {args.out}: {exc.strerror or exc}')
-        return 1
+        return error_exit('mode_coverage', exc,
+                          f'cannot write into {args.out}: {exc.strerror or exc}')
     missing = f'; never: {", ".join(map(str, coverage.missing))}' if coverage.missing else ''
     print(f'{len(coverage.visited)} of {len(TABLE_2)} modes entered{missing}; '
           f'{", ".join(str(f) for f in files)}', flush=True)
-    return 0
+    return DONE
 
 
 if __name__ == '__main__':

@@ -3,9 +3,9 @@
 Every topic as recorded (raw CDR bytes, log-time pacing scaled by ``rate``, from ``RATES``),
 ``/clock`` synthesized when the bag has none; a bag never closed or cut is read as far as it
 reached the disk (``bag_io.open_bag``), and the notes of the bag (rebuilt, gaps) go to stderr as
-coupling_analysis gives them (docs/usage.md). Exit status 0; 2 with one line for a bag or
-argument it refuses; 130, 143 or 129 with one line on SIGINT, SIGTERM or SIGHUP, answered
-within ``WAIT_SLICE``; 1 for any other failure.
+coupling_analysis gives them (docs/usage.md). Exit status (``iceskate_sim.exit_codes``) 0; 2
+with one line for a bag or argument it refuses; 130, 143 or 129 with one line on SIGINT, SIGTERM
+or SIGHUP, answered within ``WAIT_SLICE``; 1 for any other failure.
 """
 
 from __future__ import annotations
@@ -22,15 +22,15 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
 from iceskate_analysis.bag_io import open_bag
-from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.errors import InputRefused, RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.model.stamps import set_stamp
 from iceskate_sim.ros.loopback import loopback_dds
-from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS
+from iceskate_sim.ros.node_support import CLOCK_QOS, LATCHED_QOS, init_ros
 from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 #: The speed factors --rate takes (x recorded time); --fast plays without pacing.
@@ -150,15 +150,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
                         help='first wait up to S s for a subscriber on every topic')
     args = parser.parse_args(remove_ros_args(argv)[1:])
-    if not args.fast and not RATES[0] <= args.rate <= RATES[1]:
-        say(f'replay: error: --rate {args.rate:g} is outside {RATES[0]:g} to {RATES[1]:g} '
-            '(--fast plays without pacing)')
-        return 2
     node = None
     with StopRequest() as stop:  # rclpy's own handlers are not installed (as ``run_node``)
         try:
+            if not args.fast and not RATES[0] <= args.rate <= RATES[1]:
+                raise InputRefused(f'--rate {args.rate:g} is outside {RATES[0]:g} to '
+                                   f'{RATES[1]:g} (--fast plays without pacing)')
             loopback_dds(os.environ)
-            rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+            init_ros(argv)
             node = ReplayNode(args.bag, stop)
             for note in node.notes:  # e.g. a bag rebuilt after a killed run
                 say(f'replay: note: {note}')
@@ -167,16 +166,14 @@ def main(argv: list[str] | None = None) -> int:
                 node.get_logger().warning('not every topic has a subscriber; playing anyway')
             count = node.play(None if args.fast else args.rate)
             node.get_logger().info(f'replayed {count} messages from {args.bag}')
-            return 0
+            return DONE
         except RunInterrupted as exc:
             say(f'replay: {exc}')
             return exc.exit_code
-        except SimulationError as exc:  # bag missing or unreadable (its message names the file)
-            say(f'replay: error: {exc}')
-            return 2
+        except SimulationError as exc:  # e.g. a bag missing or unreadable, naming the file
+            return error_exit('replay', exc)
         except Exception as exc:  # e.g. an unknown message type
-            say(f'replay: error: {args.bag}: {type(exc).__name__}: {exc}')
-            return 1
+            return error_exit('replay', exc, f'{args.bag}: {type(exc).__name__}: {exc}')
         finally:
             if node is not None:
                 node.destroy_node()

@@ -20,7 +20,7 @@ from iceskate_analysis.coupling import (
     robot_for_bag,
 )
 from iceskate_analysis.outputs import StagedFiles
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.shutdown import raise_if_stopped
 
 if TYPE_CHECKING:
@@ -77,14 +77,14 @@ def run_analysis(bag: str | pathlib.Path, out: str | pathlib.Path,
     :param frames: most frames of a GIF.
     :param stop: looked for at every record read, between blocks and between figures.
     :return: the summary (as written to summary.json).
-    :raises SimulationError: on an unreadable bag or a bad joint (the message names it).
+    :raises InputRefused: on an unreadable bag or a bad joint (the message names it).
     :raises RunInterrupted: on a stop signal (t: how far into the run the analysis was).
     """
     from iceskate_analysis import plots
     joint = parse_joint(joint)
     out = pathlib.Path(out)
     if out.exists() and not out.is_dir():
-        raise SimulationError(f'--out {out} exists and is not a directory')
+        raise InputRefused(f'--out {out} exists and is not a directory')
     out.mkdir(parents=True, exist_ok=True)
     with StagedFiles(out) as staged:
         taken: set[str] = set()

@@ -22,7 +22,8 @@ import zlib
 import numpy as np
 
 from iceskate_analysis.outputs import StagedFiles
-from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.errors import InputRefused, RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.shutdown import StopRequest, raise_if_stopped, say
 
 if TYPE_CHECKING:
@@ -51,7 +52,7 @@ def draw_summary(columns: Iterable[tuple[str, np.ndarray]], metrics: Mapping[str
     and its metrics.
 
     :return: ``path``.
-    :raises SimulationError: when a column is missing or holds no sample.
+    :raises InputRefused: when a column is missing or holds no sample.
     """
     return draw_picked(picked_columns(columns), metrics, path)
 
@@ -82,14 +83,14 @@ def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pat
 
     :param stop: looked for before the reading, the drawing and the renaming.
     :return: the path of the PNG.
-    :raises SimulationError: when a file is missing, lacks a column or holds no sample.
+    :raises InputRefused: when a file is missing, lacks a column or holds no sample.
     :raises RunInterrupted: on a stop signal (the picture is then not written).
     """
     out_dir = pathlib.Path(out_dir)
     missing = [name for name in ('trajectory.npz', 'metrics.json')
                if not (out_dir / name).is_file()]
     if missing:
-        raise SimulationError(f'no run summary: {", ".join(missing)} missing in {out_dir}')
+        raise InputRefused(f'no run summary: {", ".join(missing)} missing in {out_dir}')
     trajectory = out_dir / 'trajectory.npz'
     raise_if_stopped(stop)
     try:
@@ -99,8 +100,8 @@ def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pat
             if 'q' in npz.files:
                 a['shoulders'] = _shoulders(trajectory)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # damaged
-        raise SimulationError(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
-                              f'{exc}') from None
+        raise InputRefused(f'cannot read the run in {out_dir}: {type(exc).__name__}: '
+                           f'{exc}') from None
     with StagedFiles(out_dir) as staged:
         raise_if_stopped(stop)
         _checked_draw(a, metrics, staged(SUMMARY_NAME), str(trajectory))
@@ -110,8 +111,9 @@ def write_summary(out_dir: pathlib.Path, stop: StopRequest | None = None) -> pat
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point ``summary DIR``: exit 0 (the picture's path on stdout), 1 with one
-    line on stderr saying why, or 128 + the number of a stop signal with one line."""
+    """Console entry point ``summary DIR``: exit 0 (the picture's path on stdout), 2 (the run
+    refused) or 1 (the picture not written) with one line on stderr saying why, or 128 + the
+    number of a stop signal with one line (``iceskate_sim.exit_codes``)."""
     with StopRequest() as stop:  # before the imports of the model and matplotlib (about 1 s)
         return _main(argv, stop)
 
@@ -129,13 +131,12 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             f'{args.dir / SUMMARY_NAME} not written')
         return exc.exit_code
     except SimulationError as exc:
-        say(f'summary: error: {exc}')
-        return 1
+        return error_exit('summary', exc)
     except OSError as exc:  # the picture cannot be written
-        say(f'summary: error: cannot write {args.dir / SUMMARY_NAME}: {exc.strerror or exc}')
-        return 1
+        return error_exit('summary', exc,
+                          f'cannot write {args.dir / SUMMARY_NAME}: {exc.strerror or exc}')
     print(path, flush=True)
-    return 0
+    return DONE
 
 
 
@@ -145,9 +146,9 @@ def _checked_draw(a: dict[str, np.ndarray], metrics: Mapping[str, Any], path: pa
     absent = [key for key in DRAWN_COLUMNS
               if key not in a and (key != 'q' or 'shoulders' not in a)]
     if absent:
-        raise SimulationError(f'{source} lacks the column(s) {absent}')
+        raise InputRefused(f'{source} lacks the column(s) {absent}')
     if a['t'].size == 0:
-        raise SimulationError(f'{source} holds no sample')
+        raise InputRefused(f'{source} holds no sample')
     _draw(a, metrics, path)
     return path
 
@@ -162,8 +163,8 @@ def _shoulders(path: pathlib.Path, chunk: int = 65536) -> np.ndarray:
                        else np.lib.format.read_array_header_2_0)
         shape, fortran, dtype = read_header(stream)
         if fortran or len(shape) != 2 or shape[1] != 18:
-            raise SimulationError(f'{path} holds a q of shape {shape}; the summary needs '
-                                  '(n, 18) in C order')
+            raise InputRefused(f'{path} holds a q of shape {shape}; the summary needs '
+                               '(n, 18) in C order')
         out = np.zeros((shape[0], 2))
         for start in range(0, shape[0], chunk):
             rows = min(chunk, shape[0] - start)

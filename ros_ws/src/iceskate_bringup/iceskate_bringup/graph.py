@@ -26,7 +26,7 @@ from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_bringup.watch import Watch, live_view
 from iceskate_native.parameters import flatten
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.model.robot import load_robot
 from iceskate_sim.ros.loopback import PROFILE_VARIABLES, loopback_dds
@@ -189,7 +189,7 @@ def realtime_scheduling(priority: int) -> Iterator[None]:
     """The calling thread under SCHED_FIFO at ``priority`` (1-99; 0: scheduling unchanged)
     while the block runs, restored afterwards; threads and processes started meanwhile keep it.
 
-    :raises SimulationError: for a priority out of range, or where SCHED_FIFO is not permitted
+    :raises InputRefused: for a priority out of range, or where SCHED_FIFO is not permitted
         (it needs root, CAP_SYS_NICE or an rtprio limit, e.g. in /etc/security/limits.conf).
     """
     if priority == 0:
@@ -198,12 +198,12 @@ def realtime_scheduling(priority: int) -> Iterator[None]:
     low, high = (os.sched_get_priority_min(os.SCHED_FIFO),
                  os.sched_get_priority_max(os.SCHED_FIFO))
     if not low <= priority <= high:
-        raise SimulationError(f'rt_priority must be 0 (off) or {low}..{high}, got {priority}')
+        raise InputRefused(f'rt_priority must be 0 (off) or {low}..{high}, got {priority}')
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except PermissionError as exc:
-        raise SimulationError(
+        raise InputRefused(
             f'rt_priority {priority}: real-time scheduling (SCHED_FIFO) is not permitted here '
             f'({exc.strerror}); it needs root, CAP_SYS_NICE or an rtprio limit >= {priority} '
             '(e.g. "@realtime - rtprio 99" in /etc/security/limits.conf)') from None

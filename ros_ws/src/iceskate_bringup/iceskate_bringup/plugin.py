@@ -11,7 +11,7 @@ import re
 from typing import Any
 
 import iceskate_native
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 
 #: The keys of a plug-in's scene block.
 PLUGIN_KEYS = ('plugin', 'parameters')
@@ -38,44 +38,44 @@ def checked_block(node: str, block: dict[str, Any]) -> PluginBlock:
     takes the parameters)."""
     key = f'inputs.{node}'
     if not _NODE_NAME.match(node):
-        raise SimulationError(f'scene key {key!r}: a controller name must be a ROS node name '
-                              '(letters, digits and _, not starting with a digit)')
+        raise InputRefused(f'scene key {key!r}: a controller name must be a ROS node name '
+                           '(letters, digits and _, not starting with a digit)')
     unknown = sorted(set(block) - set(PLUGIN_KEYS))
     if unknown:
-        raise SimulationError(f'scene key {f"{key}.{unknown[0]}"!r}: unknown key; allowed: '
-                              f'{list(PLUGIN_KEYS)}')
+        raise InputRefused(f'scene key {f"{key}.{unknown[0]}"!r}: unknown key; allowed: '
+                           f'{list(PLUGIN_KEYS)}')
     parameters = block.get('parameters') or {}
     if not isinstance(parameters, dict):
-        raise SimulationError(f'scene key {f"{key}.parameters"!r}: must be a mapping, got '
-                              f'{type(parameters).__name__}')
+        raise InputRefused(f'scene key {f"{key}.parameters"!r}: must be a mapping, got '
+                           f'{type(parameters).__name__}')
     plugin = PluginBlock(block['plugin'], dict(parameters))
     make_controller(node, plugin)  # the class exists and takes the parameters
     return plugin
 
 
 def plugin_class(path: Any, key: str = 'plugin') -> type:
-    """The class 'package.module:Class' names (a SimulationError naming ``key`` otherwise)."""
+    """The class 'package.module:Class' names (an InputRefused naming ``key`` otherwise)."""
     where = f'scene key {key!r}'
     if not isinstance(path, str) or not _PATH.match(path):
-        raise SimulationError(f"{where}: must be 'package.module:Class', got {path!r}")
+        raise InputRefused(f"{where}: must be 'package.module:Class', got {path!r}")
     module_name, _, qualname = path.partition(':')
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
-        raise SimulationError(f'{where}: no module {exc.name!r} to import {module_name!r} '
-                              '(is its package on PYTHONPATH?)') from None
+        raise InputRefused(f'{where}: no module {exc.name!r} to import {module_name!r} '
+                           '(is its package on PYTHONPATH?)') from None
     except Exception as exc:  # noqa: BLE001 - the module's own error, in one sentence
-        raise SimulationError(f'{where}: importing {module_name!r} failed: '
-                              f'{type(exc).__name__}: {exc}') from None
+        raise InputRefused(f'{where}: importing {module_name!r} failed: '
+                           f'{type(exc).__name__}: {exc}') from None
     target: Any = module
     for part in qualname.split('.'):
         target = getattr(target, part, None)
         if target is None:
-            raise SimulationError(f'{where}: module {module_name!r} has no {qualname!r}')
+            raise InputRefused(f'{where}: module {module_name!r} has no {qualname!r}')
     if not isinstance(target, type) or not callable(getattr(target, 'compute', None)):
-        raise SimulationError(f'{where}: {path!r} is not a controller class (a subclass of '
-                              'iceskate_native.Controller, or a class with compute(obs, '
-                              'kinematics))')
+        raise InputRefused(f'{where}: {path!r} is not a controller class (a subclass of '
+                           'iceskate_native.Controller, or a class with compute(obs, '
+                           'kinematics))')
     return target
 
 
@@ -101,16 +101,16 @@ def make_controller(node: str, plugin: PluginBlock) -> iceskate_native.Controlle
     try:
         law = cls(**plugin.parameters)
     except (TypeError, ValueError) as exc:  # an unknown keyword, a value the class refuses
-        raise SimulationError(f'scene key {f"{key}.parameters"!r}: {exc}') from None
+        raise InputRefused(f'scene key {f"{key}.parameters"!r}: {exc}') from None
     except Exception as exc:  # noqa: BLE001 - the class's own error, in one sentence
-        raise SimulationError(f'scene key {f"{key}.parameters"!r}: {plugin.plugin} failed: '
-                              f'{type(exc).__name__}: {exc}') from None
+        raise InputRefused(f'scene key {f"{key}.parameters"!r}: {plugin.plugin} failed: '
+                           f'{type(exc).__name__}: {exc}') from None
     controller = law if isinstance(law, iceskate_native.Controller) else PluginAdapter(law)
     try:
         controller.name = node
     except AttributeError:
-        raise SimulationError(f'scene key {key!r}: {plugin.plugin} does not take the attribute '
-                              "'name' (the controller's name)") from None
+        raise InputRefused(f'scene key {key!r}: {plugin.plugin} does not take the attribute '
+                           "'name' (the controller's name)") from None
     plugin_sources(node, controller)
     return controller
 
@@ -123,6 +123,6 @@ def plugin_sources(node: str, controller: Any) -> tuple[str, ...]:
     if (isinstance(sources, str) or not isinstance(sources, (tuple, list)) or not sources
             or not all(isinstance(s, str) and s for s in sources)
             or len(set(sources)) != len(sources)):
-        raise SimulationError(f'scene key {f"inputs.{node}"!r}: the controller\'s sources '
-                              f'must be distinct non-empty names, got {sources!r}')
+        raise InputRefused(f'scene key {f"inputs.{node}"!r}: the controller\'s sources '
+                           f'must be distinct non-empty names, got {sources!r}')
     return tuple(sources)

@@ -21,7 +21,7 @@ from rclpy.parameter import Parameter
 from iceskate_bringup.plugin import PluginBlock, make_controller, plugin_class
 import iceskate_native
 from iceskate_native.parameters import check_fields, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.model.command import CommandValues
 from iceskate_sim.physics.native_control import native_values
 from iceskate_sim.ros.controller_node import ControllerNode
@@ -42,19 +42,19 @@ class PluginNodeParameters:
                               'own parameter wins)')
 
     def __post_init__(self) -> None:
-        """Check the types (SimulationError naming the field)."""
-        check_fields(self, SimulationError)
+        """Check the types (InputRefused naming the field)."""
+        check_fields(self, InputRefused)
 
     def block(self) -> PluginBlock:
-        """The plug-in these parameters name (SimulationError if ``parameters`` is no JSON
+        """The plug-in these parameters name (InputRefused if ``parameters`` is no JSON
         mapping)."""
         try:
             parameters = json.loads(self.parameters)
         except ValueError as exc:
-            raise SimulationError(f'parameters is no JSON mapping: {exc}') from None
+            raise InputRefused(f'parameters is no JSON mapping: {exc}') from None
         if not isinstance(parameters, dict):
-            raise SimulationError(f'parameters must be a JSON mapping, got '
-                                  f'{type(parameters).__name__}')
+            raise InputRefused(f'parameters must be a JSON mapping, got '
+                               f'{type(parameters).__name__}')
         return PluginBlock(self.plugin, parameters)
 
 
@@ -101,7 +101,7 @@ class PluginControllerNode(ControllerNode[PluginNodeParameters]):
     """A plug-in controller as a node."""
 
     parameter_class = PluginNodeParameters
-    parameter_error = SimulationError
+    parameter_error = InputRefused
     law_errors = (iceskate_native.ControllerError,)
 
     def __init__(self, name: str | None = None, **kwargs: Any) -> None:

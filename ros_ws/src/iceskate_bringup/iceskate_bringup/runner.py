@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Any
 from iceskate_bringup.watch import Watch, live_view
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
-from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.errors import InputRefused, RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.shutdown import StopRequest, say
 from iceskate_sim.yaml_io import yaml_value
@@ -193,9 +194,10 @@ def _with_arm_swing_ratio(scene: Scene, metrics: dict[str, Any], out: pathlib.Pa
 def main(argv: list[str] | None = None) -> int:
     """Console entry point.
 
-    Exit status: 0 (the run ended: complete or a fall), 1 (refused or failed, one line on
-    stderr saying why), 130, 143 or 129 after SIGINT, SIGTERM or SIGHUP (the run was ended
-    cleanly: one line on stderr with the time it reached and its outputs).
+    Exit status (``iceskate_sim.exit_codes``): 0 (the run ended: complete or a fall), 2 (refused
+    before it started) or 1 (it failed), with one line on stderr saying why; 130, 143 or 129
+    after SIGINT, SIGTERM or SIGHUP (the run was ended cleanly: one line on stderr with the time
+    it reached and its outputs).
     """
     with StopRequest() as stop:  # first of all: a signal never kills the run half-written
         return _main(argv, stop)
@@ -240,14 +242,14 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     started = False
     try:
         if not args.ros and (args.single_process or args.rt_priority):
-            raise SimulationError('--single-process and --rt-priority need --ros')
+            raise InputRefused('--single-process and --rt-priority need --ros')
         watch = _watch(args)
         overrides = set_options(args.set)
         scene = load_scene(args.scene, overrides)
         if args.duration is not None:
             if not (math.isfinite(args.duration) and 0.0 < args.duration <= MAX_DURATION):
-                raise SimulationError(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
-                                      f"limits of a scene's duration), got {args.duration:g}")
+                raise InputRefused(f'--duration must be > 0 and <= {MAX_DURATION:g} s (the '
+                                   f"limits of a scene's duration), got {args.duration:g}")
             scene = replace(scene, duration=args.duration)
         start_simulator(scene, load_robot())  # an initial state it cannot start from: refused
         prepare_output(args.out, args.out / 'bag' if scene.record_bag else None)
@@ -268,10 +270,10 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
         say(f'run_scene: {exc}' + (f'; {_outputs(args.out)}' if _outputs(args.out) else ''))
         return exc.exit_code
     except SimulationError as exc:
-        say(f'run_scene: error: {exc}')
+        code = error_exit('run_scene', exc)
         if started:
             _print_outputs(args.out)
-        return 1
+        return code
     summary = {k: metrics.get(k) for k in ('scene', 'sim_time_s', 'steps', 'end', 'failure',
                                            'forward_distance_m', 'head_error_rms', 'arm_swing',
                                            'arm_swing_steady', 'arm_swing_ratio',
@@ -280,7 +282,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     with contextlib.suppress(OSError, ValueError):  # stdout gone (a closed terminal)
         print(json.dumps(summary, indent=2), flush=True)
     _print_outputs(args.out)
-    return 0
+    return DONE
 
 
 def _watch(args: argparse.Namespace) -> Watch | None:
@@ -289,15 +291,15 @@ def _watch(args: argparse.Namespace) -> Watch | None:
              if getattr(args, name) is not None]
     if not args.view:
         if given:
-            raise SimulationError(f'--{given[0].replace("_", "-")} needs --view')
+            raise InputRefused(f'--{given[0].replace("_", "-")} needs --view')
         return None
     from iceskate_viewer.page import check_host, check_port
     check_host(args.view_host or '127.0.0.1')  # refused before anything starts
     pace = 1.0 if args.pace is None else args.pace
     from iceskate_sim.run.pace import MAX_PACE
     if not (math.isfinite(pace) and 0.0 <= pace <= MAX_PACE):
-        raise SimulationError(f'--pace must be >= 0 (0: as fast as it runs) and <= '
-                              f'{MAX_PACE:g}, got {pace:g}')
+        raise InputRefused(f'--pace must be >= 0 (0: as fast as it runs) and <= '
+                           f'{MAX_PACE:g}, got {pace:g}')
     port = 8080 if args.view_port is None else args.view_port
     check_port(port, '--view-port')
     return Watch(pace, args.view_host or '127.0.0.1', port)
@@ -309,7 +311,7 @@ def set_options(settings: list[str]) -> dict[str, Any]:
     for setting in settings:
         key, equals, value = setting.partition('=')
         if not equals or not key.strip():
-            raise SimulationError(f'--set {setting!r}: give KEY=VALUE (e.g. floor.mu=0.01)')
+            raise InputRefused(f'--set {setting!r}: give KEY=VALUE (e.g. floor.mu=0.01)')
         out[key.strip()] = yaml_value(value, f'--set {key.strip()}')
     return out
 

@@ -20,7 +20,7 @@ from iceskate_bringup.plugin import (
     plugin_sources,
 )
 from iceskate_native.parameters import Rules, field_types, rules_of
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.run.scene import Scene, SceneSettings, scene_steps
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
@@ -35,14 +35,14 @@ CONTROLLERS = tuple(PARAMETER_CLASSES)
 
 
 def validate_inputs(node: str, block: dict[str, Any]) -> None:
-    """Check the parameter block of controller ``node`` (SimulationError naming the key)."""
+    """Check the parameter block of controller ``node`` (InputRefused naming the key)."""
     if is_plugin(block):
         checked_block(node, block)  # imports the class and builds it once
         return
     try:
         controller_parameters(node, block)
     except (VisualLiftingError, GaitManagerError) as exc:
-        raise SimulationError(f'scene key {f"inputs.{node}"!r}: {exc}') from None
+        raise InputRefused(f'scene key {f"inputs.{node}"!r}: {exc}') from None
 
 
 def controller_parameters(node: str, block: dict[str, Any]
@@ -53,9 +53,9 @@ def controller_parameters(node: str, block: dict[str, Any]
         return PluginBlock(block['plugin'], dict(block.get('parameters') or {}))
     if node in PARAMETER_CLASSES:
         return PARAMETER_CLASSES[node].from_dict(block)
-    raise SimulationError(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
-                          f"{list(CONTROLLERS)}, or a controller written in Python (a block "
-                          "with 'plugin: package.module:Class')")
+    raise InputRefused(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
+                       f"{list(CONTROLLERS)}, or a controller written in Python (a block "
+                       "with 'plugin: package.module:Class')")
 
 
 def node_parameters(scene: Scene
@@ -87,15 +87,15 @@ def parse_scene(raw: Any) -> Scene:
     owner: dict[str, str] = {}
     for node, sources in scene_sources(scene).items():
         if node in RESERVED_NODES:
-            raise SimulationError(f'scene key {f"inputs.{node}"!r}: {node!r} is the simulator '
-                                  "node's name; name the controller otherwise")
+            raise InputRefused(f'scene key {f"inputs.{node}"!r}: {node!r} is the simulator '
+                               "node's name; name the controller otherwise")
         for source in sources:
             if source in RESERVED_SOURCES or source in owner:
                 other = ("the scene's push" if source in RESERVED_SOURCES
                          else f'inputs.{owner[source]}')
-                raise SimulationError(f'scene key {f"inputs.{node}"!r}: its source {source!r} '
-                                      f'is also a source of {other}; every source needs its '
-                                      'own name')
+                raise InputRefused(f'scene key {f"inputs.{node}"!r}: its source {source!r} '
+                                   f'is also a source of {other}; every source needs its '
+                                   'own name')
             owner[source] = node
     return scene
 

@@ -1,4 +1,5 @@
-"""The one exception type of iceskate_sim (and its subclass for a run ended by a signal)."""
+"""The one exception type of iceskate_sim and its subclasses for input refused before anything
+ran and for a run ended by a signal (what each means as an exit status: ``exit_codes``)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ import signal
 
 
 class SimulationError(RuntimeError):
-    """Raised for every failure of the simulator: bad input, bad scene, divergence, rank loss.
+    """Raised for every failure of the simulator: divergence, rank loss, an output that cannot
+    be written, and (as ``InputRefused``) bad input such as a bad scene.
 
     The message names the problem (the offending key, value, coordinate or event) and, for a
     failure during a run, the simulation time, the gait mode and a summary of the state.
@@ -20,6 +22,11 @@ class SimulationError(RuntimeError):
     def __init__(self, message: str = '', end: str = 'failed') -> None:
         super().__init__(message)
         self.end = end
+
+
+class InputRefused(SimulationError):
+    """Input refused before anything ran: a bad argument, value, file, scene, key or parameter,
+    found where the input is checked; the message names it."""
 
 
 class RunInterrupted(SimulationError):

@@ -8,7 +8,7 @@ import pathlib
 
 from ament_index_python import PackageNotFoundError, get_package_share_path, get_resources
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 
 
 def share_path(package: str, *parts: str) -> pathlib.Path:
@@ -47,17 +47,17 @@ def shipped_or_path(name_or_path: str | pathlib.Path, resource: str, folder: str
     suffix or a folder), which must name a .yaml or .yml file: no other file is read as one
     (nor its content quoted in an error).
 
-    :raises SimulationError: for a name none ships, listing those shipped; a path of another
+    :raises InputRefused: for a name none ships, listing those shipped; a path of another
         kind of file.
     """
     path = pathlib.Path(name_or_path)
     if path.suffix or len(path.parts) > 1:
         if path.suffix.lower() not in ('.yaml', '.yml'):
-            raise SimulationError(f'{what} {str(name_or_path)!r} is neither a shipped {what} '
-                                  'name nor the path of a .yaml file')
+            raise InputRefused(f'{what} {str(name_or_path)!r} is neither a shipped {what} '
+                               'name nor the path of a .yaml file')
         return path
     shipped = shipped_files(resource, folder)
     if path.name in shipped:
         return shipped[path.name]
-    raise SimulationError(f'unknown {what} {str(name_or_path)!r}; shipped {_plural(what)}: '
-                          f'{", ".join(shipped)} (or give the path of a YAML file)')
+    raise InputRefused(f'unknown {what} {str(name_or_path)!r}; shipped {_plural(what)}: '
+                       f'{", ".join(shipped)} (or give the path of a YAML file)')

@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.files import regular_file
 
 #: The largest YAML file read [bytes] (a scene or a SPEC is a few kB).
@@ -47,7 +47,7 @@ _Yaml12Loader.add_implicit_resolver(
 
 
 def _check_bounds(text: str, what: str) -> None:
-    """SimulationError naming ``what`` when ``text`` nests deeper than ``MAX_YAML_DEPTH``, holds
+    """InputRefused naming ``what`` when ``text`` nests deeper than ``MAX_YAML_DEPTH``, holds
     more than ``MAX_YAML_VALUES`` values, each alias counted as the values its anchor stands
     for and as deep as they nest, or holds a value with an alias of itself inside. One pass over
     the parser's events, before anything is built (yaml.YAMLError where the text is malformed).
@@ -60,8 +60,8 @@ def _check_bounds(text: str, what: str) -> None:
     for event in yaml.parse(text, Loader=_Yaml12Loader):
         if isinstance(event, yaml.CollectionStartEvent):
             if len(open_values) >= MAX_YAML_DEPTH:  # at once: the scanner slows with depth
-                raise SimulationError(f'{what} nests mappings and sequences deeper than '
-                                      f'{MAX_YAML_DEPTH} levels')
+                raise InputRefused(f'{what} nests mappings and sequences deeper than '
+                                   f'{MAX_YAML_DEPTH} levels')
             open_values.append(1)
             open_depths.append(0)
             open_anchors.append(event.anchor)
@@ -72,14 +72,14 @@ def _check_bounds(text: str, what: str) -> None:
             values, depth, anchor = 1, 0, event.anchor
         elif isinstance(event, yaml.AliasEvent):
             if event.anchor in open_anchors:
-                raise SimulationError(f'{what} holds a value with an alias of itself inside '
-                                      f'(*{event.anchor})')
+                raise InputRefused(f'{what} holds a value with an alias of itself inside '
+                                   f'(*{event.anchor})')
             (values, depth), anchor = anchored.get(event.anchor, (1, 0)), None
         else:
             continue
         if len(open_values) + depth > MAX_YAML_DEPTH:
-            raise SimulationError(f'{what} nests mappings and sequences deeper than '
-                                  f'{MAX_YAML_DEPTH} levels')
+            raise InputRefused(f'{what} nests mappings and sequences deeper than '
+                               f'{MAX_YAML_DEPTH} levels')
         if anchor is not None:
             anchored[anchor] = (values, depth)
         if open_values:
@@ -90,8 +90,8 @@ def _check_bounds(text: str, what: str) -> None:
             total += values
             count = total
         if count > MAX_YAML_VALUES:
-            raise SimulationError(f'{what} expands to more than {MAX_YAML_VALUES} values (its '
-                                  'aliases counted as what they stand for)')
+            raise InputRefused(f'{what} expands to more than {MAX_YAML_VALUES} values (its '
+                               'aliases counted as what they stand for)')
 
 
 def _load(text: str, what: str) -> Any:
@@ -102,16 +102,16 @@ def _load(text: str, what: str) -> Any:
 
 def yaml_value(text: str, what: str) -> Any:
     """The value a YAML text gives (YAML 1.2 numbers: ``1e-3``, ``[30, 290, 1100]``, ``ice``),
-    or SimulationError naming ``what`` (malformed, too deep, too many values)."""
+    or InputRefused naming ``what`` (malformed, too deep, too many values)."""
     try:
         return _load(text, what)
     except yaml.YAMLError as exc:
         problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise SimulationError(f'{what}: {text!r} is no YAML value ({problem})') from None
+        raise InputRefused(f'{what}: {text!r} is no YAML value ({problem})') from None
 
 
 def read_yaml(path: str | pathlib.Path, what: str) -> Any:
-    """The YAML document at ``path`` (YAML 1.2 numbers), or SimulationError naming ``what``,
+    """The YAML document at ``path`` (YAML 1.2 numbers), or InputRefused naming ``what``,
     the path and the problem (unreadable, not a regular file, larger than ``MAX_YAML_BYTES``,
     not UTF-8 text, malformed, nested deeper than ``MAX_YAML_DEPTH``, more than
     ``MAX_YAML_VALUES`` values)."""
@@ -119,17 +119,17 @@ def read_yaml(path: str | pathlib.Path, what: str) -> Any:
     try:
         info = regular_file(path, what)
         if info.st_size > MAX_YAML_BYTES:
-            raise SimulationError(f'{what} {path} is {info.st_size} bytes, more than the '
-                                  f'{MAX_YAML_BYTES} a {what} file may have')
+            raise InputRefused(f'{what} {path} is {info.st_size} bytes, more than the '
+                               f'{MAX_YAML_BYTES} a {what} file may have')
         text = path.read_bytes().decode('utf-8')
     except OSError as exc:
-        raise SimulationError(f'cannot read {what} {path}: {exc.strerror or exc}') from None
+        raise InputRefused(f'cannot read {what} {path}: {exc.strerror or exc}') from None
     except UnicodeDecodeError:
-        raise SimulationError(f'{what} {path} is not UTF-8 text (a binary file?)') from None
+        raise InputRefused(f'{what} {path} is not UTF-8 text (a binary file?)') from None
     try:
         return _load(text, f'{what} {path}')
     except yaml.YAMLError as exc:  # one line: where, and what the parser expected
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
         problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise SimulationError(f'malformed YAML in {what} {path}{where}: {problem}') from None
+        raise InputRefused(f'malformed YAML in {what} {path}{where}: {problem}') from None

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.run.metrics import METRICS
-from iceskate_sim.shutdown import say
-from iceskate_study.errors import StudyError
+from iceskate_study.errors import StudyError, StudyRefused
 from iceskate_study.table import RESULTS, read_table
 
 if TYPE_CHECKING:
@@ -99,29 +99,30 @@ def draw_maps(table_path: pathlib.Path, x: str | None, y: str | None,
     into ``out_dir``; the files written. None: the SPEC's maps, else the first two axes and
     DEFAULT_METRICS.
 
-    :raises StudyError: a table that cannot be read, an unknown axis or metric.
+    :raises StudyRefused: a table that cannot be read, an unknown axis or metric.
+    :raises StudyError: an output folder that cannot be made.
     """
     table, meta = read_table(table_path)
     axes, maps, columns = meta.get('axes', {}), meta.get('maps') or {}, table.column_names
     x = x or maps.get('x') or next(iter(axes), '')
     y = y or maps.get('y') or (list(axes)[1] if len(axes) > 1 else '')
     if not y:
-        raise StudyError(f'{table_path} has one axis ({x}): a map needs two')
+        raise StudyRefused(f'{table_path} has one axis ({x}): a map needs two')
     metrics = metrics or maps.get('metrics') or [m for m in DEFAULT_METRICS if m in columns]
     for name, what in ((x, '--x'), (y, '--y')):
         if name not in axes:
-            raise StudyError(f'{what} {name!r} is not an axis of {table_path}; its axes: '
-                             f'{list(axes)}')
+            raise StudyRefused(f'{what} {name!r} is not an axis of {table_path}; its axes: '
+                               f'{list(axes)}')
     declared = [*meta.get('ratios', {}), *meta.get('metrics', [])]
     for metric in metrics:  # a metric the SPEC keeps may have no value in any run yet
         known = metric in declared or any(metric.startswith(f'{m}.') for m in declared)
         if metric not in columns and not known:
             numeric = [c for c in columns if c not in axes and c not in ('key', 'failure',
                                                                         'run_dir', 'status')]
-            raise StudyError(f'--metric {metric!r} is not a column of {table_path}; its '
-                             f'metrics: {numeric}')
+            raise StudyRefused(f'--metric {metric!r} is not a column of {table_path}; its '
+                               f'metrics: {numeric}')
     if table.num_rows == 0:
-        raise StudyError(f'{table_path} has no rows yet')
+        raise StudyRefused(f'{table_path} has no rows yet')
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -223,7 +224,8 @@ def _grid(ax: Any, xs: list[Any], ys: list[Any], values: np.ndarray, style: dict
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point: draw the maps; exit 1 (one line) when refused."""
+    """Console entry point: draw the maps; exit 2 when refused, 1 when the folder of the maps
+    cannot be made, with one line (``iceskate_sim.exit_codes``)."""
     parser = argparse.ArgumentParser(prog='sweep-plot', description=__doc__.split('\n\n')[0])
     parser.add_argument('dir', type=pathlib.Path, help="a sweep's output directory (or its "
                                                        'results.parquet)')
@@ -238,14 +240,13 @@ def main(argv: list[str] | None = None) -> int:
     path = args.dir if args.dir.suffix == '.parquet' else args.dir / RESULTS
     try:
         if not path.is_file():
-            raise StudyError(f'{path} does not exist: give the --out folder of a sweep')
+            raise StudyRefused(f'{path} does not exist: give the --out folder of a sweep')
         written = draw_maps(path, args.x, args.y, args.metric, args.out or path.parent / 'maps')
     except StudyError as exc:
-        say(f'sweep-plot: error: {exc}')
-        return 1
+        return error_exit('sweep-plot', exc)
     for p in written:
         print(p)
-    return 0
+    return DONE
 
 
 if __name__ == '__main__':

@@ -1,6 +1,6 @@
 """SPEC files of parameter studies: a base scene, overrides and axes over dotted scene keys, and
 the runs they generate, every scene validated before any run starts (the format: docs/usage.md,
-"Parameter studies"). A bad SPEC is a one-line ``StudyError`` naming its key. The runs are made
+"Parameter studies"). A bad SPEC is a one-line ``StudyRefused`` naming its key. The runs are made
 on demand (``Points``), never a million of them at once, and every loop over the values or points
 of a SPEC ends at a signal of its ``StopRequest`` (``RunInterrupted``).
 """
@@ -29,7 +29,7 @@ from iceskate_sim.run.scene import key_tokens, scene_path, scene_raw
 from iceskate_sim.run.scene import set_key as set_scene_key
 from iceskate_sim.shutdown import StopRequest, raise_if_stopped
 from iceskate_sim.yaml_io import read_yaml
-from iceskate_study.errors import StudyError
+from iceskate_study.errors import StudyError, StudyRefused
 
 SAMPLINGS = ('grid', 'random', 'latin_hypercube')
 #: What the table keeps of each run's metrics when the SPEC does not say.
@@ -48,7 +48,7 @@ T = TypeVar('T')
 
 
 def _study_rules(obj: Any) -> None:
-    check_fields(obj, StudyError)
+    check_fields(obj, StudyRefused)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -169,8 +169,8 @@ class Spec:
                 'maps': asdict(self.maps) if self.maps is not None else None}
 
 
-def _fail(key: str, message: str) -> StudyError:
-    return StudyError(f'SPEC key {key!r}: {message}')
+def _fail(key: str, message: str) -> StudyRefused:
+    return StudyRefused(f'SPEC key {key!r}: {message}')
 
 
 def _is_number(value: Any) -> bool:
@@ -318,7 +318,7 @@ def load_spec(name_or_path: str | pathlib.Path, stop: StopRequest | None = None)
         path = shipped_or_path(name_or_path, STUDY_RESOURCE, 'studies', 'study')
         raw = read_yaml(path, 'SPEC')
     except SimulationError as exc:
-        raise StudyError(str(exc)) from None
+        raise StudyRefused(str(exc)) from None
     return parse_spec(raw, path, stop)
 
 
@@ -342,12 +342,12 @@ def _check_scene(raw: dict[str, Any], where: str, what: str) -> None:
 
 
 def parse_spec(raw: Any, path: pathlib.Path, stop: StopRequest | None = None) -> Spec:
-    """Validate a SPEC mapping read from ``path`` (StudyError naming the key).
+    """Validate a SPEC mapping read from ``path`` (StudyRefused naming the key).
 
     :param stop: its signal ends the checks of the axes' values (``RunInterrupted``).
     """
     if not isinstance(raw, dict):
-        raise StudyError(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
+        raise StudyRefused(f'SPEC {path} must be a mapping, got {type(raw).__name__}')
     top = keyed_from_mapping(StudySettings, raw, StudyError, _fail)
     if not re.fullmatch(r'[A-Za-z0-9_.-]+', top.study):
         raise _fail('study', f'must be a name (letters, digits, _ . -), got {top.study!r}')
@@ -567,7 +567,7 @@ class Points(Sequence[Point]):
 
     def check(self, stop: StopRequest | None = None) -> None:
         """Check every selector of bags selects a point and every point's scene (those
-        ``parse_spec`` checked as values of an axis are not checked again); StudyError
+        ``parse_spec`` checked as values of an axis are not checked again); StudyRefused
         naming the selector or the point, ``RunInterrupted`` at a signal of ``stop``."""
         spec = self.spec
         for i, selector in enumerate(spec.bags or ()):

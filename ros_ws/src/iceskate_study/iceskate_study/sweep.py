@@ -20,9 +20,10 @@ from typing import TYPE_CHECKING
 
 # light imports only at the top: main() installs its signal handlers before the heavy ones
 from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.shutdown import StopRequest, say
-from iceskate_study.errors import StudyError
+from iceskate_study.errors import StudyError, StudyRefused
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -67,7 +68,8 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
     :param ray: None (local processes), ``'local'`` or the address of a Ray cluster.
     :param stop: the signals' stop request (None: one is installed for the call); a signal ends
         the runs in flight and the sweep (``signum`` in the result; no maps).
-    :raises StudyError: a bad output folder, a table of another SPEC, Ray not reached.
+    :raises StudyRefused: a bad output folder, a table of another SPEC.
+    :raises StudyError: Ray not reached, runs Ray lost.
     :raises RunInterrupted: a signal before the first run was given (the table untouched).
     """
     from iceskate_sim.run.session import prepare_output, release_output
@@ -82,7 +84,7 @@ def run_sweep(spec: Spec, out: pathlib.Path, workers: int | None = None, ray: st
             prepare_output(out, resumes=RESULTS,
                            made=('runs', RAY_MESSAGES, f'.{RESULTS}.partial'))
         except SimulationError as exc:
-            raise StudyError(str(exc)) from None
+            raise StudyRefused(str(exc)) from None
         try:
             table = ResultTable(out, spec, points, stop)
             result = SweepResult(len(points), len(table.done), table=table.path)
@@ -185,7 +187,8 @@ class _LaterFile(io.TextIOBase):
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: exit 0 (every run of the SPEC has its row, whatever its status),
-    1 (refused, one line on stderr), 128 + the signal's number (SIGINT, SIGTERM, SIGHUP)."""
+    2 (refused before any run) or 1 (Ray not reached, runs lost), with one line on stderr,
+    128 + the signal's number (SIGINT, SIGTERM, SIGHUP) (``iceskate_sim.exit_codes``)."""
     with StopRequest() as stop:  # first of all: a signal never leaves the table half-written
         return _main(argv, stop)
 
@@ -211,7 +214,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     ray_messages = _LaterFile(args.out / RAY_MESSAGES)
     try:
         if args.workers is not None and args.workers < 1:
-            raise StudyError(f'--workers must be >= 1, got {args.workers}')
+            raise StudyRefused(f'--workers must be >= 1, got {args.workers}')
         from iceskate_study.spec import load_spec
         spec = load_spec(args.spec, stop)
         if args.ray == 'local':  # one machine: Ray's node address is loopback, not probed
@@ -223,9 +226,9 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
             result = run_sweep(spec, args.out, args.workers, args.ray,
                                progress=not args.quiet, stop=stop, maps=not args.no_maps)
     except StudyError as exc:
-        say(f'sweep: error: {exc}' + (f" (Ray's messages: {ray_messages.path})"
-                                      if args.ray and ray_messages.written else ''))
-        return 1
+        messages = (f" (Ray's messages: {ray_messages.path})"
+                    if args.ray and ray_messages.written else '')
+        return error_exit('sweep', exc, f'{exc}{messages}')
     except RunInterrupted as exc:  # while the SPEC's scenes or the table were read
         say(f'sweep: interrupted by {signal.Signals(exc.signum).name} before any run started; '
             'the same command resumes')
@@ -243,7 +246,7 @@ def _main(argv: list[str] | None, stop: StopRequest) -> int:
     say(f'table: {result.table}')
     if result.maps:
         say(f'maps: {", ".join(str(p) for p in result.maps)}')
-    return 0
+    return DONE
 
 
 if __name__ == '__main__':

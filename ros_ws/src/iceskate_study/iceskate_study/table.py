@@ -15,7 +15,7 @@ import pyarrow.parquet as pq
 
 from iceskate_sim.run.metrics import metric_ratio
 from iceskate_sim.shutdown import StopRequest
-from iceskate_study.errors import StudyError
+from iceskate_study.errors import StudyRefused
 from iceskate_study.spec import RUN_COLUMNS, Point, Points, Spec, polled
 
 RESULTS = 'results.parquet'
@@ -31,11 +31,11 @@ def read_table(path: pathlib.Path) -> tuple[pa.Table, dict[str, Any]]:
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as exc:
-        raise StudyError(f'cannot read the results table {path}: {exc}') from None
+        raise StudyRefused(f'cannot read the results table {path}: {exc}') from None
     meta = (table.schema.metadata or {}).get(METADATA_KEY)
     if meta is None:
-        raise StudyError(f'{path} is not the results table of a sweep (no {METADATA_KEY.decode()}'
-                         ' metadata)')
+        raise StudyRefused(f'{path} is not the results table of a sweep (no '
+                           f'{METADATA_KEY.decode()} metadata)')
     return table, json.loads(meta)
 
 
@@ -59,8 +59,8 @@ class ResultTable:
         missing = [] if table is None else [
             name for name in RUN_COLUMNS[:4] if name not in table.column_names]
         if missing:  # e.g. edited by hand: its rows cannot say which runs are done
-            raise StudyError(f"{self.path} lacks the column {missing[0]!r} of a sweep's results "
-                             'table (edited?); restore it or choose a new --out')
+            raise StudyRefused(f"{self.path} lacks the column {missing[0]!r} of a sweep's results "
+                               'table (edited?); restore it or choose a new --out')
         batches = table.to_batches(READ_BATCH) if table is not None else []
         for batch in polled(batches, stop):
             for row in batch.to_pylist():
@@ -68,8 +68,8 @@ class ResultTable:
                 if not (all(isinstance(i, int) and i >= 0 for i in at) and at[0] < points.count
                         and at[1] < spec.repeats
                         and points[at[0] * spec.repeats + at[1]].key == row.get('key')):
-                    raise StudyError(f'{self.path} holds runs this SPEC does not make (another '
-                                     'SPEC, or the base scene changed); choose a new --out')
+                    raise StudyRefused(f'{self.path} holds runs this SPEC does not make (another '
+                                       'SPEC, or the base scene changed); choose a new --out')
                 self.rows[row['key']] = {k: v for k, v in row.items() if v is not None}
                 self.done.add(at)
         #: the table's metadata, the SPEC's description (made once: an axis may have a

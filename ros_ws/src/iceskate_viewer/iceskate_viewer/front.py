@@ -32,7 +32,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.http11 import Request, Response
 from websockets.typing import Subprotocol
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 
 #: Deadline [s] of viser's answer to a forwarded request or WebSocket, and of the front's
 #: start and stop.
@@ -59,7 +59,7 @@ def bind(host: str, port: int) -> socket.socket:
     """A listening socket on ``host``:``port`` (0: any free port; a busy port: the next free
     one, ``PORT_TRIES`` at the most).
 
-    :raises SimulationError: naming the host and port in one sentence.
+    :raises InputRefused: naming the host and port in one sentence.
     """
     family = socket.AF_INET6 if ':' in host else socket.AF_INET
     ports = range(port, 65536)[:PORT_TRIES] if port else range(1)
@@ -69,10 +69,10 @@ def bind(host: str, port: int) -> socket.socket:
         except OSError as exc:
             if exc.errno != errno.EADDRINUSE:
                 where = f'{host} port {candidate}' if candidate else host
-                raise SimulationError(f'cannot serve the view on {where}: '
-                                      f'{exc.strerror or exc}') from None
-    raise SimulationError(f'cannot serve the view on {host}: ports {ports[0]}..{ports[-1]} '
-                          'are all busy')
+                raise InputRefused(f'cannot serve the view on {where}: '
+                                   f'{exc.strerror or exc}') from None
+    raise InputRefused(f'cannot serve the view on {host}: ports {ports[0]}..{ports[-1]} '
+                       'are all busy')
 
 
 def inner_host() -> str:

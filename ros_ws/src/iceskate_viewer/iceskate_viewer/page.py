@@ -14,7 +14,7 @@ import pinocchio as pin
 import trimesh
 import viser
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import SOLE_HEEL_Y, SOLE_TOE_Y, SOLE_Z
 from iceskate_sim.shutdown import say
@@ -69,7 +69,8 @@ class PageServer(viser.ViserServer):
     ``get_port`` give the page's address. The page has no share link (it would tunnel the page
     through a server outside this machine): the button is hidden and a request is refused.
 
-    :raises SimulationError: when ``host``:``port`` cannot be served (``bind``).
+    :raises InputRefused: when ``host``:``port`` cannot be served (``bind``).
+    :raises SimulationError: when the front does not start.
     """
 
     def __init__(self, host: str, port: int) -> None:
@@ -111,7 +112,7 @@ def check_port(port: int, what: str = 'port') -> None:
     """Refuse, in one sentence naming ``what``, a port outside 0..65535, before anything is
     served."""
     if not 0 <= port <= 65535:
-        raise SimulationError(f'{what} must be 0..65535 (0: any free port), got {port}')
+        raise InputRefused(f'{what} must be 0..65535 (0: any free port), got {port}')
 
 
 def check_host(host: str) -> None:

@@ -26,7 +26,8 @@ import zlib
 
 import numpy as np
 
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
+from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.shutdown import StopRequest, say
 
 if TYPE_CHECKING:  # the page's modules load viser and Pinocchio: only once the runs are read
@@ -72,18 +73,18 @@ def load_run(path: str | pathlib.Path) -> Run:
     """The run in directory ``path``: its ``trajectory.npz``, else its bag (what its reading
     notes said on stderr); more than ``MAX_FRAMES`` samples thinned to them.
 
-    :raises SimulationError: naming what is wrong with ``path`` in one sentence.
+    :raises InputRefused: naming what is wrong with ``path`` in one sentence.
     """
     run_dir = pathlib.Path(path)
     if not run_dir.is_dir():
-        raise SimulationError(f'{run_dir} is not a run directory (no such directory)')
+        raise InputRefused(f'{run_dir} is not a run directory (no such directory)')
     npz = run_dir / 'trajectory.npz'
     if npz.is_file():
         try:
             with zipfile.ZipFile(npz) as archive:
                 columns = _read_trajectory(archive, npz)
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-            raise SimulationError(f'{npz} cannot be read: {exc}') from None
+            raise InputRefused(f'{npz} cannot be read: {exc}') from None
     elif (run_dir / 'bag').is_dir():
         from iceskate_analysis.bag_io import read_bag
         bag = read_bag(run_dir / 'bag')
@@ -99,10 +100,10 @@ def load_run(path: str | pathlib.Path) -> Run:
             if kept is not None:
                 columns = {name: column[kept] for name, column in columns.items()}
     else:
-        raise SimulationError(f'{run_dir} holds neither trajectory.npz nor bag/: '
-                              'not the output folder of a run')
+        raise InputRefused(f'{run_dir} holds neither trajectory.npz nor bag/: '
+                           'not the output folder of a run')
     if len(columns['t']) == 0:
-        raise SimulationError(f'{run_dir} holds no samples')
+        raise InputRefused(f'{run_dir} holds no samples')
     return Run(run_dir.resolve().name, columns)
 
 
@@ -111,11 +112,11 @@ def _read_trajectory(archive: zipfile.ZipFile, npz: pathlib.Path) -> dict[str, n
     deflated: no memory map applies), their times checked, read a chunk at a time and thinned
     to ``MAX_FRAMES`` samples.
 
-    :raises SimulationError: naming ``npz`` and what is wrong with it.
+    :raises InputRefused: naming ``npz`` and what is wrong with it.
     """
     missing = [name for name in COLUMNS if f'{name}.npy' not in archive.namelist()]
     if missing:
-        raise SimulationError(f'{npz} lacks the columns {", ".join(missing)}')
+        raise InputRefused(f'{npz} lacks the columns {", ".join(missing)}')
     samples = None
     for name, shape in SHAPES.items():
         with archive.open(f'{name}.npy') as stream:
@@ -124,8 +125,8 @@ def _read_trajectory(archive: zipfile.ZipFile, npz: pathlib.Path) -> dict[str, n
         if found != (samples, *shape) or dtype.kind not in 'biuf':
             expected = ', '.join(map(str, ('N' if samples is None else samples, *shape)))
             expected += ',' if not shape else ''
-            raise SimulationError(f'{npz}: column {name} holds {dtype} of shape {found} where '
-                                  f'numbers of shape ({expected}) are expected')
+            raise InputRefused(f'{npz}: column {name} holds {dtype} of shape {found} where '
+                               f'numbers of shape ({expected}) are expected')
     if samples == 0:
         return {name: np.empty((0, *shape)) for name, shape in SHAPES.items()}
     first, last = _check_times(_chunks(archive, 't', npz), str(npz))
@@ -143,8 +144,8 @@ def _check_codes(columns: dict[str, np.ndarray], npz: pathlib.Path) -> None:
     for name, known in (('mode', MODES), ('side', range(len(SIDES))), ('pivot', PIVOT_OF_CODE)):
         unknown = np.setdiff1d(np.unique(columns[name]), list(known))
         if len(unknown):
-            raise SimulationError(f'{npz}: column {name} holds codes the view does not know: '
-                                  f'{", ".join(f"{code:g}" for code in unknown[:5])}')
+            raise InputRefused(f'{npz}: column {name} holds codes the view does not know: '
+                               f'{", ".join(f"{code:g}" for code in unknown[:5])}')
 
 
 def _header(stream: IO[bytes], npz: pathlib.Path, name: str) -> tuple[tuple[int, ...],
@@ -157,11 +158,11 @@ def _header(stream: IO[bytes], npz: pathlib.Path, name: str) -> tuple[tuple[int,
     elif version == (2, 0):
         shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
     else:
-        raise SimulationError(f'{npz}: column {name} is in .npy format {version}, not 1.0 or '
-                              '2.0')
+        raise InputRefused(f'{npz}: column {name} is in .npy format {version}, not 1.0 or '
+                           '2.0')
     if fortran and len(shape) > 1:
-        raise SimulationError(f'{npz}: column {name} is stored column by column (Fortran '
-                              'order), not sample by sample')
+        raise InputRefused(f'{npz}: column {name} is stored column by column (Fortran '
+                           'order), not sample by sample')
     return tuple(shape), dtype
 
 
@@ -175,16 +176,16 @@ def _chunks(archive: zipfile.ZipFile, name: str, npz: pathlib.Path) -> Iterator[
             count = min(per_chunk, shape[0] - start)
             data = stream.read(count * size)
             if len(data) != count * size:
-                raise SimulationError(f'{npz}: column {name} ends after '
-                                      f'{start + len(data) // size} of its {shape[0]} '
-                                      'samples')
+                raise InputRefused(f'{npz}: column {name} ends after '
+                                   f'{start + len(data) // size} of its {shape[0]} '
+                                   'samples')
             yield np.frombuffer(data, dtype).reshape(count, *shape[1:])
 
 
 def _check_times(chunks: Iterable[np.ndarray], where: str) -> tuple[float, float]:
     """The first and last of the times ``t`` [s] in ``chunks``.
 
-    :raises SimulationError: naming ``where`` when a time is not finite, is negative or does
+    :raises InputRefused: naming ``where`` when a time is not finite, is negative or does
         not follow the one before (a slider needs times from 0 s on that increase).
     """
     samples, first, previous = 0, math.nan, -math.inf
@@ -192,19 +193,19 @@ def _check_times(chunks: Iterable[np.ndarray], where: str) -> tuple[float, float
         t = np.asarray(chunk, dtype=float)
         bad = np.flatnonzero(~np.isfinite(t))
         if len(bad):
-            raise SimulationError(f'{where}: time t of sample {samples + bad[0]} is '
-                                  f'{t[bad[0]]} (not a finite number)')
+            raise InputRefused(f'{where}: time t of sample {samples + bad[0]} is '
+                               f'{t[bad[0]]} (not a finite number)')
         if samples == 0:
             first = float(t[0])
             if first < 0.0:
-                raise SimulationError(f'{where}: time t starts at {first:g} s (before 0 s)')
+                raise InputRefused(f'{where}: time t starts at {first:g} s (before 0 s)')
         steps = np.diff(t, prepend=previous)
         back = np.flatnonzero(steps <= 0.0)
         if len(back):
             k = back[0]
             before = t[k - 1] if k else previous
-            raise SimulationError(f'{where}: time t does not increase: sample {samples + k} '
-                                  f'is at {t[k]:g} s after {before:g} s')
+            raise InputRefused(f'{where}: time t does not increase: sample {samples + k} '
+                               f'is at {t[k]:g} s after {before:g} s')
         samples, previous = samples + len(t), float(t[-1])
     return first, previous
 
@@ -316,8 +317,7 @@ def main(argv: list[str] | None = None) -> int:
             runs = [load_run(path) for path in args.runs]
             server = serve(args.host, args.port)
         except SimulationError as exc:
-            say(f'view: {exc}')
-            return 2
+            return error_exit('view', exc)
         from iceskate_sim.model.robot import load_robot
         from iceskate_viewer.pose import BodyPose
         try:
@@ -332,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
                 last = now
         finally:
             stop_server(server)
-    return 0
+    return DONE
 
 
 if __name__ == '__main__':

@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from iceskate_native.parameters import checked, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.model.modes import GaitMode
 from iceskate_sim.model.robot import N_COORDINATES, Q1, Y0, Robot
 
@@ -34,7 +34,7 @@ class DynamicsParameters:
     limit_damping: float = setting(100.0, 'damping of a soft stop (while it is penetrated)',
                                    unit='N m s/rad', low=0.0, high=1e5)
     damping: bool = setting(True, 'joint damping of Table 1 on')
-    __post_init__ = checked(SimulationError)
+    __post_init__ = checked(InputRefused)
 
 
 @dataclass

@@ -12,7 +12,7 @@ from typing import Callable
 import numpy as np
 
 from iceskate_native.parameters import checked, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.model.dynamics import ContactState
 from iceskate_sim.model.modes import MODES, GaitMode
 from iceskate_sim.model.robot import Q1, Y0
@@ -37,7 +37,7 @@ class FrictionModel:
     rule: str = setting('ice', "'ice' (forward sliding only, a foot sliding back is stuck by "
                         "the toe pick) or 'coulomb' (|F_t| <= mu N both ways)",
                         choices=('ice', 'coulomb'))
-    __post_init__ = checked(SimulationError)
+    __post_init__ = checked(InputRefused)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from iceskate_native.parameters import checked, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 
 FIXED_STEP = ('symplectic_euler', 'implicit_euler', 'rk4')
 ADAPTIVE = ('rk45', 'ros34pw2')
@@ -33,4 +33,4 @@ class IntegratorConfig:
                                      open_low=True, high=1e-3)
     projection: bool = setting(True, 'project positions and velocities onto the active swing '
                                'constraints after every control period (drift control)')
-    __post_init__ = checked(SimulationError)
+    __post_init__ = checked(InputRefused)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 import iceskate_native
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.model.command import CommandValues, HeldCommand
 from iceskate_sim.model.dynamics import (
     ContactState,
@@ -86,11 +86,11 @@ class SimulatorConfig:
     def __post_init__(self) -> None:
         """Check the control period against the integrator step."""
         if not (np.isfinite(self.control_period) and self.control_period > 0.0):
-            raise SimulationError(f'control_period must be > 0 s, got {self.control_period!r}')
+            raise InputRefused(f'control_period must be > 0 s, got {self.control_period!r}')
         if self.integrator.method in FIXED_STEP:
             ratio = self.control_period / self.integrator.step
             if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-                raise SimulationError(
+                raise InputRefused(
                     f'control_period {self.control_period} s is not an integer multiple of '
                     f'the {self.integrator.method} step {self.integrator.step} s')
 
@@ -163,7 +163,7 @@ class Simulator(StateQueries):
 
     :param robot: the robot model. :param config: the run's settings.
     :param initial: the initial state.
-    :raises SimulationError: for settings or an initial state the kernel refuses.
+    :raises InputRefused: for settings or an initial state the kernel refuses.
     """
 
     def __init__(self, robot: Robot, config: SimulatorConfig, initial: HybridState) -> None:
@@ -181,8 +181,8 @@ class Simulator(StateQueries):
                 integrator.projection, c.residual_bound, c.fall_height, c.max_speed,
                 c.max_instant_transitions, c.zeno_window, c.chatter_dwell)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
-            raise SimulationError(f'native simulator: {exc} (initial state: '
-                                  f'{initial.summary()})') from None
+            raise InputRefused(f'native simulator: {exc} (initial state: '
+                               f'{initial.summary()})') from None
         self.reset()
 
     def reset(self) -> None:

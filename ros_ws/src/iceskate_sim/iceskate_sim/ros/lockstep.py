@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from iceskate_sim.errors import RunInterrupted, SimulationError
+from iceskate_sim.errors import InputRefused, RunInterrupted, SimulationError
+from iceskate_sim.exit_codes import DONE, exit_code_of
 from iceskate_sim.model.command import CommandValues
 from iceskate_sim.model.robot import COORDINATE_NAMES
 from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
@@ -306,7 +307,7 @@ class LockstepLoop:
                  listened: Callable[[str], bool] = lambda topic: True,
                  run_token: str = '') -> None:
         if not session.lockstep and pace <= 0.0:
-            raise SimulationError('a free-running run (lockstep false) needs a pace > 0')
+            raise InputRefused('a free-running run (lockstep false) needs a pace > 0')
         self.session = session
         self._listened = listened
         self.monitor = LoopMonitor(session.controllers, control_timeout,
@@ -488,14 +489,14 @@ class LockstepLoop:
     def finish(self, error: SimulationError | None = None) -> None:
         """End the run (outputs, bag, report, loop timings).
 
-        The exit code: 0, 1 after an error, 128 + signum after a ``RunInterrupted``.
+        The exit code: 0, 1 after an error, 128 + signum after a ``RunInterrupted``
+        (``exit_code_of``).
         """
         run = self.session.session
         metrics = run.finish(error, {'rejected_commands': self.monitor.rejected_summary()})
         failed = run.error
         self.phase = 'finished'
-        self.exit_code = (failed.exit_code if isinstance(failed, RunInterrupted)
-                          else int(failed is not None))
+        self.exit_code = DONE if failed is None else exit_code_of(failed)
         self._report(f'run over at t={metrics["sim_time_s"]:.6f} s: '
                      f'{metrics["failure"] or "complete"}', bool(self.exit_code))
         if self._stats_file is not None:

@@ -43,7 +43,8 @@ from iceskate_native.parameters import (
     optional_inner,
     unflatten,
 )
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
+from iceskate_sim.exit_codes import error_exit
 from iceskate_sim.recording.bag_types import OFFERED_QOS
 from iceskate_sim.ros.loopback import loopback_dds
 from iceskate_sim.shutdown import STOP_SIGNALS, StopRequest, process_alive
@@ -73,8 +74,9 @@ LATCHED_QOS = _profile(OFFERED_QOS['/robot_description'][0])
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class ConfigError(ValueError):
-    """A node parameter (or the scene it names) is unusable; the message names it."""
+class ConfigError(InputRefused):
+    """A node parameter (or the scene it names) is unusable: refused before the node runs; the
+    message names it."""
 
 
 def _ros_type(tp: Any) -> Parameter.Type:
@@ -223,6 +225,20 @@ def usage(package: str, name: str, about: str, parameters: type | None) -> str:
     return '\n'.join(lines)
 
 
+def init_ros(args: list[str] | None) -> None:
+    """``rclpy.init`` with ``args`` (None: the command line), without rclpy's signal handlers
+    (a ``StopRequest`` has them).
+
+    :raises InputRefused: for ``--ros-args`` rcl refuses (a malformed ``-p``, a parameter file
+        it cannot parse, an unknown argument).
+    """
+    from rclpy.signals import SignalHandlerOptions
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RuntimeError as exc:  # RCLError, UnknownROSArgsError
+        raise InputRefused(f'{type(exc).__name__}: {exc}') from None
+
+
 def run_node(make: Callable[..., Node], package: str, name: str, args: list[str] | None = None,
              about: str = '', parameters: type | None = None) -> int:
     """The Jazzy main(): init, make the node, spin until it is finished or stopped.
@@ -236,11 +252,11 @@ def run_node(make: Callable[..., Node], package: str, name: str, args: list[str]
     before destruction: after the end of the run, an error or a signal, whose number it gets,
     with ``detail`` saying if the parent process is gone).
 
-    :returns: the process exit code (the node's ``exit_code``, 0 without one; 1 if it could not
-        start).
+    :returns: the process exit code (``iceskate_sim.exit_codes``): the node's ``exit_code``
+        (0 without one); 2 if its arguments or parameters were refused, 1 if it could not start
+        otherwise.
     """
     from rclpy.experimental import EventsExecutor
-    from rclpy.signals import SignalHandlerOptions
     argv = sys.argv[1:] if args is None else args[1:]
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     if {'-h', '--help'} & set(own):
@@ -257,20 +273,18 @@ def run_node(make: Callable[..., Node], package: str, name: str, args: list[str]
                 if option == '--params-file':
                     read_yaml(value, 'parameter file')
             loopback_dds(os.environ)
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            init_ros(args)
             node = make()
             executor = EventsExecutor()
             executor.add_node(node)
             spin_until(executor, lambda: stop.requested or getattr(node, 'finished', False))
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        except (ConfigError, SimulationError) as exc:
-            print(f'{name}: error: {exc}', file=sys.stderr)
-            return 1
-        except Exception as exc:  # e.g. rclpy.init refusing a malformed params file
+        except SimulationError as exc:  # ConfigError among them
+            return error_exit(name, exc)
+        except Exception as exc:  # a node that could not be made
             if node is None:
-                print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr)
-                return 1
+                return error_exit(name, exc, f'{type(exc).__name__}: {exc}')
             raise
         finally:
             if node is not None:

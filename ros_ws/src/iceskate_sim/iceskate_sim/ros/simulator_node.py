@@ -27,7 +27,7 @@ from std_srvs.srv import Trigger
 from iceskate_interfaces.msg import EffortCommand, GaitState
 from iceskate_interfaces.srv import StepSimulation
 from iceskate_native.parameters import checked, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused
 from iceskate_sim.model.stamps import set_stamp
 from iceskate_sim.ros.lockstep import LockstepLoop, LockstepSession
 from iceskate_sim.ros.node_support import (
@@ -79,10 +79,10 @@ class SimulatorNodeParameters:
                              'run_token); empty: commands without one')
 
     def __post_init__(self) -> None:
-        checked(SimulationError)(self)
+        checked(InputRefused)(self)
         if not self.lockstep and self.pace <= 0.0:
-            raise SimulationError('pace must be > 0 when lockstep is false (a free-running run '
-                                  'keeps it)')
+            raise InputRefused('pace must be > 0 when lockstep is false (a free-running run '
+                               'keeps it)')
 
 
 class SimulatorNode(Node):
@@ -90,7 +90,7 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **kwargs)
-        c = self.config = declare_parameters(self, SimulatorNodeParameters, SimulationError,
+        c = self.config = declare_parameters(self, SimulatorNodeParameters, InputRefused,
                                              self._on_parameters)
         self._declare_controllers()
         check_unknown(self)
@@ -104,7 +104,7 @@ class SimulatorNode(Node):
                     else ())
             session = Session(scene, out, pathlib.Path(c.record_bag) if c.record_bag else None,
                               made=made)
-        except SimulationError as exc:  # its message names the scene, bag or folder
+        except InputRefused as exc:  # its message names the scene, bag or folder
             raise ConfigError(str(exc)) from None
         controllers = self._controllers(scene)
         self.session = LockstepSession(session, controllers, c.lockstep)
@@ -171,7 +171,8 @@ class SimulatorNode(Node):
 
     @property
     def exit_code(self) -> int:
-        """1 if the run ended with an error, else 0."""
+        """The run's exit status (``LockstepLoop.finish``): 0, 1 after an error, 128 + N after
+        signal N."""
         return self.loop.exit_code
 
     def _report(self, text: str, failed: bool) -> None:

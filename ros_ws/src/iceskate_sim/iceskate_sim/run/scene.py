@@ -1,6 +1,6 @@
 """Scenes: one YAML file per experiment, validated once before the run (the simulator's part;
-the controllers' blocks by ``parse_scene``'s ``validate_inputs``), a bad key refused with a
-``SimulationError`` naming it (e.g. ``integrator.step``). A scene is named by its path or, for
+the controllers' blocks by ``parse_scene``'s ``validate_inputs``), a bad key refused with an
+``InputRefused`` naming it (e.g. ``integrator.step``). A scene is named by its path or, for
 those a package ships (``share/<package>/scenes/<name>.yaml``, the package registered under the
 ament index's ``iceskate_scenes``), by its name. See docs/usage.md, 'Run a scene'.
 """
@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from iceskate_native.parameters import block, checked, keyed_from_mapping, setting
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.installed import shipped_or_path
 from iceskate_sim.model.dynamics import DynamicsParameters
 from iceskate_sim.model.robot import COORDINATE_NAMES, LINK_NAMES, N_COORDINATES, SIDES
@@ -78,7 +78,7 @@ class Scene:
 # Every key of a scene's simulator part is a ``setting`` of these classes or of the run's own
 # configurations (``FrictionModel``, ``IntegratorConfig``, ``DynamicsParameters``; the parameter
 # schema of the project, ``iceskate_native.parameters``): its default, description, unit and rules.
-_checked = checked(SimulationError)
+_checked = checked(InputRefused)
 
 
 #: ``initial.q`` and ``initial.v``: a value per coordinate name (m, rad; m/s, rad/s), each
@@ -167,8 +167,8 @@ class SceneSettings:
     __post_init__ = _checked
 
 
-def _fail(key: str, message: str) -> SimulationError:
-    return SimulationError(f'scene key {key!r}: {message}')
+def _fail(key: str, message: str) -> InputRefused:
+    return InputRefused(f'scene key {key!r}: {message}')
 
 
 # ----------------------------------------------------------------------- postures
@@ -194,14 +194,14 @@ def standing_posture(kind: str, knee_bend: float, stagger: float) -> tuple[np.nd
 # ----------------------------------------------------------------------- loading
 def parse_scene(raw: Any, validate_inputs: Callable[[str, dict[str, Any]], None] | None = None
                 ) -> Scene:
-    """Validate a scene mapping and build a Scene; raise SimulationError naming the key.
+    """Validate a scene mapping and build a Scene; raise InputRefused naming the key.
 
     :param validate_inputs: ``validate_inputs(node, block)`` checks the parameter block of one
-        controller node (raising SimulationError naming the key); None: blocks are taken as
+        controller node (raising InputRefused naming the key); None: blocks are taken as
         given (the simulator needs only their node names).
     """
     if not isinstance(raw, dict):
-        raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__}')
+        raise InputRefused(f'a scene must be a mapping of keys, got {type(raw).__name__}')
     if 'engine' in raw:  # a scene written for the Python engine, which is gone
         raise _fail('engine', 'the physics always runs on the native core now; remove the key')
     if isinstance(raw.get('dynamics'), dict) and 'mu' in raw['dynamics']:
@@ -284,7 +284,7 @@ def _record_every(rate: float | None, control_period: float) -> int:
 def scene_path(name_or_path: str | pathlib.Path) -> pathlib.Path:
     """The YAML file of a shipped scene name (e.g. 'skate'), or the path itself.
 
-    :raises SimulationError: for a name no package ships, listing those shipped.
+    :raises InputRefused: for a name no package ships, listing those shipped.
     """
     return shipped_or_path(name_or_path, SCENE_RESOURCE, 'scenes', 'scene')
 
@@ -297,11 +297,11 @@ _TOKEN = re.compile(rf'({_NAME})|\[(\d+)\]')
 def key_tokens(key: str) -> list[str | int]:
     """The names and list indices of a dotted scene key (``a.b[2].c`` -> a, b, 2, c).
 
-    :raises SimulationError: for text that is no dotted key.
+    :raises InputRefused: for text that is no dotted key.
     """
     if not isinstance(key, str) or not _KEY.fullmatch(key):
-        raise SimulationError(f'{key!r} is not a dotted scene key (e.g. floor.mu, '
-                              'inputs.visual_lifting.kp[1], disturbances[0].force[1])')
+        raise InputRefused(f'{key!r} is not a dotted scene key (e.g. floor.mu, '
+                           'inputs.visual_lifting.kp[1], disturbances[0].force[1])')
     return [name if name else int(index) for name, index in _TOKEN.findall(key)]
 
 
@@ -309,7 +309,7 @@ def set_key(raw: dict[str, Any], key: str, value: Any) -> None:
     """Set scene key ``key`` of mapping ``raw`` to ``value``; a missing mapping on the way is
     made (the scene's validation judges the key), a list entry must exist.
 
-    :raises SimulationError: for a bad key or a path the scene's shape does not have.
+    :raises InputRefused: for a bad key or a path the scene's shape does not have.
     """
     tokens = key_tokens(key)
     node: Any = raw
@@ -319,17 +319,17 @@ def set_key(raw: dict[str, Any], key: str, value: Any) -> None:
         done = done.lstrip('.')
         if isinstance(token, int):
             if not isinstance(node, list):
-                raise SimulationError(f'{done} is not a list in the scene; give it whole in '
-                                      'overrides first')
+                raise InputRefused(f'{done} is not a list in the scene; give it whole in '
+                                   'overrides first')
             if token >= len(node):
-                raise SimulationError(f'{done} has {len(node)} entries in the scene, no '
-                                      f'[{token}]')
+                raise InputRefused(f'{done} has {len(node)} entries in the scene, no '
+                                   f'[{token}]')
         elif not isinstance(node, dict):
-            raise SimulationError(f'{done} is not a mapping in the scene')
+            raise InputRefused(f'{done} is not a mapping in the scene')
         elif not last and node.get(token) is None:
             if isinstance(tokens[depth + 1], int):
-                raise SimulationError(f'{done + "." if done else ""}{token} is not in the '
-                                      'scene; give the whole list in overrides first')
+                raise InputRefused(f'{done + "." if done else ""}{token} is not in the '
+                                   'scene; give the whole list in overrides first')
             node[token] = {}
         if last:
             node[token] = value
@@ -367,24 +367,24 @@ def _scene_files(name_or_path: str | pathlib.Path, name: str,
                  seen: tuple[pathlib.Path, ...] = ()) -> list[tuple[str, dict[str, Any]]]:
     """The files a scene is made of, its deepest base first: how each is named, its own keys.
 
-    :raises SimulationError: for an unreadable file, a file that is no mapping, a base that is
+    :raises InputRefused: for an unreadable file, a file that is no mapping, a base that is
         no scene or names itself in a chain.
     """
     path = scene_path(name_or_path)
     raw = read_yaml(path, 'scene')
     if not isinstance(raw, dict):
-        raise SimulationError(f'a scene must be a mapping of keys, got {type(raw).__name__} '
-                              f'({path})')
+        raise InputRefused(f'a scene must be a mapping of keys, got {type(raw).__name__} '
+                           f'({path})')
     if 'base' not in raw:
         return [(name, raw)]
     base = raw.pop('base')
     if not isinstance(base, str) or not base:
-        raise SimulationError(f'scene {path}: base must be a shipped scene name or the path of '
-                              f'a scene file, got {base!r}')
+        raise InputRefused(f'scene {path}: base must be a shipped scene name or the path of '
+                           f'a scene file, got {base!r}')
     relative = path.parent / base
     base_file = scene_path(relative if pathlib.Path(base).suffix and relative.is_file() else base)
     if base_file.resolve() in (*seen, path.resolve()):
-        raise SimulationError(f'scene {path}: its base {base!r} leads back to itself')
+        raise InputRefused(f'scene {path}: its base {base!r} leads back to itself')
     return [*_scene_files(base_file, base, (*seen, path.resolve())), (name, raw)]
 
 
@@ -396,7 +396,7 @@ def scene_steps(name_or_path: str | pathlib.Path,
     ``plugin`` replaces the base's whole, a null one removes it), then ``overrides`` (dotted
     key -> value, ``set_key``; a last step when given).
 
-    :raises SimulationError: for an unreadable file, a base that is no scene or names itself in
+    :raises InputRefused: for an unreadable file, a base that is no scene or names itself in
         a chain, a null controller block in a file whose base runs no controller of that name,
         or a bad override.
     """
@@ -421,7 +421,7 @@ def scene_raw(name_or_path: str | pathlib.Path,
               overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The keys of a scene, its bases and ``overrides`` composed (``scene_steps``).
 
-    :raises SimulationError: as ``scene_steps``.
+    :raises InputRefused: as ``scene_steps``.
     """
     return scene_steps(name_or_path, overrides)[-1].raw
 
@@ -429,13 +429,13 @@ def scene_raw(name_or_path: str | pathlib.Path,
 def set_keys(raw: dict[str, Any], overrides: Mapping[str, Any]) -> None:
     """Set the dotted keys of ``overrides`` in the scene mapping ``raw`` (``set_key``).
 
-    :raises SimulationError: 'override KEY: ...' for a key that cannot be set.
+    :raises InputRefused: 'override KEY: ...' for a key that cannot be set.
     """
     for key, value in overrides.items():
         try:
             set_key(raw, key, value)
         except SimulationError as exc:
-            raise SimulationError(f'override {key}: {exc}') from None
+            raise InputRefused(f'override {key}: {exc}') from None
 
 
 def load_scene(name_or_path: str | pathlib.Path,

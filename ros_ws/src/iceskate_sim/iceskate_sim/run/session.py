@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from iceskate_sim.disk import Room, write_atomically
-from iceskate_sim.errors import SimulationError
+from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot, load_robot
 from iceskate_sim.physics.simulation import Simulator
@@ -79,7 +79,7 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
     launcher made in it for this run (the nodes' ``params`` of a graph). Returns the lock's
     descriptor.
 
-    :raises SimulationError: one sentence naming the path and the problem (a file in the way,
+    :raises InputRefused: one sentence naming the path and the problem (a file in the way,
         no permission, a read-only file system, another run writing there, an earlier run's
         bag or metrics, files the run did not make).
     """
@@ -88,43 +88,43 @@ def prepare_output(out: pathlib.Path, bag: pathlib.Path | None = None,
         if path.exists() or path.is_symlink():
             if not path.is_dir():
                 where = 'is' if path == out else f'lies under {path}, which is'
-                raise SimulationError(f'output directory {out} {where} an existing file, not '
-                                      'a directory')
+                raise InputRefused(f'output directory {out} {where} an existing file, not '
+                                   'a directory')
             break
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise SimulationError(f'output directory {out} cannot be created: '
-                              f'{_reason(exc)}') from None
+        raise InputRefused(f'output directory {out} cannot be created: '
+                           f'{_reason(exc)}') from None
     try:
         with tempfile.TemporaryFile(dir=out):
             pass
     except OSError as exc:
-        raise SimulationError(f'output directory {out} is not writable: {_reason(exc)}') \
+        raise InputRefused(f'output directory {out} is not writable: {_reason(exc)}') \
             from None
     taken = out.resolve() in _HELD or _launcher_lock(out) is not None  # its files: this run's
     lock = out / LOCK_NAME
     if lock.is_symlink() or (lock.exists() and not lock.is_file()):
-        raise SimulationError(f'output directory {out} holds {LOCK_NAME!r}, which is not a '
-                              "run's lock file; choose another output directory")
+        raise InputRefused(f'output directory {out} holds {LOCK_NAME!r}, which is not a '
+                           "run's lock file; choose another output directory")
     # a folder of a run of ours (its lock file) is locked first: "in use" if it runs still;
     # any other is checked before a lock file is made in it
     fd = _lock(out) if taken or lock.exists() else None
     try:
         for earlier in ([bag] if bag is not None else []) + [out / 'metrics.json']:
             if earlier.exists() or earlier.is_symlink():
-                raise SimulationError(f'output directory {out} already holds a recorded run: '
-                                      f'{earlier} already exists; choose another output '
-                                      'directory')
+                raise InputRefused(f'output directory {out} already holds a recorded run: '
+                                   f'{earlier} already exists; choose another output '
+                                   'directory')
         earlier_kind = resumes is not None and (out / resumes).is_file()
         others = ([] if taken or earlier_kind else
                   sorted(name for name in os.listdir(out) if name not in (LOCK_NAME, *made)))
         if others:  # a run writes only files it makes: never over (or through) the user's
-            raise SimulationError(f'output directory {out} is not empty (it holds '
-                                  f'{others[0]!r}{" and more" if len(others) > 1 else ""}): a '
-                                  'run writes only into a new or empty directory; choose '
-                                  'another output directory')
-    except SimulationError:
+            raise InputRefused(f'output directory {out} is not empty (it holds '
+                               f'{others[0]!r}{" and more" if len(others) > 1 else ""}): a '
+                               'run writes only into a new or empty directory; choose '
+                               'another output directory')
+    except InputRefused:
         release_output(out)
         raise
     return fd if fd is not None else _lock(out)
@@ -153,14 +153,14 @@ def _lock(out: pathlib.Path) -> int:
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
     except OSError as exc:
-        raise SimulationError(f'output directory {out} cannot be locked: {_reason(exc)}') \
+        raise InputRefused(f'output directory {out} cannot be locked: {_reason(exc)}') \
             from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
         os.close(fd)
-        raise SimulationError(f'output directory {out} is in use by another run; choose '
-                              'another output directory or wait until that run ends') from None
+        raise InputRefused(f'output directory {out} is in use by another run; choose '
+                           'another output directory or wait until that run ends') from None
     _HELD[key] = fd
     return fd
 
@@ -189,22 +189,22 @@ def _reason(exc: OSError) -> str:
 def start_simulator(scene: Scene, robot: Robot) -> Simulator:
     """The simulator of ``scene`` at its initial state.
 
-    :raises SimulationError: for an initial state the run would end in at once (e.g. a foot
-        below the floor: nothing to simulate), naming its mode and the reason.
+    :raises InputRefused: for settings or an initial state the kernel refuses, or one the run
+        would end in at once (e.g. a foot below the floor: nothing to simulate), naming its
+        mode and the reason.
     """
     sim = Simulator(robot, scene.simulator, scene.initial)
     if sim.ended is not None:
-        raise _unstartable(scene, sim, '')
+        raise InputRefused(_unstartable(scene, sim, ''))
     return sim
 
 
-def _unstartable(scene: Scene, sim: Simulator, under: str) -> SimulationError:
-    """The error of an initial state that ends the run at once (``under``: the input that
-    makes it do so, '' for none)."""
-    return SimulationError(
-        f'scene {scene.name!r}: the initial state cannot be simulated{under}, it ends the run '
-        f'at once from mode {scene.initial.mode.number} ({sim.ended}); change '
-        'initial.posture, initial.q, initial.v or initial.mode')
+def _unstartable(scene: Scene, sim: Simulator, under: str) -> str:
+    """Why an initial state ends the run at once (``under``: the input that makes it do so,
+    '' for none)."""
+    return (f'scene {scene.name!r}: the initial state cannot be simulated{under}, it ends the '
+            f'run at once from mode {scene.initial.mode.number} ({sim.ended}); change '
+            'initial.posture, initial.q, initial.v or initial.mode')
 
 
 class Session:
@@ -407,8 +407,8 @@ class Session:
             self.error = error
         if self.error is None and self.sim.ended is not None and self.sim.time == 0.0:
             # not a fall: a posture the controllers' first command cannot hold on the floor
-            self.error = _unstartable(self.scene, self.sim, " under the controllers' first "
-                                      'command')
+            self.error = SimulationError(_unstartable(
+                self.scene, self.sim, " under the controllers' first command"))
         output_error: SimulationError | None = None  # an output that could not be written
         try:
             self.flush()
