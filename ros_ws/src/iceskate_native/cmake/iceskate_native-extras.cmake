@@ -67,7 +67,8 @@ endmacro()
 #                   generate_parameters.py writes <project>/parameters.hpp (the structs) and
 #                   <project>/parameter_readers.hpp (their by-name readers, for bindings.cpp)
 #                   from it into the build tree's include path, again whenever it changes
-#   _law            nanobind module <project>._law from src/bindings.cpp (-O3, not -Os)
+#   _law            nanobind module <project>._law from src/bindings.cpp (-O3, not -Os), linking
+#                   iceskate_native's nanobind core (lib/libiceskate_nanobind.so)
 # and installs the Python package <project>/, config/, and the executable lib/<project>/<project>
 # (`ros2 run <project> <project>`) that runs <project>.<project>_node:main with this interpreter.
 macro(iceskate_controller_package)
