@@ -26,7 +26,7 @@ def long_trajectory(path: pathlib.Path, samples: int, chunk: int = 1 << 18) -> N
     that stand for ~200 bytes a sample in memory."""
     columns = {'t': ((), np.float64), 'q': ((18,), np.float64), 'mode': ((), np.int64),
                'side': ((), np.int64), 'pivot': ((), np.int64),
-               'step_index': ((), np.int64), 'psi_d': ((3,), np.float64)}
+               'step_index': ((), np.int64), 'head_target': ((3,), np.float64)}
     with zipfile.ZipFile(path, 'w', zipfile.ZIP_DEFLATED, allowZip64=True,
                          compresslevel=1) as archive:
         for name, (shape, dtype) in columns.items():

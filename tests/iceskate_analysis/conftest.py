@@ -142,15 +142,16 @@ def synthetic_block(robot, yaw: bool) -> dict:
         head = dyn.frame_placement(contact, q, 'head_top')
         R = head.rotation
         pitch = np.arctan2(-R[1, 2], R[2, 2])
-        pivot_code = 0 if not contact.mode.q1_active else 1 + PIVOTS.index(contact.pivot)
         row = {
             't': t, 't_exchange': 0.0, 't_touchdown': np.nan,
             'heel_anchor_y': contact.heel_anchor_y, 'mode': contact.mode.number,
-            'side': SIDES.index(contact.side), 'pivot': PIVOTS.index(contact.pivot),
-            'pivot_code': pivot_code, 'step_index': step, 'q': q, 'v': v, 'qdd': result.qdd,
+            'side': SIDES.index(contact.side),
+            'pivot': 1 + PIVOTS.index(contact.pivot) if contact.mode.q1_active else 0,
+            'step_index': step, 'q': q, 'v': v, 'qdd': result.qdd,
             'passive': result.passive, 'applied': result.applied,
             'multipliers': result.multipliers, 'support_normal': result.support_normal,
-            'support_tangential': result.support_tangential, 'cop_y': result.cop_y,
+            'support_friction': result.support_friction, 'zmp_y': result.zmp_y,
+            'swing_clearance': min(result.swing_heel[2], result.swing_toe_z),
             'head_position': head.translation.copy(),
             'head_orientation': pin.Quaternion(R).coeffs().copy(), 'head_pitch': pitch,
             'tf': tf_rows(robot, contact.side, contact.pivot, q).ravel(),
@@ -159,14 +160,14 @@ def synthetic_block(robot, yaw: bool) -> dict:
             'stamps_ns': [seconds_to_ns(t), 0, 0, 0],
             'y0_active': contact.mode.y0_active, 'q1_active': contact.mode.q1_active,
             'zmp_inside_support': (not contact.mode.q1_active and q[Y0] + SOLE_HEEL_Y
-                                   <= result.cop_y <= q[Y0] + SOLE_TOE_Y),
+                                   <= result.zmp_y <= q[Y0] + SOLE_TOE_Y),
             'touched_down': False, 'active': np.isin(joints, contact.mode.active),
             'effort_total': np.sum(list(acting.values()), axis=0)}
         for key, value in row.items():
             rows.setdefault(key, []).append(value)
         for name in sources:
             efforts[name].append(acting[name])
-    integers = {'mode': np.int32, 'side': np.int32, 'pivot': np.int32, 'pivot_code': np.int32,
+    integers = {'mode': np.int32, 'side': np.int32, 'pivot': np.int32,
                 'step_index': np.int32, 'last_event': np.int64, 'present': np.uint64,
                 'stamps_ns': np.int64, 'y0_active': np.uint8, 'q1_active': np.uint8,
                 'zmp_inside_support': np.uint8, 'touched_down': np.uint8, 'active': np.uint8}

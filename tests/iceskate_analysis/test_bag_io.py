@@ -12,6 +12,7 @@ from hostile import alias_bomb
 from iceskate_analysis import bag_io
 from iceskate_analysis.bag_io import BagReading, read_bag, resolve_bag_path
 from iceskate_analysis.rows import join_rows
+from iceskate_native.sample import SAMPLE_COLUMNS, routed
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 
@@ -35,6 +36,22 @@ def test_read_bag_aligns_every_sample_of_a_run(sim_bag, spec):
     # the total effort of /joint_states is the sum of the recorded sources
     total = sum(bag.efforts[s] for s in bag.sources)
     np.testing.assert_allclose(bag.effort_total, total, rtol=0, atol=1e-9)
+
+
+def test_every_column_a_bag_gives_back_is_the_runs(sim_bag):
+    """The sample table's read-back routes: each column the bag gives back equals the one
+    the run saved in trajectory.npz, to the bit."""
+    bag = read_bag(sim_bag)
+    with np.load(sim_bag.parent / 'trajectory.npz') as saved:
+        trajectory = {name: saved[name] for name in saved.files}
+    given = [column.name for topic in bag_io.REQUIRED_TOPICS
+             for column, _ in routed(topic, read_back=True)]
+    compared = [name for name in given if SAMPLE_COLUMNS[name].saved]
+    assert {'q', 'v', 'qdd', 'mode', 'pivot', 'zmp_y', 'swing_clearance'} <= set(compared)
+    for name in given:
+        assert getattr(bag, name).shape[0] == bag.n_samples, name
+    for name in compared:
+        assert np.array_equal(getattr(bag, name), trajectory[name], equal_nan=True), name
 
 
 def _edited_copy(source: pathlib.Path, target: pathlib.Path, edit) -> pathlib.Path:

@@ -59,7 +59,7 @@ def test_the_picture_shows_the_head_y_against_its_target(tmp_path, saved_figures
     psi = np.column_stack([0.3 * t + 0.02 * np.sin(5.0 * t), np.full_like(t, 1.69),
                            np.zeros_like(t)])
     psi_d = np.column_stack([0.3 * t, np.full_like(t, 1.695), np.zeros_like(t)])
-    columns = {'t': t, 'psi': psi, 'psi_d': psi_d, 'mode': np.full(t.size, 3),
+    columns = {'t': t, 'psi': psi, 'head_target': psi_d, 'mode': np.full(t.size, 3),
                'side': (t > 1.0).astype(int), 'step_index': (t > 1.0).astype(int),
                'q': np.zeros((t.size, 18))}
     metrics = {'scene': 'skate', 'steps': 1, 'failure': None,
@@ -154,7 +154,7 @@ def test_draw_summary_from_a_trajectory_draws_the_saved_runs_picture(stand_run, 
     assert not np.array_equal(_pixels(other), _pixels(path))
 
 
-@pytest.mark.parametrize('column', ['t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q'])
+@pytest.mark.parametrize('column', ['t', 'psi', 'head_target', 'mode', 'side', 'step_index', 'q'])
 def test_draw_summary_names_a_missing_column_in_one_sentence(stand_run, tmp_path, column):
     out, metrics = stand_run
     columns = [(key, value) for key, value in _trajectory(out, None).columns() if key != column]

@@ -55,7 +55,7 @@ def _run(raw: dict, out: Path) -> tuple[dict, SimulationError | None]:
 def _compare(a: Path, b: Path, tol: float) -> None:
     ta, tb = np.load(a / 'trajectory.npz'), np.load(b / 'trajectory.npz')
     assert len(ta['t']) == len(tb['t'])
-    for key in ('t', 'q', 'v', 'qdd', 'applied', 'psi', 'psi_d', 'multipliers', 'mode'):
+    for key in ('t', 'q', 'v', 'qdd', 'applied', 'psi', 'head_target', 'multipliers', 'mode'):
         assert np.max(np.abs(ta[key] - tb[key]), initial=0.0) <= tol, key
     assert np.max(np.abs(ta['tau_visual_lifting'] - tb['tau_lifting'])) <= tol
 

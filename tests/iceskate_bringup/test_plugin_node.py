@@ -148,7 +148,7 @@ def test_the_graph_with_a_plugin_node_gives_the_headless_trajectory(tmp_path, ro
     ros = np.load(tmp_path / 'ros' / 'trajectory.npz')
     headless = np.load(tmp_path / 'headless' / 'trajectory.npz')
     assert len(ros['t']) == len(headless['t']) == 300
-    for key in ('q', 'v', 'psi_d', 'tau_lifting', 'tau_posture'):
+    for key in ('q', 'v', 'head_target', 'tau_lifting', 'tau_posture'):
         assert np.max(np.abs(ros[key] - headless[key])) <= 1e-12, key
 
 

@@ -25,6 +25,7 @@ from gait_manager.errors import GaitManagerError
 from iceskate_bringup.composition import ControlStack
 from iceskate_bringup.scene import load_scene, scene_sources
 import iceskate_native
+from iceskate_native.sample import SAMPLE_COLUMNS
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import PIVOTS, SIDES, Robot
@@ -126,6 +127,15 @@ def _placements(robot: Robot, side: int, pivot: int, q: np.ndarray) -> tuple[pin
     return head, tf_rows(robot, SIDES[side], PIVOTS[pivot], q)
 
 
+def _heights(robot: Robot, side: int, pivot: int, q: np.ndarray,
+             frames: tuple[str, ...]) -> list[float]:
+    """World heights [m] of ``frames`` in the support model of side and pivot at q."""
+    support = robot.support_model(SIDES[side], PIVOTS[pivot])
+    data = support.new_data()
+    pin.framesForwardKinematics(support.model, data, q)
+    return [float(data.oMf[support.frame_ids[frame]].translation[2]) for frame in frames]
+
+
 def _assert_tf(row: np.ndarray, expected: np.ndarray) -> None:
     """A sample's /tf rows against ``oracle.tf``'s: the root link's world pose the same
     numbers, the joints' transforms to rounding (SE3 composed in another order)."""
@@ -141,7 +151,7 @@ def _assert_head(row: dict, k: int, head: pin.SE3) -> None:
     assert row['head_pitch'][k] == np.arctan2(-rotation[1, 2], rotation[2, 2])
 
 
-def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_tf() -> None:
+def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_and_tf() -> None:
     scene = _scene('skate', 2.5)  # toe and heel pivots, support exchanges
     session = Session(scene)
     stack = ControlStack(scene, session.robot, session.observation())
@@ -151,29 +161,45 @@ def test_the_samples_carry_the_head_quaternion_and_pitch_pivot_code_and_tf() -> 
     block, error = sim.run_loop(loop, session.n_periods)
     n = len(block['t'])
     assert error is None and n == session.n_periods
+    assert list(block) == [*SAMPLE_COLUMNS, 'sources', 'efforts']  # the table's, in its order
+    pairs = len(session.robot.tf_frames)
+    for name, column in SAMPLE_COLUMNS.items():
+        assert block[name].shape == (n, *column.shape(pairs)), name
+        assert block[name].dtype == column.dtype, name
     for key, shape, dtype in [('head_orientation', (n, 4), np.float64),
-                              ('head_pitch', (n,), np.float64), ('pivot_code', (n,), np.int32),
-                              ('tf', (n, 7 * len(session.robot.tf_frames)), np.float64)]:
+                              ('head_pitch', (n,), np.float64), ('pivot', (n,), np.int32),
+                              ('tf', (n, 7 * pairs), np.float64)]:
         assert (block[key].shape, block[key].dtype) == (shape, dtype), key
-    assert 'head_rotation' not in block
     robot = session.robot
     assert robot.tf_frames[0] == ('world', 'pelvis')  # the URDF's root link
-    codes = block['pivot_code']
+    codes = block['pivot']
     assert set(codes.tolist()) == {0, 1, 2}
     # the head is observed before the transitions due at t_k, the sample's state after them
     transition_at = np.isin(block['t'], [event.t for event in sim.events])
     rows = {*range(0, n, 97), *np.flatnonzero(transition_at).tolist(),
             *(int(np.flatnonzero(codes == code)[0]) for code in (0, 1, 2))}
     for k in sorted(rows):
-        side, pivot, mode = int(block['side'][k]), int(block['pivot'][k]), int(block['mode'][k])
-        head, tf = _placements(robot, side, pivot, block['q'][k])
+        side, mode = int(block['side'][k]), int(block['mode'][k])
+        assert (codes[k] > 0) == MODES[mode].q1_active, k
+        # a flat sole (code 0) lies in the toe's or the heel's support model, the same to
+        # rounding: the sample is that of one of them
+        pivots = [int(codes[k]) - 1] if codes[k] else [0, 1]
+        head, tf = next(placed for placed in (_placements(robot, side, pivot, block['q'][k])
+                                              for pivot in pivots)
+                        if np.array_equal(placed[1][0], block['tf'][k][:7]))
         _assert_tf(block['tf'][k], tf)
-        assert codes[k] == (pivot + 1 if MODES[mode].q1_active else 0), k
         if not transition_at[k]:
             _assert_head(block, k, head)
         rotation = pin.Quaternion(block['head_orientation'][k]).toRotationMatrix()
         assert block['head_pitch'][k] == pytest.approx(
             math.atan2(-rotation[1, 2], rotation[2, 2]), abs=1e-12)
+        swing = _heights(robot, side, pivots[0], block['q'][k], ('swing_heel', 'swing_toe'))
+        assert block['swing_clearance'][k] == pytest.approx(min(swing), abs=1e-12), k
+    # the swing sole rises off the ice in every step and comes down to it
+    clearance = block['swing_clearance']
+    assert clearance.min() > -2e-3 and clearance.max() > 0.02
+    for step in np.unique(block['step_index'])[1:-1]:
+        assert np.abs(clearance[block['step_index'] == step]).min() < 1e-3, step
 
 
 def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command() -> None:
@@ -198,13 +224,14 @@ def test_the_live_view_is_a_sample_of_the_current_state_under_the_held_command()
             for key, expected in [
                     ('t', state.t), ('t_exchange', state.t_exchange),
                     ('t_touchdown', state.t_touchdown), ('heel_anchor_y', contact.heel_anchor_y),
-                    ('mode', contact.mode.number), ('side', side), ('pivot', pivot),
-                    ('pivot_code', pivot + 1 if contact.mode.q1_active else 0),
+                    ('mode', contact.mode.number), ('side', side),
+                    ('pivot', pivot + 1 if contact.mode.q1_active else 0),
+                    ('swing_clearance', min(result.swing_heel[2], result.swing_toe_z)),
                     ('step_index', state.step_index), ('q', state.q), ('v', state.v),
                     ('qdd', result.qdd), ('passive', result.passive),
                     ('applied', result.applied), ('multipliers', result.multipliers),
                     ('support_normal', result.support_normal),
-                    ('support_tangential', result.support_tangential), ('cop_y', result.cop_y),
+                    ('support_friction', result.support_friction), ('zmp_y', result.zmp_y),
                     ('head_target', block['head_target'][-1]), ('present', 1)]:
                 assert np.array_equal(live[key][0], expected, equal_nan=True), key
             held = held_of_controllers(commands.values()).torque(state.q, state.v)

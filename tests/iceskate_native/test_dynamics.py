@@ -68,9 +68,9 @@ def assert_same(a, b, what):
         scale = max(1.0, float(np.max(np.abs(x))))
         assert np.max(np.abs(x - y)) <= TOLERANCE * scale, f'{what}: {name} {x} vs {y}'
     wrench = max(1.0, float(np.max(np.abs(a.support_wrench))))
-    for name, scale in (('support_normal', wrench), ('support_tangential', wrench),
+    for name, scale in (('support_normal', wrench), ('support_friction', wrench),
                         ('heel_friction', abs(a.multipliers[0])), ('swing_toe_z', 1.0),
-                        ('cop_y', 1.0 if a.support_normal > 50.0 else np.inf)):
+                        ('zmp_y', 1.0 if a.support_normal > 50.0 else np.inf)):
         x, y = getattr(a, name), getattr(b, name)
         if np.isnan(x):
             assert np.isnan(y), f'{what}: {name}'

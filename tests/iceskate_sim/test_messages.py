@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from iceskate_bringup.scene import load_scene
+from iceskate_native.sample import SAMPLE_COLUMNS
 from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, SOLE_HEEL_Y, SOLE_TOE_Y, load_robot
 from iceskate_sim.model.stamps import seconds_to_ns
@@ -101,19 +102,20 @@ def _check(block: dict, events: list, messages: dict[str, list], links: list) ->
         gs = messages['/gait_state'][k]
         assert (gs.header.stamp.sec, gs.header.stamp.nanosec) == stamp
         assert gs.mode == mode.number and gs.support_side == block['side'][k]
-        assert gs.pivot == block['pivot_code'][k]
+        assert gs.pivot == block['pivot'][k]
         assert gs.step_index == block['step_index'][k]
         assert (gs.y0_active, gs.q1_active) == (mode.y0_active, mode.q1_active)
         assert list(gs.multiplier_names) == list(mode.multipliers)
         assert _equal(gs.multipliers, [block['multipliers'][k, MULTIPLIER_NAMES.index(n)]
                                        for n in mode.multipliers])
         assert gs.support_normal_force == block['support_normal'][k]
-        assert gs.support_friction_force == block['support_tangential'][k]
-        cop, y0 = float(block['cop_y'][k]), float(block['q'][k, 0])
+        assert gs.support_friction_force == block['support_friction'][k]
+        cop, y0 = float(block['zmp_y'][k]), float(block['q'][k, 0])
         assert gs.zmp.x == 0.0 and gs.zmp.z == 0.0
         assert _equal(gs.zmp.y, cop if np.isfinite(cop) else np.nan)
         assert gs.zmp_inside_support == (np.isfinite(cop) and not mode.q1_active
                                          and y0 + SOLE_HEEL_Y <= cop <= y0 + SOLE_TOE_Y)
+        assert gs.swing_clearance == block['swing_clearance'][k]
         index = int(block['last_event'][k])
         last = events[index] if index >= 0 else None
         assert gs.last_transition_cause == (last.cause if last else '')
@@ -152,7 +154,7 @@ def test_the_run_covers_the_cases(run):
     modes = set(b['mode'].tolist())
     assert len(modes) >= 4 and any(MODES[m].multipliers for m in modes)
     assert any(not MODES[m].multipliers for m in modes)
-    assert set(b['side'].tolist()) == {0, 1} and len(set(b['pivot_code'].tolist())) >= 2
+    assert set(b['side'].tolist()) == {0, 1} and len(set(b['pivot'].tolist())) >= 2
     assert np.isfinite(b['t_touchdown']).any() and np.isnan(b['t_touchdown']).any()
     assert len({run.events[i].cause for i in b['last_event'].tolist() if i >= 0}) >= 4
     assert len(set(b['t_exchange'].tolist())) >= 2
@@ -186,8 +188,8 @@ def _synthetic(block: dict) -> dict:
            for key, value in out.items()}
     out['efforts'] = [e.copy() for e in out['efforts']]
     m = len(out['t'])
-    out['cop_y'][0:3] = np.nan  # no support force (the loop's CoP is NaN then, never inf)
-    out['cop_y'][5::5] = np.nan
+    out['zmp_y'][0:3] = np.nan  # no support force (the loop's CoP is NaN then, never inf)
+    out['zmp_y'][5::5] = np.nan
     out['t_touchdown'][0::3] = np.nan
     out['t_touchdown'][1::3] = out['t'][1::3] * 0.5
     out['last_event'][:4] = -1
@@ -205,7 +207,7 @@ def _synthetic(block: dict) -> dict:
     out['present'] = present
     # the columns the loop derives from those changed, as it would have given them
     out['effort_total'] = np.sum(out['efforts'], axis=0)
-    out['zmp_inside_support'][np.isnan(out['cop_y'])] = 0
+    out['zmp_inside_support'][np.isnan(out['zmp_y'])] = 0
     out['touched_down'] = (~np.isnan(out['t_touchdown'])).astype(np.uint8)
     return out
 
@@ -276,3 +278,19 @@ def test_the_robot_description(typestore, links):
     assert typestore.deserialize_cdr(data, TOPICS['/robot_description']).data == urdf
     assert data == bytes(typestore.serialize_cdr(
         typestore.types['std_msgs/msg/String'](data=urdf), 'std_msgs/msg/String'))
+
+
+def test_every_routed_column_is_in_its_message_field(run, typestore, links) -> None:
+    """The sample table's routes, read generically: each field holds its column's values."""
+    messages = _messages(typestore, links, run.block, run.events)
+    routes = [(column, route) for column in SAMPLE_COLUMNS.values() for route in column.routes]
+    assert {route.topic for _, route in routes} == {'/joint_states', '/gait_state',
+                                                   '/joint_dynamics', '/head_pose'}
+    for k in range(0, len(run.block['t']), 7):
+        for column, route in routes:
+            value = messages[route.topic][k]
+            for part in route.path.split('.'):
+                value = getattr(value, part)
+            if route.axes:
+                value = [getattr(value, axis) for axis in route.axes]
+            assert _equal(value, run.block[column.name][k]), (column.name, route, k)

@@ -75,9 +75,9 @@ def _scene_run(steps: int = 6, samples: int = 600):
     q[:, 8] = 0.1 * np.sin(np.pi * t)
     psi = np.stack([0.2 * t, np.full_like(t, 0.9), np.zeros_like(t)], axis=1)
     trajectory = Trajectory()
-    trajectory.extend({'t': t, 'q': q, 'psi': psi, 'psi_d': psi + 0.01,
+    trajectory.extend({'t': t, 'q': q, 'psi': psi, 'head_target': psi + 0.01,
                        'mode': np.where(t < 3.0, 1, 4), 'pivot': np.zeros(samples, dtype=int),
-                       'cop_y': np.zeros(samples),
+                       'zmp_y': np.zeros(samples),
                        'step_index': np.minimum((t // 1.0).astype(int), steps - 1)}, {})
     stats = SimpleNamespace(max_constraint_residual=0.0, max_constraint_drift=0.0, steps=10,
                             evaluations=10, suppressed_cycles=0, resolved_cycles=0)

@@ -161,7 +161,7 @@ def test_the_native_block_holds_what_the_oracle_samples_record(native_blocks):
     got, events, _ = native_blocks(scene, 250)
     b = {key: np.concatenate([block[key] for block in got])
          for key in ('t', 'q', 'v', 'qdd', 'passive', 'multipliers', 'support_normal',
-                     'support_tangential', 'mode', 'side', 'pivot', 'step_index',
+                     'support_friction', 'mode', 'side', 'pivot', 'step_index',
                      'head_position', 'head_orientation', 'last_event', 'present')}
     sources = got[0]['sources']
     assert all(block['sources'] == sources for block in got)
@@ -177,14 +177,15 @@ def test_the_native_block_holds_what_the_oracle_samples_record(native_blocks):
         assert b['t'][k] == pytest.approx(state.t, abs=1e-12)
         assert (b['mode'][k], b['side'][k], b['pivot'][k], b['step_index'][k]) == (
             state.mode.number, SIDES.index(state.contact.side),
-            PIVOTS.index(state.contact.pivot), state.step_index), k
+            1 + PIVOTS.index(state.contact.pivot) if state.mode.q1_active else 0,
+            state.step_index), k
         np.testing.assert_allclose(b['q'][k], state.q, **close)
         np.testing.assert_allclose(b['v'][k], state.v, **close)
         np.testing.assert_allclose(b['qdd'][k], result.qdd, **close)
         np.testing.assert_allclose(b['passive'][k], result.passive, **close)
         np.testing.assert_allclose(b['multipliers'][k], result.multipliers, **close)
-        np.testing.assert_allclose([b['support_normal'][k], b['support_tangential'][k]],
-                                   [result.support_normal, result.support_tangential], **close)
+        np.testing.assert_allclose([b['support_normal'][k], b['support_friction'][k]],
+                                   [result.support_normal, result.support_friction], **close)
         acting = {name for i, name in enumerate(sources) if int(b['present'][k]) >> i & 1}
         assert acting == set(sample.efforts), k
         for name in sources:
@@ -303,7 +304,7 @@ def test_a_spilling_trajectory_holds_what_one_in_memory_holds(tmp_path, blocks):
     from iceskate_sim.run.metrics import Trajectory
     kept, spilled = Trajectory(), Trajectory(tmp_path, spill_bytes=20_000)
     rows = {key: np.concatenate([b[key] for b, _ in blocks])
-            for key in ('t', 'q', 'v', 'mode', 'side', 'cop_y')}
+            for key in ('t', 'q', 'v', 'mode', 'side', 'zmp_y')}
     sources = blocks[0][0]['sources']
     efforts = {name: np.concatenate([b['efforts'][i] for b, _ in blocks])
                for i, name in enumerate(sources)}

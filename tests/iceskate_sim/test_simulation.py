@@ -201,8 +201,8 @@ def test_ice_glide_decelerates_at_mu_g_and_sticks(robot, runs):
         result = advance(_rigid_torque(robot, sim, GLIDE_POSTURE, ankle_acceleration=-0.7))
         assert sim.state.mode.number == 1
         assert sim.state.q[Y0] == y_stuck and sim.state.v[Y0] == 0.0
-        assert result.support_tangential > 10.0 * MU * result.support_normal > 0.0
-        assert -0.04 < result.cop_y - y_stuck < 0.18
+        assert result.support_friction > 10.0 * MU * result.support_normal > 0.0
+        assert -0.04 < result.zmp_y - y_stuck < 0.18
         assert E4(sim.state, result, ICE) < 0.0
         assert E4(sim.state, result, coulomb) > 0.0
     assert [e.event for e in sim.events] == ['E5']
@@ -372,7 +372,7 @@ def test_a_guard_made_due_by_a_new_input_fires_at_once(robot, runs):
     state = run.sim.state
     result = _solver(run.sim).evaluate(state.contact, state.q, state.v, kick)
     assert result.support_normal > 50.0
-    assert result.cop_y - state.q[Y0] < -0.5  # far behind the heel edge (-0.06 m) at once
+    assert result.zmp_y - state.q[Y0] < -0.5  # far behind the heel edge (-0.06 m) at once
     due = guard_values(state, result, config.friction) > GUARD_MARGIN
     assert [g.name for g, d in zip(guards_of(state.mode), due, strict=True) if d] == ['E2']
     run.advance(kick)

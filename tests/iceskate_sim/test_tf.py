@@ -160,8 +160,8 @@ def _check_tf(tf: list[tuple[int, object]], block: dict) -> None:
                 world[t.child_frame_id] = world[t.header.frame_id] * local
                 pending.remove(t)
         q = block['q'][k]
-        expected = kinematics.link_poses(q, SIDES[int(block['side'][k])],
-                                         PIVOTS[int(block['pivot'][k])])
+        expected = kinematics.link_poses(q, SIDES[int(block['side'][k])],  # flat (0): toe
+                                         PIVOTS[max(int(block['pivot'][k]) - 1, 0)])
         for name in links:
             worst = max(worst, float(np.max(np.abs(world[name].translation
                                                    - expected[name].translation))),

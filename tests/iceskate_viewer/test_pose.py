@@ -64,8 +64,8 @@ def test_the_geometry_follows_its_link(skate_run):
 
 
 @pytest.mark.parametrize('code, pivot', [(0, 'toe'), (1, 'toe'), (2, 'heel')])
-def test_the_pivot_code_names_the_edge(code, pivot):
+def test_the_pivot_names_the_edge(code, pivot):
     columns = {'t': np.zeros(1), 'q': np.zeros((1, 18)), 'mode': np.ones(1, int),
                'side': np.zeros(1, int), 'pivot': np.array([code]),
-               'step_index': np.zeros(1, int), 'psi_d': np.full((1, 3), np.nan)}
+               'step_index': np.zeros(1, int), 'head_target': np.full((1, 3), np.nan)}
     assert ViewFrame.of_columns(columns, 0).pivot == pivot

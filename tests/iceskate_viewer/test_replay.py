@@ -23,8 +23,8 @@ def test_a_run_loads_from_its_trajectory_and_from_its_bag_alone(skate_run, tmp_p
     np.testing.assert_allclose(from_bag.t, from_npz.t[::every], rtol=0, atol=1e-9)  # ns
     for name in ('q', 'mode', 'side', 'pivot', 'step_index'):
         np.testing.assert_array_equal(from_bag.columns[name], from_npz.columns[name][::every])
-    assert np.all(np.isnan(from_bag.columns['psi_d']))  # the bag has no head target
-    assert np.all(np.isfinite(from_npz.columns['psi_d']))
+    assert np.all(np.isnan(from_bag.columns['head_target']))  # the bag has no head target
+    assert np.all(np.isfinite(from_npz.columns['head_target']))
 
 
 @pytest.mark.parametrize('case, expected', [

@@ -56,7 +56,7 @@ def test_times_a_slider_cannot_take_are_one_sentence(skate_run, tmp_path, capsys
 
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize('column, shape', [('q', (1200, 17)), ('mode', (1199,)),
-                                           ('psi_d', (1200,))])
+                                           ('head_target', (1200,))])
 def test_a_column_of_the_wrong_shape_is_one_sentence(skate_run, tmp_path, capsys, column,
                                                      shape):
     run_dir = tmp_path / column

@@ -75,6 +75,7 @@ def make_messages(typestore, step: int):
         multiplier_names=['f_nz', 'tau_n'], multipliers=np.array([400.0 + step, -2.5]),
         support_normal_force=300.0 - step, support_friction_force=-0.05 * step,
         zmp=Point(x=0.0, y=0.1 * step, z=0.0), zmp_inside_support=step % 4 != 0,
+        swing_clearance=0.002 * step,
         last_transition_cause=f'step_{step}', last_transition_stamp=stamp,
         support_exchange_stamp=stamp, touched_down=step % 2 == 1, touchdown_stamp=stamp,
         heel_anchor_y=0.01 * step, position=np.linspace(-0.5, 0.5, n) * step,

@@ -65,8 +65,8 @@ class RunEnded(Exception):
 def _stuck_support_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
     """E4: the reaction needed to hold the support foot exceeds friction."""
     if f.rule == 'ice':  # only a forward-wanting foot (reaction pointing back) can slide
-        return -r.support_tangential - f.mu * r.support_normal - FORCE_BAND
-    return abs(r.support_tangential) - f.mu * r.support_normal - FORCE_BAND
+        return -r.support_friction - f.mu * r.support_normal - FORCE_BAND
+    return abs(r.support_friction) - f.mu * r.support_normal - FORCE_BAND
 
 
 def _pinned_heel_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
@@ -265,7 +265,7 @@ def apply_transition(dynamics: GaitDynamics, friction: FrictionModel, state: Hyb
         contact = replace(c, mode=_swapped(mode, support=_DROP_Q1[mode.support]))
         new = replace(state, q=q, v=v_plus, contact=contact)
     elif name == 'E4':
-        direction = 1.0 if friction.rule == 'ice' else float(np.sign(-result.support_tangential))
+        direction = 1.0 if friction.rule == 'ice' else float(np.sign(-result.support_friction))
         contact = replace(c, mode=_swapped(mode, support=_ADD_Y0[mode.support]),
                           support_slide_dir=direction or 1.0)
         new = replace(state, contact=contact)

@@ -312,8 +312,8 @@ class GaitDynamics(ModelTerms):
         wrench = self._support_wrench(plan, terms.heel, q, v, qdd, values, heel_friction,
                                       applied, push)
         normal = float(wrench[2])
-        cop_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
-        return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), cop_y,
+        zmp_y = float(q[Y0] + wrench[3] / normal) if normal > 0.0 else float('nan')
+        return DynamicsResult(qdd, multipliers, wrench, normal, float(wrench[1]), zmp_y,
                               float(heel_friction), applied, terms.heel, terms.heel_velocity,
                               terms.toe_z, terms.passive)
 

@@ -37,7 +37,7 @@ class FloatingBaseResult:
     qdd: np.ndarray  # (18,) [m/s^2, rad/s^2]
     multipliers: np.ndarray  # (f_nz, f_ny, tau_n) of the swing contact [N, N, N m]
     support_normal: float  # N_s [N]
-    support_tangential: float  # F_y [N]
+    support_friction: float  # F_y [N]
 
 
 class FloatingBaseDynamics:

@@ -57,12 +57,12 @@ class NativeProbes(NativeGaitDynamics):
         """Eq. (7) of ``contact.mode`` at (q, v) natively: the accelerations, multipliers and
         support wrench (docs/model.md §4)."""
         try:
-            (qdd, multipliers, wrench, normal, tangential, cop_y, heel_friction, applied, heel,
+            (qdd, multipliers, wrench, normal, tangential, zmp_y, heel_friction, applied, heel,
              heel_velocity, toe_z, passive) = self.kernel.evaluate(
                 *self._arguments(contact, q, v, tau, push, stiffness, damping))
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'mode {contact.mode.number} dynamics: {exc}') from None
-        return DynamicsResult(qdd, multipliers, wrench, normal, tangential, cop_y,
+        return DynamicsResult(qdd, multipliers, wrench, normal, tangential, zmp_y,
                               heel_friction, applied, heel, heel_velocity, toe_z, passive)
 
     def implicit_acceleration(self, contact: ContactState, q: np.ndarray, v: np.ndarray,

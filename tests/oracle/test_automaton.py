@@ -454,8 +454,8 @@ def test_support_slap_impact(robot, dynamics, mode, pivot, new_mode):
 def _result(**values) -> DynamicsResult:
     """A DynamicsResult with only the fields a guard reads set."""
     fields = dict(qdd=np.zeros(N_COORDINATES), multipliers=np.zeros(3),
-                  support_wrench=np.zeros(6), support_normal=600.0, support_tangential=0.0,
-                  cop_y=0.0, heel_friction=0.0, applied=np.zeros(N_COORDINATES),
+                  support_wrench=np.zeros(6), support_normal=600.0, support_friction=0.0,
+                  zmp_y=0.0, heel_friction=0.0, applied=np.zeros(N_COORDINATES),
                   swing_heel=np.array([0.0, 0.0, 0.05]), swing_heel_velocity=np.zeros(3),
                   swing_toe_z=0.05)
     fields.update(values)
@@ -481,13 +481,13 @@ TANGENTIAL_CASES = [(-20.0, True, True), (-4.0, True, True), (-0.5, False, False
 def test_support_slip_guard_e4(ratio, ice_due, coulomb_due):
     """E4: on ice only a reaction pointing back beyond mu N starts a glide (toe pick)."""
     for mode in (1, 2, 9, 18):
-        result = _result(support_normal=N_S, support_tangential=ratio * MU_ICE * N_S)
+        result = _result(support_normal=N_S, support_friction=ratio * MU_ICE * N_S)
         state = _state(mode)
         ice = GUARD_VALUES['E4'](state, result, ICE)
         coulomb = GUARD_VALUES['E4'](state, result, FrictionModel(MU_ICE, 'coulomb'))
         assert (ice > 0.0) == ice_due, (mode, ratio, ice)
         assert (coulomb > 0.0) == coulomb_due, (mode, ratio, coulomb)
-        mirrored = _result(support_normal=N_S, support_tangential=-ratio * MU_ICE * N_S)
+        mirrored = _result(support_normal=N_S, support_friction=-ratio * MU_ICE * N_S)
         assert GUARD_VALUES['E4'](state, mirrored, FrictionModel(MU_ICE, 'coulomb')) == \
             pytest.approx(coulomb, abs=1e-12)  # symmetric
 
@@ -508,12 +508,12 @@ def test_heel_slip_guard_s3(ratio, ice_due, coulomb_due):
 def test_e4_starts_a_forward_glide_on_ice_and_either_way_on_coulomb(dynamics, mode,
                                                                     glide_mode):
     state = _state(mode)
-    back = _result(support_tangential=-2.0 * MU_ICE * N_S)
+    back = _result(support_friction=-2.0 * MU_ICE * N_S)
     new, _ = apply_transition(dynamics, ICE, state, GUARD['E4'], back)
     assert new.mode.number == glide_mode and new.contact.support_slide_dir == 1.0
     assert new.v[Y0] == 0.0 and new.q[Y0] == state.q[Y0]
     coulomb = FrictionModel(MU_ICE, 'coulomb')
-    forward = _result(support_tangential=2.0 * MU_ICE * N_S)  # floor pushes forward: the
+    forward = _result(support_friction=2.0 * MU_ICE * N_S)  # floor pushes forward: the
     new, _ = apply_transition(dynamics, coulomb, state, GUARD['E4'], forward)  # foot goes back
     assert new.mode.number == glide_mode and new.contact.support_slide_dir == -1.0
 
@@ -560,7 +560,7 @@ def test_ice_rule_with_real_reactions(robot, dynamics):
         result = dynamics.evaluate(contact, q, np.zeros(N_COORDINATES), tau)
         jcom = pin.jacobianCenterOfMass(model, data, q)
         a_com = jcom @ result.qdd  # v = 0: no velocity-product term
-        assert result.support_tangential == pytest.approx(mass * a_com[1], rel=1e-9, abs=1e-9)
+        assert result.support_friction == pytest.approx(mass * a_com[1], rel=1e-9, abs=1e-9)
         assert result.support_normal == pytest.approx(mass * (G + a_com[2]), rel=1e-9)
         e4_ice = GUARD_VALUES['E4'](_state(1), result, ICE) > 0.0
         e4_coulomb = GUARD_VALUES['E4'](_state(1), result,

@@ -221,9 +221,9 @@ def test_support_reaction_from_momentum_balance(robot, random_state, rng, number
         expected_normal = MASS * (G + com_acc[2]) - f_nz
         assert result.support_normal == pytest.approx(expected_normal, abs=1e-9 * scale)
         assert result.support_normal == result.support_wrench[2]
-        assert result.support_tangential == result.support_wrench[1]
+        assert result.support_friction == result.support_wrench[1]
         if mode.y0_active:
-            assert result.support_tangential == pytest.approx(
+            assert result.support_friction == pytest.approx(
                 -mu * support_dir * result.support_normal, abs=1e-9 * scale)
         # whole-body Newton: m (c_dd + g e_z) = support force + swing-heel force
         heel = data.oMf[sm.frame_ids['swing_heel']].translation
@@ -258,10 +258,10 @@ def test_cop_is_the_pivot_edge_when_tipping(dynamics, random_state, rng, number,
         if result.support_normal > 0.0:
             seen_positive += 1
             edge = TOE_Y if pivot == 'toe' else HEEL_Y
-            assert result.cop_y == pytest.approx(q[0] + edge, abs=1e-9)
-            assert result.cop_y == pytest.approx(dynamics.pivot_y(contact, q), abs=1e-9)
+            assert result.zmp_y == pytest.approx(q[0] + edge, abs=1e-9)
+            assert result.zmp_y == pytest.approx(dynamics.pivot_y(contact, q), abs=1e-9)
         else:
-            assert math.isnan(result.cop_y)
+            assert math.isnan(result.zmp_y)
     assert seen_positive  # the check was not vacuous
 
 
@@ -282,12 +282,12 @@ def test_cop_of_a_flat_foot_in_static_balance_is_under_the_com(dynamics, side, l
     assert np.abs(result.qdd).max() < 1e-9
     assert result.support_normal == pytest.approx(MASS * G, rel=1e-12)
     com_y = dynamics.center_of_mass(contact, q)[1]
-    assert result.cop_y == pytest.approx(com_y, abs=1e-9)
+    assert result.zmp_y == pytest.approx(com_y, abs=1e-9)
     heel, toe = dynamics.support_polygon_y(contact, q)
     assert (heel, toe) == pytest.approx((q[0] + HEEL_Y, q[0] + TOE_Y), abs=1e-15)
-    position = ('behind' if result.cop_y < heel else 'ahead' if result.cop_y > toe
+    position = ('behind' if result.zmp_y < heel else 'ahead' if result.zmp_y > toe
                 else 'inside')
-    assert position == where, (result.cop_y, heel, toe)
+    assert position == where, (result.zmp_y, heel, toe)
 
 
 # ------------------------------------------------------------ (i) singular double support

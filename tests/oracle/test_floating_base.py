@@ -74,7 +74,7 @@ def test_formulations_agree(solvers, random_state, number, side, pivot, limits):
         pairs = {'qdd': (other.qdd, result.qdd),
                  'multipliers': (other.multipliers, result.multipliers),
                  'N_s': (other.support_normal, result.support_normal),
-                 'F_y': (other.support_tangential, result.support_tangential)}
+                 'F_y': (other.support_friction, result.support_friction)}
         for name, (got, reference) in pairs.items():
             error = _relative_error(got, reference)
             worst[name] = max(worst.get(name, 0.0), error)
@@ -84,7 +84,7 @@ def test_formulations_agree(solvers, random_state, number, side, pivot, limits):
         # friction really acts: a gliding support foot feels mu N_s, a sliding heel mu f_nz
         # (N_s and F_y come from an RNEA pass after the solve: agree to solver accuracy)
         if mode.y0_active:
-            assert result.support_tangential == pytest.approx(
+            assert result.support_friction == pytest.approx(
                 -MU * support_dir * result.support_normal, rel=1e-9, abs=1e-9)
         if mode.swing_sliding:
             assert result.heel_friction == pytest.approx(

@@ -80,7 +80,7 @@ def test_a_disk_that_fills_up_under_the_graph_ends_the_run_as_headless_does(disk
     assert code == 1, stderr
     (line,) = [line for line in stderr.splitlines() if 'error' in line]
     assert line.startswith('run_scene: error: ') and str(out) in line, stderr
-    assert 'No space left on device' in line, line
+    assert 'No space left on device' in line or 'no space left on device' in line, line
     assert 'Traceback' not in stderr
     metrics = run.metrics()
     assert metrics['end'] == 'io_error' and not metrics['fell']

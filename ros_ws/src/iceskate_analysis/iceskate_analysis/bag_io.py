@@ -25,6 +25,7 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 
 from iceskate_analysis.rows import collect_rows
+from iceskate_native.sample import SampleColumn, routed
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
@@ -35,7 +36,7 @@ from iceskate_sim.ros.conversions import PIVOT_OF_CODE
 from iceskate_sim.yaml_io import read_yaml
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Iterator
+    from collections.abc import Callable, Iterable, Iterator
 
     from mcap.records import McapRecord
     from rosbags.typesys.store import Typestore
@@ -92,7 +93,10 @@ class BagData:
     :ivar pivot: 0 none / 1 toe / 2 heel (N,). :ivar step_index: support exchanges (N,).
     :ivar multipliers: (f_nz, f_ny, tau_n) per sample (N, 3), 0 where inactive.
     :ivar support_normal: N_s [N] (N,). :ivar support_friction: F_y [N] (N,).
-    :ivar zmp_y: world y of the CoP [m] (N,). :ivar heel_anchor_y: y_h* [m] (N,).
+    :ivar zmp_y: world y of the ZMP, the support foot's centre of pressure [m] (N,).
+    :ivar heel_anchor_y: y_h* [m] (N,).
+    :ivar zmp_inside_support, y0_active, q1_active, touched_down: (N,) bool, as GaitState's.
+    :ivar swing_clearance: height of the swing sole's lower end above the ice [m] (N,).
     :ivar last_transition_ns: time of the latest transition at or before each sample [ns]
         (N,; 0: none yet).
     :ivar head_position: head-top world position [m] (N, 3), nan without /head_pose.
@@ -118,6 +122,11 @@ class BagData:
     support_friction: np.ndarray
     zmp_y: np.ndarray
     heel_anchor_y: np.ndarray
+    zmp_inside_support: np.ndarray
+    swing_clearance: np.ndarray
+    y0_active: np.ndarray
+    q1_active: np.ndarray
+    touched_down: np.ndarray
     last_transition_ns: np.ndarray
     head_position: np.ndarray
     urdf: str = ''
@@ -441,16 +450,38 @@ def _check_connections(reader: OpenBag, path: pathlib.Path) -> dict[str, BagTopi
     return chosen
 
 
-def _joint_states(msg: Any, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    order = _order(msg.name, '/joint_states', where)
-    q = _vector(msg.position, order, '/joint_states', 'position', where)
-    v = _vector(msg.velocity, order, '/joint_states', 'velocity', where)
-    effort = (_vector(msg.effort, order, '/joint_states', 'effort', where)
-              if len(msg.effort) else np.zeros(N_COORDINATES))
-    return q, v, effort
+def _value(msg: Any, path: str) -> Any:
+    """The field ``path`` ('zmp.y') of a decoded message."""
+    return functools.reduce(getattr, path.split('.'), msg)
 
 
-def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
+def _routed_reader(topic: str) -> Callable[[Any, str, np.ndarray | None], list[Any]]:
+    """What ``topic``'s messages give back of the sample columns (``routed``): reader(msg,
+    where, order of its coordinate arrays) -> a value per column. A JointState's effort may be
+    empty (0)."""
+    parts = routed(topic, read_back=True)
+
+    def read(msg: Any, where: str, order: np.ndarray | None) -> list[Any]:
+        values: list[Any] = []
+        for column, route in parts:
+            value = _value(msg, route.path)
+            if route.axes:
+                value = np.array([getattr(value, axis) for axis in route.axes], dtype=float)
+            elif column.width == N_COORDINATES:
+                if route.path == 'effort' and len(value) == 0:
+                    value = np.zeros(N_COORDINATES)
+                else:
+                    value = _vector(value, order, topic, route.path, where)
+            values.append(value)
+        return values
+    return read
+
+
+def _joint_states(msg: Any, where: str) -> list[Any]:
+    return _READ_ROUTED['/joint_states'](msg, where, _order(msg.name, '/joint_states', where))
+
+
+def _gait_state(msg: Any, where: str) -> list[Any]:
     multipliers = np.zeros(len(MULTIPLIER_NAMES))
     if len(msg.multiplier_names) != len(msg.multipliers):
         raise InputRefused(f'/gait_state at {where}: {len(msg.multiplier_names)} multiplier '
@@ -459,20 +490,15 @@ def _gait_state(msg: Any, where: str) -> tuple[Any, ...]:
         if name in MULTIPLIER_NAMES:
             multipliers[MULTIPLIER_NAMES.index(name)] = float(value)
     last = msg.last_transition_stamp
-    return (int(msg.mode), int(msg.support_side), int(msg.pivot), int(msg.step_index),
-            multipliers, float(msg.support_normal_force), float(msg.support_friction_force),
-            float(msg.zmp.y), float(msg.heel_anchor_y),
-            int(last.sec) * 1_000_000_000 + int(last.nanosec))
+    return [*_READ_ROUTED['/gait_state'](msg, where, None), multipliers,
+            int(last.sec) * 1_000_000_000 + int(last.nanosec)]
 
 
-def _joint_dynamics(msg: Any, where: str
-                    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+def _joint_dynamics(msg: Any, where: str) -> list[Any]:
     if len(msg.acceleration) == 0:
         raise InputRefused(f'/joint_dynamics at {where}: the message carries no joint '
                            'accelerations (empty acceleration array)')
     order = _order(msg.name, '/joint_dynamics', where)
-    qdd = _vector(msg.acceleration, order, '/joint_dynamics', 'acceleration', where)
-    active = np.asarray(msg.active, dtype=bool)[order]
     sources = [str(s) for s in msg.source_names]
     if len(set(sources)) != len(sources):
         raise InputRefused(f'/joint_dynamics at {where}: repeated source names {sources}')
@@ -483,31 +509,34 @@ def _joint_dynamics(msg: Any, where: str
                            f'values for {len(sources)} sources x {n} names')
     efforts = {source: _vector(row, order, '/joint_dynamics', f'effort of {source!r}', where)
                for source, row in zip(sources, values.reshape(len(sources), n), strict=True)}
-    return qdd, active, efforts
+    return [*_READ_ROUTED['/joint_dynamics'](msg, where, order), efforts]
 
 
-def _head_pose(msg: Any, where: str) -> tuple[np.ndarray]:
-    p = msg.pose.position
-    return (np.array([p.x, p.y, p.z], dtype=float),)
+def _head_pose(msg: Any, where: str) -> list[Any]:
+    return _READ_ROUTED['/head_pose'](msg, where, None)
 
 
 #: What a message of each sampled topic gives: reader(msg, where) -> its row.
 _READERS = {'/joint_states': _joint_states, '/gait_state': _gait_state,
             '/joint_dynamics': _joint_dynamics, '/head_pose': _head_pose}
-#: The fields of each sampled topic's rows: (name, shape of one row, dtype), in row order
-#: (``/joint_dynamics``' third field, the efforts by source, is kept apart: ``_Table.efforts``).
-_FIELDS = {
-    '/joint_states': (('q', (N_COORDINATES,), float), ('v', (N_COORDINATES,), float),
-                      ('effort_total', (N_COORDINATES,), float)),
-    '/gait_state': (('mode', (), np.int64), ('side', (), np.int64), ('pivot', (), np.int64),
-                    ('step_index', (), np.int64),
-                    ('multipliers', (len(MULTIPLIER_NAMES),), float),
-                    ('support_normal', (), float), ('support_friction', (), float),
-                    ('zmp_y', (), float), ('heel_anchor_y', (), float),
-                    ('last_transition_ns', (), np.int64)),
-    '/joint_dynamics': (('qdd', (N_COORDINATES,), float), ('active', (N_COORDINATES,), bool)),
-    '/head_pose': (('head_position', (3,), float),),
-}
+_READ_ROUTED = {topic: _routed_reader(topic) for topic in _READERS}
+
+
+def _row_dtype(column: SampleColumn) -> type:
+    """How the bag's rows hold a column: messages' bools as bool, integers as int64."""
+    if column.dtype == np.uint8:
+        return bool
+    return np.int64 if column.dtype.kind in 'iu' else float
+
+
+#: The fields of each sampled topic's rows: (name, shape of one row, dtype), in row order: the
+#: sample columns it gives back, then /gait_state's multipliers (by name) and latest transition
+#: (``/joint_dynamics``' last value, the efforts by source, is kept apart: ``_Table.efforts``).
+_FIELDS = {topic: (*((column.name, column.shape(), _row_dtype(column))
+                     for column, _ in routed(topic, read_back=True)),
+                   *((('multipliers', (len(MULTIPLIER_NAMES),), float),
+                      ('last_transition_ns', (), np.int64)) if topic == '/gait_state' else ()))
+           for topic in _READERS}
 
 
 class _Table:
@@ -524,7 +553,7 @@ class _Table:
         # source -> its place among each row's sources (-1: the row does not carry it)
         self.places: dict[str, np.ndarray] = {}
 
-    def append(self, stamp: int, row: tuple[Any, ...]) -> None:
+    def append(self, stamp: int, row: list[Any]) -> None:
         """Add a message's row (``_READERS``' output) at header ``stamp`` [ns]."""
         k = self.size
         if k == self.stamps.size:

@@ -40,7 +40,7 @@ _SWING_GROUPS = ((1, 'A'), (5, 'Hs'), (9, 'Hp'), (13, 'Fs'), (17, 'Fp'))  # firs
 _SWING_KEY = ('swing foot (right): A air · Hs/Hp heel sliding/pinned · '
               'Fs/Fp sole flat sliding/stuck')
 #: The trajectory's columns the picture is drawn from (q: its shoulders q11 and q14).
-DRAWN_COLUMNS = ('t', 'psi', 'psi_d', 'mode', 'side', 'step_index', 'q')
+DRAWN_COLUMNS = ('t', 'psi', 'head_target', 'mode', 'side', 'step_index', 'q')
 #: Clip a panel only for a blow-up: samples reaching ~50 times the bulk's span.
 _DIVERGENCE = {'percentile': 1.0, 'margin': 1.0, 'reach': 24.5}
 
@@ -181,7 +181,7 @@ def _draw(a: dict[str, np.ndarray], metrics: dict[str, Any], path: pathlib.Path)
     from iceskate_analysis.plots import clip_to_bulk, legend_above
     from iceskate_sim.run.metrics import ARM_SWING_FROM_STEP
 
-    t, psi, psi_d = a['t'], a['psi'], a['psi_d']
+    t, psi, psi_d = a['t'], a['psi'], a['head_target']
     steps = a['step_index']
     exchanges = t[np.flatnonzero(np.diff(steps) != 0) + 1]
     rms = metrics.get('head_error_rms') or {}

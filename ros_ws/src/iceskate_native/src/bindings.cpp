@@ -125,7 +125,7 @@ auto result_tuple(const DynamicsResult & r)
 {
   return std::make_tuple(
     Eigen::VectorXd(r.qdd), Eigen::VectorXd(r.multipliers), Eigen::VectorXd(r.support_wrench),
-    r.support_normal, r.support_tangential, r.cop_y, r.heel_friction,
+    r.support_normal, r.support_friction, r.zmp_y, r.heel_friction,
     Eigen::VectorXd(r.applied), Eigen::VectorXd(r.swing_heel),
     Eigen::VectorXd(r.swing_heel_velocity), r.swing_toe_z, Eigen::VectorXd(r.passive));
 }
@@ -282,7 +282,7 @@ NB_MODULE(_kernel, m)
       "heel_slide_dir"_a, "q"_a, "v"_a, "tau"_a, "stiffness"_a = nb::none(),
       "damping"_a = nb::none(), "push_frame"_a = "", "push_force"_a = nb::none(),
       "Eq. (7) at (q, v): (qdd, multipliers, support_wrench, support_normal, "
-      "support_tangential, cop_y, heel_friction, applied, swing_heel, swing_heel_velocity, "
+      "support_friction, zmp_y, heel_friction, applied, swing_heel, swing_heel_velocity, "
       "swing_toe_z, passive). ValueError for bad input, NativeError for a rank-deficient or "
       "singular system.")
     .def(

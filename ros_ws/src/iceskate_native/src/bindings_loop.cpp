@@ -213,7 +213,7 @@ nb::dict live(BoundControlLoop & self)
   return block_arrays(sample);
 }
 
-std::tuple<int, long, std::uint64_t> live_fill(BoundControlLoop & self)
+std::tuple<int, std::int64_t, std::uint64_t> live_fill(BoundControlLoop & self)
 {
   self.loop.live(self.live);
   return {self.live.mode[0], self.live.last_event[0], self.live.present[0]};
@@ -241,10 +241,39 @@ nb::list live_messages(const BoundControlLoop & self, const std::vector<std::str
   return out;
 }
 
+/// numpy's name of the dtype of a column of T.
+template <class T>
+const char * dtype_name(const std::vector<T> &)
+{
+  switch (column_type(std::vector<T>{})) {
+    case Column::Type::kFloat64: return "float64";
+    case Column::Type::kInt64: return "int64";
+    case Column::Type::kInt32: return "int32";
+    case Column::Type::kUint64: return "uint64";
+    case Column::Type::kUint8: return "uint8";
+  }
+  return "";
+}
+
+/// ICESKATE_SAMPLE_COLUMNS as a tuple of (name, dtype, width (0: kTfPoseWidth per /tf pair),
+/// unit, saved, routes, meaning).
+nb::tuple sample_columns()
+{
+  nb::list out;
+#define ICESKATE_SAMPLE_ROW(name, type, width, unit, saved, routes, meaning) \
+  out.append(nb::make_tuple(#name, dtype_name(std::vector<type>{}),        \
+                            static_cast<std::size_t>(width), unit, saved, routes, meaning));
+  ICESKATE_SAMPLE_COLUMNS(ICESKATE_SAMPLE_ROW)
+#undef ICESKATE_SAMPLE_ROW
+  return nb::tuple(out);
+}
+
 }  // namespace
 
 void bind_control_loop(nb::module_ & m)
 {
+  m.attr("SAMPLE_COLUMNS_TABLE") = sample_columns();
+  m.attr("TF_POSE_WIDTH") = kTfPoseWidth;
   nb::class_<BoundControlLoop>(
     m, "ControlLoop",
     "Many control periods in one call: the controllers (native Controller objects, in summing "
@@ -306,18 +335,10 @@ void bind_control_loop(nb::module_ & m)
       "target.")
     .def(
       "run", &run, "periods"_a,
-      "Up to `periods` control periods; returns their samples as a dict of numpy arrays (t, "
-      "t_exchange, t_touchdown, heel_anchor_y (n,); mode, side (0 right / 1 left), pivot (0 "
-      "toe / 1 heel), pivot_code (GaitState's: 0 while q1 is locked, else 1 toe / 2 heel), "
-      "step_index (n,) int32; q, v, qdd, passive, applied (n, 18); multipliers (n, 3); "
-      "support_normal, support_tangential, cop_y (n,); head_position (n, 3) [m], "
-      "head_orientation (n, 4) quaternion x, y, z, w, head_pitch (n,) [rad]: the head top "
-      "observed at t_k; tf (n, 7 * pairs): per tf pair, the child's placement in its parent's "
-      "x, y, z [m], qx, qy, qz, qw; head_target (n, 3); last_event (n,) int64 (index in the event log, -1: none), "
-      "stamps_ns (n, 4) int64: t, t_exchange, t_touchdown (0 before it) and the latest "
-      "transition's t (0: none) in whole nanoseconds, "
-      "present (n,) uint64 (bit i: source i answered), sources (names), efforts (one (n, 18) "
-      "array per source)). It stops after a period that ends the run, and before a period that "
+      "Up to `periods` control periods; returns their samples as a dict of numpy arrays: the "
+      "columns of SAMPLE_COLUMNS ((n,) for one value per sample, else (n, width)), sources "
+      "(names) and efforts (one (n, 18) array per source). It stops after a period that ends "
+      "the run, and before a period that "
       "failed: `failed` is then True and raise_error() raises the failure.")
     .def_prop_ro(
       "failed", [](const BoundControlLoop & self) { return self.loop.error() != nullptr; },

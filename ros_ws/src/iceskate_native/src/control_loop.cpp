@@ -4,7 +4,6 @@
 #include <cmath>
 #include <optional>
 #include <stdexcept>
-#include <type_traits>
 #include <utility>
 
 #include <Eigen/Geometry>
@@ -44,30 +43,13 @@ ModelKinematics * adopting(Kinematics * kinematics, const Dynamics & dynamics)
 }
 
 /// Index in `events` of the latest transition at or before t [s] (-1: none).
-long last_event_at(const std::vector<TransitionRecord> & events, double t)
+std::int64_t last_event_at(const std::vector<TransitionRecord> & events, double t)
 {
-  long last = static_cast<long>(events.size()) - 1;
+  auto last = static_cast<std::int64_t>(events.size()) - 1;
   while (last >= 0 && !(events[static_cast<std::size_t>(last)].t <= t)) {
     --last;
   }
   return last;
-}
-
-/// The Column::Type of a column of T.
-template <class T>
-constexpr Column::Type column_type(const std::vector<T> &)
-{
-  static_assert(sizeof(long) == sizeof(std::int64_t), "last_event is read as int64");
-  if constexpr (std::is_same_v<T, double>) {
-    return Column::Type::kFloat64;
-  } else if constexpr (std::is_same_v<T, std::uint8_t>) {
-    return Column::Type::kUint8;
-  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
-    return Column::Type::kUint64;
-  } else {
-    static_assert(std::is_signed_v<T> && (sizeof(T) == 4 || sizeof(T) == 8));
-    return sizeof(T) == 8 ? Column::Type::kInt64 : Column::Type::kInt32;
-  }
 }
 
 template <typename Derived>
@@ -323,8 +305,7 @@ void ControlLoop::sample(
   block.heel_anchor_y.push_back(s.contact.heel_anchor_y);
   block.mode.push_back(s.contact.mode);
   block.side.push_back(s.contact.side);
-  block.pivot.push_back(s.contact.pivot);
-  block.pivot_code.push_back(q1_active ? s.contact.pivot + 1 : 0);
+  block.pivot.push_back(q1_active ? s.contact.pivot + 1 : 0);
   block.step_index.push_back(s.step_index);
   append(block.q, s.q);
   append(block.v, s.v);
@@ -333,8 +314,9 @@ void ControlLoop::sample(
   append(block.applied, r.applied);
   append(block.multipliers, r.multipliers);
   block.support_normal.push_back(r.support_normal);
-  block.support_tangential.push_back(r.support_tangential);
-  block.cop_y.push_back(r.cop_y);
+  block.support_friction.push_back(r.support_friction);
+  block.zmp_y.push_back(r.zmp_y);
+  block.swing_clearance.push_back(std::min(r.swing_heel.z(), r.swing_toe_z));
   append(block.head_position, head.translation);
   append(block.head_orientation, Eigen::Quaterniond(rotation).coeffs());
   block.head_pitch.push_back(std::atan2(-rotation(1, 2), rotation(2, 2)));
@@ -351,14 +333,14 @@ void ControlLoop::sample(
     append(block.tf, Eigen::Quaterniond(p.rotation.transpose() * c.rotation).coeffs());
   }
   append(block.head_target, target);
-  const long last = last_event_at(simulator_.events(), s.t);
+  const std::int64_t last = last_event_at(simulator_.events(), s.t);
   block.last_event.push_back(last);
   const GuardConstants & sole = simulator_.settings().constants;
   const double y0 = s.q[kY0];
   block.y0_active.push_back(mode.y0_active);
   block.q1_active.push_back(q1_active);
   block.zmp_inside_support.push_back(  // false for a NaN CoP (no support force)
-    !q1_active && y0 + sole.sole_heel_y <= r.cop_y && r.cop_y <= y0 + sole.sole_toe_y);
+    !q1_active && y0 + sole.sole_heel_y <= r.zmp_y && r.zmp_y <= y0 + sole.sole_toe_y);
   block.touched_down.push_back(!std::isnan(s.t_touchdown));
   const std::size_t first = block.active.size();
   block.active.resize(first + kCoordinates, 0);

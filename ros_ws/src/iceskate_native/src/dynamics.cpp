@@ -491,8 +491,8 @@ DynamicsResult Dynamics::evaluate(
   r.swing_toe_z = w.toe_z;
   r.support_wrench = support_wrench(contact, q, inputs, r);
   r.support_normal = r.support_wrench[2];
-  r.support_tangential = r.support_wrench[1];
-  r.cop_y = r.support_normal > 0.0 ? q[kY0] + r.support_wrench[3] / r.support_normal
+  r.support_friction = r.support_wrench[1];
+  r.zmp_y = r.support_normal > 0.0 ? q[kY0] + r.support_wrench[3] / r.support_normal
                                    : std::numeric_limits<double>::quiet_NaN();
   return r;
 }

@@ -28,7 +28,7 @@ double guard_value(
     case Guard::kE3:  // support sole came back flat
       return contact.pivot == 0 ? q[kQ1] : -q[kQ1];
     case Guard::kE4:  // holding the support foot needs more than friction: it starts gliding
-      return (friction.ice ? -r.support_tangential : std::abs(r.support_tangential))
+      return (friction.ice ? -r.support_friction : std::abs(r.support_friction))
              - friction.mu * r.support_normal - c.force_band;
     case Guard::kE5:  // support glide stopped
       return -contact.support_slide_dir * v[kY0];

@@ -374,7 +374,7 @@ TransitionOutcome apply_transition(
     }
     case Guard::kE4:
       c = with_mode(c, modes, support_with(on_edge(support), true), swing);
-      c.support_slide_dir = friction.ice ? 1.0 : direction_of(-result.support_tangential);
+      c.support_slide_dir = friction.ice ? 1.0 : direction_of(-result.support_friction);
       break;
     case Guard::kE5:
       s.v[kY0] = 0.0;

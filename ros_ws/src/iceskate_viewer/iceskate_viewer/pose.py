@@ -43,7 +43,7 @@ class ViewFrame:
         return cls(float(columns['t'][k]), np.asarray(columns['q'][k], dtype=float),
                    int(columns['mode'][k]), SIDES[int(columns['side'][k])],
                    PIVOT_OF_CODE[int(columns['pivot'][k])], int(columns['step_index'][k]),
-                   np.asarray(columns['psi_d'][k][:2], dtype=float))
+                   np.asarray(columns['head_target'][k][:2], dtype=float))
 
 
 class BodyPose:

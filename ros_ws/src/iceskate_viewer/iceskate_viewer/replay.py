@@ -26,6 +26,7 @@ import zlib
 
 import numpy as np
 
+from iceskate_native.sample import SAMPLE_COLUMNS
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.exit_codes import DONE, error_exit
 from iceskate_sim.shutdown import StopRequest, say
@@ -34,8 +35,8 @@ if TYPE_CHECKING:  # the page's modules load viser and Pinocchio: only once the 
     from iceskate_viewer.page import RunPage
 
 #: The trajectory columns the view reads, and the shape of one sample of each.
-SHAPES = {'t': (), 'q': (18,), 'mode': (), 'side': (), 'pivot': (), 'step_index': (),
-          'psi_d': (3,)}
+SHAPES = {name: SAMPLE_COLUMNS[name].shape()
+          for name in ('t', 'q', 'mode', 'side', 'pivot', 'step_index', 'head_target')}
 COLUMNS = tuple(SHAPES)
 #: Samples of a run the view keeps at the most (a millisecond each of 100 s: more than a
 #: slider has positions, and than playback shows at its usual speeds).
@@ -92,7 +93,7 @@ def load_run(path: str | pathlib.Path) -> Run:
             say(f'view: {run_dir}: note: {note}')
         columns = {'t': bag.t, 'q': bag.q, 'mode': bag.mode, 'side': bag.side,
                    'pivot': bag.pivot, 'step_index': bag.step_index,
-                   'psi_d': np.full((bag.n_samples, 3), np.nan)}
+                   'head_target': np.full((bag.n_samples, 3), np.nan)}
         t = bag.t
         if len(t):
             first, last = _check_times([t], f'bag {bag.path}')

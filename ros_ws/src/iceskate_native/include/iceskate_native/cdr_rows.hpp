@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 namespace iceskate_native
@@ -23,6 +24,22 @@ struct Column
   double real(std::size_t row, std::size_t element) const;
   std::int64_t integer(std::size_t row, std::size_t element) const;
 };
+
+/// The Column::Type of a column of T.
+template <class T>
+constexpr Column::Type column_type(const std::vector<T> &)
+{
+  if constexpr (std::is_same_v<T, double>) {
+    return Column::Type::kFloat64;
+  } else if constexpr (std::is_same_v<T, std::uint8_t>) {
+    return Column::Type::kUint8;
+  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+    return Column::Type::kUint64;
+  } else {
+    static_assert(std::is_signed_v<T> && (sizeof(T) == 4 || sizeof(T) == 8));
+    return sizeof(T) == 8 ? Column::Type::kInt64 : Column::Type::kInt32;
+  }
+}
 
 /// How one number of a message is written: its type. kStamp writes builtin_interfaces/Time
 /// from an integer column of nanoseconds >= 0: int32 sec, then uint32 nanosec.

@@ -19,6 +19,7 @@
 #include "iceskate_native/cdr_rows.hpp"
 #include "iceskate_native/controller.hpp"
 #include "iceskate_native/kinematics.hpp"
+#include "iceskate_native/sample_columns.hpp"
 #include "iceskate_native/simulator.hpp"
 
 namespace iceskate_native
@@ -50,7 +51,8 @@ struct ReceivedCommand
   Eigen::Vector3d head_target = Eigen::Vector3d::Zero();
 };
 
-/// The samples of consecutive control instants, column by column (row-major per sample). A
+/// The samples of consecutive control instants, column by column (row-major per sample): the
+/// columns of ICESKATE_SAMPLE_COLUMNS (sample_columns.hpp), then each source's efforts. A
 /// sample holds the state at t_k after the transitions due then, its dynamics under the
 /// commands held over the period, each source's generalized force at the observed state, the
 /// head-top placement observed at t_k, the /tf transforms of the URDF's links at the sample's
@@ -58,80 +60,30 @@ struct ReceivedCommand
 struct SampleBlock
 {
   int count = 0;
-  std::vector<double> t, t_exchange, t_touchdown, heel_anchor_y;  ///< [s, s, s (NaN: none), m]
-  std::vector<int> mode, side, pivot, step_index;  ///< side 0 right / 1 left, pivot 0 toe / 1 heel
-  /// GaitState's pivot: 0 while the mode's q1 is locked (flat sole), else 1 toe / 2 heel.
-  std::vector<int> pivot_code;
-  std::vector<double> q, v, qdd, passive, applied;  ///< 18 per sample
-  std::vector<double> multipliers;                  ///< f_nz [N], f_ny [N], tau_n [N m]
-  std::vector<double> support_normal, support_tangential, cop_y;  ///< [N, N, m]
-  std::vector<double> head_position;     ///< 3 per sample [m]
-  std::vector<double> head_orientation;  ///< quaternion x, y, z, w (Eigen's coeffs())
-  std::vector<double> head_pitch;        ///< atan2(-R(1,2), R(2,2)) [rad] of its rotation R
-  /// 7 per /tf pair per sample: the child link's placement in its parent's (or the world's):
-  /// x, y, z [m], qx, qy, qz, qw.
-  std::vector<double> tf;
+#define ICESKATE_SAMPLE_FIELD(name, type, width, unit, saved, routes, meaning) \
+  std::vector<type> name;
+  ICESKATE_SAMPLE_COLUMNS(ICESKATE_SAMPLE_FIELD)
+#undef ICESKATE_SAMPLE_FIELD
   std::size_t tf_pairs = 0;  ///< the /tf pairs of a sample
-  std::vector<double> head_target;       ///< psi_d: y [m], z [m], pitch [rad]
-  /// Index in the simulator's event log of the latest transition at or before t_k; -1: none.
-  std::vector<long> last_event;
-  /// 4 per sample, whole nanoseconds (ties to even): t, t_exchange, t_touchdown (0 before the
-  /// heel strike) and the time of the latest transition (0: none).
-  std::vector<std::int64_t> stamps_ns;
-  /// 0/1 per sample: the mode's y0 and q1 are free; the CoP lies on the flat support sole;
-  /// the swing heel has struck.
-  std::vector<std::uint8_t> y0_active, q1_active, zmp_inside_support, touched_down;
-  std::vector<std::uint8_t> active;  ///< 18 per sample: the mode's active coordinates (0/1)
-  std::vector<double> effort_total;  ///< 18 per sample: the sum of the sources' efforts
   /// The sources in the order they first answered; efforts[i]: 18 per sample, 0 where source i
-  /// did not answer, present[k] bit i: it answered at sample k ("push" while a push acts).
+  /// did not answer (present[k] bit i: it answered at sample k; "push" while a push acts).
   std::vector<std::string> sources;
   std::vector<std::vector<double>> efforts;
-  std::vector<std::uint64_t> present;
 
   /// Empty, the source list kept.
   void clear();
 };
 
 /// Call f(key, column, width) for every column of `block` (a SampleBlock, const or not) but
-/// the efforts, in the order of take_block()'s dict: its key there, its vector and its values
+/// the efforts, in the order of ICESKATE_SAMPLE_COLUMNS: its name, its vector and its values
 /// per sample (1: a 1-D array).
 template <class Block, class F>
 void for_each_column(Block & block, F && f)
 {
-  const std::size_t n = kCoordinates;
-  f("t", block.t, 1);
-  f("t_exchange", block.t_exchange, 1);
-  f("t_touchdown", block.t_touchdown, 1);
-  f("heel_anchor_y", block.heel_anchor_y, 1);
-  f("mode", block.mode, 1);
-  f("side", block.side, 1);
-  f("pivot", block.pivot, 1);
-  f("pivot_code", block.pivot_code, 1);
-  f("step_index", block.step_index, 1);
-  f("q", block.q, n);
-  f("v", block.v, n);
-  f("qdd", block.qdd, n);
-  f("passive", block.passive, n);
-  f("applied", block.applied, n);
-  f("multipliers", block.multipliers, 3);
-  f("support_normal", block.support_normal, 1);
-  f("support_tangential", block.support_tangential, 1);
-  f("cop_y", block.cop_y, 1);
-  f("head_position", block.head_position, 3);
-  f("head_orientation", block.head_orientation, 4);
-  f("head_pitch", block.head_pitch, 1);
-  f("tf", block.tf, 7 * block.tf_pairs);
-  f("head_target", block.head_target, 3);
-  f("last_event", block.last_event, 1);
-  f("stamps_ns", block.stamps_ns, 4);
-  f("y0_active", block.y0_active, 1);
-  f("q1_active", block.q1_active, 1);
-  f("zmp_inside_support", block.zmp_inside_support, 1);
-  f("touched_down", block.touched_down, 1);
-  f("active", block.active, n);
-  f("effort_total", block.effort_total, n);
-  f("present", block.present, 1);
+#define ICESKATE_SAMPLE_VISIT(name, type, width, unit, saved, routes, meaning) \
+  f(#name, block.name, sample_width(static_cast<std::size_t>(width), block.tf_pairs));
+  ICESKATE_SAMPLE_COLUMNS(ICESKATE_SAMPLE_VISIT)
+#undef ICESKATE_SAMPLE_VISIT
 }
 
 /// The column `name` of `block` (its key in take_block()'s dict; "efforts.<i>" for source i's

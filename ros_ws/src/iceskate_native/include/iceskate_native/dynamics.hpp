@@ -88,8 +88,8 @@ struct DynamicsResult
   Eigen::Vector3d multipliers = Eigen::Vector3d::Zero();  ///< f_nz [N], f_ny [N], tau_n [N m]
   Wrench support_wrench = Wrench::Zero();  ///< (F, M) on the support foot at (x_s, y0, 0)
   double support_normal = 0.0;             ///< N_s [N]
-  double support_tangential = 0.0;         ///< F_y [N]
-  double cop_y = 0.0;                      ///< [m]; NaN if N_s <= 0
+  double support_friction = 0.0;         ///< F_y [N]
+  double zmp_y = 0.0;                      ///< [m]; NaN if N_s <= 0
   double heel_friction = 0.0;              ///< [N]
   Vector18 applied = Vector18::Zero();     ///< inputs, damping and stops [N m, N]
   Eigen::Vector3d swing_heel = Eigen::Vector3d::Zero();           ///< [m]

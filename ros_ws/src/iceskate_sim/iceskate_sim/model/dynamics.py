@@ -66,8 +66,8 @@ class DynamicsResult:
     :ivar support_wrench: floor wrench on the support foot, world-aligned, at the point
         (x_support, y0, 0): (F_x, F_y, F_z [N], M_x, M_y, M_z [N m]).
     :ivar support_normal: N_s [N], vertical floor reaction on the support foot.
-    :ivar support_tangential: F_y [N], floor force on the support foot along y.
-    :ivar cop_y: world y [m] of the support foot's centre of pressure (nan if N_s <= 0).
+    :ivar support_friction: F_y [N], floor force on the support foot along y.
+    :ivar zmp_y: world y [m] of the support foot's centre of pressure (nan if N_s <= 0).
     :ivar heel_friction: friction force on a sliding swing heel along y [N] (0 otherwise).
     :ivar applied: generalized force applied besides the constraints: inputs, damping and
         soft stops, per coordinate [N m, N].
@@ -81,8 +81,8 @@ class DynamicsResult:
     multipliers: np.ndarray
     support_wrench: np.ndarray
     support_normal: float
-    support_tangential: float
-    cop_y: float
+    support_friction: float
+    zmp_y: float
     heel_friction: float
     applied: np.ndarray = field(repr=False)
     swing_heel: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(3))

@@ -14,6 +14,7 @@ import numpy as np
 from rosbags.typesys.store import Typestore
 
 import iceskate_native
+from iceskate_native.sample import routed
 from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES
 from iceskate_sim.recording.bag_types import PASSIVE
@@ -44,6 +45,23 @@ Sources = dict[str, list[tuple[str, int]]]
 
 def _numbers(column: str, count: int, first: int = 0) -> list[tuple[str, int]]:
     return [(column, first + k) for k in range(count)]
+
+
+def _routed(topic: str) -> tuple[dict[str, int], Sources]:
+    """The message shape (array lengths) and sources of the sample columns routed to
+    ``topic`` (``iceskate_native.sample``): a field per number, a Point's fields, or an array."""
+    shape: dict[str, int] = {}
+    sources: Sources = {}
+    for column, route in routed(topic):
+        if route.axes:
+            sources.update({f'{route.path}.{axis}': [(column.name, i)]
+                            for i, axis in enumerate(route.axes)})
+        elif column.width == 1:
+            sources[route.path] = [(column.name, 0)]
+        else:
+            shape[route.path] = column.width
+            sources[route.path] = _numbers(column.name, column.width)
+    return shape, sources
 
 
 def _stamp(which: int = 0) -> list[tuple[str, int]]:
@@ -146,42 +164,31 @@ class SampleMessages:
         return {}, {'clock': _stamp()}
 
     def _joint_states(self, key: None) -> tuple[dict, Sources]:
-        return {'name': COORDINATE_NAMES, 'position': _N, 'velocity': _N, 'effort': _N}, {
-            'header.stamp': _stamp(), 'position': _numbers('q', _N),
-            'velocity': _numbers('v', _N), 'effort': _numbers('effort_total', _N)}
+        shape, sources = _routed('/joint_states')
+        return {'name': COORDINATE_NAMES, **shape}, {'header.stamp': _stamp(), **sources}
 
     def _head_pose(self, key: None) -> tuple[dict, Sources]:
-        return {'header.frame_id': 'world'}, {
-            'header.stamp': _stamp(),
-            **{f'pose.position.{axis}': [('head_position', i)] for i, axis in enumerate('xyz')},
-            **{f'pose.orientation.{axis}': [('head_orientation', i)]
-               for i, axis in enumerate('xyzw')}}
+        shape, sources = _routed('/head_pose')
+        return {'header.frame_id': 'world', **shape}, {'header.stamp': _stamp(), **sources}
 
     def _gait_state(self, key: tuple[int, str]) -> tuple[dict, Sources]:
         number, cause = key
         names = _MODES[number].multipliers
+        shape, sources = _routed('/gait_state')
         return {'multiplier_names': names, 'multipliers': len(names),
-                'last_transition_cause': cause, 'position': _N, 'velocity': _N}, {
-            'header.stamp': _stamp(), 'mode': [('mode', 0)], 'support_side': [('side', 0)],
-            'pivot': [('pivot_code', 0)], 'step_index': [('step_index', 0)],
-            'y0_active': [('y0_active', 0)], 'q1_active': [('q1_active', 0)],
+                'last_transition_cause': cause, **shape}, {
+            'header.stamp': _stamp(), **sources,
             'multipliers': [('multipliers', MULTIPLIER_NAMES.index(name)) for name in names],
-            'support_normal_force': [('support_normal', 0)],
-            'support_friction_force': [('support_tangential', 0)],
-            'zmp.y': [('cop_y', 0)],  # NaN: no support force
-            'zmp_inside_support': [('zmp_inside_support', 0)],
             'last_transition_stamp': _stamp(3), 'support_exchange_stamp': _stamp(1),
-            'touched_down': [('touched_down', 0)], 'touchdown_stamp': _stamp(2),
-            'heel_anchor_y': [('heel_anchor_y', 0)], 'position': _numbers('q', _N),
-            'velocity': _numbers('v', _N)}
+            'touchdown_stamp': _stamp(2)}
 
     def _joint_dynamics(self, key: tuple[tuple[int, str], ...]) -> tuple[dict, Sources]:
         names = [*(name for _, name in key), PASSIVE]
         efforts = [n for i, _ in key for n in _numbers(f'efforts.{i}', _N)]
-        return {'name': COORDINATE_NAMES, 'active': _N, 'acceleration': _N,
-                'source_names': names, 'source_efforts': _N * len(names)}, {
-            'header.stamp': _stamp(), 'active': _numbers('active', _N),
-            'acceleration': _numbers('qdd', _N),
+        shape, sources = _routed('/joint_dynamics')
+        return {'name': COORDINATE_NAMES, 'source_names': names,
+                'source_efforts': _N * len(names), **shape}, {
+            'header.stamp': _stamp(), **sources,
             'source_efforts': [*efforts, *_numbers('passive', _N)]}
 
     def _tf(self, key: None) -> tuple[dict, Sources]:

@@ -90,8 +90,8 @@ def _swing_block(block: str, window: str, mask: str) -> tuple[Metric, ...]:
 
 def _head_block(block: str, what: str, by: str) -> tuple[Metric, ...]:
     """A block of the head's error (target minus pose) per coordinate."""
-    return (Metric(block, '', what, ('psi', 'psi_d'), by=by),
-            *(Metric(f'{block}.{axis}', unit, f'{what}, {meaning}', ('psi', 'psi_d'), by=by)
+    return (Metric(block, '', what, ('psi', 'head_target'), by=by),
+            *(Metric(f'{block}.{axis}', unit, f'{what}, {meaning}', ('psi', 'head_target'), by=by)
               for axis, (unit, meaning) in _HEAD.items()))
 
 
@@ -127,7 +127,7 @@ METRICS: dict[str, Metric] = {m.name: m for m in (
                  'pushes', 'compute_metrics: max |psi_d - psi| (scenes with pushes only)'),
     Metric('mode_time_fraction', '-', 'share of the time in each gait mode', ('mode',)),
     Metric('zmp_outside_support_fraction', '-', 'share of flat-sole time with the ZMP off '
-           'the sole', ('pivot', 'cop_y', 'q[0]')),
+           'the sole', ('pivot', 'zmp_y', 'q[0]')),
     Metric('edge_mode_fraction', '-', 'share of the time on a sole edge', ('pivot',)),
     Metric('support_positions_m', 'm', 'support foot position at each step',
            ('q[0]', 'step_index')),
@@ -175,10 +175,9 @@ class Trajectory:
         self._layout: dict[str, tuple[np.dtype, tuple[int, ...]]] = {}  # of the spilled columns
 
     def extend(self, columns: dict[str, np.ndarray], efforts: dict[str, np.ndarray]) -> None:
-        """Add a block of samples: ``columns`` holds every column but the efforts (t, q, v,
-        qdd, mode, side, pivot, step_index, multipliers, support forces, cop_y, psi, psi_d,
-        applied; first axis: sample), ``efforts`` each source's (n, 18) generalized forces (0
-        where it did not act)."""
+        """Add a block of samples: ``columns`` holds every column but the efforts (the sample's
+        saved columns, ``iceskate_native.sample.SAVED_COLUMNS``, and psi; first axis: sample),
+        ``efforts`` each source's (n, 18) generalized forces (0 where it did not act)."""
         self._add_sources(efforts)
         n = len(columns['t'])
         for source in self.sources:
@@ -385,7 +384,8 @@ def arm_swing_ratio(with_yaw: Mapping[str, Any], without_yaw: Mapping[str, Any]
 
 
 #: The trajectory's columns the metrics are computed from (the others are not joined for them).
-METRIC_COLUMNS = frozenset({'t', 'psi', 'psi_d', 'mode', 'pivot', 'cop_y', 'q', 'step_index'})
+METRIC_COLUMNS = frozenset({'t', 'psi', 'head_target', 'mode', 'pivot', 'zmp_y', 'q',
+                            'step_index'})
 
 
 def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: float,
@@ -413,7 +413,7 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
     }
     if not len(trajectory):
         return metrics
-    psi, psi_d = a['psi'], a['psi_d']
+    psi, psi_d = a['psi'], a['head_target']
     err = psi_d - psi
     metrics['head_error_rms'] = {'y': _rms(err[:, 0]), 'z': _rms(err[:, 1]),
                                  'pitch': _rms(err[:, 2])}
@@ -432,7 +432,7 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
         str(m): count / modes.size for m, count in zip(entered.tolist(), counts.tolist(),
                                                        strict=True)}
     flat = a['pivot'] == 0
-    cop = a['cop_y']
+    cop = a['zmp_y']
     y0 = a['q'][:, 0]
     outside = flat & ~((cop >= y0 + SOLE_HEEL_Y) & (cop <= y0 + SOLE_TOE_Y))
     metrics['zmp_outside_support_fraction'] = float(np.mean(outside))

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from iceskate_native.sample import SAVED_COLUMNS
 from iceskate_sim.disk import Room, write_atomically
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.model.observation import Observation
@@ -33,9 +34,6 @@ if TYPE_CHECKING:
 
 #: Samples of held periods (``Session.hold``) recorded at once by a partial ``flush``.
 HELD_BLOCK = 100
-#: The trajectory's columns that are the native block's own (``Trajectory``).
-_BLOCK_COLUMNS = ('t', 'q', 'v', 'qdd', 'mode', 'side', 'step_index', 'multipliers',
-                  'support_normal', 'support_tangential', 'cop_y', 'applied')
 
 
 class Controllers(Protocol):
@@ -348,12 +346,11 @@ class Session:
         if self.scene.record_every > 1:  # record.rate: every n-th sample only
             kept = periods % self.scene.record_every == 0
             block, periods = _rows(block, kept), periods[kept]
-        columns = {key: block[key] for key in _BLOCK_COLUMNS}
-        columns['pivot'] = block['pivot_code']
-        for key in ('mode', 'side', 'pivot', 'step_index'):  # the saved trajectory's integers
-            columns[key] = columns[key].astype(np.int64)
+        columns = {key: block[key] for key in SAVED_COLUMNS}
+        for key, values in columns.items():  # the saved trajectory's integers are int64
+            if values.dtype == np.int32:
+                columns[key] = values.astype(np.int64)
         columns['psi'] = np.column_stack([block['head_position'][:, 1:], block['head_pitch']])
-        columns['psi_d'] = block['head_target']
         self.trajectory.extend(columns, dict(zip(block['sources'], block['efforts'],
                                                  strict=True)))
         self.latest = columns
