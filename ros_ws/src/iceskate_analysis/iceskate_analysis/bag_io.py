@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import bisect
 from collections import Counter
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 import functools
 import json
 import pathlib
@@ -25,7 +25,7 @@ import numpy as np
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 
 from iceskate_analysis.rows import collect_rows
-from iceskate_native.sample import SampleColumn, routed
+from iceskate_native.sample import Route, SampleColumn, routed
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.files import regular_file
 from iceskate_sim.model.modes import MULTIPLIER_NAMES
@@ -95,8 +95,6 @@ class BagData:
     :ivar support_normal: N_s [N] (N,). :ivar support_friction: F_y [N] (N,).
     :ivar zmp_y: world y of the ZMP, the support foot's centre of pressure [m] (N,).
     :ivar heel_anchor_y: y_h* [m] (N,).
-    :ivar zmp_inside_support, y0_active, q1_active, touched_down: (N,) bool, as GaitState's.
-    :ivar swing_clearance: height of the swing sole's lower end above the ice [m] (N,).
     :ivar last_transition_ns: time of the latest transition at or before each sample [ns]
         (N,; 0: none yet).
     :ivar head_position: head-top world position [m] (N, 3), nan without /head_pose.
@@ -122,11 +120,6 @@ class BagData:
     support_friction: np.ndarray
     zmp_y: np.ndarray
     heel_anchor_y: np.ndarray
-    zmp_inside_support: np.ndarray
-    swing_clearance: np.ndarray
-    y0_active: np.ndarray
-    q1_active: np.ndarray
-    touched_down: np.ndarray
     last_transition_ns: np.ndarray
     head_position: np.ndarray
     urdf: str = ''
@@ -455,11 +448,19 @@ def _value(msg: Any, path: str) -> Any:
     return functools.reduce(getattr, path.split('.'), msg)
 
 
+def _read_back(topic: str) -> list[tuple[SampleColumn, Route]]:
+    """The sample columns ``BagData`` holds that ``topic``'s messages give back, with their
+    route there."""
+    held = {f.name for f in fields(BagData)}
+    return [(column, route) for column, route in routed(topic, read_back=True)
+            if column.name in held]
+
+
 def _routed_reader(topic: str) -> Callable[[Any, str, np.ndarray | None], list[Any]]:
-    """What ``topic``'s messages give back of the sample columns (``routed``): reader(msg,
-    where, order of its coordinate arrays) -> a value per column. A JointState's effort may be
-    empty (0)."""
-    parts = routed(topic, read_back=True)
+    """What ``topic``'s messages give back of the sample columns (``_read_back``):
+    reader(msg, where, order of its coordinate arrays) -> a value per column. A JointState's
+    effort may be empty (0)."""
+    parts = _read_back(topic)
 
     def read(msg: Any, where: str, order: np.ndarray | None) -> list[Any]:
         values: list[Any] = []
@@ -533,7 +534,7 @@ def _row_dtype(column: SampleColumn) -> type:
 #: sample columns it gives back, then /gait_state's multipliers (by name) and latest transition
 #: (``/joint_dynamics``' last value, the efforts by source, is kept apart: ``_Table.efforts``).
 _FIELDS = {topic: (*((column.name, column.shape(), _row_dtype(column))
-                     for column, _ in routed(topic, read_back=True)),
+                     for column, _ in _read_back(topic)),
                    *((('multipliers', (len(MULTIPLIER_NAMES),), float),
                       ('last_transition_ns', (), np.int64)) if topic == '/gait_state' else ()))
            for topic in _READERS}
