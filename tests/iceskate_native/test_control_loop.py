@@ -30,6 +30,7 @@ from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import PIVOTS, SIDES, Robot
 from iceskate_sim.physics.hybrid import Transition
+from iceskate_sim.physics.native_control import native_observation
 from iceskate_sim.physics.simulation import Simulator
 from iceskate_sim.run.scene import Push, Scene
 from iceskate_sim.run.session import Session
@@ -347,3 +348,47 @@ def test_the_loop_refuses_bad_arguments_in_one_sentence() -> None:
         iceskate_native.ControlLoop(session.sim.kernel, None, [], [], session.psi_initial,
                                     [('pelvis', 'world')])
     assert isinstance(loop.kernel, iceskate_native.ControlLoop)
+
+
+class _Seen(iceskate_native.Controller):
+    """Answers zero and keeps every observation it is given (as tuples of its fields)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[tuple] = []
+
+    def compute(self, obs: iceskate_native.Observation,
+                kinematics: iceskate_native.Kinematics) -> np.ndarray:
+        self.seen.append(_fields(obs))
+        return np.zeros(18)
+
+
+def _fields(obs) -> tuple:
+    return (obs.t, *obs.q, *obs.v, obs.mode, obs.side, obs.pivot, obs.step_index,
+            obs.t_exchange, obs.heel_anchor_y, obs.t_touchdown)
+
+
+def test_the_controllers_see_the_simulators_observation_of_each_instant() -> None:
+    """The observation is built in one place: the loop gives its controllers what
+    ``HybridSimulator.observation`` gives Python at the same state, to the bit."""
+    scene = _scene('skate', 2.5)  # both sides, toe and heel pivots, flat soles
+    session = Session(scene)
+    stack = ControlStack(scene, session.robot, session.observation())
+    seen = _Seen()
+    sim = session.sim
+    loop = sim.control_loop(stack.kinematics, [*stack.controllers.values(), seen], scene.pushes,
+                            session.psi_initial)
+    expected, pivots = [], set()
+    while len(expected) < session.n_periods:
+        obs = sim.kernel.observation()
+        expected.append(_fields(obs))
+        pivots.add((obs.pivot, MODES[obs.mode].q1_active))
+        _, error = sim.run_loop(loop, 1)
+        assert error is None
+    assert pivots == {(0, False), (0, True), (1, True)}
+    assert np.array_equal(np.array(seen.seen), np.array(expected), equal_nan=True)
+    python = session.observation()  # the Python view: the same state, side and pivot named
+    native = sim.kernel.observation()
+    assert (python.side, python.pivot) == (SIDES[native.side], PIVOTS[native.pivot])
+    assert np.array_equal(_fields(native_observation(python)), _fields(native),
+                          equal_nan=True)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -22,6 +23,7 @@ from iceskate_sim.model.command import HeldCommand
 from iceskate_sim.model.dynamics import ContactState, DynamicsResult
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, SIDES, Robot
+from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import (
     Guard,
     HybridState,
@@ -99,6 +101,20 @@ class ReferenceSimulator(StateQueries):
         self.result = self._evaluate(state.q, state.v)
 
     # -------------------------------------------------------------- accessors
+    def observation(self) -> Observation:
+        """The controllers' view of the current state, built here in Python from the state (the
+        native core builds its own, ``HybridSimulator.observation``): times rounded to whole
+        nanoseconds, the pivot 'toe' while the sole is flat (copies of q and v)."""
+        s = self.state
+
+        def stamped(t: float) -> float:
+            return ns_to_seconds(seconds_to_ns(t)) if math.isfinite(t) else t
+
+        pivot = s.contact.pivot if s.mode.q1_active else 'toe'
+        return Observation(stamped(s.t), s.q.copy(), s.v.copy(), s.mode.number, s.contact.side,
+                           pivot, s.step_index, stamped(s.t_exchange), s.contact.heel_anchor_y,
+                           stamped(s.t_touchdown))
+
     @property
     def command(self) -> HeldCommand:
         """The input held over the last period (zero torque before the first), in the

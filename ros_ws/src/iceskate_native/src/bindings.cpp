@@ -29,6 +29,7 @@
 #include "iceskate_native/guards.hpp"
 #include "iceskate_native/integrators.hpp"
 #include "iceskate_native/model.hpp"
+#include "iceskate_native/observation.hpp"
 #include "iceskate_native/simulator.hpp"
 #include "iceskate_native/transitions.hpp"
 
@@ -421,6 +422,15 @@ NB_MODULE(_kernel, m)
       "DivergenceError, ChatteringError or NativeError when the physics fails (the state is "
       "where it failed).")
     .def_prop_ro("state", [](const HybridSimulator & self) { return state_row(self.state()); })
+    .def(
+      "observation",
+      [](HybridSimulator & self) {
+        const HybridState & s = self.state();
+        return observation_of(s, self.dynamics().mode(s.contact.mode));
+      },
+      "The controllers' Observation of the current state, as the control loop gives it to "
+      "them: times at a stamp's resolution (whole ns), the pivot toe (0) while the sole is "
+      "flat.")
     .def_prop_ro(
       "start_state", [](const HybridSimulator & self) { return state_row(self.start_state()); })
     .def_prop_ro(

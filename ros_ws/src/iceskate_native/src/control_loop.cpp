@@ -10,6 +10,7 @@
 
 #include "iceskate_native/checks.hpp"
 #include "iceskate_native/model_kinematics.hpp"
+#include "iceskate_native/observation.hpp"
 
 namespace iceskate_native
 {
@@ -18,22 +19,6 @@ namespace
 {
 
 constexpr int kMaxSources = 64;  // SampleBlock::present has one bit per source
-
-/// t [s] >= 0 as a ROS stamp's whole nanoseconds (ties to even), as a message carries it.
-std::int64_t stamp_ns(double t) { return static_cast<std::int64_t>(std::nearbyint(t * 1e9)); }
-
-/// t [s] at a stamp's resolution.
-double stamp_time(double t) { return static_cast<double>(stamp_ns(t)) / 1e9; }
-
-/// The controllers' view of a hybrid state (iceskate_sim.physics.simulation.observation_of): times at
-/// a stamp's resolution, and the pivot 'toe' while the sole is flat (q1 locked).
-Observation observation_of(const HybridState & s, const Mode & mode)
-{
-  return {stamp_time(s.t), s.q, s.v, s.contact.mode, s.contact.side,
-          mode.q1_active ? s.contact.pivot : 0, s.step_index, stamp_time(s.t_exchange),
-          s.contact.heel_anchor_y,
-          std::isfinite(s.t_touchdown) ? stamp_time(s.t_touchdown) : s.t_touchdown};
-}
 
 /// `kinematics` if it is a ModelKinematics that can adopt the passes of `dynamics`, else null.
 ModelKinematics * adopting(Kinematics * kinematics, const Dynamics & dynamics)

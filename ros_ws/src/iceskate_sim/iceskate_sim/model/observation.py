@@ -1,7 +1,8 @@
 """What a controller sees of the hybrid state: the input of every control law.
 
-The headless runner builds it straight from the simulator state; the ROS nodes build it from
-``gait_state`` (which holds the whole hybrid state). Control laws are pure functions of an
+The native core builds it from the simulator state (``Simulator.observation``, the one the
+native loop gives its controllers); the ROS nodes read it from ``gait_state`` (which holds the
+whole hybrid state). Control laws are pure functions of an
 ``Observation`` (plus their parameters), so both paths give the same torques.
 """
 
@@ -12,6 +13,7 @@ import math
 
 import numpy as np
 
+import iceskate_native
 from iceskate_sim.errors import SimulationError
 from iceskate_sim.model.command import all_finite
 from iceskate_sim.model.dynamics import ContactState
@@ -62,6 +64,12 @@ class Observation:
             raise SimulationError(f'observation pivot {self.pivot!r} not in {PIVOTS}')
         if not math.isfinite(self.t) or not math.isfinite(self.t_exchange):
             raise SimulationError('observation times must be finite')
+
+    @classmethod
+    def of_native(cls, obs: iceskate_native.Observation) -> Observation:
+        """The native laws' observation ``obs`` (side and pivot as indices) as this one."""
+        return cls(obs.t, obs.q, obs.v, obs.mode, SIDES[obs.side], PIVOTS[obs.pivot],
+                   obs.step_index, obs.t_exchange, obs.heel_anchor_y, obs.t_touchdown)
 
     @property
     def gait_mode(self) -> GaitMode:

@@ -9,7 +9,6 @@ state; a fall, flight or toe-first touchdown ends the run (``Simulator.ended``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-import math
 
 import numpy as np
 
@@ -25,7 +24,6 @@ from iceskate_sim.model.dynamics import (
 from iceskate_sim.model.modes import MODES, get_mode
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import N_COORDINATES, PIVOTS, SIDES, Robot
-from iceskate_sim.model.stamps import ns_to_seconds, seconds_to_ns
 from iceskate_sim.physics.hybrid import (
     CAUSES,
     FLIGHT,
@@ -39,11 +37,6 @@ from iceskate_sim.physics.hybrid import (
 )
 from iceskate_sim.physics.integrators import FIXED_STEP, GUARD_MARGIN, IntegratorConfig
 from iceskate_sim.physics.native import GUARD_CONSTANTS, NativeGaitDynamics
-
-
-def stamp_time(t: float) -> float:
-    """Time t [s] at a stamp's resolution (whole nanoseconds)."""
-    return ns_to_seconds(seconds_to_ns(t))
 
 
 @dataclass(frozen=True)
@@ -109,8 +102,7 @@ class RunStatistics:
 
 
 class StateQueries:
-    """What a simulator answers about its current ``state`` (with its ``dynamics``' model
-    terms): the time, the controllers' observation."""
+    """What a simulator answers about its current ``state``: the time."""
 
     state: HybridState
     dynamics: ModelTerms
@@ -119,21 +111,6 @@ class StateQueries:
     def time(self) -> float:
         """Simulation time [s]."""
         return self.state.t
-
-    def observation(self) -> Observation:
-        """The controller's view of the current state (copies of q and v).
-
-        It holds what a GaitState message carries, so a controller computes the same torque
-        in-process as from the message: times rounded to whole nanoseconds (a ROS stamp's
-        resolution), and the pivot 'toe' while the sole is flat (q1 locked: no pivot is sent,
-        and the kinematics rooted at either edge agree up to rounding).
-        """
-        s = self.state
-        touchdown = stamp_time(s.t_touchdown) if math.isfinite(s.t_touchdown) else s.t_touchdown
-        pivot = s.contact.pivot if s.mode.q1_active else 'toe'
-        return Observation(stamp_time(s.t), s.q.copy(), s.v.copy(), s.mode.number,
-                           s.contact.side, pivot, s.step_index, stamp_time(s.t_exchange),
-                           s.contact.heel_anchor_y, touchdown)
 
 
 #: Guard causes for the event log, by name.
@@ -208,6 +185,12 @@ class Simulator(StateQueries):
     def result(self) -> DynamicsResult:
         """The dynamics at the current state under the last input."""
         return DynamicsResult(*self.kernel.result)
+
+    def observation(self) -> Observation:
+        """The controllers' view of the current state, as the native loop gives it to them
+        (``HybridSimulator.observation``): what a GaitState message carries, times at whole
+        nanoseconds and the pivot 'toe' while the sole is flat."""
+        return Observation.of_native(self.kernel.observation())
 
     def advance(self, command: HeldCommand | np.ndarray,
                 push: tuple[str, np.ndarray] | None = None) -> DynamicsResult:
