@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from iceskate_bringup.controllers import SHIPPED
 from iceskate_bringup.plugin import PluginBlock
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_bringup.watch import Watch, live_view
@@ -41,7 +42,6 @@ from iceskate_sim.shutdown import StopRequest, die_with_parent, process_alive, s
 
 GRACE = 5.0  # s between SIGTERM and SIGKILL
 STOP_GRACE = 30.0  # s the simulator has to end a run it was signalled to end (bag, outputs)
-CONTROLLER_CLASSES = {'visual_lifting': 'VisualLiftingNode', 'gait_manager': 'GaitManagerNode'}
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
             continue
         write_parameter_file(folder / f'{node}.yaml',
                              {node: flatten(params) | {'run_token': token}})
-        specs.append(NodeSpec(node, node, f'{node}.{node}_node', CONTROLLER_CLASSES[node],
+        specs.append(NodeSpec(node, node, f'{node}.{node}_node', SHIPPED[node].node_class,
                               folder / f'{node}.yaml'))
     return specs
 

@@ -10,8 +10,8 @@ from dataclasses import is_dataclass, replace
 import pathlib
 from typing import Any
 
-from gait_manager.errors import GaitManagerError
-from gait_manager.parameters import SOURCES, GaitManagerParameters, head_stance
+from gait_manager.parameters import GaitManagerParameters, head_stance
+from iceskate_bringup.controllers import SHIPPED
 from iceskate_bringup.plugin import (
     PluginBlock,
     checked_block,
@@ -24,14 +24,10 @@ from iceskate_sim.errors import InputRefused
 from iceskate_sim.run.scene import Scene, SceneSettings, scene_steps
 from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
-from visual_lifting.errors import VisualLiftingError
 from visual_lifting.parameters import VisualLiftingParameters
 
-#: The shipped controller nodes a scene may run (besides plug-ins), with their parameter
-#: classes; the commands of a scene's controllers are summed in the order the scene lists them.
-PARAMETER_CLASSES = {'visual_lifting': VisualLiftingParameters,
-                     'gait_manager': GaitManagerParameters}
-CONTROLLERS = tuple(PARAMETER_CLASSES)
+#: A controller's parameters: a shipped one's parameter object or a plug-in's block.
+ControllerParameters = Any
 
 
 def validate_inputs(node: str, block: dict[str, Any]) -> None:
@@ -39,27 +35,26 @@ def validate_inputs(node: str, block: dict[str, Any]) -> None:
     if is_plugin(block):
         checked_block(node, block)  # imports the class and builds it once
         return
+    errors = SHIPPED[node].errors if node in SHIPPED else ()
     try:
         controller_parameters(node, block)
-    except (VisualLiftingError, GaitManagerError) as exc:
+    except errors as exc:
         raise InputRefused(f'scene key {f"inputs.{node}"!r}: {exc}') from None
 
 
-def controller_parameters(node: str, block: dict[str, Any]
-                          ) -> VisualLiftingParameters | GaitManagerParameters | PluginBlock:
+def controller_parameters(node: str, block: dict[str, Any]) -> ControllerParameters:
     """The validated parameters of controller ``node`` from its scene block (a plug-in's as
     given: its class is checked by ``validate_inputs`` and when it is built)."""
     if is_plugin(block):
         return PluginBlock(block['plugin'], dict(block.get('parameters') or {}))
-    if node in PARAMETER_CLASSES:
-        return PARAMETER_CLASSES[node].from_dict(block)
+    if node in SHIPPED:
+        return SHIPPED[node].parameters.from_dict(block)
     raise InputRefused(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
-                       f"{list(CONTROLLERS)}, or a controller written in Python (a block "
+                       f"{list(SHIPPED)}, or a controller written in Python (a block "
                        "with 'plugin: package.module:Class')")
 
 
-def node_parameters(scene: Scene
-                    ) -> dict[str, VisualLiftingParameters | GaitManagerParameters | PluginBlock]:
+def node_parameters(scene: Scene) -> dict[str, ControllerParameters]:
     """The parameters of each controller node the scene runs, in the scene's order, composed:
     visual lifting's head target follows the gait manager's moving stance when both run
     (``head_stance``)."""
@@ -105,15 +100,11 @@ def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
     sources in order (an idle gait manager, with no source enabled, is left out)."""
     out: dict[str, tuple[str, ...]] = {}
     for node, block in scene.inputs.items():
-        if is_plugin(block):
-            plugin = controller_parameters(node, block)
-            out[node] = plugin_sources(node, make_controller(node, plugin))
-        elif node == 'visual_lifting':
-            out[node] = ('visual_lifting',)
-        elif node == 'gait_manager':
-            enabled = GaitManagerParameters.from_dict(block).enabled
-            if enabled:
-                out[node] = tuple(s for s in SOURCES if s in enabled)
+        params = controller_parameters(node, block)
+        sources = (plugin_sources(node, make_controller(node, params)) if is_plugin(block)
+                   else SHIPPED[node].sources(params))
+        if sources:
+            out[node] = sources
     return out
 
 
@@ -123,8 +114,8 @@ def key_rules(key: str) -> Rules | None:
     schema declares (a list entry, a plug-in's parameter)."""
     head, _, rest = key.partition('.')
     node, _, field = rest.partition('.')
-    cls, names = ((PARAMETER_CLASSES[node], field)
-                  if head == 'inputs' and node in PARAMETER_CLASSES
+    cls, names = ((SHIPPED[node].parameters, field)
+                  if head == 'inputs' and node in SHIPPED
                   else (SceneSettings, key))
     *blocks, last = names.split('.')
     for name in blocks:
