@@ -233,3 +233,46 @@ def test_the_shipped_scenes_follow_the_python_oracle_to_the_end(name: str) -> No
     the product: distance 4e-9 m, arm swing 3e-9 rad)."""
     scene = replace(load_scene(name), record_bag=False)
     _assert_same_run(*_runs(scene), tolerance=1e-6)
+
+
+def _kernel_arguments(session: Session) -> dict:
+    """What ``Simulator`` hands the native HybridSimulator, by name."""
+    from iceskate_sim.model.modes import MODES
+    from iceskate_sim.physics.hybrid import guards_of
+    from iceskate_sim.physics.integrators import GUARD_MARGIN
+    from iceskate_sim.physics.native import GUARD_CONSTANTS
+    sim = session.sim
+    return {'dynamics': sim.dynamics.kernel, 'initial': sim.kernel.start_state,
+            'config': sim.config, 'constants': GUARD_CONSTANTS, 'margin': GUARD_MARGIN,
+            'guards': [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]}
+
+
+def test_the_kernel_reads_its_settings_by_name_and_names_a_bad_one() -> None:
+    """The run's settings cross into C++ by name, from ``SimulatorConfig`` (their one
+    declaration, with the defaults): a changed field changes the run, a missing or bad one is
+    refused by name."""
+    import types
+
+    import iceskate_native
+    from iceskate_sim.physics.native import GUARD_CONSTANTS
+    session = Session(_scene('stand', 0.2))
+    args = _kernel_arguments(session)
+    kernel = iceskate_native.HybridSimulator(**args)
+    assert all(np.array_equal(a, b) for a, b in zip(kernel.state, session.sim.kernel.state,
+                                                     strict=True))
+    low = replace(args['config'], fall_height=5.0)  # the head is below 5 m at once: a fall
+    fallen = iceskate_native.HybridSimulator(**{**args, 'config': low})
+    assert kernel.ended == fallen.ended == 0
+    kernel.advance(np.zeros(18))
+    fallen.advance(np.zeros(18))
+    assert (kernel.ended, fallen.ended) == (0, 3)  # running; fallen
+    missing = types.SimpleNamespace(**{name: getattr(args['config'], name)
+                                       for name in ('control_period', 'integrator', 'friction')})
+    with pytest.raises(ValueError, match='simulator settings: residual_bound'):
+        iceskate_native.HybridSimulator(**{**args, 'config': missing})
+    bad_rule = replace(args['config'], friction=types.SimpleNamespace(mu=0.005, rule='sand'))
+    with pytest.raises(ValueError, match="simulator settings: friction.rule 'sand' is not one"):
+        iceskate_native.HybridSimulator(**{**args, 'config': bad_rule})
+    with pytest.raises(ValueError, match='guard constants: toe_scuff is nan'):
+        iceskate_native.HybridSimulator(**{**args, 'constants': replace(
+            GUARD_CONSTANTS, toe_scuff=float('nan'))})

@@ -23,6 +23,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "bindings.hpp"
+#include "iceskate_native/binding_parameters.hpp"
 #include "iceskate_native/checks.hpp"
 #include "iceskate_native/dynamics.hpp"
 #include "iceskate_native/errors.hpp"
@@ -90,12 +91,18 @@ Contact contact_of(
   return {mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir};
 }
 
-/// (cop_band, force_band, moment_band, toe_scuff, sole_toe_y, sole_heel_y)
-using ConstantRow = std::tuple<double, double, double, double, double, double>;
+/// The guards' constants read by name from `constants` (an object with GuardConstants' fields:
+/// iceskate_sim.physics.native.GUARD_CONSTANTS); each must be finite.
+GuardConstants constants_of(nb::handle constants)
+{
+  const binding::Fields c(constants, "guard constants: ");
+  return {c.number("cop_band"),  c.number("force_band"), c.number("moment_band"),
+          c.number("toe_scuff"), c.number("sole_toe_y"), c.number("sole_heel_y")};
+}
 
 GuardSet guard_set(
   const std::vector<std::string> & names, const std::vector<double> & rested_until,
-  double mu, bool ice, const ConstantRow & constants, double margin)
+  double mu, bool ice, nb::handle constants, double margin)
 {
   GuardSet set;
   for (const auto & name : names) {
@@ -106,15 +113,10 @@ GuardSet guard_set(
   }
   set.rested_until = rested_until;
   set.friction = {mu, ice};
-  auto & c = set.constants;
-  std::tie(c.cop_band, c.force_band, c.moment_band, c.toe_scuff, c.sole_toe_y, c.sole_heel_y) =
-    constants;
+  set.constants = constants_of(constants);
   set.margin = margin;
-  for (double value : {mu, margin, c.cop_band, c.force_band, c.moment_band, c.toe_scuff,
-                       c.sole_toe_y, c.sole_heel_y}) {
-    if (!std::isfinite(value)) {
-      throw std::invalid_argument("the friction, margin and guard constants must be finite");
-    }
+  if (!std::isfinite(mu) || !std::isfinite(margin)) {
+    throw std::invalid_argument("the friction coefficient and the guard margin must be finite");
   }
   if (mu < 0.0) {
     throw std::invalid_argument("the friction coefficient mu must be >= 0");
@@ -183,25 +185,30 @@ StateRow state_row(const HybridState & s)
 }
 
 /// Construct a HybridSimulator in place from the Python-side settings (SimulatorConfig).
+/// A HybridSimulator from its settings read by name from `config` (an object with the fields
+/// of iceskate_sim.physics.simulation.SimulatorConfig, the one place they are declared, with
+/// their defaults), the guards' constants (`constants_of`), margin and table.
 void construct_simulator(
-  HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, double control_period,
-  const std::string & method, double step, double rtol, double atol, double event_tolerance,
-  double mu, bool ice, const ConstantRow & constants, double margin,
-  const std::vector<std::vector<std::string>> & guards, bool projection, double residual_bound,
-  double fall_height, double max_speed, int max_instant_transitions, double zeno_window,
-  double chatter_dwell)
+  HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, nb::handle config,
+  nb::handle constants, double margin, const std::vector<std::vector<std::string>> & guards)
 {
   if (guards.size() != kModes) {
     throw std::invalid_argument("the guard table needs the guards of each of the 20 modes");
   }
+  const binding::Fields c(config, "simulator settings: ");
+  const binding::Fields integrator = c.block("integrator");
+  const binding::Fields friction = c.block("friction");
   SimulatorSettings s;
-  s.control_period = control_period;
-  s.method = method_named(method);
-  s.step = step;
-  s.rtol = rtol;
-  s.atol = atol;
-  s.event_tolerance = event_tolerance;
-  const auto set = guard_set({}, {}, mu, ice, constants, margin);
+  s.control_period = c.number("control_period");
+  s.method = method_named(integrator.text("method"));
+  s.step = integrator.number("step");
+  s.rtol = integrator.number("rtol");
+  s.atol = integrator.number("atol");
+  s.event_tolerance = integrator.number("event_tolerance");
+  s.projection = integrator.flag("projection");
+  const bool ice =
+    friction.choice<bool>("rule", std::array<const char *, 2>{"coulomb", "ice"});
+  const auto set = guard_set({}, {}, friction.number("mu"), ice, constants, margin);
   s.friction = set.friction;
   s.constants = set.constants;
   s.margin = margin;
@@ -210,13 +217,12 @@ void construct_simulator(
       s.guards[k].push_back(guard_named(name));
     }
   }
-  s.projection = projection;
-  s.residual_bound = residual_bound;
-  s.fall_height = fall_height;
-  s.max_speed = max_speed;
-  s.max_instant_transitions = max_instant_transitions;
-  s.zeno_window = zeno_window;
-  s.chatter_dwell = chatter_dwell;
+  s.residual_bound = c.number("residual_bound");
+  s.fall_height = c.number("fall_height");
+  s.max_speed = c.number("max_speed");
+  s.max_instant_transitions = c.integer("max_instant_transitions", 1);
+  s.zeno_window = c.number("zeno_window");
+  s.chatter_dwell = c.number("chatter_dwell");
   new (self) HybridSimulator(dynamics, std::move(s), state_of(initial));
 }
 
@@ -331,7 +337,7 @@ NB_MODULE(_kernel, m)
          const Vector & tau, const Optional & stiffness, const Optional & damping,
          const std::string & push_frame, const Optional & push_force,
          const std::vector<std::string> & guards, const std::vector<double> & rested_until,
-         double mu, bool ice, const ConstantRow & constants, double margin, double t) {
+         double mu, bool ice, nb::handle constants, double margin, double t) {
         const auto contact =
           contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
         const Vector18 q18 = vector18(q, "q"), v18 = vector18(v, "v");
@@ -355,7 +361,7 @@ NB_MODULE(_kernel, m)
          const Optional & push_force, const std::string & method, double step, double rtol,
          double atol, double event_tolerance, const std::vector<std::string> & guards,
          const std::vector<double> & rested_until, double mu, bool ice,
-         const ConstantRow & constants, double margin, double t0, const Vector & x0,
+         nb::handle constants, double margin, double t0, const Vector & x0,
          double t_end) {
         const auto contact =
           contact_of(mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir);
@@ -398,11 +404,15 @@ NB_MODULE(_kernel, m)
     "checks. States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
     "heel_slide_dir, step_index, t_exchange, t_touchdown).")
     .def(
-      "__init__", &construct_simulator, "dynamics"_a, "initial"_a, "control_period"_a,
-      "method"_a, "step"_a, "rtol"_a, "atol"_a, "event_tolerance"_a, "mu"_a, "ice"_a,
-      "constants"_a, "margin"_a, "guards"_a, "projection"_a, "residual_bound"_a,
-      "fall_height"_a, "max_speed"_a, "max_instant_transitions"_a, "zeno_window"_a,
-      "chatter_dwell"_a, nb::keep_alive<1, 2>())
+      "__init__", &construct_simulator, "dynamics"_a, "initial"_a, "config"_a, "constants"_a,
+      "margin"_a, "guards"_a, nb::keep_alive<1, 2>(),
+      "dynamics: the Dynamics kernel; initial: the state tuple; config: the run's settings, read "
+      "by name (iceskate_sim.physics.simulation.SimulatorConfig: control_period, integrator "
+      "(method, step, rtol, atol, event_tolerance, projection), friction (mu, rule), "
+      "residual_bound, fall_height, max_speed, max_instant_transitions, zeno_window, "
+      "chatter_dwell); constants: the guards' dead bands and sole geometry, read by name "
+      "(GuardConstants' fields); margin: a guard at most this positive is not due; guards: the "
+      "guard names of each mode. ValueError naming a field that is missing or bad.")
     .def("reset", &HybridSimulator::reset, "Back to the initial state; clears log and counters.")
     .def(
       "set_state",

@@ -48,6 +48,8 @@ public:
     return get(name).is_none() ? std::nullopt : std::optional<double>(number(name));
   }
 
+  std::string text(const char * name) const { return cast<std::string>(get(name), name, "text"); }
+
   bool flag(const char * name) const
   {
     const nanobind::object value = get(name);

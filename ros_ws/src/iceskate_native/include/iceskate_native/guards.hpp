@@ -40,8 +40,8 @@ struct GuardConstants
 /// Floor friction: Coulomb coefficient and the rule (ice: a one-way clutch).
 struct Friction
 {
-  double mu = 0.005;
-  bool ice = true;
+  double mu{};    ///< Coulomb coefficient (the scene's floor.mu)
+  bool ice{};     ///< a one-way clutch: a foot sliding back sticks
 };
 
 /// The value of `guard` at the state (q, v) of `contact` with its dynamics `result`.

@@ -37,26 +37,27 @@ public:
   using NativeError::NativeError;
 };
 
-/// Settings of a run (iceskate_sim.physics.simulation.SimulatorConfig with a fixed-step integrator).
+/// Settings of a run: iceskate_sim.physics.simulation.SimulatorConfig's, the one place they are
+/// declared with their defaults (the binding reads them by name).
 struct SimulatorSettings
 {
-  double control_period = 1.0e-3;  ///< [s], an integer multiple of step
-  Method method = Method::kImplicitEuler;
-  double step = 1.0e-3;             ///< [s]; the largest step of the adaptive method
-  double rtol = 1.0e-8;             ///< relative tolerance of the adaptive method
-  double atol = 1.0e-10;            ///< absolute tolerance of the adaptive method
-  double event_tolerance = 1.0e-9;  ///< [s]
+  double control_period{};  ///< [s], an integer multiple of step
+  Method method{};
+  double step{};             ///< [s]; the largest step of the adaptive method
+  double rtol{};             ///< relative tolerance of the adaptive method
+  double atol{};             ///< absolute tolerance of the adaptive method
+  double event_tolerance{};  ///< [s]
   Friction friction;
   GuardConstants constants{};
-  double margin = 1.0e-9;   ///< a guard at most this positive is not due
-  GuardTable guards;        ///< the guards of every mode, in the event log's order
-  bool projection = true;   ///< project onto the swing constraints after every period
-  double residual_bound = 1.0e-3;  ///< [m, rad] beyond which the run has diverged
-  double fall_height = 1.2;        ///< [m] head-top height below which the robot has fallen
-  double max_speed = 200.0;        ///< [m/s, rad/s] beyond which the run has diverged
-  int max_instant_transitions = 20;
-  double zeno_window = 1.0e-6;   ///< [s] transitions this close count as one burst
-  double chatter_dwell = 0.005;  ///< [s] a rested guard stays off this long
+  double margin{};           ///< a guard at most this positive is not due
+  GuardTable guards;         ///< the guards of every mode, in the event log's order
+  bool projection{};         ///< project onto the swing constraints after every period
+  double residual_bound{};   ///< [m, rad] beyond which the run has diverged
+  double fall_height{};      ///< [m] head-top height below which the robot has fallen
+  double max_speed{};        ///< [m/s, rad/s] beyond which the run has diverged
+  int max_instant_transitions{};
+  double zeno_window{};      ///< [s] transitions this close count as one burst
+  double chatter_dwell{};    ///< [s] a rested guard stays off this long
 };
 
 /// One entry of the event log: a guard's transition, or "R" (the contact-consistent mode

@@ -4,6 +4,7 @@ run in ``simulation.Simulator``. Errors come back as ``SimulationError``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import functools
 
 import iceskate_native
@@ -13,8 +14,22 @@ from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import JOINT_LIMITS, PIVOTS, SIDES, SOLE_HEEL_Y, SOLE_TOE_Y, Robot
 from iceskate_sim.physics.hybrid import COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF
 
-#: The guards' dead bands and sole geometry, in the kernel's order.
-GUARD_CONSTANTS = (COP_BAND, FORCE_BAND, MOMENT_BAND, TOE_SCUFF, SOLE_TOE_Y, SOLE_HEEL_Y)
+
+@dataclass(frozen=True)
+class GuardConstants:
+    """The guards' dead bands and the sole's geometry, as the kernels read them (by name)."""
+
+    cop_band: float  #: [m] the support CoP passes a sole edge by this much (E1, E2)
+    force_band: float  #: [N] friction excess, contact force below zero (E4, E6, S3, S6)
+    moment_band: float  #: [N m] swing-sole moment below zero (S5)
+    toe_scuff: float  #: [m] a swing toe this far below the floor is a scuff (S7)
+    sole_toe_y: float  #: [m] toe edge relative to the ankle
+    sole_heel_y: float  #: [m] heel edge relative to the ankle
+
+
+GUARD_CONSTANTS = GuardConstants(cop_band=COP_BAND, force_band=FORCE_BAND,
+                                 moment_band=MOMENT_BAND, toe_scuff=TOE_SCUFF,
+                                 sole_toe_y=SOLE_TOE_Y, sole_heel_y=SOLE_HEEL_Y)
 #: Table 2 as the kernels take it: (number, y0 active, q1 active, swing sliding, active
 #: coordinates, constraints) per mode.
 MODE_ROWS = [(m.number, m.y0_active, m.q1_active, m.swing_sliding, [int(i) for i in m.active],

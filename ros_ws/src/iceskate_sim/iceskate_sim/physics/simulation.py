@@ -149,14 +149,10 @@ class Simulator(StateQueries):
         self.dynamics = NativeGaitDynamics(robot, replace(config.dynamics, mu=config.friction.mu))
         self._fall = fall_reason(config.fall_height)
         guards = [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]
-        c, integrator = config, config.integrator
         try:
             self.kernel = iceskate_native.HybridSimulator(
-                self.dynamics.kernel, _state_row(initial), c.control_period, integrator.method,
-                integrator.step, integrator.rtol, integrator.atol, integrator.event_tolerance,
-                c.friction.mu, c.friction.rule == 'ice', GUARD_CONSTANTS, GUARD_MARGIN, guards,
-                integrator.projection, c.residual_bound, c.fall_height, c.max_speed,
-                c.max_instant_transitions, c.zeno_window, c.chatter_dwell)
+                self.dynamics.kernel, _state_row(initial), config, GUARD_CONSTANTS, GUARD_MARGIN,
+                guards)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise InputRefused(f'native simulator: {exc} (initial state: '
                                f'{initial.summary()})') from None
