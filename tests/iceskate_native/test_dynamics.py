@@ -239,6 +239,29 @@ def test_a_bad_mode_table_is_refused(robot):
                                  (0.005, 0.0, True, 1e4, 100.0, True))
 
 
+def test_the_kernel_takes_the_mode_table_it_is_given_whatever_its_size(robot):
+    """The core keeps no count of the modes: a table with a 21st row (mode 20's coordinates
+    and constraints) is taken whole, and its mode 21 evaluates as mode 20 does."""
+    import iceskate_native
+    from iceskate_sim.physics.native import MODE_ROWS, native_robot
+    models, frames = native_robot(robot)
+    rows = [*MODE_ROWS, (21, *MODE_ROWS[19][1:])]
+    options = (0.005, 0.0, True, 1e4, 100.0, True)
+    kernel = iceskate_native.Dynamics(models, frames, rows, robot.damping, robot.total_mass, [],
+                                      options)
+    shipped = iceskate_native.Dynamics(models, frames, MODE_ROWS, robot.damping,
+                                       robot.total_mass, [], options)
+    q = np.zeros(18)
+    q[2:8] = (-0.05, 0.1, -0.05, 0.05, -0.1, 0.05)
+    args = (0, 0, 0.0, 1.0, 1.0, q, np.zeros(18), np.zeros(18))
+    assert np.array_equal(kernel.evaluate(21, *args)[0], shipped.evaluate(20, *args)[0])
+    with pytest.raises(ValueError, match='unknown gait mode 22; the mode table has modes 1-21'):
+        kernel.evaluate(22, *args)
+    with pytest.raises(ValueError, match='the mode table is empty'):
+        iceskate_native.Dynamics(models, frames, [], robot.damping, robot.total_mass, [],
+                                 options)
+
+
 # ------------------------------------------------------------------ guards and segments
 @pytest.mark.parametrize(('number', 'side', 'pivot'), CASES[::2])
 @pytest.mark.parametrize('rule', ['ice', 'coulomb'])

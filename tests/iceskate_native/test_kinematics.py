@@ -147,7 +147,7 @@ def _observation(**changes):
     ({'v': np.full(18, np.nan)}, r'v\[0\] is nan: every entry must be finite'),
     ({'t': math.inf}, "the observation's t, t_exchange and heel_anchor_y must be finite"),
     ({'t_touchdown': -math.inf}, 't_touchdown must be finite or NaN'),
-    ({'mode': 0}, 'observation mode 0 is not a Table 2 mode'),
+    ({'mode': 0}, 'observation mode 0 is not a mode'),
     ({'pivot': 2}, 'side and pivot must be 0 or 1'),
 ])
 def test_the_observation_refuses_bad_fields(changes, message):

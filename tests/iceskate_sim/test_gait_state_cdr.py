@@ -150,7 +150,7 @@ def _changed(typestore, data: bytes, **change) -> bytes:
 @pytest.mark.parametrize(('change', 'match'), [
     ({'support_side': 2}, 'gait_state support_side must be 0 or 1, got 2'),
     ({'pivot': 7}, 'gait_state pivot must be 0, 1 or 2, got 7'),
-    ({'mode': 21}, 'gait_state: observation mode 21 is not a Table 2 mode'),
+    ({'mode': 21}, r'gait_state mode 21 is not a mode of the table \(1-20\)'),
     ({'step_index': 2**32 - 1}, 'gait_state: observation step_index 4294967295 is beyond the '
                                 '2147483647 steps a run can take'),
     ({'heel_anchor_y': np.inf}, "gait_state: the observation's t, t_exchange and heel_anchor_y"),

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.model.stamps import NS_PER_S
@@ -38,6 +39,9 @@ def observation_from_gait_state(gait_state: Any) -> Observation:
 
     :raises SimulationError: when a field is malformed (naming it).
     """
+    if int(gait_state.mode) not in MODES:
+        raise SimulationError(f'gait_state mode {gait_state.mode} is not a mode of the table '
+                              f'(1-{len(MODES)})')
     side = int(gait_state.support_side)
     if side not in (0, 1):
         raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')

@@ -28,7 +28,7 @@ from iceskate_analysis.rows import collect_rows
 from iceskate_native.sample import Route, SampleColumn, routed
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.files import regular_file
-from iceskate_sim.model.modes import MULTIPLIER_NAMES
+from iceskate_sim.model.modes import MODES, MULTIPLIER_NAMES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, SIDES
 from iceskate_sim.progress import ProgressBar
 from iceskate_sim.recording.bag_types import PASSIVE, make_typestore
@@ -865,10 +865,10 @@ def _bin(spacings: np.ndarray) -> np.ndarray:
 
 
 def _validate(data: BagData) -> None:
-    bad_modes = sorted(set(data.mode[(data.mode < 1) | (data.mode > 20)].tolist()))
+    bad_modes = sorted(set(data.mode[~np.isin(data.mode, list(MODES))].tolist()))
     if bad_modes:
         raise InputRefused(f'bag {data.path}: /gait_state has modes {bad_modes} outside '
-                           'Table 2 (1-20)')
+                           f'the mode table (1-{len(MODES)})')
     if np.any((data.side < 0) | (data.side > 1)) or np.any((data.pivot < 0) | (data.pivot > 2)):
         raise InputRefused(f'bag {data.path}: /gait_state has an unknown support_side or '
                            'pivot code')

@@ -192,13 +192,15 @@ void construct_simulator(
   HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, nb::handle config,
   nb::handle constants, double margin, const std::vector<std::vector<std::string>> & guards)
 {
-  if (guards.size() != kModes) {
-    throw std::invalid_argument("the guard table needs the guards of each of the 20 modes");
+  if (guards.size() != dynamics.modes().size()) {
+    throw std::invalid_argument("the guard table needs the guards of each of the "
+                                + std::to_string(dynamics.modes().size()) + " modes");
   }
   const binding::Fields c(config, "simulator settings: ");
   const binding::Fields integrator = c.block("integrator");
   const binding::Fields friction = c.block("friction");
   SimulatorSettings s;
+  s.guards.resize(guards.size());
   s.control_period = c.number("control_period");
   s.method = method_named(integrator.text("method"));
   s.step = integrator.number("step");

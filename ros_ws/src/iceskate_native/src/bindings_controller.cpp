@@ -68,9 +68,8 @@ void construct_observation(
   if (std::isinf(t_touchdown)) {
     throw std::invalid_argument("the observation's t_touchdown must be finite or NaN (none)");
   }
-  if (mode < 1 || mode > kModes) {
-    throw std::invalid_argument(
-      "observation mode " + std::to_string(mode) + " is not a Table 2 mode (1-20)");
+  if (mode < 1 || mode > std::numeric_limits<int>::max()) {  // the table's: Kinematics::mode
+    throw std::invalid_argument("observation mode " + std::to_string(mode) + " is not a mode");
   }
   if (side < 0 || side > 1 || pivot < 0 || pivot > 1 || step_index < 0) {
     throw std::invalid_argument(

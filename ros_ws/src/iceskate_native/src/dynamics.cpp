@@ -181,11 +181,7 @@ const SupportModel & Dynamics::support_model(int side, int pivot) const
 
 const Mode & Dynamics::mode(int number) const
 {
-  if (number < 1 || number > kModes) {
-    throw std::invalid_argument(
-      "unknown gait mode " + std::to_string(number) + "; Table 2 has modes 1-20");
-  }
-  return modes_[static_cast<std::size_t>(number - 1)];
+  return mode_numbered(modes_, number);
 }
 
 bool Dynamics::limits_engaged(const Vector18 & q) const

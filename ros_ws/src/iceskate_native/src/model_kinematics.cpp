@@ -137,11 +137,7 @@ std::size_t ModelKinematics::model_index(int side, int pivot) const
 
 const Mode & ModelKinematics::mode(int number) const
 {
-  if (number < 1 || number > kModes) {
-    throw std::invalid_argument(
-      "unknown gait mode " + std::to_string(number) + "; Table 2 has modes 1-20");
-  }
-  return modes_[static_cast<std::size_t>(number - 1)];
+  return mode_numbered(modes_, number);
 }
 
 Eigen::Vector3d ModelKinematics::joint_placement(int side, int pivot, int joint) const

@@ -2,6 +2,7 @@
 
 #include <sstream>
 #include <stdexcept>
+#include <string>
 
 namespace iceskate_native
 {
@@ -18,6 +19,9 @@ int Mode::multiplier_index(Constraint c) const
 
 void check_modes(const ModeTable & modes)
 {
+  if (modes.empty()) {
+    throw std::invalid_argument("the mode table is empty");
+  }
   for (std::size_t k = 0; k < modes.size(); ++k) {
     const Mode & mode = modes[k];
     std::ostringstream problem;
@@ -46,6 +50,15 @@ void check_modes(const ModeTable & modes)
       throw std::invalid_argument(problem.str());
     }
   }
+}
+
+const Mode & mode_numbered(const ModeTable & modes, int number)
+{
+  if (number < 1 || static_cast<std::size_t>(number) > modes.size()) {
+    throw std::invalid_argument("unknown gait mode " + std::to_string(number)
+                                + "; the mode table has modes 1-" + std::to_string(modes.size()));
+  }
+  return modes[static_cast<std::size_t>(number - 1)];
 }
 
 }  // namespace iceskate_native

@@ -50,6 +50,6 @@ double guard_value(
   const DynamicsResult & result, const Friction & friction, const GuardConstants & constants);
 
 /// The guards of every mode (index number - 1), in the order of Python's guards_of.
-using GuardTable = std::array<std::vector<Guard>, kModes>;
+using GuardTable = std::vector<std::vector<Guard>>;
 
 }  // namespace iceskate_native

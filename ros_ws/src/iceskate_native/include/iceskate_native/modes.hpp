@@ -1,6 +1,6 @@
 // The gait modes of the paper's Table 2 as data (docs/model.md §3): which coordinates are
 // active and which swing-foot constraints act. The table is Python's (iceskate_sim.model.modes); the
-// native core receives it when a kernel is made and keeps no copy of its own.
+// native core receives it when a kernel is made and keeps no copy of its own, nor its size.
 #pragma once
 
 #include <array>
@@ -10,8 +10,6 @@
 
 namespace iceskate_native
 {
-
-constexpr int kModes = 20;
 
 /// A swing-foot constraint: heel height (hz), heel forward position (hy), flat sole (fr).
 enum class Constraint
@@ -24,7 +22,7 @@ enum class Constraint
 /// One row of Table 2.
 struct Mode
 {
-  int number = 0;              ///< 1..20
+  int number = 0;              ///< 1..the table's size
   bool y0_active = false;      ///< the support foot glides
   bool q1_active = false;      ///< the support foot tips about an edge
   bool swing_sliding = false;  ///< Coulomb friction on the swing heel
@@ -48,11 +46,15 @@ void zero_locked_columns(const Mode & mode, Matrix && matrix)
   }
 }
 
-/// The 20 modes, indexed by number - 1.
-using ModeTable = std::array<Mode, kModes>;
+/// The modes, indexed by number - 1.
+using ModeTable = std::vector<Mode>;
 
-/// Check a table (numbers 1..20 in order, active indices in range and increasing, constraint
-/// order hz, hy, fr, hz first); throws std::invalid_argument naming the first problem.
+/// Check a table (not empty, numbers 1..n in order, active indices in range and increasing,
+/// constraint order hz, hy, fr, hz first); throws std::invalid_argument naming the first
+/// problem.
 void check_modes(const ModeTable & modes);
+
+/// The mode `number` of `modes`; std::invalid_argument for a number the table does not hold.
+const Mode & mode_numbered(const ModeTable & modes, int number);
 
 }  // namespace iceskate_native

@@ -83,9 +83,11 @@ MODES: dict[int, GaitMode] = {n: _make_mode(n, sup, sw) for n, (sup, sw) in TABL
 
 
 def get_mode(number: int) -> GaitMode:
-    """Return the Table 2 mode ``number`` (1-20); raise SimulationError for anything else."""
+    """Return the Table 2 mode ``number`` (a key of ``MODES``); raise SimulationError for
+    anything else."""
     mode = MODES.get(number) if isinstance(number, (int, np.integer)) and not isinstance(
         number, bool) else None
     if mode is None:
-        raise SimulationError(f'unknown gait mode {number!r}; Table 2 has modes 1-20')
+        raise SimulationError(f'unknown gait mode {number!r}; the mode table has modes '
+                              f'1-{len(MODES)}')
     return mode

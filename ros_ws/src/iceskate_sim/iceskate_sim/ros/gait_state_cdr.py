@@ -12,6 +12,7 @@ from rosbags.typesys.store import Typestore
 
 import iceskate_native
 from iceskate_sim.errors import SimulationError
+from iceskate_sim.model.modes import MODES
 from iceskate_sim.model.robot import COORDINATE_NAMES, N_COORDINATES, PIVOTS
 from iceskate_sim.model.stamps import NS_PER_S
 from iceskate_sim.recording.bag_types import make_typestore
@@ -54,6 +55,9 @@ class GaitStateReader:
                 from None
         (sec, nanosec, mode, side, pivot, step_index, exchange_sec, exchange_nanosec,
          heel_anchor_y, touched_down, touchdown_sec, touchdown_nanosec) = scalars(data)
+        if mode not in MODES:
+            raise SimulationError(f'gait_state mode {mode} is not a mode of the table '
+                                  f'(1-{len(MODES)})')
         if side not in (0, 1):
             raise SimulationError(f'gait_state support_side must be 0 or 1, got {side}')
         pivot_name = PIVOT_OF_CODE.get(pivot)
