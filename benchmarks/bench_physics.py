@@ -151,7 +151,8 @@ def time_advance(advances: list[tuple[Simulator, Any]], snaps: list[Snapshot], r
                 t0 = clock()
                 advance(snap.command)
                 timings[k][i].append((clock() - t0) * 1e6)
-                t, q, v = sim.kernel.state[:3]  # the kernel's: the kernel call mirrors nothing
+                state = sim.kernel.state  # the kernel's: the kernel call mirrors nothing
+                t, q, v = state['t'], state['q'], state['v']
                 deviation[k] = max(deviation[k], abs(t - snap.after.t),
                                    float(np.max(np.abs(q - snap.after.q))),
                                    float(np.max(np.abs(v - snap.after.v))))

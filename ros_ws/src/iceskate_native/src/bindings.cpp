@@ -158,38 +158,59 @@ Inputs inputs_of(
   return inputs;
 }
 
-/// (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, heel_slide_dir, step_index,
-/// t_exchange, t_touchdown)
-using StateRow = std::tuple<double, Eigen::VectorXd, Eigen::VectorXd, int, int, int, double,
-                            double, double, int, double, double>;
-
-HybridState state_of(const StateRow & row)
+/// A state read by name from `state`, an object with the fields of
+/// iceskate_sim.physics.hybrid.HybridState (t, q, v, contact, step_index, t_exchange,
+/// t_touchdown; the contact's mode (its number), side ('right', 'left'), pivot ('toe', 'heel'),
+/// heel_anchor_y, support_slide_dir, heel_slide_dir).
+HybridState state_of(nb::handle state)
 {
-  const auto & [t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step, t_e, t_td] = row;
-  if (!std::isfinite(t) || !std::isfinite(t_e) || std::isinf(t_td)) {
-    throw std::invalid_argument("the state's times must be finite (t_touchdown: or NaN)");
+  const binding::Fields s(state, "state: ");
+  const binding::Fields c = s.block("contact");
+  const double t_touchdown = nb::cast<double>(state.attr("t_touchdown"));
+  if (std::isinf(t_touchdown)) {
+    throw std::invalid_argument("state: t_touchdown must be finite or NaN (none)");
   }
-  if (side < 0 || side > 1 || pivot < 0 || pivot > 1 || step < 0) {
-    throw std::invalid_argument("side and pivot must be 0 or 1, step_index >= 0");
-  }
-  return {t, vector18(q, "q"), vector18(v, "v"),
-          contact_of(mode, side, pivot, anchor, support_dir, heel_dir), step, t_e, t_td};
+  const std::vector<double> q = s.numbers("q", kCoordinates), v = s.numbers("v", kCoordinates);
+  return {s.number("t"),
+          Eigen::Map<const Vector18>(q.data()),
+          Eigen::Map<const Vector18>(v.data()),
+          {c.block("mode").integer("number", 1),
+           c.choice<int>("side", std::array<const char *, 2>{"right", "left"}),
+           c.choice<int>("pivot", std::array<const char *, 2>{"toe", "heel"}),
+           c.number("heel_anchor_y"), c.number("support_slide_dir"),
+           c.number("heel_slide_dir")},
+          s.integer("step_index", 0),
+          s.number("t_exchange"),
+          t_touchdown};
 }
 
-StateRow state_row(const HybridState & s)
+/// A state as a dict of HybridState's fields by name, the contact's flattened: t, q, v, mode,
+/// side (0 right, 1 left), pivot (0 toe, 1 heel), heel_anchor_y, support_slide_dir,
+/// heel_slide_dir, step_index, t_exchange, t_touchdown.
+nb::dict state_dict(const HybridState & s)
 {
   const auto & c = s.contact;
-  return {s.t, Eigen::VectorXd(s.q), Eigen::VectorXd(s.v), c.mode, c.side, c.pivot,
-          c.heel_anchor_y, c.support_slide_dir, c.heel_slide_dir, s.step_index, s.t_exchange,
-          s.t_touchdown};
+  nb::dict d;
+  d["t"] = s.t;
+  d["q"] = Eigen::VectorXd(s.q);
+  d["v"] = Eigen::VectorXd(s.v);
+  d["mode"] = c.mode;
+  d["side"] = c.side;
+  d["pivot"] = c.pivot;
+  d["heel_anchor_y"] = c.heel_anchor_y;
+  d["support_slide_dir"] = c.support_slide_dir;
+  d["heel_slide_dir"] = c.heel_slide_dir;
+  d["step_index"] = s.step_index;
+  d["t_exchange"] = s.t_exchange;
+  d["t_touchdown"] = s.t_touchdown;
+  return d;
 }
 
-/// Construct a HybridSimulator in place from the Python-side settings (SimulatorConfig).
 /// A HybridSimulator from its settings read by name from `config` (an object with the fields
 /// of iceskate_sim.physics.simulation.SimulatorConfig, the one place they are declared, with
 /// their defaults), the guards' constants (`constants_of`), margin and table.
 void construct_simulator(
-  HybridSimulator * self, Dynamics & dynamics, const StateRow & initial, nb::handle config,
+  HybridSimulator * self, Dynamics & dynamics, nb::handle initial, nb::handle config,
   nb::handle constants, double margin, const std::vector<std::vector<std::string>> & guards)
 {
   if (guards.size() != dynamics.modes().size()) {
@@ -403,12 +424,12 @@ NB_MODULE(_kernel, m)
     m, "HybridSimulator",
     "Whole control periods of the hybrid simulation on a Dynamics kernel (kept alive by it): "
     "integration (fixed-step, rk45 or ros34pw2) with event location, transitions, projection and health "
-    "checks. States are tuples (t, q, v, mode, side, pivot, heel_anchor_y, support_slide_dir, "
-    "heel_slide_dir, step_index, t_exchange, t_touchdown).")
+    "checks. A state goes in read by name from an object with the fields of "
+    "iceskate_sim.physics.hybrid.HybridState and comes out as a dict of them (`state`).")
     .def(
       "__init__", &construct_simulator, "dynamics"_a, "initial"_a, "config"_a, "constants"_a,
       "margin"_a, "guards"_a, nb::keep_alive<1, 2>(),
-      "dynamics: the Dynamics kernel; initial: the state tuple; config: the run's settings, read "
+      "dynamics: the Dynamics kernel; initial: the initial state (read by name); config: the run's settings, read "
       "by name (iceskate_sim.physics.simulation.SimulatorConfig: control_period, integrator "
       "(method, step, rtol, atol, event_tolerance, projection), friction (mu, rule), "
       "residual_bound, fall_height, max_speed, max_instant_transitions, zeno_window, "
@@ -418,7 +439,7 @@ NB_MODULE(_kernel, m)
     .def("reset", &HybridSimulator::reset, "Back to the initial state; clears log and counters.")
     .def(
       "set_state",
-      [](HybridSimulator & self, const StateRow & state) { self.set_state(state_of(state)); },
+      [](HybridSimulator & self, nb::handle state) { self.set_state(state_of(state)); },
       "state"_a,
       "Continue from `state` (the event log, counters and rested guards kept; an ended run goes "
       "on).")
@@ -433,7 +454,11 @@ NB_MODULE(_kernel, m)
       "One control period holding the inputs. ValueError for bad input or an ended run; "
       "DivergenceError, ChatteringError or NativeError when the physics fails (the state is "
       "where it failed).")
-    .def_prop_ro("state", [](const HybridSimulator & self) { return state_row(self.state()); })
+    .def_prop_ro(
+      "state", [](const HybridSimulator & self) { return state_dict(self.state()); },
+      "The current state, a dict of HybridState's fields by name (the contact's flattened: "
+      "mode, side 0 right / 1 left, pivot 0 toe / 1 heel, heel_anchor_y, support_slide_dir, "
+      "heel_slide_dir).")
     .def(
       "observation",
       [](HybridSimulator & self) {
@@ -444,7 +469,8 @@ NB_MODULE(_kernel, m)
       "them: times at a stamp's resolution (whole ns), the pivot toe (0) while the sole is "
       "flat.")
     .def_prop_ro(
-      "start_state", [](const HybridSimulator & self) { return state_row(self.start_state()); })
+      "start_state", [](const HybridSimulator & self) { return state_dict(self.start_state()); },
+      "The state the last period started from, as `state`.")
     .def_prop_ro(
       "start_result",
       [](const HybridSimulator & self) { return result_tuple(self.start_result()); })

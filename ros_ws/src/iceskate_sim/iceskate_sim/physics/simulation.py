@@ -116,21 +116,14 @@ class StateQueries:
 #: Guard causes for the event log, by name.
 
 
-def _state_row(state: HybridState) -> tuple:
-    """A HybridState as the kernel's state tuple."""
-    c = state.contact
-    return (state.t, state.q, state.v, c.mode.number, SIDES.index(c.side),
-            PIVOTS.index(c.pivot), c.heel_anchor_y, c.support_slide_dir, c.heel_slide_dir,
-            state.step_index, state.t_exchange, state.t_touchdown)
-
-
-def _hybrid_state(row: tuple) -> HybridState:
-    """The kernel's state tuple as a HybridState."""
-    (t, q, v, mode, side, pivot, anchor, support_dir, heel_dir, step_index, t_exchange,
-     t_touchdown) = row
-    contact = ContactState(MODES[mode], SIDES[side], PIVOTS[pivot], anchor, support_dir,
-                           heel_dir)
-    return HybridState(t, q, v, contact, step_index, t_exchange, t_touchdown)
+def _hybrid_state(state: dict) -> HybridState:
+    """The kernel's state (``HybridSimulator.state``: HybridState's fields by name, the
+    contact's flattened) as a HybridState."""
+    contact = ContactState(MODES[state['mode']], SIDES[state['side']], PIVOTS[state['pivot']],
+                           state['heel_anchor_y'], state['support_slide_dir'],
+                           state['heel_slide_dir'])
+    return HybridState(state['t'], state['q'], state['v'], contact, state['step_index'],
+                       state['t_exchange'], state['t_touchdown'])
 
 
 class Simulator(StateQueries):
@@ -151,8 +144,7 @@ class Simulator(StateQueries):
         guards = [[g.name for g in guards_of(MODES[n])] for n in sorted(MODES)]
         try:
             self.kernel = iceskate_native.HybridSimulator(
-                self.dynamics.kernel, _state_row(initial), config, GUARD_CONSTANTS, GUARD_MARGIN,
-                guards)
+                self.dynamics.kernel, initial, config, GUARD_CONSTANTS, GUARD_MARGIN, guards)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise InputRefused(f'native simulator: {exc} (initial state: '
                                f'{initial.summary()})') from None
@@ -172,7 +164,7 @@ class Simulator(StateQueries):
         """Continue from ``state`` (the event log, counters and rested guards kept; a run that
         had ended goes on), as after a period that ended there under the current command."""
         try:
-            self.kernel.set_state(_state_row(state))
+            self.kernel.set_state(state)
         except (ValueError, TypeError, iceskate_native.NativeError) as exc:
             raise SimulationError(f'native simulator: {exc} ({state.summary()})') from None
         self._mirror()
