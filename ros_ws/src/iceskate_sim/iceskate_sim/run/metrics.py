@@ -432,9 +432,9 @@ def compute_metrics(scene: Any, sim: Any, trajectory: Trajectory, wall_time: flo
         str(m): count / modes.size for m, count in zip(entered.tolist(), counts.tolist(),
                                                        strict=True)}
     flat = a['pivot'] == 0
-    cop = a['zmp_y']
+    zmp_y = a['zmp_y']
     y0 = a['q'][:, 0]
-    outside = flat & ~((cop >= y0 + SOLE_HEEL_Y) & (cop <= y0 + SOLE_TOE_Y))
+    outside = flat & ~((zmp_y >= y0 + SOLE_HEEL_Y) & (zmp_y <= y0 + SOLE_TOE_Y))
     metrics['zmp_outside_support_fraction'] = float(np.mean(outside))
     metrics['edge_mode_fraction'] = float(np.mean(~flat))
     steps = np.asarray(a['step_index'])
