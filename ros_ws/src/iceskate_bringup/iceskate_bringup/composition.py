@@ -5,8 +5,7 @@ laws in C++'.
 
 from __future__ import annotations
 
-from iceskate_bringup.controllers import SHIPPED
-from iceskate_bringup.plugin import PluginBlock, make_controller
+from iceskate_bringup.controllers import kind_of
 from iceskate_bringup.scene import node_parameters, scene_sources
 from iceskate_sim.model.observation import Observation
 from iceskate_sim.model.robot import Robot
@@ -15,8 +14,8 @@ from iceskate_sim.run.scene import Scene
 
 
 class ControlStack:
-    """The controllers of a scene that run (``scene_sources``: those with a source), shipped
-    (``SHIPPED``) or plug-ins, with their own model data."""
+    """The controllers of a scene that run (``scene_sources``: those with a source), each built
+    as its kind says (``kind_of``: shipped or a plug-in), with their own model data."""
 
     def __init__(self, scene: Scene, robot: Robot, initial: Observation) -> None:
         self.kinematics = native_kinematics(robot)  # the laws' own model data, as in the nodes
@@ -28,11 +27,9 @@ class ControlStack:
         for node, params in node_parameters(scene).items():
             if node not in running:
                 continue
-            if isinstance(params, PluginBlock):
-                self.controllers[node] = make_controller(node, params)
+            kind = kind_of(node, scene.inputs[node])
+            law = self.controllers[node] = kind.law(node, params)
+            if kind.in_python:
                 self.plugins += (node,)
-                continue
-            shipped = SHIPPED[node]
-            law = self.controllers[node] = shipped.law(params)
-            if shipped.start is not None:
-                shipped.start(law, native_observation(initial), self.kinematics)
+            if kind.start is not None:
+                kind.start(law, native_observation(initial), self.kinematics)

@@ -22,11 +22,9 @@ from typing import Any
 
 import yaml
 
-from iceskate_bringup.controllers import SHIPPED
-from iceskate_bringup.plugin import PluginBlock
+from iceskate_bringup.controllers import kind_of
 from iceskate_bringup.scene import load_scene, node_parameters, scene_sources
 from iceskate_bringup.watch import Watch, live_view
-from iceskate_native.parameters import flatten
 from iceskate_sim.errors import InputRefused, SimulationError
 from iceskate_sim.installed import share_path
 from iceskate_sim.model.robot import load_robot
@@ -113,19 +111,12 @@ def graph_nodes(scene_arg: str, out: pathlib.Path, duration: float | None = None
                       'SimulatorNode', folder / 'simulator.yaml')]
     composed = node_parameters(scene)
     for node in sorted(controllers, reverse=True):
-        params = composed[node]
-        if isinstance(params, PluginBlock):  # iceskate_bringup.plugin_node, named after its key
-            write_parameter_file(folder / f'{node}.yaml', {node: {
-                'plugin': params.plugin, 'parameters': json.dumps(params.parameters),
-                'run_token': token}})
-            specs.append(NodeSpec('iceskate_bringup', 'plugin_controller',
-                                  'iceskate_bringup.plugin_node', 'PluginControllerNode',
-                                  folder / f'{node}.yaml', node))
-            continue
+        kind = kind_of(node, scene.inputs[node])
         write_parameter_file(folder / f'{node}.yaml',
-                             {node: flatten(params) | {'run_token': token}})
-        specs.append(NodeSpec(node, node, f'{node}.{node}_node', SHIPPED[node].node_class,
-                              folder / f'{node}.yaml'))
+                             {node: kind.ros_parameters(composed[node]) | {'run_token': token}})
+        n = kind.node
+        specs.append(NodeSpec(n.package, n.executable, n.module, n.node_class,
+                              folder / f'{node}.yaml', node if n.renamed else ''))
     return specs
 
 

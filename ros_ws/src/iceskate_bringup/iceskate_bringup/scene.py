@@ -11,14 +11,8 @@ import pathlib
 from typing import Any
 
 from gait_manager.parameters import GaitManagerParameters, head_stance
-from iceskate_bringup.controllers import SHIPPED
-from iceskate_bringup.plugin import (
-    PluginBlock,
-    checked_block,
-    is_plugin,
-    make_controller,
-    plugin_sources,
-)
+from iceskate_bringup.controllers import SHIPPED, kind_of
+from iceskate_bringup.plugin import is_plugin
 from iceskate_native.parameters import Rules, field_types, rules_of
 from iceskate_sim.errors import InputRefused
 from iceskate_sim.run.scene import Scene, SceneSettings, scene_steps
@@ -26,32 +20,20 @@ from iceskate_sim.run.scene import load_scene as load_scene_file
 from iceskate_sim.run.scene import parse_scene as parse_simulator_scene
 from visual_lifting.parameters import VisualLiftingParameters
 
-#: A controller's parameters: a shipped one's parameter object or a plug-in's block.
+#: A controller's parameters: a shipped one's parameter object or a plug-in's block
+#: (``ControllerKind.parameters``).
 ControllerParameters = Any
 
 
 def validate_inputs(node: str, block: dict[str, Any]) -> None:
     """Check the parameter block of controller ``node`` (InputRefused naming the key)."""
-    if is_plugin(block):
-        checked_block(node, block)  # imports the class and builds it once
-        return
-    errors = SHIPPED[node].errors if node in SHIPPED else ()
-    try:
-        controller_parameters(node, block)
-    except errors as exc:
-        raise InputRefused(f'scene key {f"inputs.{node}"!r}: {exc}') from None
+    kind_of(node, block).check(node, block)
 
 
 def controller_parameters(node: str, block: dict[str, Any]) -> ControllerParameters:
     """The validated parameters of controller ``node`` from its scene block (a plug-in's as
     given: its class is checked by ``validate_inputs`` and when it is built)."""
-    if is_plugin(block):
-        return PluginBlock(block['plugin'], dict(block.get('parameters') or {}))
-    if node in SHIPPED:
-        return SHIPPED[node].parameters.from_dict(block)
-    raise InputRefused(f'scene key {f"inputs.{node}"!r}: unknown controller; one of '
-                       f"{list(SHIPPED)}, or a controller written in Python (a block "
-                       "with 'plugin: package.module:Class')")
+    return kind_of(node, block).parameters(node, block)
 
 
 def node_parameters(scene: Scene) -> dict[str, ControllerParameters]:
@@ -100,9 +82,7 @@ def scene_sources(scene: Scene) -> dict[str, tuple[str, ...]]:
     sources in order (an idle gait manager, with no source enabled, is left out)."""
     out: dict[str, tuple[str, ...]] = {}
     for node, block in scene.inputs.items():
-        params = controller_parameters(node, block)
-        sources = (plugin_sources(node, make_controller(node, params)) if is_plugin(block)
-                   else SHIPPED[node].sources(params))
+        sources = kind_of(node, block).sources(node, controller_parameters(node, block))
         if sources:
             out[node] = sources
     return out
@@ -114,8 +94,7 @@ def key_rules(key: str) -> Rules | None:
     schema declares (a list entry, a plug-in's parameter)."""
     head, _, rest = key.partition('.')
     node, _, field = rest.partition('.')
-    cls, names = ((SHIPPED[node].parameters, field)
-                  if head == 'inputs' and node in SHIPPED
+    cls, names = ((SHIPPED[node].schema, field) if head == 'inputs' and node in SHIPPED
                   else (SceneSettings, key))
     *blocks, last = names.split('.')
     for name in blocks:
