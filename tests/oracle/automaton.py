@@ -62,7 +62,7 @@ class RunEnded(Exception):
         self.state = state
 
 
-def _stuck_support_tangential(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
+def _stuck_support_friction(s: HybridState, r: DynamicsResult, f: FrictionModel) -> float:
     """E4: the reaction needed to hold the support foot exceeds friction."""
     if f.rule == 'ice':  # only a forward-wanting foot (reaction pointing back) can slide
         return -r.support_friction - f.mu * r.support_normal - FORCE_BAND
@@ -82,7 +82,7 @@ GUARD_VALUES: dict[str, Callable[[HybridState, DynamicsResult, FrictionModel], f
     'E1': lambda s, r, f: r.support_wrench[3] - (SOLE_TOE_Y + COP_BAND) * r.support_normal,
     'E2': lambda s, r, f: (SOLE_HEEL_Y - COP_BAND) * r.support_normal - r.support_wrench[3],
     'E3': lambda s, r, f: s.q[Q1] if s.contact.pivot == 'toe' else -s.q[Q1],
-    'E4': _stuck_support_tangential,
+    'E4': _stuck_support_friction,
     'E5': lambda s, r, f: -s.contact.support_slide_dir * s.v[0],
     'E6': lambda s, r, f: -r.support_normal - FORCE_BAND,
     'S1': lambda s, r, f: -r.swing_heel[2],
@@ -385,7 +385,7 @@ def _consistent(state: HybridState, r: DynamicsResult, friction: FrictionModel,
     if r.support_normal < -FORCE_BAND:
         return False
     if not mode.y0_active:  # stuck support: the needed reaction inside the friction cone
-        if _stuck_support_tangential(state, r, friction) > 0.0:
+        if _stuck_support_friction(state, r, friction) > 0.0:
             return False
     elif abs(state.v[Y0]) < _AT_REST and c.support_slide_dir * r.qdd[Y0] < -_ACCEL_TOL:
         return False
